@@ -1,0 +1,178 @@
+"""Common machinery of the fence_sorter nodes: parameters, diagnostic heartbeat, clean shutdown.
+
+Every executable is a small :class:`FenceSorterNode` subclass that lists its parameters as
+:class:`ParamSpec` entries (declared in one place, with a ParameterDescriptor each) and a
+module-level ``main()`` that calls :func:`run_node`.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    SetParametersResult,
+)
+from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from fence_sorter import __version__
+from fence_sorter.nodes.qos import RELIABLE_QOS
+
+ParamValue = bool | int | float | str | list[str] | list[float] | list[int]
+
+DIAGNOSTICS_TOPIC = "/diagnostics"
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One node parameter: name, default, description (with unit) and constraints."""
+
+    name: str
+    default: ParamValue
+    description: str
+    read_only: bool = False
+    min_value: float | int | None = None
+    max_value: float | int | None = None
+
+    def descriptor(self) -> ParameterDescriptor:
+        """Return the ParameterDescriptor that declares this parameter."""
+        param_type = Parameter.Type.from_parameter_value(self.default)
+        desc = ParameterDescriptor(
+            name=self.name,
+            type=param_type.value,
+            description=self.description,
+            read_only=self.read_only,
+        )
+        if self.min_value is not None and self.max_value is not None:
+            if param_type is Parameter.Type.DOUBLE:
+                desc.floating_point_range = [
+                    FloatingPointRange(
+                        from_value=float(self.min_value), to_value=float(self.max_value), step=0.0
+                    )
+                ]
+            elif param_type is Parameter.Type.INTEGER:
+                desc.integer_range = [
+                    IntegerRange(
+                        from_value=int(self.min_value), to_value=int(self.max_value), step=0
+                    )
+                ]
+            else:
+                raise ValueError(f"parameter {self.name!r}: a range needs a number default")
+        return desc
+
+
+COMMON_PARAMETERS: tuple[ParamSpec, ...] = (
+    ParamSpec(
+        "heartbeat_period",
+        1.0,
+        "Period of the diagnostic heartbeat on /diagnostics [s] (steady clock)",
+        read_only=True,
+        min_value=0.05,
+        max_value=60.0,
+    ),
+)
+
+
+class FenceSorterNode(Node):
+    """Base class of the fence_sorter nodes.
+
+    Subclasses set ``NODE_NAME``, ``PARAMETERS`` and ``STATUS``; they may override
+    :meth:`validate_parameters` to refuse parameter changes that the ranges cannot express.
+    """
+
+    NODE_NAME: str = "fence_sorter"
+    PARAMETERS: tuple[ParamSpec, ...] = ()
+    #: Status text carried by the heartbeat until the node does its real work.
+    STATUS: str = "not yet implemented"
+    STATUS_LEVEL: bytes = DiagnosticStatus.WARN
+
+    def __init__(self, **kwargs: object) -> None:
+        super().__init__(self.NODE_NAME, **kwargs)
+        specs = COMMON_PARAMETERS + self.PARAMETERS
+        names = [spec.name for spec in specs]
+        if len(set(names)) != len(names):
+            raise ValueError(f"{self.NODE_NAME}: duplicate parameter names in {names}")
+        for spec in specs:
+            self.declare_parameter(spec.name, spec.default, spec.descriptor())
+        # Initial values (defaults, --params-file, -p overrides) pass the same validation as
+        # later changes.
+        reason = self.validate_parameters([self.get_parameter(name) for name in names])
+        if reason:
+            raise ParameterException(reason, "initial values")
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+
+        self._diagnostics_pub = self.create_publisher(
+            DiagnosticArray, DIAGNOSTICS_TOPIC, RELIABLE_QOS
+        )
+        # The heartbeat runs on the steady clock: it must beat even before /clock arrives when
+        # the node runs with use_sim_time:=true.
+        self._heartbeat_timer = self.create_timer(
+            float(self.get_parameter("heartbeat_period").value),
+            self.publish_heartbeat,
+            clock=Clock(clock_type=ClockType.STEADY_TIME),
+        )
+        self.get_logger().info(f"{self.NODE_NAME} {__version__}: {self.STATUS}")
+
+    def validate_parameters(self, parameters: Sequence[Parameter]) -> str | None:
+        """Return a reason to refuse ``parameters``, or None to accept them."""
+        del parameters
+        return None
+
+    def _on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
+        reason = self.validate_parameters(parameters)
+        if reason:
+            return SetParametersResult(successful=False, reason=reason)
+        return SetParametersResult(successful=True)
+
+    def heartbeat_status(self) -> DiagnosticStatus:
+        """Return the DiagnosticStatus this node reports on every heartbeat."""
+        return DiagnosticStatus(
+            level=self.STATUS_LEVEL,
+            name=f"fence_sorter/{self.get_name()}",
+            message=self.STATUS,
+            hardware_id="fence_sorter",
+            values=[
+                KeyValue(key="version", value=__version__),
+                KeyValue(key="node", value=self.get_fully_qualified_name()),
+            ],
+        )
+
+    def publish_heartbeat(self) -> None:
+        """Publish one DiagnosticArray with this node's status on /diagnostics."""
+        msg = DiagnosticArray()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.status = [self.heartbeat_status()]
+        self._diagnostics_pub.publish(msg)
+
+
+def run_node(node_class: type[FenceSorterNode], args: Sequence[str] | None = None) -> int:
+    """Init rclpy, spin one node until Ctrl-C, SIGTERM or external shutdown; return exit code.
+
+    rclpy's own signal handlers (SIGINT and SIGTERM) shut the context down, which ends the spin
+    with ExternalShutdownException; a KeyboardInterrupt that slips through ends it as well.
+    """
+    rclpy.init(args=list(args) if args is not None else None)
+    node: FenceSorterNode | None = None
+    try:
+        node = node_class()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except ParameterException as exc:
+        print(f"{node_class.NODE_NAME}: invalid parameter: {exc}", file=sys.stderr)
+        return 1
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
