@@ -1,0 +1,1 @@
+"""Recording of fence_sorter runs: rosbag2 (MCAP) bags and the message type registry."""
