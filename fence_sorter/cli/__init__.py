@@ -1,0 +1,1 @@
+"""User command line of fence_sorter (``fence-sorter``): one module per subcommand."""
