@@ -1,0 +1,181 @@
+#!/usr/bin/env bash
+# One-command, idempotent set-up of fence_sorter into the project-local venv (.venv).
+#
+#   1. venv        create .venv with CPython 3.11 if missing
+#   2. requirements pip install requirements/{ros,python}.txt under requirements/constraints.txt
+#   3. messages    build msg_defs/ (fence_sorter_msgs) with cmake + rosidl, install into .venv
+#   4. package     pip install -e . (editable fence_sorter)
+#   5. ament       lib/fence_sorter/<executables>, ament index marker, share/fence_sorter
+#
+# Every step is skipped when the sha256 of its inputs matches the stamp it left behind in
+# .venv/.fence_sorter_stamps/, so a rerun with nothing changed takes a second or two.
+# The install prefix of the interface package is the venv itself: its libraries land in
+# .venv/lib, which the ros-wheels bootstrapper (ros_wheels_bootstrapper.pth) already puts on
+# LD_LIBRARY_PATH of every python started from the venv, and its Python package lands in the
+# venv's site-packages. scripts/env.sh adds the venv to AMENT_PREFIX_PATH.
+#
+# Environment: FENCE_SORTER_VENV (default <repo>/.venv), PYTHON (base interpreter for a new
+# venv, default python3.11), FENCE_SORTER_FORCE=1 (ignore all stamps), JOBS (cmake build jobs).
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+VENV="${FENCE_SORTER_VENV:-$ROOT/.venv}"
+STAMPS="$VENV/.fence_sorter_stamps"
+MSG_SRC="$ROOT/msg_defs"
+MSG_BUILD="$ROOT/.build/fence_sorter_msgs"
+JOBS="${JOBS:-$(nproc 2>/dev/null || echo 2)}"
+
+log() { echo "bootstrap: $*"; }
+die() { echo "bootstrap: ERROR: $*" >&2; exit 1; }
+
+# sha256 over the names and contents of the given files, plus extra strings (-s STRING).
+inputs_hash() {
+  {
+    while (($#)); do
+      if [[ "$1" == "-s" ]]; then
+        printf 'string:%s\n' "$2"
+        shift 2
+        continue
+      fi
+      [[ -f "$1" ]] || die "missing input file $1"
+      printf 'file:%s\n' "${1#"$ROOT"/}"
+      sha256sum <"$1"
+      shift
+    done
+  } | sha256sum | cut -d' ' -f1
+}
+
+stamp_ok() { [[ "${FENCE_SORTER_FORCE:-0}" != 1 && -f "$STAMPS/$1" && "$(<"$STAMPS/$1")" == "$2" ]]; }
+stamp_write() { mkdir -p "$STAMPS" && printf '%s\n' "$2" >"$STAMPS/$1"; }
+
+timed() {
+  local name="$1" start=$SECONDS
+  shift
+  "$@"
+  log "$name done in $((SECONDS - start)) s"
+}
+
+# -- 1. venv ---------------------------------------------------------------------------------
+find_base_python() {
+  local candidate
+  for candidate in "${PYTHON:-}" python3.11 python3; do
+    [[ -n "$candidate" ]] || continue
+    if command -v "$candidate" >/dev/null 2>&1 &&
+      "$candidate" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))' 2>/dev/null; then
+      command -v "$candidate"
+      return 0
+    fi
+  done
+  return 1
+}
+
+step_venv() {
+  if [[ -x "$VENV/bin/python" ]] && "$VENV/bin/python" -c 'import sys' 2>/dev/null; then
+    return 0
+  fi
+  local base
+  base="$(find_base_python)" || die "no CPython 3.11 found (the ROS wheels are cp311); set PYTHON"
+  log "creating venv $VENV with $base"
+  rm -rf "$VENV"
+  "$base" -m venv "$VENV"
+}
+
+PY="$VENV/bin/python"
+PIP=("$PY" -m pip --disable-pip-version-check)
+
+# -- 2. requirements ---------------------------------------------------------------------------
+step_requirements() {
+  local key
+  key="$(inputs_hash "$ROOT/requirements/ros.txt" "$ROOT/requirements/python.txt" \
+    "$ROOT/requirements/constraints.txt" -s "$("$PY" -V 2>&1)")"
+  if stamp_ok requirements "$key"; then return 0; fi
+  log "installing pinned requirements (first time: about a minute)"
+  "${PIP[@]}" install --quiet -r "$ROOT/requirements/ros.txt" -r "$ROOT/requirements/python.txt" \
+    -c "$ROOT/requirements/constraints.txt"
+  stamp_write requirements "$key"
+  # New ROS libraries or generators: rebuild the messages.
+  rm -f "$STAMPS/messages"
+}
+
+# -- 3. messages -------------------------------------------------------------------------------
+uninstall_messages() {
+  local manifest="$MSG_BUILD/install_manifest.txt" file
+  [[ -f "$manifest" ]] || return 0
+  while IFS= read -r file; do
+    # Only ever remove files under the venv this build installed into.
+    [[ "$file" == "$VENV"/* ]] && rm -f "$file"
+  done <"$manifest"
+}
+
+step_messages() {
+  command -v cmake >/dev/null 2>&1 || die "cmake not found (apt-get install cmake)"
+  local files=("$MSG_SRC/CMakeLists.txt" "$MSG_SRC/package.xml")
+  local msg
+  for msg in "$MSG_SRC"/msg/*.msg; do files+=("$msg"); done
+  local key
+  key="$(inputs_hash "${files[@]}" -s "$VENV" -s "$(<"$STAMPS/requirements")")"
+  if stamp_ok messages "$key"; then return 0; fi
+  log "building fence_sorter_msgs (cmake + rosidl, about 30 s)"
+  # A cache from another venv or source path cannot be reused.
+  if [[ -f "$MSG_BUILD/CMakeCache.txt" ]] &&
+    ! grep -qxF "CMAKE_INSTALL_PREFIX:PATH=$VENV" "$MSG_BUILD/CMakeCache.txt"; then
+    rm -rf "$MSG_BUILD"
+  fi
+  uninstall_messages
+  local log_file="$ROOT/.build/fence_sorter_msgs.log"
+  mkdir -p "$MSG_BUILD"
+  if ! (
+    export AMENT_PREFIX_PATH="$VENV"
+    cmake -S "$MSG_SRC" -B "$MSG_BUILD" \
+      -DCMAKE_PREFIX_PATH="$VENV" \
+      -DCMAKE_INSTALL_PREFIX="$VENV" \
+      -DPython3_EXECUTABLE="$PY" \
+      -DCMAKE_BUILD_TYPE=Release \
+      -DBUILD_TESTING=OFF &&
+      cmake --build "$MSG_BUILD" --parallel "$JOBS" &&
+      cmake --install "$MSG_BUILD"
+  ) >"$log_file" 2>&1; then
+    tail -n 40 "$log_file" >&2
+    die "building fence_sorter_msgs failed; full log: $log_file"
+  fi
+  stamp_write messages "$key"
+}
+
+# -- 4. package --------------------------------------------------------------------------------
+step_package() {
+  local key
+  key="$(inputs_hash "$ROOT/setup.py" "$ROOT/setup.cfg" "$ROOT/package.xml" \
+    "$ROOT/fence_sorter/__init__.py" -s "$ROOT" -s "$(<"$STAMPS/requirements")")"
+  if stamp_ok package "$key" && "$PY" -c 'import fence_sorter' 2>/dev/null; then return 0; fi
+  log "installing fence_sorter (editable)"
+  "${PIP[@]}" install --quiet --no-deps --no-build-isolation -e "$ROOT"
+  stamp_write package "$key"
+  rm -f "$STAMPS/ament"
+}
+
+# -- 5. ament layout ---------------------------------------------------------------------------
+step_ament() {
+  local key
+  key="$(inputs_hash "$ROOT/scripts/ament_layout.py" "$ROOT/package.xml" \
+    "$ROOT/resource/fence_sorter" -s "$(<"$STAMPS/package")")"
+  if stamp_ok ament "$key" &&
+    [[ -x "$VENV/lib/fence_sorter/simulator" && -f "$VENV/share/fence_sorter/package.xml" &&
+      -f "$VENV/share/ament_index/resource_index/packages/fence_sorter" ]]; then
+    return 0
+  fi
+  "$PY" "$ROOT/scripts/ament_layout.py" --prefix "$VENV" --root "$ROOT" --python "$PY"
+  stamp_write ament "$key"
+}
+
+main() {
+  local start=$SECONDS
+  cd "$ROOT"
+  timed venv step_venv
+  timed requirements step_requirements
+  timed messages step_messages
+  timed package step_package
+  timed "ament layout" step_ament
+  log "ready in $((SECONDS - start)) s: source scripts/env.sh (venv $VENV)"
+}
+
+main "$@"
