@@ -94,12 +94,15 @@ def stiff_impact(
     yy = sol.sol(tt)
     dd = np.maximum(yy[0], 0.0)
     peak = float(np.max(np.maximum(b * yy[1] * dd * dd + k * dd**4, 0.0)))
+    i_d = int(np.argmax(d))
+    td = np.linspace(t[max(i_d - 1, 0)], t[min(i_d + 1, samples - 1)], 201)
+    d_max = float(np.max(sol.sol(td)[0]))
     return StiffImpact(
         approach_speed=approach_speed,
         time=t,
         force=force,
         peak_force=peak,
-        max_deformation=float(np.max(d)),
+        max_deformation=d_max,
         duration=t_sep,
         restitution=restitution,
         damping_work=damping_work,

@@ -5,9 +5,9 @@ One evaluation gives every active contact of the load with the law (16) and fric
 - ``corner``: a load corner against the fence surface: E1's oblique strike (13), (23)-(33); the
   arc position starts from R = |O C_j| (23) and is refined by one projection onto the deflected
   fence, and D is the normal distance of C_j behind the fence surface at U (26).
-- ``tip``: the fence tip inside a load face: the face still lies on the fence after its front
-  corner has passed the tip (the paper keeps E2's contact point C on the fence until it passes
-  R_z, (21)).
+- ``tip``: the fence tip inside the load after a penetrating corner has slid past it: the face
+  still lies on the fence (the paper keeps E2's contact point C on the fence until it passes R_z,
+  (21)); D is measured from the tip along the fence normal, continuous with the corner's D.
 - ``border``: a load corner against the fence-side border wall y0 = 0, D = -y_C2 (56), kinetic
   friction mu2 (E3, (50)-(55)).
 
@@ -114,16 +114,24 @@ def evaluate(
         ev.contacts.append(Contact(kind, index, s_arc, d, d_rate, n, ft, px, py, nx, ny))
 
     # corners against the fence surface
+    tip_x, tip_y, ttx, tty, vtx, vty = fence.surface(length) if use_tip else (0,) * 6
+    ntx, nty = -tty, ttx
+    passed = [False] * 4
     for k, (px, py) in enumerate(corners):
         # cheap reject: well in front of the rigid line, beyond any deflection
         if -px * sa + py * ca > reach:
             continue
         r = math.hypot(px, py)
         if r > length:
+            s_arc = r
+        else:
+            ux, uy, tx, ty, vux, vuy = fence.surface(r)
+            s_arc = r + (px - ux) * tx + (py - uy) * ty
+        if s_arc > length:
+            # beyond the tip: behind the fence's extension, the tip contact takes over
+            passed[k] = use_tip and (tip_x - px) * ntx + (tip_y - py) * nty > 0.0
             continue
-        ux, uy, tx, ty, vux, vuy = fence.surface(r)
-        s_arc = r + (px - ux) * tx + (py - uy) * ty
-        if s_arc < 0.0 or s_arc > length:
+        if s_arc < 0.0:
             continue
         ux, uy, tx, ty, vux, vuy = fence.surface(s_arc)
         nx, ny = -ty, tx
@@ -136,34 +144,46 @@ def evaluate(
             slide = (vpx - vux) * tx + (vpy - vuy) * ty
             add("corner", k, s_arc, d, d_rate, px, py, nx, ny, tx, ty, slide, True)
 
-    # the fence tip inside a load face
-    if use_tip:
-        tip_x, tip_y = fence.tip()
-        bx = c * (tip_x - x) + s * (tip_y - y)
-        by = -s * (tip_x - x) + c * (tip_y - y)
-        best = None
-        for k, (nbx, nby) in enumerate(body.face_normals):
-            cx_, cy_ = body.corners[k]
-            dist = -((bx - cx_) * nbx + (by - cy_) * nby)  # > 0 inside the face
-            if dist <= 0.0:
-                best = None
-                break
-            if best is None or dist < best[1]:
-                best = (k, dist)
-        if best is not None:
-            k, d = best
+    # the fence tip inside the load, continuing a corner that slid past it: D is the depth of
+    # the load behind the tip along the fence normal (a ray from the tip), so it equals the
+    # corner's D at the moment the corner passes the tip and the force stays continuous
+    if use_tip and any(passed):
+        depth = math.inf
+        exit_face = -1
+        for k in range(4):
             nbx, nby = body.face_normals[k]
-            mx, my = c * nbx - s * nby, s * nbx + c * nby  # outward face normal (world)
-            nfx, nfy = -(-sa), -ca  # minus the fence normal n_alpha (approx. at the tip)
-            if mx * nfx + my * nfy > 0.0:  # the face looks at the fence
-                _, _, ftx, fty, vtx, vty = fence.surface(length)
-                vpx = vx - om * (tip_y - y)
-                vpy = vy + om * (tip_x - x)
-                d_rate = (vpx - vtx) * mx + (vpy - vty) * my
-                tx, ty = -my, mx
-                slide = (vpx - vtx) * tx + (vpy - vty) * ty
-                ev.gaps[("tip", k)] = (d, d_rate)
-                add("tip", k, length, d, d_rate, tip_x, tip_y, -mx, -my, tx, ty, slide, True)
+            mx, my = c * nbx - s * nby, s * nbx + c * nby
+            cx_, cy_ = corners[k]
+            inside = (cx_ - tip_x) * mx + (cy_ - tip_y) * my
+            if inside <= 0.0:
+                exit_face = -1
+                break
+            cos_dir = -(ntx * mx + nty * my)
+            if cos_dir > 1e-12:
+                lam = inside / cos_dir
+                if lam < depth:
+                    depth, exit_face = lam, k
+        if exit_face >= 0 and (passed[exit_face] or passed[(exit_face + 1) % 4]):
+            vpx = vx - om * (tip_y - y)
+            vpy = vy + om * (tip_x - x)
+            d_rate = (vtx - vpx) * ntx + (vty - vpy) * nty
+            slide = (vpx - vtx) * ttx + (vpy - vty) * tty
+            ev.gaps[("tip", exit_face)] = (depth, d_rate)
+            add(
+                "tip",
+                exit_face,
+                length,
+                depth,
+                d_rate,
+                tip_x,
+                tip_y,
+                ntx,
+                nty,
+                ttx,
+                tty,
+                slide,
+                True,
+            )
 
     # corners against the border wall y0 = 0
     if use_border:

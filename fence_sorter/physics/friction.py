@@ -1,4 +1,4 @@
-"""Belt friction with coupled sliding and spinning (34)-(36) and Karnopp stick; fence friction (37).
+"""Belt friction, coupled sliding and spinning (34)-(36), Karnopp stick; fence friction (37).
 
 The paper's coupled law (after its ref. 6) is an elliptic limit surface: with c = F_max v_o and
 d = T_max |phidot| the slip wrench is F = -F_max^2 v / sqrt(c^2 + d^2), T = -T_max^2 phidot /
@@ -69,11 +69,11 @@ def karnopp_belt_wrench(
     that sticks is minus the applied wrench). Returns (F_x, F_y, T).
     """
     v_o = math.hypot(ux, uy)
+    # slip wrench = -(F_max^2 v, T_max^2 phidot) / sqrt(c^2 + d^2), the form (34)-(36) reduces to
+    norm = math.hypot(f_max * v_o, t_max * spin)
     if v_o > v_min:
-        c = f_max * v_o
-        d = t_max * abs(spin)
-        scale = f_max / (v_o * math.sqrt(1.0 + (d / c) ** 2))
-        fx, fy = -scale * ux, -scale * uy
+        k = f_max * f_max / norm if norm > 0.0 else 0.0
+        fx, fy = -k * ux, -k * uy
     else:
         p = math.hypot(applied_x, applied_y)
         if f_max > p:
@@ -81,9 +81,7 @@ def karnopp_belt_wrench(
         else:
             fx, fy = -f_max * applied_x / p, -f_max * applied_y / p
     if abs(spin) > phidot_min:
-        d = t_max * abs(spin)
-        c = f_max * v_o
-        torque = -math.copysign(t_max, spin) / math.sqrt(1.0 + (c / d) ** 2)
+        torque = -t_max * t_max * spin / norm if norm > 0.0 else 0.0
     elif t_max > abs(applied_torque):
         torque = -applied_torque
     else:

@@ -51,7 +51,7 @@ def world_corners(body: ParcelBody, x: float, y: float, phi: float) -> list[tupl
 def initial_pose(
     body: ParcelBody, front_x: float, lateral_gap: float, yaw: float
 ) -> tuple[float, float, float]:
-    """C_s position with the load front at x0 = front_x and its lowest point at y0 = lateral_gap."""
+    """C_s with the load front at x0 = front_x and its lowest point at y0 = lateral_gap."""
     pts = world_corners(body, 0.0, 0.0, yaw)
     x = front_x - max(p[0] for p in pts)
     y = lateral_gap - min(p[1] for p in pts)

@@ -8,7 +8,7 @@ Time stepping ("trapezoidal", the default and for now the only method):
 - Fence: modal coordinates of the FEM beam (13) propagated exactly over the step for a modal force
   varying linearly between the step's ends (a 4x4 matrix exponential per mode, Van Loan), so the
   stiff top modes cost nothing and cannot go unstable; modal truncation just drops columns.
-- Belt friction (34)-(36): solved implicitly at the end of the step (friction.implicit_belt_wrench):
+- Belt friction (34)-(36): solved implicitly at the step end (friction.implicit_belt_wrench):
   stick holds the relative velocity at exactly zero, as the Karnopp window intends, which a fixed
   explicit step cannot do with a 1e-6 m/s window.
 - Events: the drive's breakpoints (0, t1, 2 t1) are hit exactly; contact onset is located by the
@@ -52,6 +52,10 @@ class Scenario:
     fence_length: float = 1.2  # R_z [m] of a stiff fence (a flexible one uses fence.length)
     fence_modes: int | None = None  # modal truncation; None keeps every mode
     record: tuple[str, ...] = ()
+    # initial (vx, vy, phidot) of C_s over ground; None = riding the belt at belt speed
+    initial_velocity: tuple[float, float, float] | None = None
+    # constant applied wrench (F_x, F_y, M_z) on the load, for checks and disturbances
+    external_wrench: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     @property
     def length(self) -> float:
@@ -78,6 +82,7 @@ class SimulationResult:
     wall_time: float
     steps: int
     rejected_steps: int
+    forced_steps: int = 0  # steps taken unconverged across a model discontinuity
     impacts: list[tuple[float, StiffImpact]] = field(default_factory=list)
     series: dict[str, np.ndarray] = field(default_factory=dict)
     model_parts: tuple[str, ...] = ()
@@ -105,6 +110,7 @@ class SimulationResult:
             "wall_time_s": self.wall_time,
             "steps": self.steps,
             "rejected_steps": self.rejected_steps,
+            "forced_steps": self.forced_steps,
             "model_parts": list(self.model_parts),
         }
 
@@ -193,6 +199,7 @@ class _Stepper:
         self.speed_limit = 20.0 * (self.belt + tip_speed) + 10.0
         self.deep = sc.contact.deep_penetration * min(self.body.length_a, self.body.width_b)
         self.record = set(sc.record)
+        self.forced = 0
         self.phi_scale = float(np.max(np.abs(self.fence.phi))) if self.nm else 0.0
 
     # -- one evaluation of all forces at a state --------------------------------------------
@@ -216,6 +223,10 @@ class _Stepper:
         )
         if self.nm:
             ev.modal -= self.fence.rigid_modal * d.accel
+        ext = self.sc.external_wrench
+        ev.fx += ext[0]
+        ev.fy += ext[1]
+        ev.mz += ext[2]
         return ev
 
     def _stick_wrench(self, ev):
@@ -234,7 +245,7 @@ class _Stepper:
         )
 
     # -- one trapezoidal step -------------------------------------------------------------------
-    def _step(self, h, t, q, v, z, ev0, lam0, on_belt):
+    def _step(self, h, t, q, v, z, ev0, lam0, on_belt, force=False):
         sv = self.sc.solver
         t1 = t + h
         im = self.inv_mass
@@ -275,7 +286,9 @@ class _Stepper:
             if err <= sv.tolerance:
                 break
         else:
-            return None
+            if not force:
+                return None
+            self.forced += 1
         # end-of-step forces at the converged state
         ev = self._evaluate(t1, q_new, v_new, z_new, lam0)
         if stuck:
@@ -286,13 +299,28 @@ class _Stepper:
         sc, sv = self.sc, self.sc.solver
         wall0 = time.perf_counter()
         q = list(self.m.initial)
-        v = [self.belt, 0.0, 0.0]
+        v = list(sc.initial_velocity) if sc.initial_velocity else [self.belt, 0.0, 0.0]
         z = np.zeros((self.nm, 2))
         t = 0.0
         lam = (0.0, 0.0, 0.0)
         on_belt = True
         ev = self._evaluate(t, q, v, z, lam)
-        lam = self._stick_wrench(ev)
+        u0 = math.hypot(v[0] - self.belt, v[1])
+        if u0 <= sc.contact.v_min and abs(v[2]) <= sc.contact.phidot_min:
+            lam = self._stick_wrench(ev)
+        else:
+            lam = karnopp_belt_wrench(
+                v[0] - self.belt,
+                v[1],
+                v[2],
+                ev.fx,
+                ev.fy,
+                ev.mz,
+                self.body.f_max,
+                self.body.t_max,
+                sc.contact.v_min,
+                sc.contact.phidot_min,
+            )
         h_nom = sv.dt
         h = h_nom
         steps = rejected = 0
@@ -337,14 +365,17 @@ class _Stepper:
             while next_break < len(self.breaks) and self.breaks[next_break] <= t + 1e-12:
                 next_break += 1
             h_try = min(h, self.breaks[next_break] - t) if next_break < len(self.breaks) else h
-            out = self._step(h_try, t, q, v, z, ev, lam, on_belt)
+            # a step this small that still does not converge straddles a discontinuity of the
+            # model (a contact set or friction sign switching): take it and count it
+            tiny = h_try <= 1e-3 * h_nom
+            out = self._step(h_try, t, q, v, z, ev, lam, on_belt, force=tiny)
             if out is None:
                 rejected += 1
                 h = h_try / 2.0
                 if h < sv.min_dt:
                     diagnosis = (
                         f"step size fell below solver.min_dt={sv.min_dt:g} s at t = {t:.6f} s: "
-                        "the contact iteration does not converge (stiffness too high for the step?)"
+                        "the contact iteration does not converge (contact too stiff for the step?)"
                     )
                     break
                 continue
@@ -443,6 +474,7 @@ class _Stepper:
             wall_time=wall,
             steps=steps,
             rejected_steps=rejected,
+            forced_steps=self.forced,
             impacts=impacts,
             series=series,
             model_parts=self.m.parts,
