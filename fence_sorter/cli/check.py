@@ -40,8 +40,28 @@ class CheckResult:
         return f"{'OK  ' if self.ok else 'FAIL'} {self.name}: {self.detail}"
 
 
+def rmw_env_problem() -> str | None:
+    """Return why the environment selects another RMW, or None.
+
+    librcl checks RMW_IMPLEMENTATION and RCL_ASSERT_RMW_ID_MATCHES when it is loaded and ends
+    the whole process (exit code 102) on a mismatch, so this is checked before importing rclpy.
+    """
+    for var in ("RMW_IMPLEMENTATION", "RCL_ASSERT_RMW_ID_MATCHES"):
+        value = os.environ.get(var)
+        if value and value != EXPECTED_RMW:
+            return (
+                f"{var}={value} but fence_sorter runs on {EXPECTED_RMW}, the one RMW it "
+                f"installs (librcl would end the process at import); unset {var} or set it "
+                f"to {EXPECTED_RMW}"
+            )
+    return None
+
+
 def check_rclpy() -> str:
     """rclpy imports and its C extension loads."""
+    problem = rmw_env_problem()
+    if problem:
+        raise CheckFailed(f"not imported: {problem}")
     try:
         import rclpy
         from rclpy.impl.implementation_singleton import rclpy_implementation  # noqa: F401
@@ -52,6 +72,9 @@ def check_rclpy() -> str:
 
 def check_rmw() -> str:
     """The RMW implementation is Fast DDS."""
+    problem = rmw_env_problem()
+    if problem:
+        raise CheckFailed(problem)
     try:
         from rclpy.utilities import get_rmw_implementation_identifier
 

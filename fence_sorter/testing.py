@@ -1,0 +1,88 @@
+"""Helpers for tests that start fence_sorter processes (nodes, CLI) over real DDS.
+
+Each process gets its own process group, so a test can always end it and everything it
+started (no orphan processes), and an environment that keeps test runs apart: one
+ROS_DOMAIN_ID per run, discovery limited to this machine, rcl logs in a temporary directory.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+
+#: Fast DDS accepts domain ids 0..232; stay away from 0 (the default) and 1..99.
+DOMAIN_ID_RANGE = (100, 200)
+
+
+def run_domain_id() -> int:
+    """Return a ROS_DOMAIN_ID for this test run (derived from the process id)."""
+    low, high = DOMAIN_ID_RANGE
+    return low + os.getpid() % (high - low)
+
+
+def ros_env(
+    domain_id: int, log_dir: Path, extra: Mapping[str, str] | None = None
+) -> dict[str, str]:
+    """Return os.environ plus the isolation settings for a child process."""
+    env = dict(os.environ)
+    env["ROS_DOMAIN_ID"] = str(domain_id)
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    env["ROS_LOG_DIR"] = str(log_dir)
+    env["PYTHONUNBUFFERED"] = "1"
+    env.pop("RMW_IMPLEMENTATION", None)
+    if extra:
+        env.update(extra)
+    return env
+
+
+def venv_executable(name: str) -> str:
+    """Return the path of console script ``name`` next to this interpreter."""
+    return str(Path(sys.executable).parent / name)
+
+
+def stop_process(proc: subprocess.Popen, sig: int = signal.SIGTERM, timeout: float = 10.0) -> None:
+    """End ``proc`` and its process group: ``sig`` first, SIGKILL if it lingers."""
+    if proc.poll() is None:
+        try:
+            os.killpg(proc.pid, sig)
+        except ProcessLookupError:
+            pass
+        try:
+            proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            pass
+    # Whatever is left of the group (children of the child), and the child itself.
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)
+    except (ProcessLookupError, PermissionError):
+        pass
+    if proc.poll() is None:
+        proc.wait(timeout=timeout)
+
+
+@contextmanager
+def managed_process(
+    cmd: Sequence[str], env: Mapping[str, str], **popen_kwargs: object
+) -> Iterator[subprocess.Popen]:
+    """Start ``cmd`` in its own process group; always end the group on exit of the block."""
+    proc = subprocess.Popen(
+        list(cmd),
+        env=dict(env),
+        start_new_session=True,
+        stdout=popen_kwargs.pop("stdout", subprocess.PIPE),
+        stderr=popen_kwargs.pop("stderr", subprocess.PIPE),
+        text=True,
+        **popen_kwargs,
+    )
+    try:
+        yield proc
+    finally:
+        stop_process(proc)
+        for stream in (proc.stdout, proc.stderr):
+            if stream is not None:
+                stream.close()

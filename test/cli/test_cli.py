@@ -1,0 +1,139 @@
+"""The ``fence-sorter`` command line: version, subcommand registry, check, demo-roundtrip."""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from fence_sorter import __version__
+from fence_sorter.cli import main as cli_main
+from fence_sorter.testing import managed_process, venv_executable
+
+FENCE_SORTER = venv_executable("fence-sorter")
+TIMEOUT = 60.0
+CHECK_NAMES = ("rclpy", "rmw", "fence_sorter_msgs", "ament index", "rosbags typestore")
+
+
+def run_cli(args: list[str], env: dict[str, str]) -> subprocess.CompletedProcess:
+    with managed_process([FENCE_SORTER, *args], env) as proc:
+        out, err = proc.communicate(timeout=TIMEOUT)
+    return subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
+
+
+def test_version_console_script(env: dict[str, str]) -> None:
+    result = run_cli(["--version"], env)
+    assert result.returncode == 0
+    assert result.stdout.strip() == f"fence-sorter {__version__}"
+
+
+def test_version_is_single_sourced() -> None:
+    from importlib import metadata
+
+    assert metadata.version("fence_sorter") == __version__
+    package_xml = Path(__file__).resolve().parents[2] / "package.xml"
+    assert f"<version>{__version__}</version>" in package_xml.read_text()
+
+
+def test_every_registered_module_adds_its_subcommand() -> None:
+    assert "check" in cli_main.SUBCOMMAND_MODULES
+    assert "demo_roundtrip" in cli_main.SUBCOMMAND_MODULES
+    parser = cli_main.build_parser()
+    commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    for module in cli_main.SUBCOMMAND_MODULES:
+        assert module.replace("_", "-") in commands.choices
+        assert "func" in commands.choices[module.replace("_", "-")]._defaults
+
+
+def test_broken_subcommand_module_does_not_break_the_others(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setattr(cli_main, "SUBCOMMAND_MODULES", ("check", "no_such_module"))
+    assert cli_main.main(["no-such-module"]) == 1
+    assert "fence_sorter.cli.no_such_module cannot be loaded" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        cli_main.main(["--version"])
+    assert exc.value.code == 0
+
+
+def test_no_subcommand_prints_help(capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli_main.main([]) == 2
+    assert "check" in capsys.readouterr().err
+
+
+@pytest.mark.ros
+def test_check_passes_in_the_bootstrapped_env(env: dict[str, str]) -> None:
+    result = run_cli(["check"], env)
+    assert result.returncode == 0, result.stdout + result.stderr
+    for name in CHECK_NAMES:
+        assert f"OK   {name}:" in result.stdout
+    assert "FAIL" not in result.stdout
+
+
+def _shadow_package(root: Path, name: str, body: str) -> Path:
+    """A package ``name`` under ``root`` that hides the real one (PYTHONPATH comes first)."""
+    package = root / name
+    package.mkdir(parents=True)
+    (package / "__init__.py").write_text(body)
+    return root
+
+
+def _assert_fails_cleanly(result: subprocess.CompletedProcess, failing: str, *words: str) -> str:
+    output = result.stdout + result.stderr
+    assert result.returncode == 1, output
+    assert "Traceback" not in output
+    line = next((ln for ln in result.stdout.splitlines() if ln.startswith(f"FAIL {failing}:")), "")
+    assert line, output
+    for word in words:
+        assert word in line, line
+    assert "bootstrap" in line or "unset" in line, line
+    return line
+
+
+@pytest.mark.ros
+def test_check_names_unbuilt_messages(env: dict[str, str], tmp_path: Path) -> None:
+    # A fence_sorter_msgs without its generated msg module, as after a failed build.
+    shadow = _shadow_package(tmp_path / "shadow", "fence_sorter_msgs", "")
+    env["PYTHONPATH"] = str(shadow)
+    result = run_cli(["check"], env)
+    _assert_fails_cleanly(result, "fence_sorter_msgs", "fence_sorter_msgs.msg")
+    assert "OK   rclpy:" in result.stdout  # the other checks still run
+
+
+@pytest.mark.ros
+def test_check_names_broken_rclpy(env: dict[str, str], tmp_path: Path) -> None:
+    body = "raise ImportError('librmw_fastrtps_cpp.so: cannot open shared object file')\n"
+    env["PYTHONPATH"] = str(_shadow_package(tmp_path / "shadow", "rclpy", body))
+    result = run_cli(["check"], env)
+    _assert_fails_cleanly(result, "rclpy", "librmw_fastrtps_cpp.so")
+    _assert_fails_cleanly(result, "rmw")
+
+
+@pytest.mark.ros
+def test_check_names_missing_ament_prefix(env: dict[str, str]) -> None:
+    env.pop("AMENT_PREFIX_PATH", None)
+    result = run_cli(["check"], env)
+    _assert_fails_cleanly(result, "ament index", "AMENT_PREFIX_PATH")
+
+
+@pytest.mark.ros
+def test_check_names_package_missing_from_index(env: dict[str, str], tmp_path: Path) -> None:
+    env["AMENT_PREFIX_PATH"] = str(tmp_path)
+    result = run_cli(["check"], env)
+    _assert_fails_cleanly(result, "ament index", "fence_sorter", "not in the ament index")
+
+
+@pytest.mark.ros
+def test_check_names_foreign_rmw(env: dict[str, str]) -> None:
+    env["RMW_IMPLEMENTATION"] = "rmw_cyclonedds_cpp"
+    result = run_cli(["check"], env)
+    _assert_fails_cleanly(result, "rmw", "RMW_IMPLEMENTATION=rmw_cyclonedds_cpp")
+
+
+@pytest.mark.ros
+def test_demo_roundtrip(env: dict[str, str]) -> None:
+    result = run_cli(["demo-roundtrip", "--timeout", "45"], env)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "all 5 message types made the round trip" in result.stdout

@@ -1,0 +1,26 @@
+"""Fixtures of the ROS tests: an isolated environment for the processes a test starts."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from fence_sorter.testing import ros_env, run_domain_id
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Register the ``ros`` marker (also in setup.cfg) in case another config file wins."""
+    config.addinivalue_line("markers", "ros: needs a working ROS 2 environment (rclpy, DDS)")
+
+
+@pytest.fixture(scope="session")
+def domain_id() -> int:
+    """ROS_DOMAIN_ID of this test run."""
+    return run_domain_id()
+
+
+@pytest.fixture
+def env(domain_id: int, tmp_path: Path) -> dict[str, str]:
+    """Environment for child processes: this run's domain, localhost discovery, own logs."""
+    return ros_env(domain_id, tmp_path / "ros_log")

@@ -1,0 +1,105 @@
+"""The node executables, started as ``ros2 run fence_sorter <node>`` would start them."""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+from pathlib import Path
+
+import pytest
+
+from fence_sorter.testing import managed_process
+
+pytestmark = pytest.mark.ros
+
+NODES = {
+    # node: signal that ends it (both must give a clean exit)
+    "simulator": signal.SIGINT,
+    "scanner": signal.SIGTERM,
+    "controller": signal.SIGINT,
+    "recorder": signal.SIGTERM,
+}
+HEARTBEATS = 2
+TIMEOUT = 30.0
+
+
+def resolve_executable(name: str) -> Path:
+    """Resolve like ``ros2 run``: package prefix from the ament index, then lib/<pkg>/<exe>."""
+    from ament_index_python.packages import get_package_prefix
+
+    path = Path(get_package_prefix("fence_sorter")) / "lib" / "fence_sorter" / name
+    assert path.is_file() and os.access(path, os.X_OK), path
+    return path
+
+
+@pytest.fixture
+def listener(domain_id: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    """An rclpy node in the test process listening on /diagnostics."""
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    from fence_sorter.nodes.qos import RELIABLE_QOS
+
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    monkeypatch.setenv("ROS_LOG_DIR", str(tmp_path / "ros_log_listener"))
+    context = rclpy.Context()
+    rclpy.init(
+        context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO
+    )
+    node = rclpy.create_node("test_listener", context=context)
+    received: list = []
+    node.create_subscription(DiagnosticArray, "/diagnostics", received.append, RELIABLE_QOS)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    try:
+        yield executor, received
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
+@pytest.mark.parametrize("name", sorted(NODES))
+def test_node_beats_and_exits_cleanly(
+    name: str, env: dict[str, str], tmp_path: Path, listener
+) -> None:
+    executor, received = listener
+    params = tmp_path / "params.yaml"
+    params.write_text("/**:\n  ros__parameters:\n    heartbeat_period: 0.2\n")
+    cmd = [str(resolve_executable(name)), "--ros-args", "--params-file", str(params)]
+    with managed_process(cmd, env) as proc:
+        deadline = time.monotonic() + TIMEOUT
+        mine: list = []
+        while len(mine) < HEARTBEATS and time.monotonic() < deadline:
+            assert proc.poll() is None, proc.communicate()
+            executor.spin_once(timeout_sec=0.1)
+            mine = [s for msg in received for s in msg.status if s.name == f"fence_sorter/{name}"]
+        assert len(mine) >= HEARTBEATS, f"{name}: no heartbeat on /diagnostics"
+        assert "not yet implemented" in mine[0].message
+        assert {v.key: v.value for v in mine[0].values}["node"] == f"/{name}"
+
+        proc.send_signal(NODES[name])
+        out, err = proc.communicate(timeout=TIMEOUT)
+    assert proc.returncode == 0, out + err
+    assert "Traceback" not in out + err
+
+
+def test_invalid_parameter_is_refused_without_traceback(env: dict[str, str]) -> None:
+    cmd = [str(resolve_executable("controller")), "--ros-args", "-p", "t1_min:=2.0"]
+    with managed_process(cmd, env) as proc:
+        out, err = proc.communicate(timeout=TIMEOUT)
+    assert proc.returncode == 1
+    assert "t1_min" in err and "t1_max" in err
+    assert "Traceback" not in out + err
+
+
+def test_out_of_range_parameter_is_refused(env: dict[str, str]) -> None:
+    cmd = [str(resolve_executable("simulator")), "--ros-args", "-p", "real_time_factor:=1e6"]
+    with managed_process(cmd, env) as proc:
+        out, err = proc.communicate(timeout=TIMEOUT)
+    assert proc.returncode == 1
+    assert "real_time_factor" in err and "range" in err
+    assert "Traceback" not in out + err
