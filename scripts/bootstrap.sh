@@ -48,11 +48,19 @@ inputs_hash() {
 stamp_ok() { [[ "${FENCE_SORTER_FORCE:-0}" != 1 && -f "$STAMPS/$1" && "$(<"$STAMPS/$1")" == "$2" ]]; }
 stamp_write() { mkdir -p "$STAMPS" && printf '%s\n' "$2" >"$STAMPS/$1"; }
 
+# Run a step; report its duration when it did some work (set WORKED=1), stay quiet otherwise.
+WORKED=0
 timed() {
   local name="$1" start=$SECONDS
   shift
+  WORKED=0
   "$@"
-  log "$name done in $((SECONDS - start)) s"
+  if ((WORKED)); then log "$name done in $((SECONDS - start)) s"; fi
+}
+
+# pip, without the machine's notices about index locations that do not exist.
+pip_install() {
+  "${PIP[@]}" install "$@" 2> >(grep -v -- 'is ignored: it is neither a file nor a directory' >&2)
 }
 
 # -- 1. venv ---------------------------------------------------------------------------------
@@ -75,6 +83,7 @@ step_venv() {
   fi
   local base
   base="$(find_base_python)" || die "no CPython 3.11 found (the ROS wheels are cp311); set PYTHON"
+  WORKED=1
   log "creating venv $VENV with $base"
   rm -rf "$VENV"
   "$base" -m venv "$VENV"
@@ -89,8 +98,9 @@ step_requirements() {
   key="$(inputs_hash "$ROOT/requirements/ros.txt" "$ROOT/requirements/python.txt" \
     "$ROOT/requirements/constraints.txt" -s "$("$PY" -V 2>&1)")"
   if stamp_ok requirements "$key"; then return 0; fi
+  WORKED=1
   log "installing pinned requirements (first time: about a minute)"
-  "${PIP[@]}" install --quiet -r "$ROOT/requirements/ros.txt" -r "$ROOT/requirements/python.txt" \
+  pip_install --quiet -r "$ROOT/requirements/ros.txt" -r "$ROOT/requirements/python.txt" \
     -c "$ROOT/requirements/constraints.txt"
   stamp_write requirements "$key"
   # New ROS libraries or generators: rebuild the messages.
@@ -115,6 +125,7 @@ step_messages() {
   local key
   key="$(inputs_hash "${files[@]}" -s "$VENV" -s "$(<"$STAMPS/requirements")")"
   if stamp_ok messages "$key"; then return 0; fi
+  WORKED=1
   log "building fence_sorter_msgs (cmake + rosidl, about 30 s)"
   # A cache from another venv or source path cannot be reused.
   if [[ -f "$MSG_BUILD/CMakeCache.txt" ]] &&
@@ -147,8 +158,9 @@ step_package() {
   key="$(inputs_hash "$ROOT/setup.py" "$ROOT/setup.cfg" "$ROOT/package.xml" \
     "$ROOT/fence_sorter/__init__.py" -s "$ROOT" -s "$(<"$STAMPS/requirements")")"
   if stamp_ok package "$key" && "$PY" -c 'import fence_sorter' 2>/dev/null; then return 0; fi
+  WORKED=1
   log "installing fence_sorter (editable)"
-  "${PIP[@]}" install --quiet --no-deps --no-build-isolation -e "$ROOT"
+  pip_install --quiet --no-deps --no-build-isolation -e "$ROOT"
   stamp_write package "$key"
   rm -f "$STAMPS/ament"
 }
@@ -157,12 +169,14 @@ step_package() {
 step_ament() {
   local key
   key="$(inputs_hash "$ROOT/scripts/ament_layout.py" "$ROOT/package.xml" \
-    "$ROOT/resource/fence_sorter" -s "$(<"$STAMPS/package")")"
+    "$ROOT/resource/fence_sorter" -s "$(<"$STAMPS/package")" \
+    -s "$(cd "$ROOT" && ls -d config launch 2>/dev/null || true)")"
   if stamp_ok ament "$key" &&
     [[ -x "$VENV/lib/fence_sorter/simulator" && -f "$VENV/share/fence_sorter/package.xml" &&
       -f "$VENV/share/ament_index/resource_index/packages/fence_sorter" ]]; then
     return 0
   fi
+  WORKED=1
   "$PY" "$ROOT/scripts/ament_layout.py" --prefix "$VENV" --root "$ROOT" --python "$PY"
   stamp_write ament "$key"
 }
@@ -175,7 +189,7 @@ main() {
   timed messages step_messages
   timed package step_package
   timed "ament layout" step_ament
-  log "ready in $((SECONDS - start)) s: source scripts/env.sh (venv $VENV)"
+  log "ready in $((SECONDS - start)) s (venv $VENV; shell: source scripts/env.sh)"
 }
 
 main "$@"
