@@ -66,7 +66,8 @@ pip_install() {
 # -- 1. venv ---------------------------------------------------------------------------------
 find_base_python() {
   local candidate
-  for candidate in "${PYTHON:-}" python3.11 python3; do
+  local pyenv_pythons=("${PYENV_ROOT:-$HOME/.pyenv}"/versions/3.11*/bin/python3.11)
+  for candidate in "${PYTHON:-}" python3.11 python3 "${pyenv_pythons[@]}"; do
     [[ -n "$candidate" ]] || continue
     if command -v "$candidate" >/dev/null 2>&1 &&
       "$candidate" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))' 2>/dev/null; then
