@@ -19,6 +19,8 @@ from fence_sorter import __version__
 SUBCOMMAND_MODULES: tuple[str, ...] = (
     "check",
     "demo_roundtrip",
+    "simulate",
+    "modes",
 )
 
 
