@@ -76,11 +76,20 @@ def evaluate(
     use_border: bool,
     use_tip: bool,
     modal_out: np.ndarray | None,
+    implicit_weight: float | None = None,
+    prev_friction: dict | None = None,
 ) -> Evaluation:
     """Contact forces on the load in ``state`` = (x, y, phi, vx, vy, phidot) against ``fence``.
 
     ``belt_wrench`` (the belt friction in force) supplies the applied tangential force of the
     Karnopp stick branch of (37). ``modal_out`` (zeroed here) receives the fence's share.
+
+    Inside a time step's iteration, ``implicit_weight`` (velocity change per unit end-of-step
+    force over the mass, h/2 for the trapezoidal rule) and ``prev_friction`` (each contact's
+    friction at the previous iterate, keyed (kind, index)) make (37) implicit: the friction that
+    stops the contact's slip by the end of the step is used if it lies within mu2 N (stick),
+    otherwise mu2 N against the slip. The explicit sign flip would never let the iteration
+    converge while a contact point's slip passes through zero.
     """
     x, y, phi, vx, vy, om = state
     ev = Evaluation()
@@ -97,10 +106,22 @@ def evaluate(
     ca, sa = math.cos(fence.alpha), math.sin(fence.alpha)
     reach = fence.max_deflection() + 1e-3
 
+    inv_mass, inv_inertia = 1.0 / mass, 1.0 / body.inertia
+
     def add(kind, index, s_arc, d, d_rate, px, py, nx, ny, tx, ty, slide, on_fence):
         n = normal_force(d, d_rate, mass, contact)
-        applied_t = lam_x * tx + lam_y * ty
-        ft = fence_friction(n, slide, applied_t, mu2, v_min)
+        f_prev = prev_friction.get((kind, index)) if prev_friction is not None else None
+        if implicit_weight is not None and f_prev is not None:
+            arm = (px - x) * ty - (py - y) * tx
+            w_eff = implicit_weight * (inv_mass + arm * arm * inv_inertia)
+            slip_free = slide - w_eff * f_prev  # the slip without this contact's friction
+            limit = mu2 * n
+            ft = -slip_free / w_eff
+            if abs(ft) > limit:
+                ft = -math.copysign(limit, slip_free)
+        else:
+            applied_t = lam_x * tx + lam_y * ty
+            ft = fence_friction(n, slide, applied_t, mu2, v_min)
         fx = n * nx + ft * tx
         fy = n * ny + ft * ty
         ev.fx += fx

@@ -203,7 +203,7 @@ class _Stepper:
         self.phi_scale = float(np.max(np.abs(self.fence.phi))) if self.nm else 0.0
 
     # -- one evaluation of all forces at a state --------------------------------------------
-    def _evaluate(self, t, q, v, z, lam):
+    def _evaluate(self, t, q, v, z, lam, weight=None, prev=None):
         d = drive_state(self.sc.drive, t)
         if self.nm:
             self.fence.set_state(d.alpha, d.rate, z[:, 0], z[:, 1])
@@ -220,6 +220,8 @@ class _Stepper:
             use_border=self.m.use_border,
             use_tip=self.m.use_tip,
             modal_out=modal,
+            implicit_weight=weight,
+            prev_friction=prev,
         )
         if self.nm:
             ev.modal -= self.fence.rigid_modal * d.accel
@@ -261,8 +263,10 @@ class _Stepper:
         ev = None
         lam = lam0
         stuck = False
+        prev = None
         for _ in range(sv.max_iterations):
-            ev = self._evaluate(t1, q_new, v_new, z_new, lam0)
+            ev = self._evaluate(t1, q_new, v_new, z_new, lam0, 0.5 * h, prev)
+            prev = {(c.kind, c.index): c.friction_force for c in ev.contacts}
             if not all(map(math.isfinite, (ev.fx, ev.fy, ev.mz))):
                 return None
             vnf = [v[k] + 0.5 * h * (f0[k] + (ev.fx, ev.fy, ev.mz)[k]) * im[k] for k in range(3)]
@@ -290,7 +294,7 @@ class _Stepper:
                 return None
             self.forced += 1
         # end-of-step forces at the converged state
-        ev = self._evaluate(t1, q_new, v_new, z_new, lam0)
+        ev = self._evaluate(t1, q_new, v_new, z_new, lam0, 0.5 * h, prev)
         if stuck:
             lam = self._stick_wrench(ev)
         return t1, q_new, v_new, z_new, ev, lam
