@@ -1,4 +1,4 @@
-"""Fixtures of the CLI tests: an isolated environment for the processes a test starts."""
+"""Shared fixtures: an isolated ROS environment for the processes a test starts."""
 
 from __future__ import annotations
 
