@@ -1,5 +1,6 @@
 # fence_sorter: the two commands of the README.
 #   make run   set up (idempotent) + environment check + two-node message round trip
+#              + one offline sorting event of the default scene (the node suite comes later)
 #   make test  set up (idempotent) + ruff + pytest
 SHELL := /bin/bash
 .SHELLFLAGS := -euo pipefail -c
@@ -14,7 +15,8 @@ bootstrap:
 	bash scripts/bootstrap.sh
 
 run: bootstrap
-	$(ENV) && fence-sorter check && fence-sorter demo-roundtrip
+	$(ENV) && fence-sorter check && fence-sorter demo-roundtrip \
+		&& fence-sorter simulate impact_flexible
 
 check: bootstrap
 	$(ENV) && fence-sorter check
