@@ -104,7 +104,7 @@ def evaluate(
     v_min = contact.v_min
     lam_x, lam_y = belt_wrench[0], belt_wrench[1]
     ca, sa = math.cos(fence.alpha), math.sin(fence.alpha)
-    reach = fence.max_deflection() + 1e-3
+    reach = fence.max_deflection() + 0.05  # wide enough that the gap before an onset is known
 
     inv_mass, inv_inertia = 1.0 / mass, 1.0 / body.inertia
 

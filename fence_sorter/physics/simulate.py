@@ -11,8 +11,8 @@ Time stepping ("trapezoidal", the default and for now the only method):
 - Belt friction (34)-(36): solved implicitly at the step end (friction.implicit_belt_wrench):
   stick holds the relative velocity at exactly zero, as the Karnopp window intends, which a fixed
   explicit step cannot do with a 1e-6 m/s window.
-- Events: the drive's breakpoints (0, t1, 2 t1) are hit exactly; contact onset is located by the
-  secant on the gap D so the impact speed w_n (and N_stiff) does not depend on the step; the
+- Events: the drive's breakpoints (0, t1, 2 t1) are hit exactly; contact onset is located by
+  regula falsi on the gap D so the impact speed w_n (and N_stiff) does not depend on the step; the
   crossing of y0 = s (sorted) is interpolated. A step whose iteration does not converge is halved.
 - Divergence: NaN, a load speed far beyond any source, or a penetration deeper than
   ``contact.deep_penetration`` x min(A, B) stop the solve with ``success = False`` and a diagnosis.
@@ -29,7 +29,7 @@ import scipy.linalg
 
 from . import contacts as ct
 from .contact import StiffImpact, stiff_impact
-from .drive import breakpoints, drive_state, peak_rate
+from .drive import accel_jump_at, breakpoints, drive_state, peak_rate
 from .fence import FenceParams, build_fence
 from .friction import implicit_belt_wrench, karnopp_belt_wrench
 from .params import ContactParams, ConveyorParams, DriveParams, ParcelParams, SolverParams
@@ -256,8 +256,12 @@ class _Stepper:
         q_new = [q[k] + 0.5 * h * (v[k] + v_new[k]) for k in range(3)]
         if self.nm:
             a, g0, g1 = self.m.props.get(h)
-            base = np.einsum("mij,mj->mi", a, z) + g0 * ev0.modal[:, None]
-            z_new = base + g1 * ev0.modal[:, None]
+            f0_modal = ev0.modal
+            jump = accel_jump_at(self.sc.drive, t)
+            if jump:  # the step starts on the far side of the drive's acceleration jump
+                f0_modal = f0_modal - self.fence.rigid_modal * jump
+            base = np.einsum("mij,mj->mi", a, z) + g0 * f0_modal[:, None]
+            z_new = base + g1 * f0_modal[:, None]
         else:
             z_new = z
         ev = None
@@ -390,15 +394,26 @@ class _Stepper:
                 c for c in ev1.contacts if c.kind != "border" and ev.gaps.get((c.kind, c.index))
             ]
             if not had_fence and new:
+                # regula falsi on D until the step ends just inside the contact (D <= 1e-10 m),
+                # so w_n = D' is read at the onset, not a step later
                 c = max(new, key=lambda c: c.depth)
-                d0 = ev.gaps[(c.kind, c.index)][0]
-                if c.depth > 1e-9 and d0 < 0.0 and h_try > 1e-9:
-                    theta = -d0 / (c.depth - d0)
-                    h_loc = h_try * min(max(theta, 1e-3), 0.999)
-                    if h_loc < h_try * 0.999:
-                        out = self._step(h_loc, t, q, v, z, ev, lam, on_belt)
-                        if out is not None:
-                            t1, q1, v1, z1, ev1, lam1 = out
+                key = (c.kind, c.index)
+                lo, d_lo = 0.0, ev.gaps[key][0]
+                hi, d_hi = h_try, c.depth
+                for _ in range(12):
+                    if d_hi <= 1e-10 or d_lo >= 0.0 or hi - lo <= 1e-12:
+                        break
+                    h_loc = lo + (hi - lo) * (-d_lo / (d_hi - d_lo))
+                    h_loc = min(max(h_loc, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
+                    trial = self._step(h_loc, t, q, v, z, ev, lam, on_belt)
+                    gap = trial[4].gaps.get(key) if trial is not None else None
+                    if gap is None:
+                        break
+                    if gap[0] > 0.0:
+                        hi, d_hi, out = h_loc, gap[0], trial
+                    else:
+                        lo, d_lo = h_loc, gap[0]
+                t1, q1, v1, z1, ev1, lam1 = out
             # sorted: C_s crosses y0 = s
             if q1[1] >= self.width and q[1] < self.width:
                 frac = (self.width - q[1]) / (q1[1] - q[1])
