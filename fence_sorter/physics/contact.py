@@ -17,6 +17,9 @@ from scipy.integrate import solve_ivp
 
 from .params import ContactParams
 
+#: b = 0 contact time factor: 2 int_0^1 dx / sqrt(1 - x^5) = 2 sqrt(pi) G(6/5) / G(7/10) = 2.5074
+ELASTIC_DURATION_FACTOR = 2.0 * math.sqrt(math.pi) * math.gamma(1.2) / math.gamma(0.7)
+
 
 def normal_force(d: float, d_rate: float, mass: float, contact: ContactParams) -> float:
     """Contact law (16), clipped at 0; D and Ddot positive into the load."""
@@ -115,10 +118,5 @@ def elastic_impact_closed_form(mass: float, approach_speed: float, k_p: float) -
     return {
         "max_deformation": d_max,
         "peak_force": k_p * d_max**4,
-        "duration": 2.5074 * d_max / approach_speed,
+        "duration": ELASTIC_DURATION_FACTOR * d_max / approach_speed,
     }
-
-
-def _duration_factor() -> float:
-    """Integral factor of the b = 0 contact time: 2 int_0^1 dx / sqrt(1 - x^5) = 2.5074."""
-    return 2.0 * math.sqrt(math.pi) * math.gamma(1.2) / math.gamma(0.7)

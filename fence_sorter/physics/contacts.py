@@ -217,7 +217,7 @@ def evaluate(
     return ev
 
 
-def classify(ev: Evaluation, body: ParcelBody, phi: float, fence_alpha: float, touched: bool):
+def classify(ev: Evaluation, body: ParcelBody, phi: float, touched: bool) -> str:
     """Stage E1-E4 (or on_belt before the first touch) from the active contact set."""
     fence_contacts = [ct for ct in ev.contacts if ct.kind != "border"]
     border = any(ct.kind == "border" for ct in ev.contacts)
@@ -227,11 +227,9 @@ def classify(ev: Evaluation, body: ParcelBody, phi: float, fence_alpha: float, t
         return STAGE_E3
     if any(ct.kind == "tip" for ct in fence_contacts):
         return STAGE_E2
-    idx = sorted(ct.index for ct in fence_contacts)
-    if len(idx) >= 2:
-        for a, b in zip(idx, idx[1:] + [idx[0] + 4], strict=True):
-            if b - a == 1 or (a == 0 and 3 in idx):
-                return STAGE_E2
+    corners = {ct.index for ct in fence_contacts}
+    if any((k + 1) % 4 in corners for k in corners):  # both corners of one face on the fence
+        return STAGE_E2
     # single corner: is one of its faces (nearly) along the fence tangent?
     ct = fence_contacts[0]
     tangent_angle = math.atan2(ct.nx, -ct.ny)  # n = (-t_y, t_x)

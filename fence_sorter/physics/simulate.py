@@ -333,7 +333,7 @@ class _Stepper:
         h = h_nom
         steps = rejected = 0
         touched = False
-        stage = ct.classify(ev, self.body, q[2], self.fence.alpha, touched)
+        stage = ct.classify(ev, self.body, q[2], touched)
         stages = [(stage, 0.0)]
         impacts: list[tuple[float, StiffImpact]] = []
         peak_n = peak_tip = 0.0
@@ -436,11 +436,7 @@ class _Stepper:
             peak_n = max(peak_n, ev.fence_normal)
             peak_tip = max(peak_tip, abs(self.fence.tip_deflection()))
             y_max = max(y_max, q[1])
-            new_stage = (
-                ct.STAGE_SORTED
-                if sorted_
-                else ct.classify(ev, self.body, q[2], self.fence.alpha, touched)
-            )
+            new_stage = ct.STAGE_SORTED if sorted_ else ct.classify(ev, self.body, q[2], touched)
             if new_stage != stage:
                 stage = new_stage
                 stages.append((stage, t))

@@ -1,6 +1,7 @@
 """Closed-form checks of the contact law (16), the stiff-obstacle reference and belt friction."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -12,7 +13,13 @@ from fence_sorter.physics.friction import (
     max_spin_torque,
     polar_distance_integral,
 )
-from fence_sorter.physics.params import ContactParams, ConveyorParams, ParcelParams
+from fence_sorter.physics.params import (
+    ContactParams,
+    ConveyorParams,
+    DriveParams,
+    ParcelParams,
+    SolverParams,
+)
 from fence_sorter.physics.simulate import Scenario, simulate
 
 G = 9.81
@@ -88,23 +95,16 @@ def _free_parcel(**kw) -> Scenario:
         record=("trajectory",),
     )
     base.update(kw)
-    sc = Scenario(**base)
-    from dataclasses import replace
-
-    from fence_sorter.physics.params import DriveParams, SolverParams
-
-    return replace(
-        sc,
+    return Scenario(
+        **base,
         drive=DriveParams(r_s=-3.0, t1=0.3),
-        solver=replace(SolverParams(), t_end=kw.pop("t_end", 0.6), dt=1e-3),
+        solver=SolverParams(t_end=0.6, dt=1e-3),
     )
 
 
 @pytest.mark.parametrize("dt", [1e-3, 2.5e-4])
 def test_parcel_at_rest_reaches_belt_speed_in_coulomb_time(dt):
     """Slip lasts v / (mu g) over v^2 / (2 mu g), then the parcel sticks exactly."""
-    from dataclasses import replace
-
     sc = _free_parcel(initial_velocity=(0.0, 0.0, 0.0))
     sc = replace(sc, solver=replace(sc.solver, dt=dt))
     r = simulate(sc)
@@ -153,8 +153,6 @@ def test_pure_spin_decays_at_t_max_over_inertia():
 
 def test_elastic_bounce_off_the_border_conserves_energy():
     """b_p = 0, mu1 = mu2 = 0: the parcel hits the border wall and leaves at the same speed."""
-    from dataclasses import replace
-
     sc = _free_parcel(
         initial_velocity=(1.5, -0.7, 0.0),
         conveyor=ConveyorParams(belt_speed=1.5, mu_belt=0.0),
@@ -170,8 +168,6 @@ def test_elastic_bounce_off_the_border_conserves_energy():
 
 
 def test_damped_bounce_off_the_border_loses_energy():
-    from dataclasses import replace
-
     sc = _free_parcel(
         initial_velocity=(1.5, -0.7, 0.0),
         conveyor=ConveyorParams(belt_speed=1.5, mu_belt=0.0),
