@@ -143,10 +143,19 @@ class ContactParams:
 
 @dataclass(frozen=True)
 class SolverParams:
-    """Time stepping: step h, fixed-point tolerance, end conditions."""
+    """Time integration: method, steps or tolerances, end conditions (see ``integrators``).
 
-    method: str = "trapezoidal"
-    dt: float = 5e-4  # [s]
+    ``method``: ``adaptive`` (default; error-controlled trapezoidal), ``trapezoidal`` or
+    ``generalized_alpha`` (fixed step ``dt``), or a SciPy baseline ``scipy:RK45``,
+    ``scipy:DOP853``, ``scipy:Radau``, ``scipy:BDF``, ``scipy:LSODA`` (``rtol``/``atol``).
+    """
+
+    method: str = "adaptive"
+    dt: float = 5e-4  # [s] fixed step (trapezoidal, generalized_alpha); first step (adaptive)
+    dt_max: float = 5e-3  # [s] largest adaptive step
+    rtol: float = 1e-4  # relative local-error tolerance (adaptive, scipy:*)
+    atol: float = 1e-6  # absolute local-error tolerance [m, m/s, rad] (adaptive, scipy:*)
+    rho_inf: float = 0.8  # generalized_alpha spectral radius at h -> infinity (1: no damping)
     max_iterations: int = 12
     tolerance: float = 1e-9  # fixed-point tolerance on positions [m] and velocities [m/s]
     min_dt: float = 1e-7  # step halving stops here and the solve is reported as failed
@@ -161,6 +170,10 @@ class SolverParams:
                 f"{prefix}.method must be one of {', '.join(SOLVER_METHODS)}, got {self.method!r}"
             )
         check_range(f"{prefix}.dt", self.dt, 1e-7, 0.01, unit="s")
+        check_range(f"{prefix}.dt_max", self.dt_max, 1e-6, 0.05, unit="s")
+        check_range(f"{prefix}.rtol", self.rtol, 1e-13, 0.1)
+        check_range(f"{prefix}.atol", self.atol, 1e-15, 0.1)
+        check_range(f"{prefix}.rho_inf", self.rho_inf, 0.0, 1.0)
         check_range(f"{prefix}.max_iterations", self.max_iterations, 1, 200)
         check_range(f"{prefix}.tolerance", self.tolerance, 1e-15, 1e-2)
         check_range(f"{prefix}.min_dt", self.min_dt, 1e-12, self.dt)
@@ -169,7 +182,9 @@ class SolverParams:
         check_range(f"{prefix}.max_wall_time", self.max_wall_time, 0.1, 3600.0, unit="s")
 
 
-SOLVER_METHODS = ("trapezoidal",)
+OUR_METHODS = ("adaptive", "trapezoidal", "generalized_alpha")
+SCIPY_METHODS = ("scipy:RK45", "scipy:DOP853", "scipy:Radau", "scipy:BDF", "scipy:LSODA")
+SOLVER_METHODS = OUR_METHODS + SCIPY_METHODS
 
 
 def field_names(cls) -> tuple[str, ...]:

@@ -98,7 +98,7 @@ def _free_parcel(**kw) -> Scenario:
     return Scenario(
         **base,
         drive=DriveParams(r_s=-3.0, t1=0.3),
-        solver=SolverParams(t_end=0.6, dt=1e-3),
+        solver=SolverParams(method="trapezoidal", t_end=0.6, dt=1e-3),
     )
 
 
