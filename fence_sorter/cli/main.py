@@ -21,6 +21,9 @@ SUBCOMMAND_MODULES: tuple[str, ...] = (
     "demo_roundtrip",
     "simulate",
     "modes",
+    "accuracy",
+    "stability",
+    "bench",
 )
 
 
