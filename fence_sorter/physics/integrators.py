@@ -34,7 +34,6 @@ import numpy as np
 from . import kernel as K
 from .contacts import STAGE_SORTED, classify
 
-FENCE_SLOTS = slice(0, K.SLOT_BORDER)
 EVENT_TOL = 1e-10  # a located onset's step ends with 0 < D <= EVENT_TOL [m]
 
 
@@ -229,21 +228,35 @@ class Scheme:
         return status
 
 
-def _event_values(a: State, b: State) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per fence slot with its gap known at both ends: the event function at a and b.
+def _local_error(a: State, b: State, prev_v, prev_a, r: float, h: float, scale):
+    """Scaled local error of the trapezoidal step a -> b and the order of the estimate.
 
-    A slot without force at a can start one (onset): the function is D. A slot with force at a
-    can lose it (release or the N >= 0 clamp engaging): the function is the law (16) unclipped.
-    Returns (g_a, g_b, is_onset); NaN where the slot has no event function.
+    With history (r = h / h_prev > 0), Milne's device: TR's local error is -h^3 y'''/12, a
+    variable-step AB2 predictor's is h^3 y''' (1/6 + 1/(4r)), so the error is r/(3(r+1)) times
+    corrector minus predictor (order 3). Without history (the start, after an event or a drive
+    breakpoint) the explicit Euler predictor gives the conservative order-2 estimate
+    |corrector - predictor|. Each component is scaled by atol + rtol * a block magnitude
+    (position: |r| or 1 m; yaw: |phi| or 1 rad; velocity: |v| or the belt speed; yaw rate:
+    |phidot| or belt / load size), so a component passing through zero does not shrink the
+    tolerance to atol.
     """
-    oa, ob = a.out[FENCE_SLOTS], b.out[FENCE_SLOTS]
-    known = (oa[:, K.C_GAP] != 0.0) & (ob[:, K.C_GAP] != 0.0)
-    onset = oa[:, K.C_ACTIVE] == 0.0
-    col = np.where(onset, K.C_D, K.C_NRAW)
-    rows = np.arange(len(col))
-    ga = np.where(known, oa[rows, col], np.nan)
-    gb = np.where(known, ob[rows, col], np.nan)
-    return ga, gb, onset
+    atol, rtol, v_ref, om_ref = scale
+    y0, y1 = a.y, b.y
+    if r > 0.0:
+        c1, c2 = 1.0 + 0.5 * r, 0.5 * r
+        fac, order = r / (3.0 * (r + 1.0)), 3.0
+    else:
+        c1, c2, fac, order = 1.0, 0.0, 1.0, 2.0
+    pos = atol + rtol * max(math.hypot(y1[0], y1[1]), 1.0)
+    ang = atol + rtol * max(abs(y1[2]), 1.0)
+    vel = atol + rtol * max(math.hypot(y1[3], y1[4]), v_ref)
+    rot = atol + rtol * max(abs(y1[5]), om_ref)
+    err = 0.0
+    for k, (sq, sv) in enumerate(((pos, vel), (pos, vel), (ang, rot))):
+        qp = y0[k] + h * (c1 * y0[3 + k] - c2 * prev_v[k])
+        vp = y0[3 + k] + h * (c1 * a.acc[k] - c2 * prev_a[k])
+        err = max(err, abs(y1[k] - qp) / sq, abs(y1[3 + k] - vp) / sv)
+    return fac * err, order
 
 
 class Integrator:
@@ -267,6 +280,15 @@ class Integrator:
         self.cur, self.trial, self.loc = State(n, m), State(n, m), State(n, m)
         self.forced = 0
         self.events = 0
+        body = model.body
+        v_ref = max(model.belt, 0.1)
+        self.err_scale = (sv.atol, sv.rtol, v_ref, v_ref / min(body.length_a, body.width_b))
+
+    def _snap(self, h: float) -> float:
+        """Round an adaptive step down onto the ladder dt_max 2^(-k/4), so the exact modal
+        propagators (a matrix exponential per mode) are reused instead of recomputed."""
+        k = math.ceil(4.0 * math.log2(self.h_nom / h) - 1e-9)
+        return self.h_nom * 2.0 ** (-k / 4.0)
 
     def jump_at(self, t: float) -> float:
         return (
@@ -275,26 +297,22 @@ class Integrator:
             else 0.0
         )
 
-    def _locate(self, h: float, on_belt: bool, g0, g1, onset) -> float:
-        """Shorten the step to end just past the first sign change of a slot's event function.
+    def _locate(self, h: float, on_belt: bool, slot: int, onset: bool, g0: float, g1: float):
+        """Shorten the step to end just past the sign change of ``slot``'s event function.
 
-        Regula falsi on the slot whose change comes first (estimated linearly), until an onset
-        step ends within ``EVENT_TOL`` m of D = 0 (so w_n is read at the onset) or a release
-        bracket is below 1e-7 of the step. The located trial is left in ``self.trial``.
+        Regula falsi until an onset step ends within ``EVENT_TOL`` m of D = 0 (so w_n is read
+        at the onset) or a release bracket is below 1e-7 of the step. The located trial is left
+        in ``self.trial``; returns the step taken.
         """
         a, sch = self.cur, self.scheme
-        change = np.isfinite(g0) & np.isfinite(g1) & ((g0 > 0.0) != (g1 > 0.0))
-        slots = np.flatnonzero(change)
-        fr = g0[slots] / (g0[slots] - g1[slots])
-        slot = int(slots[int(np.argmin(fr))])
-        col = K.C_D if onset[slot] else K.C_NRAW
-        sign0 = g0[slot] > 0.0
-        lo, g_lo = 0.0, float(g0[slot])
-        hi, g_hi = h, float(g1[slot])
+        col = K.C_D if onset else K.C_NRAW
+        sign0 = g0 > 0.0
+        lo, g_lo = 0.0, g0
+        hi, g_hi = h, g1
         jump = self.jump_at(a.t)
         best = None
         for _ in range(60):
-            if hi - lo <= 1e-7 * h or (onset[slot] and g_hi <= EVENT_TOL):
+            if hi - lo <= 1e-7 * h or (onset and g_hi <= EVENT_TOL):
                 break
             h_loc = lo + (hi - lo) * (g_lo / (g_lo - g_hi))
             h_loc = min(max(h_loc, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
@@ -332,7 +350,6 @@ class Integrator:
         prev_v = np.zeros(3)
         prev_a = np.zeros(3)
         h_prev = 0.0  # 0: no history (start, after an event or a breakpoint)
-        atol, rtol = sv.atol, sv.rtol
         while not stop and a.t < self.t_end - 1e-12:
             if time.perf_counter() - wall0 > sv.max_wall_time:
                 diagnosis = f"wall-time limit {sv.max_wall_time:g} s reached at t = {a.t:.4f} s"
@@ -357,38 +374,24 @@ class Integrator:
                 self.forced += 1
             h_taken = h_try
             # contact onset / release inside the step: end the step on it
-            g0, g1, onset = _event_values(a, b)
-            crossed = np.isfinite(g0) & np.isfinite(g1) & ((g0 > 0.0) != (g1 > 0.0))
+            slot, onset, g0, g1 = K.first_event(a.out, b.out)
             located = False
-            if crossed.any() and h_try > 1e-9:
-                h_taken = self._locate(h_try, on_belt, g0, g1, onset)
+            if slot >= 0 and h_try > 1e-9:
+                h_taken = self._locate(h_try, on_belt, slot, onset, g0, g1)
                 located = True
-            elif self.adaptive and h_prev > 0.0:
-                # Milne's device: TR corrector minus variable-step AB2 predictor
-                r = h_try / h_prev
-                c1, c2 = 1.0 + 0.5 * r, 0.5 * r
-                y0, y1 = a.y, b.y
-                err = 0.0
-                fac = r / (3.0 * (r + 1.0))
-                for k in range(3):
-                    qp = y0[k] + h_try * (c1 * y0[3 + k] - c2 * prev_v[k])
-                    vp = y0[3 + k] + h_try * (c1 * a.acc[k] - c2 * prev_a[k])
-                    eq = fac * abs(y1[k] - qp) / (atol + rtol * max(abs(y0[k]), abs(y1[k])))
-                    ev = (
-                        fac
-                        * abs(y1[3 + k] - vp)
-                        / (atol + rtol * max(abs(y0[3 + k]), abs(y1[3 + k])))
-                    )
-                    err = max(err, eq, ev)
-                if err > 1.0 and h_try > 4.0 * sv.min_dt:
+            if self.adaptive:
+                # the solution is smooth on [t, t + h_taken] (a located event is at its end)
+                r = h_taken / h_prev if h_prev > 0.0 else 0.0
+                err, order = _local_error(a, b, prev_v, prev_a, r, h_taken, self.err_scale)
+                if err > 1.0 and h_taken > 4.0 * sv.min_dt:
                     rejected += 1
-                    h = h_try * max(0.2, 0.9 * err ** (-1.0 / 3.0))
+                    h = self._snap(h_taken * max(0.2, 0.9 * err ** (-1.0 / order)))
                     continue
-                h = min(self.h_nom, h_try * min(4.0, 0.9 * max(err, 1e-12) ** (-1.0 / 3.0)))
-            elif not self.adaptive:
-                h = min(self.h_nom, 2.0 * h_try)
+                if not located:
+                    grow = min(4.0, 0.9 * max(err, 1e-12) ** (-1.0 / order))
+                    h = self._snap(min(self.h_nom, h_taken * grow))
             else:
-                h = min(self.h_nom, max(h_try, 2.0 * sv.min_dt))
+                h = min(self.h_nom, 2.0 * h_try)
             # accept
             prev_v[:] = a.y[3:6]
             prev_a[:] = a.acc[:3]

@@ -85,7 +85,8 @@ R_ACCEL = 8
 R_TIP_W = 9  # tip deflection [m]
 R_MAX_W = 10  # largest nodal |w| [m]
 R_ENERGY_CONTACT = 11  # potential of the k_p D^4 springs, sum k D^5 / 5 [J]
-N_RES = 12
+R_ACTIVE_MASK = 12  # bit k set: slot k carries a force
+N_RES = 13
 
 
 def pack(
@@ -395,6 +396,7 @@ def _add(
         res[R_POWER_FENCE] += fx * vsx + fy * vsy
         if P[P_FLEX] != 0.0:
             _modal_share(P, phi, s_arc, alpha, -fx, -fy, modal)
+    res[R_ACTIVE_MASK] += float(1 << slot)
     if d > res[R_MAX_D]:
         res[R_MAX_D] = d
     row = out[slot]
@@ -1088,8 +1090,19 @@ def _law(b, k, d, v):
 
 # -- exact modal propagation --------------------------------------------------------------------
 @njit(cache=True)
-def _expm4(a):
-    """exp(a) of a 4x4 matrix: scaling and squaring with an 18-term Taylor series."""
+def _mm4(a, b, out):
+    for i in range(4):
+        for j in range(4):
+            acc = 0.0
+            for k in range(4):
+                acc += a[i, k] * b[k, j]
+            out[i, j] = acc
+
+
+@njit(cache=True)
+def _expm4(a, result, term, tmp):
+    """result = exp(a) of a 4x4 matrix: scaling and squaring with an 18-term Taylor series
+    (allocation-free: this runs for every mode at every new step size)."""
     norm = 0.0
     for i in range(4):
         row = 0.0
@@ -1101,15 +1114,27 @@ def _expm4(a):
         norm *= 0.5
         sq += 1
     scale = 0.5**sq
-    term = np.eye(4)
-    result = np.eye(4)
-    b = a * scale
+    for i in range(4):
+        for j in range(4):
+            v = 1.0 if i == j else 0.0
+            term[i, j] = v
+            result[i, j] = v
     for k in range(1, 19):
-        term = term @ b / k
-        result += term
+        _mm4(term, a, tmp)
+        f = scale / k
+        small = 0.0
+        for i in range(4):
+            for j in range(4):
+                term[i, j] = tmp[i, j] * f
+                result[i, j] += term[i, j]
+                small = max(small, abs(term[i, j]))
+        if small < 1e-18:
+            break
     for _ in range(sq):
-        result = result @ result
-    return result
+        _mm4(result, result, tmp)
+        for i in range(4):
+            for j in range(4):
+                result[i, j] = tmp[i, j]
 
 
 @njit(cache=True)
@@ -1118,15 +1143,49 @@ def modal_propagators(omega, zeta, h, a_out, g0_out, g1_out):
     for f linear over the step (Van Loan's augmented matrix exponential):
     z1 = A z0 + g0 f0 + g1 f1 with z = (eta, eta')."""
     base = np.zeros((4, 4))
+    e = np.empty((4, 4))
+    term = np.empty((4, 4))
+    tmp = np.empty((4, 4))
     for j in range(omega.shape[0]):
         base[0, 1] = h
         base[1, 0] = -(omega[j] ** 2) * h
         base[1, 1] = -2.0 * zeta[j] * omega[j] * h
         base[1, 2] = h
         base[2, 3] = h
-        e = _expm4(base)
+        _expm4(base, e, term, tmp)
         for r in range(2):
             a_out[j, r, 0] = e[r, 0]
             a_out[j, r, 1] = e[r, 1]
             g0_out[j, r] = e[r, 2] - e[r, 3] / h
             g1_out[j, r] = e[r, 3] / h
+
+
+@njit(cache=True)
+def first_event(out_a, out_b):
+    """The fence slot whose event function changes sign first between two points, or -1.
+
+    A slot without force at a can start one (onset; the function is D), a slot with force can
+    lose it (release or the N >= 0 clamp engaging; the function is the law (16) unclipped); only
+    slots whose gap is known at both points count. The first is estimated by linear
+    interpolation. Returns (slot, is_onset, g_a, g_b).
+    """
+    best = -1
+    best_fr = 2.0
+    onset_best = False
+    ga_best = gb_best = 0.0
+    for k in range(SLOT_BORDER):
+        if out_a[k, C_GAP] == 0.0 or out_b[k, C_GAP] == 0.0:
+            continue
+        onset = out_a[k, C_ACTIVE] == 0.0
+        col = C_D if onset else C_NRAW
+        ga = out_a[k, col]
+        gb = out_b[k, col]
+        if (ga > 0.0) == (gb > 0.0):
+            continue
+        fr = ga / (ga - gb)
+        if fr < best_fr:
+            best_fr = fr
+            best = k
+            onset_best = onset
+            ga_best, gb_best = ga, gb
+    return best, onset_best, ga_best, gb_best

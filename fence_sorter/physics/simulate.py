@@ -210,6 +210,22 @@ def simulate(sc: Scenario, model: SortingModel | None = None) -> SimulationResul
     )
 
 
+def _parabola_peak(t0: float, n0: float, t1: float, n1: float, t2: float, n2: float) -> float:
+    """Vertex value of the parabola through three points with n1 >= n0, n2 (else n1)."""
+    d0, d2 = t0 - t1, t2 - t1
+    if d0 >= 0.0 or d2 <= 0.0:
+        return n1
+    # n(t1 + d) = n1 + b d + c d^2 through (d0, n0) and (d2, n2)
+    c = ((n0 - n1) / d0 - (n2 - n1) / d2) / (d0 - d2)
+    b = (n0 - n1) / d0 - c * d0
+    if c >= 0.0:
+        return n1
+    d = -b / (2.0 * c)
+    if not d0 <= d <= d2:
+        return n1
+    return n1 + b * d + c * d * d
+
+
 class Observer:
     """Reduces the accepted points of a run to a :class:`SimulationResult` (any method).
 
@@ -243,35 +259,38 @@ class Observer:
         self.prev_y = np.zeros(6)
         self.prev_power = 0.0
         self.work = 0.0
-        self.e0 = math.nan
+        self.last_n = [0.0, 0.0, 0.0]
+        self.last_t = [0.0, 0.0, 0.0]
+        self.first = True
+        self.e0 = 0.0
         self.energy_excess = 0.0
-        self.active = None
-
-    def _power(self, st, on_belt: bool) -> float:
-        y, md = st.y, self.md
-        p = st.res[K.R_POWER_FENCE]
-        if on_belt:
-            p += st.lam[0] * md.belt
-        ext = md.sc.external_wrench
-        return p + ext[0] * y[3] + ext[1] * y[4] + ext[2] * y[5]
+        self.mask = -1
 
     def __call__(self, st, on_belt: bool) -> tuple[bool, bool]:
         md, y, res = self.md, st.y, st.res
         t = st.t
-        first = math.isnan(self.e0)
-        energy = md.kinetic_energy(y) + res[K.R_ENERGY_CONTACT]
-        power = self._power(st, on_belt)
-        if first:
+        vx, vy, om = y[3], y[4], y[5]
+        energy = 0.5 * md.mass * (vx * vx + vy * vy) + 0.5 * md.inertia * om * om
+        energy += res[K.R_ENERGY_CONTACT]
+        ext = md.sc.external_wrench
+        power = res[K.R_POWER_FENCE] + ext[0] * vx + ext[1] * vy + ext[2] * om
+        if on_belt:
+            power += st.lam[0] * md.belt
+        if self.first:
+            self.first = False
             self.e0 = energy
             self.y_max = y[1]
         else:
             self.work += 0.5 * (t - self.prev_t) * (power + self.prev_power)
-            self.energy_excess = max(self.energy_excess, energy - self.e0 - self.work)
+            excess = energy - self.e0 - self.work
+            if excess > self.energy_excess:
+                self.energy_excess = excess
             if y[1] >= self.width > self.prev_y[1] and not self.sorted:
                 frac = (self.width - self.prev_y[1]) / (y[1] - self.prev_y[1])
-                self.exit_speed = self.prev_y[4] + frac * (y[4] - self.prev_y[4])
+                self.exit_speed = self.prev_y[4] + frac * (vy - self.prev_y[4])
                 self.sorted = True
-        fence_on = bool(st.out[: K.SLOT_BORDER, K.C_ACTIVE].any())
+        mask = int(res[K.R_ACTIVE_MASK])
+        fence_on = (mask & 0xFF) != 0
         if fence_on and not self.had_fence:
             self.touched = True
             slots = np.flatnonzero(st.out[: K.SLOT_BORDER, K.C_ACTIVE])
@@ -281,13 +300,28 @@ class Observer:
             peak = K.stiff_impact_peak(md.mass, w_n, md.sc.contact.b_p, md.sc.contact.k_p, 4000)[0]
             self.impacts.append((t, w_n, peak))
         self.had_fence = fence_on
-        self.peak_n = max(self.peak_n, res[K.R_FENCE_N])
-        self.peak_tip = max(self.peak_tip, abs(res[K.R_TIP_W]))
-        self.max_depth = max(self.max_depth, res[K.R_MAX_D])
-        self.y_max = max(self.y_max, y[1])
-        active = st.out[:, K.C_ACTIVE].tobytes()
-        if active != self.active or self.sorted and self.stage != STAGE_SORTED:
-            self.active = active
+        n = res[K.R_FENCE_N]
+        if n > self.peak_n:
+            self.peak_n = n
+        # a local maximum of N at the previous point: the parabola through the last three
+        # points recovers the peak between steps (third-order accurate; adaptive steps)
+        n1, n2 = self.last_n[1], self.last_n[2]
+        if n2 > n1 and n2 >= n and n1 > 0.0:
+            t0, t1 = self.last_t[1], self.last_t[2]
+            peak = _parabola_peak(t0, n1, t1, n2, t, n)
+            if peak > self.peak_n:
+                self.peak_n = peak
+        self.last_n[1], self.last_n[2] = n2, n
+        self.last_t[1], self.last_t[2] = self.last_t[2], t
+        tip = abs(res[K.R_TIP_W])
+        if tip > self.peak_tip:
+            self.peak_tip = tip
+        if res[K.R_MAX_D] > self.max_depth:
+            self.max_depth = res[K.R_MAX_D]
+        if y[1] > self.y_max:
+            self.y_max = y[1]
+        if mask != self.mask or (self.sorted and self.stage != STAGE_SORTED):
+            self.mask = mask
             stage = (
                 STAGE_SORTED if self.sorted else classify(st.out, md.normals, y[2], self.touched)
             )
@@ -299,8 +333,7 @@ class Observer:
         self.prev_t = t
         self.prev_y[:] = y[:6]
         self.prev_power = power
-        stop = self.sorted and self.stop_when_sorted
-        return stop, on_belt and not self.sorted
+        return self.sorted and self.stop_when_sorted, on_belt and not self.sorted
 
     def _record(self, st) -> None:
         rec, want, y = self.rec, self.want, st.y
