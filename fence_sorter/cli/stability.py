@@ -1,0 +1,122 @@
+"""``fence-sorter stability``: the stability campaign over stiff and extreme cases.
+
+Runs the cases of :mod:`fence_sorter.verification.stability` (all, the fast subset with
+``--quick``, or the ones named with ``--cases``), prints one line per case and writes
+``README.md``, ``results.json`` and ``summary.png`` into ``--out`` (default docs/stability).
+
+Exit codes: 0 every case met its expectation, 1 some did not (they are named), 2 bad arguments
+(an unknown case name: one line ``fence-sorter: error: ...`` naming the allowed names).
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+import time
+from datetime import UTC, datetime
+from pathlib import Path
+
+EXIT_OK = 0
+EXIT_UNMET = 1
+EXIT_BAD_ARGS = 2
+REPO = Path(__file__).resolve().parents[2]
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "stability",
+        help="stability campaign over stiff and extreme cases (invariants and verdicts)",
+        description=(
+            "Solve every stability case, check its invariants (finite results, energy never "
+            "rising without a power source, bounded penetration, convergence when the step is "
+            "halved, a named diagnosis when a case cannot be solved) and write the report."
+        ),
+    )
+    parser.add_argument(
+        "--out",
+        default="docs/stability",
+        metavar="DIR",
+        help="directory for README.md, results.json and summary.png (default docs/stability)",
+    )
+    which = parser.add_mutually_exclusive_group()
+    which.add_argument(
+        "--cases",
+        nargs="+",
+        metavar="NAME",
+        help="run only these cases (names separated by spaces or commas; see --list)",
+    )
+    which.add_argument(
+        "--quick", action="store_true", help="run the fast subset (the one CI runs)"
+    )
+    parser.add_argument("--list", action="store_true", help="list the cases and exit")
+    parser.set_defaults(func=run)
+
+
+def _line(cr) -> str:
+    c = cr.case
+    flag = "" if cr.meets_expectation else f"  <- expected {c.expected}"
+    failed = ", ".join(i.name for i in cr.failed_invariants)
+    detail = f"  failed: {failed}" if failed else ""
+    if cr.diagnosis:
+        detail += f"  diagnosis: {cr.diagnosis}"
+    return f"{c.name:24s} {cr.verdict:9s} {cr.wall_time:7.2f} s{detail}{flag}"
+
+
+def run(args: argparse.Namespace) -> int:
+    from fence_sorter.verification import stability as S
+
+    if args.list:
+        for c in S.CASES:
+            print(f"{c.name:24s} {c.speed:4s} {c.expected:9s} {c.description}")
+        return EXIT_OK
+    names = None
+    if args.cases:
+        names = [n for item in args.cases for n in item.split(",") if n.strip()]
+        names = [n.strip() for n in names]
+    try:
+        cases = S.select_cases(names, quick=args.quick)
+    except KeyError as exc:
+        unknown = exc.args[0]
+        print(
+            f"fence-sorter: error: unknown stability case {unknown}; "
+            f"allowed: {', '.join(S.case_names())}",
+            file=sys.stderr,
+        )
+        return EXIT_BAD_ARGS
+    if not cases:
+        print("fence-sorter: error: no stability case selected", file=sys.stderr)
+        return EXIT_BAD_ARGS
+
+    print(f"compiling the kernel for {len(cases)} case(s) ...", flush=True)
+    warm = S.warm_up(cases)
+    t0 = time.perf_counter()
+    results = S.run_cases(cases, progress=lambda cr: print(_line(cr), flush=True))
+    wall = time.perf_counter() - t0
+
+    argv = ["fence-sorter", "stability"]
+    if args.out != "docs/stability":
+        argv += ["--out", args.out]
+    if args.quick:
+        argv.append("--quick")
+    if names:
+        argv += ["--cases", *names]
+    meta = {
+        "command": shlex.join(argv),
+        "date": datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC"),
+        "commit": S.git_revision(REPO),
+        "machine": S.machine_info(),
+        "warm_up_s": warm,
+        "wall_time_s": wall,
+    }
+    paths = S.write_report(results, args.out, meta)
+    missed = [cr.case.name for cr in results if not cr.meets_expectation]
+    print(
+        f"{len(results)} case(s) in {wall:.1f} s; report: {paths['readme']}",
+        flush=True,
+    )
+    if missed:
+        print(f"did not meet their expectation: {', '.join(missed)}")
+        return EXIT_UNMET
+    print("every case met its expectation")
+    return EXIT_OK
