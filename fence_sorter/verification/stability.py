@@ -124,7 +124,8 @@ def _yaml_value(v: object) -> str:
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, float):
-        return repr(v)  # round-trips exactly; the scene loader accepts numeric strings
+        short = f"{v:g}"  # the scene loader accepts numeric strings such as 1e-09
+        return short if float(short) == v else repr(v)  # repr round-trips exactly
     return str(v)
 
 
@@ -1423,6 +1424,27 @@ def render_readme(results: Sequence[CaseResult], meta: dict) -> str:
             extra.append("stages: " + " → ".join(s for s, _ in cr.result.stages))
         if extra:
             lines.append(f"- `{cr.case.name}`: " + "; ".join(extra))
+    slow = [
+        cr
+        for cr in results
+        if cr.result is not None
+        and max(cr.result.wall_time, getattr(cr.refined, "wall_time", 0.0)) > 2.0
+    ]
+    lines += ["", "## Costly solves (more than 2 s of wall time)", ""]
+    if not slow:
+        lines.append("None.")
+    for cr in slow:
+        r, rr = cr.result, cr.refined
+        text = (
+            f"- `{cr.case.name}`: {r.steps} steps ({r.rejected_steps} rejected) in "
+            f"{r.wall_time:.2f} s for {r.sim_time:.3f} s simulated"
+        )
+        if rr is not None:
+            text += (
+                f"; at half the step ({cr.refinement}) {rr.steps} steps "
+                f"({rr.rejected_steps} rejected) in {rr.wall_time:.2f} s"
+            )
+        lines.append(text)
     lines += ["", "## Case notes", ""]
     for cr in results:
         if cr.case.note:
