@@ -205,6 +205,7 @@ class Scheme:
                 a.res,
                 a.lam,
                 a.modal,
+                a.out,
                 jump,
                 on_belt,
                 self.tol,
@@ -346,6 +347,7 @@ class Integrator:
         steps = rejected = 0
         next_break = 0
         diagnosis = None
+        h_cap, clean = self.h_nom, 0
         # adaptive: Milne's device needs the previous point's rates
         prev_v = np.zeros(3)
         prev_a = np.zeros(3)
@@ -363,6 +365,9 @@ class Integrator:
             if status == K.STEP_REJECTED:
                 rejected += 1
                 h = h_try / 2.0
+                # the contact iteration does not contract at this step: cap the adaptive step one
+                # ladder rung below it, and lift the cap one rung per 4 clean steps
+                h_cap, clean = h_try * 2.0**-0.25, 0
                 if h < sv.min_dt:
                     diagnosis = (
                         f"step size fell below solver.min_dt={sv.min_dt:g} s at t = {a.t:.6f} s: "
@@ -389,7 +394,10 @@ class Integrator:
                     continue
                 if not located:
                     grow = min(4.0, 0.9 * max(err, 1e-12) ** (-1.0 / order))
-                    h = self._snap(min(self.h_nom, h_taken * grow))
+                    clean += 1
+                    if clean >= 4 and h_cap < self.h_nom:
+                        h_cap, clean = h_cap * 2.0**0.25, 0
+                    h = self._snap(min(self.h_nom, h_cap, h_taken * grow))
             else:
                 h = min(self.h_nom, 2.0 * h_try)
             # accept

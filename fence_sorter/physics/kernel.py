@@ -658,6 +658,7 @@ def trapezoidal_step(
     f0,
     lam0,
     modal0,
+    out0,
     jump,
     on_belt,
     tol,
@@ -681,6 +682,11 @@ def trapezoidal_step(
     Van Loan's matrix exponential). ``f0``/``lam0``/``modal0``: forces at the step start.
     Returns STEP_OK, STEP_REJECTED or STEP_FORCED; the end-of-step forces are left in out/res/
     modal1 and the belt wrench in lam1 (the stick wrench when stuck).
+
+    Stick forces are constraint forces, and the trapezoidal rule rings on them (F1 = 2 F - F0,
+    alternating step to step); like the belt's stick wrench, a fence or border contact that
+    sticks at both ends of the step stores the mean (F0 + F1) / 2 as its end force (``out0``:
+    the contacts at the step start), which removes the ringing mode.
     """
     a_mat, g0, g1 = props
     m = modal0.shape[0]
@@ -792,9 +798,35 @@ def trapezoidal_step(
         wdot,
         nodes,
     )
+    _unring_stick(P, phi, out0, out, res, modal1, y1[0], y1[1])
     if stuck:
         lam1[0], lam1[1], lam1[2] = stick_wrench(P, res[R_FX], res[R_FY], res[R_MZ])
     return STEP_OK if converged else STEP_FORCED
+
+
+@njit(cache=True)
+def _unring_stick(P, phi, out0, out, res, modal, x, y):
+    """Replace the end friction of contacts that stick at both step ends by the step mean."""
+    mu2 = P[P_MU2]
+    for k in range(N_SLOTS):
+        if out[k, C_ACTIVE] == 0.0 or out0[k, C_ACTIVE] == 0.0:
+            continue
+        ft1, ft0 = out[k, C_FT], out0[k, C_FT]
+        if abs(ft1) >= mu2 * out[k, C_N] * (1.0 - 1e-9):
+            continue
+        if abs(ft0) >= mu2 * out0[k, C_N] * (1.0 - 1e-9):
+            continue
+        d = 0.5 * (ft0 + ft1) - ft1
+        tx, ty = out[k, C_NY], -out[k, C_NX]  # n = (-t_y, t_x)
+        dfx, dfy = d * tx, d * ty
+        res[R_FX] += dfx
+        res[R_FY] += dfy
+        res[R_MZ] += (out[k, C_PX] - x) * dfy - (out[k, C_PY] - y) * dfx
+        if k < SLOT_BORDER:
+            res[R_POWER_FENCE] += dfx * out[k, C_VSX] + dfy * out[k, C_VSY]
+            if P[P_FLEX] != 0.0:
+                _modal_share(P, phi, out[k, C_S], res[R_ALPHA], -dfx, -dfy, modal)
+        out[k, C_FT] += d
 
 
 @njit(cache=True)
