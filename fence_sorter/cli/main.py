@@ -23,7 +23,6 @@ SUBCOMMAND_MODULES: tuple[str, ...] = (
     "modes",
     "accuracy",
     "stability",
-    "bench",
 )
 
 
