@@ -1,0 +1,1063 @@
+"""Work-precision diagrams: error against wall time for every integration method.
+
+For each benchmark scene and each method over a range of step sizes (fixed-step methods) or
+tolerances (adaptive and the SciPy baselines), one solve is compared with a reference solution of
+the same scene and timed. The result is a table per scene and log-log plots of error against wall
+time, one curve per method, with the scene's default configuration as a marked point.
+
+Reference. Our ``trapezoidal`` at a fixed step of 2 ms / 512 (``REF_DT``): second order with the
+model's discontinuities located, it reaches a converged solution at a bounded cost (no error
+estimator to trust, no tolerance-to-error mapping). It is checked three ways, each reported:
+
+- its halved-step twin (same scheme at ``REF_DT / 2``): the difference estimates the reference's
+  own error (for a second-order scheme the reference error is about 4/3 of it);
+- ``generalized_alpha`` at ``REF_DT``: an independent time discretisation of the same model;
+- a SciPy solver at a tight tolerance (``ODE_REFERENCE``) on the ODE form of the model
+  (``kernel.rhs``, explicit Karnopp friction): the converged answer of the SciPy baselines. Where
+  it differs from the reference by more than the reference's own error, the two forms of the
+  model differ, and no SciPy run can be more accurate than that difference; the plots draw it as
+  the SciPy floor and the tables add each SciPy run's peak-force error against it.
+
+Error measures (``error_measures``), each against the reference:
+
+- ``peak_force``: |N_peak - N_ref| / N_ref, N_peak the run's largest summed fence normal force
+  over its accepted points;
+- ``trajectory``: RMS over a 1 ms grid on the common time span of the distance between the run's
+  and the reference's C_s, both interpolated by cubic Hermite splines through the accepted
+  points' positions and velocities;
+- ``tip_deflection``: RMS on the same grid of the fence tip deflection difference (linear
+  interpolation between accepted points); flexible fences only;
+- ``final_pose``: the largest displacement of a load corner between the run's and the
+  reference's pose (x, y, phi) at the common end time (the sort crossing, give or take a step,
+  for a scene that stops when sorted).
+
+Timing: one untimed warm-up solve per scene and method (the Numba kernel compiles or loads on
+first use), then the median of ``repeats`` ``time.perf_counter()`` wall times of ``simulate()``
+(one for a solve longer than ``LONG_RUN`` s). A solve stopped by ``solver.max_wall_time`` is
+reported as capped, with no error point, and the method's tighter settings are skipped.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+from scipy.interpolate import CubicHermiteSpline
+
+from fence_sorter.physics.params import OUR_METHODS, SCIPY_METHODS
+from fence_sorter.physics.simulate import Scenario, SimulationResult, SortingModel, simulate
+
+SCENES = ("impact_flexible", "slide_flexible", "positioned_stiff", "arbitrary_stiff")
+METHODS = OUR_METHODS + SCIPY_METHODS
+RECORD = ("trajectory", "fence", "forces")
+MEASURES = ("peak_force", "trajectory", "tip_deflection", "final_pose")
+MEASURE_TEXT = {
+    "peak_force": ("peak contact force", "relative error |N_peak - N_ref| / N_ref"),
+    "trajectory": ("trajectory of C_s", "RMS position error [m]"),
+    "tip_deflection": ("fence tip deflection", "RMS error [m]"),
+    "final_pose": ("final pose", "largest corner displacement [m]"),
+}
+GRID_STEP = 1e-3  # [s] the grid of the RMS measures
+ATOL_PER_RTOL = 1e-2  # atol = 1e-2 rtol (the default rtol 1e-4, atol 1e-6 keep this ratio)
+FIXED_DTS = tuple(2e-3 / 2**k for k in range(7))  # 2 ms ... 31.25 us, halving
+ADAPTIVE_RTOLS = tuple(10.0**-k for k in range(2, 9))  # 1e-2 ... 1e-8
+SCIPY_RTOLS = tuple(10.0**-k for k in range(3, 9))  # 1e-3 ... 1e-8
+REF_DT = 2e-3 / 512  # 3.90625 us
+REF_DT_QUICK = 2e-3 / 128  # 15.625 us
+ODE_REFERENCE = {  # scene -> (SciPy method, rtol) of the ODE-form reference
+    "impact_flexible": ("scipy:Radau", 1e-9),
+    "slide_flexible": ("scipy:Radau", 1e-9),
+    "positioned_stiff": ("scipy:DOP853", 1e-10),
+    "arbitrary_stiff": ("scipy:RK45", 1e-7),
+}
+ODE_REFERENCE_DEFAULT = ("scipy:Radau", 1e-9)
+QUICK_SCENES = ("positioned_stiff",)
+QUICK_METHODS = ("adaptive", "trapezoidal", "generalized_alpha", "scipy:RK45", "scipy:LSODA")
+QUICK_GRID = {
+    "adaptive": (1e-3, 1e-5),
+    "trapezoidal": (1e-3, 5e-4, 2.5e-4),
+    "generalized_alpha": (1e-3, 5e-4, 2.5e-4),
+}
+QUICK_SCIPY_RTOLS = (1e-3, 1e-5)
+LONG_RUN = 5.0  # [s] a solve this long is timed once
+WARMUP_WALL = 10.0  # [s] cap of the untimed warm-up solve
+MARKERS = {
+    "adaptive": "o",
+    "trapezoidal": "s",
+    "generalized_alpha": "D",
+    "scipy:RK45": "v",
+    "scipy:DOP853": "^",
+    "scipy:Radau": "<",
+    "scipy:BDF": ">",
+    "scipy:LSODA": "P",
+}
+
+Progress = Callable[[str], None]
+
+
+def _quiet(_: str) -> None:
+    pass
+
+
+# -- settings -----------------------------------------------------------------------------------
+def setting_name(method: str) -> str:
+    """``dt`` for the fixed-step methods, ``rtol`` for the error-controlled ones."""
+    return "dt" if method in ("trapezoidal", "generalized_alpha") else "rtol"
+
+
+def grid(method: str, quick: bool = False) -> tuple[float, ...]:
+    """The settings one method is run at, loosest first."""
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; one of {', '.join(METHODS)}")
+    if quick:
+        return QUICK_GRID.get(method, QUICK_SCIPY_RTOLS)
+    if setting_name(method) == "dt":
+        return FIXED_DTS
+    return ADAPTIVE_RTOLS if method == "adaptive" else SCIPY_RTOLS
+
+
+def configure(sc: Scenario, method: str, value: float, max_wall: float) -> Scenario:
+    """The scene ``sc`` solved by ``method`` at ``value`` (dt or rtol), recording RECORD."""
+    sv = sc.solver
+    if setting_name(method) == "dt":
+        sv = replace(sv, method=method, dt=value, min_dt=min(sv.min_dt, value))
+    else:
+        sv = replace(sv, method=method, rtol=value, atol=value * ATOL_PER_RTOL)
+    sv = replace(sv, max_wall_time=max_wall)
+    sv.validate()
+    return replace(sc, solver=sv, record=RECORD)
+
+
+def describe(method: str, value: float) -> str:
+    unit = " s" if setting_name(method) == "dt" else ""
+    return f"{method} {setting_name(method)} = {value:.4g}{unit}"
+
+
+# -- traces and error measures ------------------------------------------------------------------
+def _increasing(t: np.ndarray) -> np.ndarray:
+    """Mask keeping each time strictly later than all before it (drops duplicate event times)."""
+    t = np.asarray(t, dtype=float)
+    if len(t) == 0:
+        return np.zeros(0, dtype=bool)
+    keep = np.ones(len(t), dtype=bool)
+    keep[1:] = t[1:] > np.maximum.accumulate(t)[:-1]
+    return keep
+
+
+class Trace:
+    """A run's recorded series as functions of time (Hermite for the load, linear for the tip)."""
+
+    def __init__(self, result: SimulationResult):
+        s = result.series
+        keep = _increasing(s["t"])
+        t = np.asarray(s["t"], dtype=float)[keep]
+        if len(t) < 2:
+            raise ValueError("fewer than two recorded points")
+        self.t_end = float(t[-1])
+        self.peak = float(result.peak_contact_force)
+        self.sim_time = float(result.sim_time)
+
+        def spline(key: str, rate: str) -> CubicHermiteSpline:
+            return CubicHermiteSpline(
+                t, np.asarray(s[key], dtype=float)[keep], np.asarray(s[rate], dtype=float)[keep]
+            )
+
+        self.x = spline("x", "vx")
+        self.y = spline("y", "vy")
+        self.phi = spline("phi", "phidot")
+        self.tip_t = self.tip = None
+        if "tip_deflection" in s and "fem_fence" in result.model_parts:
+            kf = _increasing(s["t_fence"])
+            self.tip_t = np.asarray(s["t_fence"], dtype=float)[kf]
+            self.tip = np.asarray(s["tip_deflection"], dtype=float)[kf]
+
+    def pose(self, t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return self.x(t), self.y(t), self.phi(t)
+
+    def tip_at(self, t) -> np.ndarray | None:
+        return None if self.tip is None else np.interp(t, self.tip_t, self.tip)
+
+
+@dataclass
+class ReferenceSolution:
+    """One converged solve of a scene: its trace and what the measures need."""
+
+    label: str
+    method: str
+    value: float
+    trace: Trace
+    corners: np.ndarray  # load corners relative to C_s [m]
+    flexible: bool
+    peak: float
+    sim_time: float
+    steps: int
+    wall: float
+
+
+def error_measures(result: SimulationResult, ref: ReferenceSolution) -> dict[str, float]:
+    """The four error measures of ``result`` against ``ref`` (NaN where one does not apply)."""
+    tr = Trace(result)
+    rt = ref.trace
+    t_c = min(tr.t_end, rt.t_end)
+    g = np.arange(0.0, t_c, GRID_STEP)
+    errors = {m: math.nan for m in MEASURES}
+    errors["peak_force"] = abs(tr.peak - rt.peak) / rt.peak if rt.peak > 0 else math.nan
+    xa, ya, _ = tr.pose(g)
+    xb, yb, _ = rt.pose(g)
+    errors["trajectory"] = float(np.sqrt(np.mean((xa - xb) ** 2 + (ya - yb) ** 2)))
+    if ref.flexible and tr.tip is not None and rt.tip is not None:
+        errors["tip_deflection"] = float(np.sqrt(np.mean((tr.tip_at(g) - rt.tip_at(g)) ** 2)))
+    pa = [float(v) for v in tr.pose(t_c)]
+    pb = [float(v) for v in rt.pose(t_c)]
+    errors["final_pose"] = corner_displacement(pa, pb, ref.corners)
+    return errors
+
+
+def corner_displacement(pa: Sequence[float], pb: Sequence[float], corners: np.ndarray) -> float:
+    """Largest distance between the same load corner in poses ``pa`` and ``pb`` (x, y, phi)."""
+
+    def place(p):
+        c, s = math.cos(p[2]), math.sin(p[2])
+        return np.column_stack(
+            (
+                p[0] + c * corners[:, 0] - s * corners[:, 1],
+                p[1] + s * corners[:, 0] + c * corners[:, 1],
+            )
+        )
+
+    return float(np.max(np.hypot(*(place(pa) - place(pb)).T)))
+
+
+# -- runs -------------------------------------------------------------------------------------
+@dataclass
+class RunPoint:
+    """One (scene, method, setting) of the campaign."""
+
+    scene: str
+    method: str
+    setting: str  # "dt" or "rtol"
+    value: float
+    status: str  # ok | capped | failed | skipped
+    wall: float = math.nan  # median wall time [s]
+    walls: list[float] = field(default_factory=list)
+    sim_time: float = math.nan
+    steps: int = 0
+    rejected: int = 0
+    errors: dict[str, float] = field(default_factory=dict)
+    errors_ode: dict[str, float] = field(default_factory=dict)  # SciPy runs: vs the ODE form
+    is_default: bool = False
+    note: str = ""
+    peak: float = math.nan
+    sorted: bool = False
+
+    @property
+    def rtf(self) -> float:
+        """Real-time factor: simulated time over wall time."""
+        return self.sim_time / self.wall if self.wall > 0 else math.nan
+
+    @property
+    def label(self) -> str:
+        return "default" if self.is_default else self.method
+
+
+def _status(result: SimulationResult) -> str:
+    if result.diagnosis is None:
+        return "ok"
+    if result.diagnosis.startswith("wall-time limit"):
+        return "capped"
+    return "failed"
+
+
+def timed(sc: Scenario) -> tuple[SimulationResult, float]:
+    """One solve and its wall time (perf_counter around ``simulate``)."""
+    t0 = time.perf_counter()
+    result = simulate(sc)
+    return result, time.perf_counter() - t0
+
+
+def measure(
+    scene: str,
+    sc: Scenario,
+    ref: Reference,
+    repeats: int,
+    *,
+    is_default: bool = False,
+) -> RunPoint:
+    """Solve ``sc`` (median of ``repeats`` timed runs) and compare it with the reference."""
+    sv = sc.solver
+    method = sv.method
+    name = setting_name(method)
+    value = sv.dt if name == "dt" else sv.rtol
+    result, wall = timed(sc)
+    walls = [wall]
+    status = _status(result)
+    point = RunPoint(
+        scene,
+        method,
+        name,
+        value,
+        status,
+        is_default=is_default,
+        sim_time=result.sim_time,
+        steps=result.steps,
+        rejected=result.rejected_steps,
+        peak=result.peak_contact_force,
+        sorted=result.sorted,
+    )
+    if status == "ok":
+        point.errors = error_measures(result, ref.main)
+        if method in SCIPY_METHODS and ref.ode is not None:
+            point.errors_ode = error_measures(result, ref.ode)
+        if result.forced_steps:
+            point.note = f"{result.forced_steps} forced steps"
+    else:
+        point.note = result.diagnosis or ""
+    del result
+    if status == "ok" and wall <= LONG_RUN:
+        for _ in range(repeats - 1):
+            walls.append(timed(sc)[1])
+    point.walls = walls
+    point.wall = statistics.median(walls)
+    return point
+
+
+# -- reference ----------------------------------------------------------------------------------
+@dataclass
+class ReferenceCheck:
+    """A second solve compared with the reference: its differences are the reference's error."""
+
+    label: str
+    kind: str  # "twin" (halved step), "independent" (another scheme), "ode_form" (SciPy)
+    status: str
+    errors: dict[str, float]
+    wall: float
+    note: str = ""
+
+
+@dataclass
+class Reference:
+    """The reference of one scene, its checks and the SciPy (ODE-form) reference."""
+
+    scene: str
+    main: ReferenceSolution
+    ode: ReferenceSolution | None
+    checks: list[ReferenceCheck]
+
+    def uncertainty(self, measure: str) -> float:
+        """The reference's error estimate for a measure: its difference to the halved step."""
+        for c in self.checks:
+            if c.kind == "twin":
+                return c.errors.get(measure, math.nan)
+        return math.nan
+
+    def ode_gap(self, measure: str) -> float:
+        """How far the converged ODE form lies from the reference (the SciPy floor)."""
+        for c in self.checks:
+            if c.kind == "ode_form" and c.status == "ok":
+                return c.errors.get(measure, math.nan)
+        return math.nan
+
+
+def _solution(label, method, value, sc, result, wall) -> ReferenceSolution:
+    md = SortingModel(sc)
+    return ReferenceSolution(
+        label=label,
+        method=method,
+        value=value,
+        trace=Trace(result),
+        corners=np.array(md.body.corners, dtype=float),
+        flexible=md.flexible,
+        peak=result.peak_contact_force,
+        sim_time=result.sim_time,
+        steps=result.steps,
+        wall=wall,
+    )
+
+
+def reference(
+    scene: str,
+    *,
+    quick: bool = False,
+    max_wall: float = 600.0,
+    progress: Progress = _quiet,
+    base: Scenario | None = None,
+) -> Reference:
+    """The reference solution of ``scene`` with its halved-step, independent and ODE checks."""
+    sc0 = base if base is not None else _load(scene)
+    dt = REF_DT_QUICK if quick else REF_DT
+    sc = configure(sc0, "trapezoidal", dt, max_wall)
+    progress(f"{scene}: reference {describe('trapezoidal', dt)}")
+    result, wall = timed(sc)
+    if result.diagnosis is not None:
+        raise RuntimeError(f"{scene}: the reference solve failed: {result.diagnosis}")
+    main = _solution(f"trapezoidal dt = {dt:.6g} s", "trapezoidal", dt, sc, result, wall)
+    del result
+    checks: list[ReferenceCheck] = []
+    specs = [
+        ("twin", "trapezoidal", dt / 2.0, "trapezoidal at half the reference step"),
+        ("independent", "generalized_alpha", dt, "generalized_alpha at the reference step"),
+    ]
+    ode_method, ode_rtol = ODE_REFERENCE.get(scene, ODE_REFERENCE_DEFAULT)
+    specs.append(
+        ("ode_form", ode_method, ode_rtol, f"{ode_method} rtol = {ode_rtol:g} (ODE form)")
+    )
+    ode = None
+    for kind, method, value, text in specs:
+        sck = configure(sc0, method, value, max_wall)
+        progress(f"{scene}: reference check {describe(method, value)}")
+        r, w = timed(sck)
+        status = _status(r)
+        errors = error_measures(r, main) if status == "ok" else {}
+        checks.append(ReferenceCheck(text, kind, status, errors, w, r.diagnosis or ""))
+        if kind == "ode_form" and status == "ok":
+            ode = _solution(text, method, value, sck, r, w)
+        del r
+    if ode is not None:
+        twin = ode_rtol / 10.0
+        sck = configure(sc0, ode_method, twin, max_wall)
+        progress(f"{scene}: ODE-form check {describe(ode_method, twin)}")
+        r, w = timed(sck)
+        status = _status(r)
+        errors = error_measures(r, ode) if status == "ok" else {}
+        checks.append(
+            ReferenceCheck(
+                f"{ode_method} rtol = {twin:g} against the ODE-form reference",
+                "ode_twin",
+                status,
+                errors,
+                w,
+                r.diagnosis or "",
+            )
+        )
+    return Reference(scene, main, ode, checks)
+
+
+# -- campaign -----------------------------------------------------------------------------------
+@dataclass
+class SceneResult:
+    scene: str
+    sim_time: float
+    reference: Reference
+    points: list[RunPoint]
+
+
+@dataclass
+class Campaign:
+    scenes: list[SceneResult]
+    methods: tuple[str, ...]
+    quick: bool
+    repeats: int
+    max_wall: float
+    command: str
+    machine: dict[str, str]
+    started: str
+    duration: float = 0.0
+
+
+def _load(scene: str) -> Scenario:
+    from fence_sorter.scene import load_scene
+
+    return load_scene(scene).scenario
+
+
+def machine_info() -> dict[str, str]:
+    """Platform, CPUs, load, library versions and the git revision the campaign ran on."""
+    import numba
+    import scipy
+
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    cpu = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    info = {
+        "platform": platform.platform(),
+        "cpu": cpu,
+        "cpu count": str(os.cpu_count()),
+        "python": sys.version.split()[0],
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+        "numba": numba.__version__,
+    }
+    try:
+        info["load average at start"] = " ".join(f"{v:.2f}" for v in os.getloadavg())
+    except OSError:
+        pass
+    repo = Path(__file__).resolve().parents[2]
+    try:
+        head = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"],
+            cwd=repo,
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=True,
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--", "fence_sorter"],
+            cwd=repo,
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=True,
+        ).stdout.split("\n")
+        changed = [line[3:] for line in dirty if line.strip()]
+        info["git"] = head + (f" (uncommitted changes: {', '.join(changed)})" if changed else "")
+    except (OSError, subprocess.SubprocessError):
+        pass
+    return info
+
+
+def run_campaign(
+    scenes: Sequence[str] | None = None,
+    methods: Sequence[str] | None = None,
+    out_dir: Path | str | None = None,
+    repeats: int = 3,
+    quick: bool = False,
+    *,
+    max_wall: float = 30.0,
+    command: str = "",
+    progress: Progress = _quiet,
+) -> Campaign:
+    """Run the work-precision campaign; write the report into ``out_dir`` if given."""
+    scenes = tuple(scenes or (QUICK_SCENES if quick else SCENES))
+    methods = tuple(methods or (QUICK_METHODS if quick else METHODS))
+    for m in methods:
+        grid(m)  # rejects an unknown method before any solve
+    t_start = time.perf_counter()
+    campaign = Campaign(
+        scenes=[],
+        methods=methods,
+        quick=quick,
+        repeats=repeats,
+        max_wall=max_wall,
+        command=command,
+        machine=machine_info(),
+        started=time.strftime("%Y-%m-%d %H:%M:%S %Z"),
+    )
+    for scene in scenes:
+        sc0 = _load(scene)
+        ref = reference(scene, quick=quick, progress=progress, base=sc0)
+        points = []
+        default = replace(sc0, record=RECORD, solver=replace(sc0.solver, max_wall_time=max_wall))
+        timed(default)  # warm-up
+        p = measure(scene, default, ref, repeats, is_default=True)
+        progress(_line(p))
+        points.append(p)
+        for method in methods:
+            values = grid(method, quick)
+            warm = configure(sc0, method, values[0], min(max_wall, WARMUP_WALL))
+            timed(warm)
+            capped = None
+            for value in values:
+                if capped is not None:
+                    points.append(
+                        RunPoint(
+                            scene,
+                            method,
+                            setting_name(method),
+                            value,
+                            "skipped",
+                            note=f"skipped: {setting_name(method)} = {capped:g} already hit "
+                            f"the {max_wall:g} s cap",
+                        )
+                    )
+                    continue
+                p = measure(scene, configure(sc0, method, value, max_wall), ref, repeats)
+                progress(_line(p))
+                points.append(p)
+                if p.status == "capped":
+                    capped = value
+        campaign.scenes.append(SceneResult(scene, ref.main.sim_time, ref, points))
+    campaign.duration = time.perf_counter() - t_start
+    if out_dir is not None:
+        write_report(campaign, out_dir)
+    return campaign
+
+
+def _line(p: RunPoint) -> str:
+    err = " ".join(f"{k}={v:.2e}" for k, v in p.errors.items() if math.isfinite(v))
+    tag = " (default)" if p.is_default else ""
+    return (
+        f"{p.scene}: {describe(p.method, p.value)}{tag}: {p.status}, wall {p.wall * 1e3:.1f} ms, "
+        f"{p.steps} steps {err} {p.note}"
+    ).rstrip()
+
+
+# -- convergence and comparisons (numbers for the report) ---------------------------------------
+def observed_order(points: Sequence[RunPoint], measure: str, floor: float) -> float:
+    """Least-squares slope of log(error) over log(dt) (errors above 10x ``floor``)."""
+    xs, ys = [], []
+    for p in points:
+        e = p.errors.get(measure, math.nan)
+        if p.status == "ok" and math.isfinite(e) and e > 10.0 * max(floor, 0.0) and e > 0:
+            xs.append(math.log(p.value))
+            ys.append(math.log(e))
+    if len(xs) < 3:
+        return math.nan
+    return float(np.polyfit(xs, ys, 1)[0])
+
+
+def fastest_reaching(points: Sequence[RunPoint], measure: str, target: float) -> RunPoint | None:
+    """The quickest ok run whose error in ``measure`` is at most ``target``."""
+    hits = [
+        p
+        for p in points
+        if p.status == "ok" and p.errors.get(measure, math.inf) <= target and not p.is_default
+    ]
+    return min(hits, key=lambda p: p.wall) if hits else None
+
+
+# -- report -------------------------------------------------------------------------------------
+def _e(v: float) -> str:
+    return "n/a" if v is None or not math.isfinite(v) else f"{v:.2e}"
+
+
+def _f(v: float, spec: str = ".2f") -> str:
+    return "n/a" if v is None or not math.isfinite(v) else f"{v:{spec}}"
+
+
+def _value(p: RunPoint) -> str:
+    if p.setting == "dt":
+        return f"dt {p.value * 1e3:.4g} ms"
+    return f"rtol {p.value:.0e}"
+
+
+def _measures(sr: SceneResult) -> tuple[str, ...]:
+    return tuple(m for m in MEASURES if m != "tip_deflection" or sr.reference.main.flexible)
+
+
+def plot_scene(sr: SceneResult, out_dir: Path) -> list[str]:
+    """``<scene>_<measure>.png``: error against wall time, one curve per method, default star."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    files = []
+    methods = list(dict.fromkeys(p.method for p in sr.points if not p.is_default))
+    for measure in _measures(sr):
+        fig, ax = plt.subplots(figsize=(7.0, 5.0))
+        for method in methods:
+            pts = [
+                p
+                for p in sr.points
+                if p.method == method and not p.is_default and p.status == "ok"
+            ]
+            pts = [p for p in pts if p.errors.get(measure, math.nan) > 0]
+            if not pts:
+                continue
+            (line,) = ax.loglog(
+                [p.wall * 1e3 for p in pts],
+                [p.errors[measure] for p in pts],
+                marker=MARKERS.get(method, "o"),
+                linestyle="--" if method.startswith("scipy:") else "-",
+                label=method,
+            )
+            for p in {id(q): q for q in (pts[0], pts[-1])}.values():
+                ax.annotate(
+                    _value(p).split(" ", 1)[1],
+                    (p.wall * 1e3, p.errors[measure]),
+                    textcoords="offset points",
+                    xytext=(4, 3),
+                    fontsize=6,
+                    color=line.get_color(),
+                )
+        for p in sr.points:
+            e = p.errors.get(measure, math.nan)
+            if p.is_default and p.status == "ok" and e > 0:
+                ax.loglog(
+                    [p.wall * 1e3],
+                    [e],
+                    marker="*",
+                    markersize=18,
+                    color="gold",
+                    markeredgecolor="black",
+                    linestyle="none",
+                    label=f"default ({describe(p.method, p.value)})",
+                    zorder=5,
+                )
+        unc = sr.reference.uncertainty(measure)
+        if unc > 0:
+            ax.axhline(unc, color="grey", linestyle=":", label="reference vs its halved step")
+        gap = sr.reference.ode_gap(measure)
+        if gap > 0 and any(m.startswith("scipy:") for m in methods):
+            ax.axhline(gap, color="tab:red", linestyle="-.", lw=1, label="ODE form vs reference")
+        title, unit = MEASURE_TEXT[measure]
+        ax.set_title(f"{sr.scene}: {title}")
+        ax.set_xlabel("wall time per solve [ms] (median)")
+        ax.set_ylabel(unit)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7, loc="best")
+        fig.tight_layout()
+        name = f"{sr.scene}_{measure}.png"
+        fig.savefig(out_dir / name, dpi=110)
+        plt.close(fig)
+        files.append(name)
+    return files
+
+
+def save_reference(sr: SceneResult, out_dir: Path) -> str:
+    """The reference sampled on the 1 ms grid (small; for inspection, not used as a cache)."""
+    ref = sr.reference.main
+    g = np.arange(0.0, ref.trace.t_end, GRID_STEP)
+    x, y, phi = ref.trace.pose(g)
+    arrays = {"t": g, "x": x, "y": y, "phi": phi}
+    tip = ref.trace.tip_at(g)
+    if tip is not None:
+        arrays["tip_deflection"] = tip
+    path = out_dir / "reference" / f"{sr.scene}.npz"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    np.savez_compressed(
+        path,
+        **arrays,
+        peak_contact_force=ref.peak,
+        sim_time=ref.sim_time,
+        label=np.array(ref.label),
+    )
+    return str(path.relative_to(out_dir))
+
+
+def _reference_section(campaign: Campaign) -> list[str]:
+    lines = [
+        "## Reference solutions and their check",
+        "",
+        "Each row compares a second solve with the reference, in the same measures as the runs "
+        "below. The halved-step row estimates the reference's own error; it must lie far below "
+        "the errors reported for the runs. The generalized_alpha row is an independent scheme "
+        "on the same model. The ODE-form row is the SciPy form of the model (`kernel.rhs`, "
+        "explicit Karnopp friction) solved tightly: the answer the SciPy baselines converge to; "
+        "its last row checks that answer against a ten times tighter tolerance.",
+        "",
+    ]
+    for sr in campaign.scenes:
+        ref = sr.reference
+        ms = _measures(sr)
+        lines += [
+            f"### {sr.scene}",
+            "",
+            f"Reference: {ref.main.label}, {ref.main.steps} steps, "
+            f"{ref.main.sim_time:.4f} s simulated, peak N = {ref.main.peak:.6g} N, "
+            f"wall {ref.main.wall:.1f} s.",
+            "",
+            "| compared with the reference | "
+            + " | ".join(MEASURE_TEXT[m][0] for m in ms)
+            + " | wall [s] |",
+            "|---|" + "---|" * (len(ms) + 1),
+        ]
+        for c in ref.checks:
+            cells = (
+                [_e(c.errors.get(m, math.nan)) for m in ms]
+                if c.status == "ok"
+                else ([c.status + ": " + c.note] + [""] * (len(ms) - 1))
+            )
+            lines.append(f"| {c.label} | " + " | ".join(cells) + f" | {c.wall:.1f} |")
+        lines.append("")
+        smallest = {
+            m: min(
+                (p.errors.get(m, math.inf) for p in sr.points if p.status == "ok"),
+                default=math.nan,
+            )
+            for m in ms
+        }
+        lines.append(
+            "Smallest error reported below, per measure: "
+            + ", ".join(f"{MEASURE_TEXT[m][0]} {_e(smallest[m])}" for m in ms)
+            + "; reference vs halved step: "
+            + ", ".join(f"{_e(ref.uncertainty(m))}" for m in ms)
+            + "."
+        )
+        lines.append("")
+    return lines
+
+
+def _scene_table(sr: SceneResult) -> list[str]:
+    ms = _measures(sr)
+    head = (
+        "| method | setting | wall [ms] | RTF | steps | "
+        + " | ".join(MEASURE_TEXT[m][0] for m in ms)
+        + " | peak N vs ODE form | note |"
+    )
+    lines = [head, "|---|---|---|---|---|" + "---|" * len(ms) + "---|---|"]
+    for p in sr.points:
+        name = f"**default** ({p.method})" if p.is_default else p.method
+        if p.status == "skipped":
+            lines.append(
+                f"| {name} | {_value(p)} | | | | "
+                + " | ".join("" for _ in ms)
+                + f" | | {p.note} |"
+            )
+            continue
+        errs = [_e(p.errors.get(m, math.nan)) if p.status == "ok" else "-" for m in ms]
+        rtf = f"{p.rtf:.3g}"
+        note = p.note
+        if p.status == "capped":
+            rtf += " (capped)"
+            note = f"capped at {p.sim_time:.3f} s simulated: {note}"
+        elif p.status == "failed":
+            note = f"failed: {note}"
+        if p.status == "ok" and not p.sorted:
+            note = (note + "; " if note else "") + "not sorted"
+        if len(p.walls) > 1:
+            note = (note + "; " if note else "") + f"median of {len(p.walls)}"
+        ode = _e(p.errors_ode.get("peak_force", math.nan)) if p.errors_ode else ""
+        lines.append(
+            f"| {name} | {_value(p)} | {p.wall * 1e3:.1f} | {rtf} | {p.steps} | "
+            + " | ".join(errs)
+            + f" | {ode} | {note} |"
+        )
+    return lines
+
+
+def findings(sr: SceneResult) -> list[str]:
+    """Sentences computed from the numbers of one scene (for "What this shows")."""
+    out = []
+    ref = sr.reference
+    default = next((p for p in sr.points if p.is_default), None)
+    scipy_pts = [p for p in sr.points if p.method.startswith("scipy:")]
+    if default is not None and default.status == "ok":
+        e = default.errors["peak_force"]
+        out.append(
+            f"The default ({describe(default.method, default.value)}) solves the event in "
+            f"{default.wall * 1e3:.1f} ms (RTF {default.rtf:.3g}) with a peak-force error of "
+            f"{_e(e)}, a trajectory RMS error of {_e(default.errors['trajectory'])} m and a "
+            f"final-pose error of {_e(default.errors['final_pose'])} m."
+        )
+        hit = fastest_reaching(scipy_pts, "peak_force", e)
+        if scipy_pts and hit is not None:
+            out.append(
+                f"The fastest SciPy baseline with a peak-force error at most that is "
+                f"{describe(hit.method, hit.value)}: {hit.wall * 1e3:.1f} ms "
+                f"({hit.wall / default.wall:.3g} times the default's wall time, error "
+                f"{_e(hit.errors['peak_force'])})."
+            )
+        elif scipy_pts:
+            best = [p for p in scipy_pts if p.status == "ok"]
+            if best:
+                b = min(best, key=lambda p: p.errors["peak_force"])
+                out.append(
+                    f"No SciPy run reached that peak-force error; the closest was "
+                    f"{describe(b.method, b.value)} with {_e(b.errors['peak_force'])} in "
+                    f"{b.wall * 1e3:.1f} ms."
+                )
+        own = [
+            p
+            for p in scipy_pts
+            if p.status == "ok" and p.errors_ode.get("peak_force", math.inf) <= e
+        ]
+        if own:
+            b = min(own, key=lambda p: p.wall)
+            out.append(
+                f"Measured against their own converged ODE form instead, the fastest SciPy run "
+                f"within that error is {describe(b.method, b.value)}: {b.wall * 1e3:.1f} ms "
+                f"({b.wall / default.wall:.3g} times the default's)."
+            )
+        ours = [p for p in sr.points if p.method in OUR_METHODS and not p.is_default]
+        hit = fastest_reaching(ours, "peak_force", e)
+        if hit is not None and hit.wall < default.wall / 1.5:
+            out.append(
+                f"Among our methods, {describe(hit.method, hit.value)} reaches it faster: "
+                f"{hit.wall * 1e3:.1f} ms."
+            )
+    elif default is not None:
+        out.append(f"The default run did not finish: {default.status}, {default.note}.")
+    for method in ("trapezoidal", "generalized_alpha"):
+        pts = [p for p in sr.points if p.method == method]
+        orders = {
+            m: observed_order(pts, m, ref.uncertainty(m)) for m in ("peak_force", "trajectory")
+        }
+        if any(math.isfinite(v) for v in orders.values()):
+            out.append(
+                f"{method}: observed order in dt {_f(orders['peak_force'])} (peak force), "
+                f"{_f(orders['trajectory'])} (trajectory)."
+            )
+    ad = [
+        p
+        for p in sr.points
+        if p.method == "adaptive" and p.status == "ok" and p.errors and not p.is_default
+    ]
+    if len(ad) >= 2:
+        lo, hi = ad[0], ad[-1]
+        out.append(
+            f"adaptive: from rtol {lo.value:.0e} to {hi.value:.0e} the trajectory error goes "
+            f"from {_e(lo.errors['trajectory'])} to {_e(hi.errors['trajectory'])} m and the "
+            f"peak-force error from {_e(lo.errors['peak_force'])} to "
+            f"{_e(hi.errors['peak_force'])}, at {lo.wall * 1e3:.1f} to {hi.wall * 1e3:.1f} ms."
+        )
+    gap = ref.ode_gap("peak_force")
+    if math.isfinite(gap) and gap > 10.0 * max(ref.uncertainty("peak_force"), 0.0):
+        out.append(
+            f"The ODE form the SciPy baselines integrate converges to a different answer: its "
+            f"tight solve differs from the reference by {_e(gap)} in peak force and "
+            f"{_e(ref.ode_gap('trajectory'))} m in trajectory, far more than the reference's "
+            f"own error ({_e(ref.uncertainty('peak_force'))}, "
+            f"{_e(ref.uncertainty('trajectory'))} m); SciPy errors against the reference cannot "
+            "fall below it."
+        )
+    capped = sorted({p.method for p in scipy_pts if p.status == "capped"})
+    failed = sorted({p.method for p in scipy_pts if p.status == "failed"})
+    if capped:
+        out.append(f"Hit the wall-time cap: {', '.join(capped)}.")
+    if failed:
+        out.append(f"Failed: {', '.join(failed)}.")
+    return out
+
+
+def _clean(v):
+    if isinstance(v, float):
+        return v if math.isfinite(v) else None
+    if isinstance(v, dict):
+        return {k: _clean(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_clean(x) for x in v]
+    return v
+
+
+def results_dict(campaign: Campaign) -> dict:
+    """Everything the report shows, as plain JSON data (``results.json``)."""
+    scenes = []
+    for sr in campaign.scenes:
+        ref = sr.reference
+        scenes.append(
+            {
+                "scene": sr.scene,
+                "reference": {
+                    "label": ref.main.label,
+                    "method": ref.main.method,
+                    "value": ref.main.value,
+                    "peak_contact_force": ref.main.peak,
+                    "sim_time": ref.main.sim_time,
+                    "steps": ref.main.steps,
+                    "wall": ref.main.wall,
+                    "checks": [asdict(c) for c in ref.checks],
+                },
+                "points": [dict(asdict(p), rtf=p.rtf) for p in sr.points],
+            }
+        )
+    return _clean(
+        {
+            "command": campaign.command,
+            "started": campaign.started,
+            "duration_s": campaign.duration,
+            "machine": campaign.machine,
+            "quick": campaign.quick,
+            "repeats": campaign.repeats,
+            "max_wall_s": campaign.max_wall,
+            "methods": list(campaign.methods),
+            "scenes": scenes,
+        }
+    )
+
+
+def write_report(campaign: Campaign, out_dir: Path | str) -> Path:
+    """README.md, results.json and the PNGs into ``out_dir``; returns the README's path."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    lines = [
+        "# Accuracy: work-precision diagrams of the time integrators",
+        "",
+        "Generated by `fence-sorter accuracy` (`fence_sorter/verification/accuracy.py`); do not "
+        "edit by hand. The numbers are also in `results.json`.",
+        "",
+        "Command:",
+        "",
+        "```",
+        campaign.command or "fence-sorter accuracy",
+        "```",
+        "",
+        f"Run {campaign.started}, {campaign.duration / 60:.1f} min"
+        + (" (--quick: reduced grid)" if campaign.quick else "")
+        + ".",
+        "",
+        "Machine:",
+        "",
+    ]
+    lines += [f"- {k}: {v}" for k, v in campaign.machine.items()]
+    lines += [
+        "",
+        "Timings are medians on a shared machine with other jobs running; treat ratios below "
+        "about 1.5 as noise.",
+        "",
+        "## How",
+        "",
+        f"- Scenes: {', '.join(sr.scene for sr in campaign.scenes)} (`config/scenes/`), "
+        f"recording {', '.join(RECORD)}.",
+        f"- Methods and settings: adaptive over rtol "
+        f"{', '.join(f'{v:.0e}' for v in grid('adaptive', campaign.quick))}; trapezoidal and "
+        f"generalized_alpha over dt "
+        f"{', '.join(f'{v * 1e3:.4g}' for v in grid('trapezoidal', campaign.quick))} ms; SciPy "
+        f"baselines over rtol {', '.join(f'{v:.0e}' for v in grid('scipy:RK45', campaign.quick))}"
+        f". atol = {ATOL_PER_RTOL:g} x rtol for every error-controlled method (the defaults "
+        "rtol 1e-4, atol 1e-6 have this ratio); dt_max 5 ms (also the SciPy max_step). "
+        f"Methods run: {', '.join(campaign.methods)}.",
+        "- Default: the scene as shipped (solver defaults: adaptive, rtol 1e-4, atol 1e-6, "
+        "dt_max 5 ms), the star in the plots and the **default** row in the tables.",
+        f"- Timing: one untimed warm-up solve per scene and method (JIT), then the median of "
+        f"{campaign.repeats} `perf_counter` wall times of `simulate()` (one if a solve takes "
+        f"more than {LONG_RUN:g} s). RTF = simulated time / wall time. Each solve is capped at "
+        f"{campaign.max_wall:g} s (`solver.max_wall_time`): a capped solve has no error point, "
+        "its RTF is that of the part it solved, and the method's tighter settings are skipped.",
+        "- Error measures against the reference: peak contact force (relative); trajectory of "
+        "C_s (RMS distance on a 1 ms grid over the common time span, cubic Hermite "
+        "interpolation through the accepted points' positions and velocities); fence tip "
+        "deflection (RMS on the same grid, linear interpolation; flexible fences); final pose "
+        "(largest displacement of a load corner at the common end time, which is the sort "
+        "crossing give or take one step for the scenes that stop when sorted). Duplicate times "
+        "at events are dropped before interpolating.",
+        "- The SciPy baselines (`fence_sorter/physics/baselines.py`) integrate `kernel.rhs`, "
+        "the model's ODE form with explicit Karnopp friction, with no event location; the "
+        "column *peak N vs ODE form* gives their peak-force error against the converged ODE "
+        "form, i.e. their own convergence.",
+        "",
+    ]
+    lines += _reference_section(campaign)
+    lines += ["## Results", ""]
+    for sr in campaign.scenes:
+        files = plot_scene(sr, out_dir)
+        npz = save_reference(sr, out_dir)
+        lines += [f"### {sr.scene}", ""]
+        lines += [f"![{f}]({f})" for f in files]
+        lines += ["", f"Reference sampled on the 1 ms grid: `{npz}`.", ""]
+        lines += _scene_table(sr)
+        lines += [""]
+    lines += ["## What this shows", ""]
+    for sr in campaign.scenes:
+        lines += [f"**{sr.scene}.** " + " ".join(findings(sr)), ""]
+    path = out_dir / "README.md"
+    path.write_text("\n".join(lines), encoding="utf-8")
+    (out_dir / "results.json").write_text(
+        json.dumps(results_dict(campaign), indent=1) + "\n", encoding="utf-8"
+    )
+    return path
+
+
+__all__ = [
+    "Campaign",
+    "METHODS",
+    "MEASURES",
+    "Reference",
+    "ReferenceSolution",
+    "RunPoint",
+    "SCENES",
+    "Trace",
+    "configure",
+    "error_measures",
+    "grid",
+    "reference",
+    "run_campaign",
+    "write_report",
+]
