@@ -1,0 +1,124 @@
+"""``fence-sorter bench`` run as a process: --quick writes the markdown report (tables, the JIT
+comparison) and the JSON figures; bad arguments exit 2 with one line. No timing assertions:
+speed targets live in the benchmark report, never in unit tests. ROS-free."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+from fence_sorter.cli import bench as bench_cli
+from fence_sorter.verification import bench as B
+
+REPO = Path(__file__).resolve().parents[2]
+TIMEOUT = 600.0
+SECTIONS = (
+    "## Machine",
+    "## Targets",
+    "## Default configuration per scene",
+    "## References",
+    "## SciPy baselines at the same error",
+    "## Stiff-fence events (optimisation inner loop)",
+    "## Peak memory",
+    "## Model parts: what each scene leaves out",
+    "## Compiled kernel: the same code with and without the JIT",
+    "## Discussion",
+)
+
+
+def bench(*args: str) -> subprocess.CompletedProcess:
+    """The subcommand on its own (``python -m fence_sorter.cli.bench``)."""
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH")]))
+    return subprocess.run(
+        [sys.executable, "-m", "fence_sorter.cli.bench", *args],
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT,
+        cwd=REPO,
+        env=env,
+    )
+
+
+def test_register_adds_the_bench_subcommand() -> None:
+    parser = argparse.ArgumentParser()
+    bench_cli.register(parser.add_subparsers(dest="command"))
+    args = parser.parse_args(["bench", "--quick", "--out", "x.md", "--scenes", "impact_flexible"])
+    assert args.func is bench_cli.run
+    assert args.quick and args.out == "x.md" and args.scenes == ["impact_flexible"]
+    assert parser.parse_args(["bench"]).out == "docs/benchmarks.md"
+
+
+def test_quick_writes_the_report(tmp_path: Path) -> None:
+    md_path, json_path = tmp_path / "docs" / "benchmarks.md", tmp_path / "bench.json"
+    r = bench("--quick", "--out", str(md_path), "--json", str(json_path))
+    assert r.returncode == 0, r.stderr
+    md = md_path.read_text(encoding="utf-8")
+    for section in SECTIONS:
+        assert section in md, section
+    assert "`fence-sorter bench --out " in md and "--quick`" in md
+    assert "NUMBA_DISABLE_JIT=1" in md and "| wall median [ms] |" in md
+    assert "| positioned_stiff | adaptive " in md
+    assert "## Default configuration per scene" in r.stdout  # the report is printed too
+
+    data = json.loads(json_path.read_text(encoding="utf-8"))
+    assert data["options"]["quick"] is True
+    (s,) = data["scenes"]
+    assert s["scene"] == "positioned_stiff"
+    d = s["default"]
+    out = d["outcome"]
+    assert out["success"] and out["sorted"] and out["steps"] > 0
+    assert d["method"] == "adaptive" and len(d["walls"]) == 2
+    # the default configuration is within the 1e-3 target of a converged reference
+    assert s["ours"]["check_change"] < 1e-6
+    assert d["error"] < B.TARGET_ERROR
+    assert d["wall"] > 0 and d["rtf"] > 0 and d["tracemalloc_peak"] > 0
+    # the SciPy ladder ran the quick methods on the quick ladder
+    runs = s["baselines"]["runs"]
+    assert {r["method"] for r in runs} == set(B.QUICK_SCIPY_METHODS)
+    assert {r["rtol"] for r in runs} <= set(B.QUICK_RTOL_LADDER)
+    assert s["scipy_ref"]["check_change"] < 1e-4
+    for key in ("by_ref", "by_self"):
+        comp = s["baselines"][key]
+        assert comp["threshold"] in (d["error"], B.TARGET_ERROR)
+        if comp["best"] is not None:
+            assert comp["best"]["method"] in B.QUICK_SCIPY_METHODS and comp["ratio"] > 0
+    # leaving out records and border contact does not change the answer
+    variants = s["parts"]["variants"]
+    built = variants[0]
+    assert built["role"] == "built"
+    for v in variants:
+        if v["same_physics"]:
+            assert v["outcome"]["peak_force"] == built["outcome"]["peak_force"], v["label"]
+            assert v["outcome"]["steps"] == built["outcome"]["steps"], v["label"]
+    assert any(v["role"] == "full" for v in variants)
+    assert "fem_fence" in next(v for v in variants if v["role"] == "full")["parts"]
+    # the same code with and without the JIT gives the same answer
+    j = data["jit"]
+    assert j["jit_child_confirmed"] is True
+    assert j["nojit_walls"] and j["jit_walls"]
+    assert abs(j["nojit_peak"] - j["jit_peak"]) <= 1e-9 * j["jit_peak"]
+    assert s["memory"]["rss_after_run_kib"] > 0
+    verdicts = {t["verdict"] for t in data["targets"]}
+    assert verdicts <= {"PASS", "FAIL", "N/A"}
+    assert any(t["target"].startswith("stiff-fence event") for t in data["targets"])
+
+
+def test_unknown_scene_is_one_line_naming_the_allowed() -> None:
+    r = bench("--scenes", "no_such_scene", "--out", os.devnull)
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in r.stderr
+    assert "no_such_scene" in lines[0]
+    for name in B.SCENES:
+        assert name in lines[0]
+
+
+def test_bad_repeats_exit_2() -> None:
+    r = bench("--repeats", "0", "--out", os.devnull)
+    assert r.returncode == 2
+    assert r.stderr.strip().startswith("fence-sorter: error: --repeats")
