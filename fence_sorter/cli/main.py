@@ -23,6 +23,7 @@ SUBCOMMAND_MODULES: tuple[str, ...] = (
     "modes",
     "accuracy",
     "stability",
+    "bench",
 )
 
 
