@@ -880,6 +880,19 @@ def _scene_table(sr: SceneResult) -> list[str]:
     return lines
 
 
+def _unfinished_after(points: Sequence[RunPoint], hit: RunPoint) -> str:
+    """ " (its tighter settings ... did not finish)" when some of them were not ok."""
+    same = [p for p in points if p.method == hit.method and not p.is_default]
+    later = same[same.index(hit) + 1 :]
+    bad = [p for p in later if p.status != "ok"]
+    if not bad:
+        return ""
+    return (
+        f" (its tighter settings {', '.join(_value(p) for p in bad)} did not finish: "
+        f"{', '.join(sorted({p.status for p in bad}))})"
+    )
+
+
 def findings(sr: SceneResult) -> list[str]:
     """Sentences computed from the numbers of one scene (for "What this shows")."""
     out = []
@@ -900,7 +913,7 @@ def findings(sr: SceneResult) -> list[str]:
                 f"The fastest SciPy baseline with a peak-force error at most that is "
                 f"{describe(hit.method, hit.value)}: {hit.wall * 1e3:.1f} ms "
                 f"({hit.wall / default.wall:.3g} times the default's wall time, error "
-                f"{_e(hit.errors['peak_force'])})."
+                f"{_e(hit.errors['peak_force'])}){_unfinished_after(sr.points, hit)}."
             )
         elif scipy_pts:
             best = [p for p in scipy_pts if p.status == "ok"]
@@ -916,7 +929,8 @@ def findings(sr: SceneResult) -> list[str]:
             out.append(
                 f"Measured against their own converged ODE form instead, the fastest SciPy run "
                 f"within that error is {describe(b.method, b.value)}: {b.wall * 1e3:.1f} ms "
-                f"({b.wall / default.wall:.3g} times the default's)."
+                f"({b.wall / default.wall:.3g} times the default's)"
+                f"{_unfinished_after(sr.points, b)}."
             )
         ours = [p for p in sr.points if p.method in OUR_METHODS and not p.is_default]
         hit = fastest_reaching(ours, "peak_force", e)
@@ -975,6 +989,17 @@ def findings(sr: SceneResult) -> list[str]:
             f"{_e(ref.uncertainty('trajectory'))} m); SciPy errors against the reference cannot "
             "fall below it."
         )
+    for m in _measures(sr):
+        unc = ref.uncertainty(m)
+        small = min(
+            (p.errors.get(m, math.inf) for p in sr.points if p.status == "ok"), default=math.inf
+        )
+        if math.isfinite(unc) and math.isfinite(small) and unc > 0.1 * small:
+            out.append(
+                f"Reference caveat: in {MEASURE_TEXT[m][0]} the reference differs from its "
+                f"halved-step twin by {_e(unc)}, not far below the smallest error reported "
+                f"({_e(small)}); errors of that size in this measure are not resolved."
+            )
     capped = sorted({p.method for p in scipy_pts if p.status == "capped"})
     failed = sorted({p.method for p in scipy_pts if p.status == "failed"})
     if capped:
