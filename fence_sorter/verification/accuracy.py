@@ -45,11 +45,7 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import platform
 import statistics
-import subprocess
-import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field, replace
@@ -60,6 +56,7 @@ from scipy.interpolate import CubicHermiteSpline
 
 from fence_sorter.physics.params import OUR_METHODS, SCIPY_METHODS
 from fence_sorter.physics.simulate import Scenario, SimulationResult, SortingModel, simulate
+from fence_sorter.verification import machine
 
 SCENES = ("impact_flexible", "slide_flexible", "positioned_stiff", "arbitrary_stiff")
 METHODS = OUR_METHODS + SCIPY_METHODS
@@ -501,55 +498,12 @@ def _load(scene: str) -> Scenario:
 
 
 def machine_info() -> dict[str, str]:
-    """Platform, CPUs, load, library versions and the git revision the campaign ran on."""
-    import numba
-    import scipy
-
-    cpu = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    cpu = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    info = {
-        "platform": platform.platform(),
-        "cpu": cpu,
-        "cpu count": str(os.cpu_count()),
-        "python": sys.version.split()[0],
-        "numpy": np.__version__,
-        "scipy": scipy.__version__,
-        "numba": numba.__version__,
+    """The machine, the load at the start and the git revision the campaign ran on."""
+    return {
+        **machine.machine_info(),
+        "load average at start": machine.load_average(),
+        "git": machine.git_revision(),
     }
-    try:
-        info["load average at start"] = " ".join(f"{v:.2f}" for v in os.getloadavg())
-    except OSError:
-        pass
-    repo = Path(__file__).resolve().parents[2]
-    try:
-        head = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"],
-            cwd=repo,
-            capture_output=True,
-            text=True,
-            timeout=10,
-            check=True,
-        ).stdout.strip()
-        dirty = subprocess.run(
-            ["git", "status", "--porcelain", "--", "fence_sorter"],
-            cwd=repo,
-            capture_output=True,
-            text=True,
-            timeout=10,
-            check=True,
-        ).stdout.split("\n")
-        changed = [line[3:] for line in dirty if line.strip()]
-        info["git"] = head + (f" (uncommitted changes: {', '.join(changed)})" if changed else "")
-    except (OSError, subprocess.SubprocessError):
-        pass
-    return info
 
 
 def run_campaign(

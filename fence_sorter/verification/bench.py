@@ -41,7 +41,6 @@ import gc
 import json
 import math
 import os
-import platform
 import resource
 import statistics
 import subprocess
@@ -52,9 +51,8 @@ import tracemalloc
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
-from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[2]
+from fence_sorter.verification.machine import REPO, git_revision, load_average, machine_info
 
 SCENES = ("impact_flexible", "slide_flexible", "positioned_stiff", "arbitrary_stiff")
 QUICK_SCENES = ("positioned_stiff",)
@@ -173,75 +171,6 @@ def timed_run(sc, force_border: bool = False) -> tuple[Outcome, float, float]:
 
 
 # -- machine --------------------------------------------------------------------------------------
-def machine_info() -> dict[str, str]:
-    """CPU model, cores, memory, OS, Python and library versions, load average now."""
-    import numba
-    import numpy as np
-    import scipy
-
-    cpu = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as fh:
-            for line in fh:
-                if line.startswith("model name"):
-                    cpu = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    mem = "unknown"
-    try:
-        with open("/proc/meminfo", encoding="utf-8") as fh:
-            for line in fh:
-                if line.startswith("MemTotal"):
-                    mem = f"{int(line.split()[1]) / 1024**2:.1f} GiB"
-                    break
-    except (OSError, ValueError):
-        pass
-    try:
-        usable = str(len(os.sched_getaffinity(0)))
-    except AttributeError:
-        usable = "?"
-    return {
-        "cpu": cpu,
-        "cores": f"{os.cpu_count()} logical ({usable} usable by this process)",
-        "memory": mem,
-        "os": platform.platform(),
-        "python": platform.python_version(),
-        "numpy": np.__version__,
-        "scipy": scipy.__version__,
-        "numba": numba.__version__,
-        "numba_jit": "disabled (NUMBA_DISABLE_JIT)" if numba.config.DISABLE_JIT else "enabled",
-    }
-
-
-def load_average() -> str:
-    try:
-        return " ".join(f"{x:.2f}" for x in os.getloadavg())
-    except OSError:
-        return "unknown"
-
-
-def git_revision(root: Path = REPO) -> str:
-    try:
-        rev = subprocess.run(
-            ["git", "-C", str(root), "rev-parse", "--short", "HEAD"],
-            capture_output=True,
-            text=True,
-            timeout=10,
-            check=True,
-        ).stdout.strip()
-        dirty = subprocess.run(
-            ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
-            capture_output=True,
-            text=True,
-            timeout=10,
-            check=True,
-        ).stdout.strip()
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
-    return rev + (" (working tree modified)" if dirty else "")
-
-
 # -- references -----------------------------------------------------------------------------------
 @dataclass
 class Reference:

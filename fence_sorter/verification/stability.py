@@ -37,13 +37,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import platform
 import time
 import traceback
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from fence_sorter.verification.machine import git_revision, machine_info
 
 __all__ = [
     "CASES",
@@ -52,6 +53,7 @@ __all__ = [
     "Invariant",
     "case_names",
     "fast_cases",
+    "git_revision",
     "grazing_r_s",
     "machine_info",
     "run_case",
@@ -1093,33 +1095,6 @@ def run_cases(
     return out
 
 
-def machine_info() -> dict[str, str]:
-    """CPU, cores, OS, Python and library versions of this run."""
-    import os
-
-    import numba
-    import scipy
-
-    cpu = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as fh:
-            for line in fh:
-                if line.startswith("model name"):
-                    cpu = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    return {
-        "cpu": cpu,
-        "cores": str(os.cpu_count()),
-        "os": f"{platform.system()} {platform.release()}",
-        "python": platform.python_version(),
-        "numpy": np.__version__,
-        "scipy": scipy.__version__,
-        "numba": numba.__version__,
-    }
-
-
 # -- the report ----------------------------------------------------------------------------------
 ISSUE_ITEMS = (
     "fence meshes up to 50 elements",
@@ -1170,29 +1145,6 @@ def worst_ratio(cr: CaseResult, prefixes: tuple[str, ...] = ("conv_", "ref_")) -
         and i.limit > 0
     ]
     return max(ratios) if ratios else math.nan
-
-
-def git_revision(root) -> str:
-    import subprocess
-
-    try:
-        rev = subprocess.run(
-            ["git", "-C", str(root), "rev-parse", "--short", "HEAD"],
-            capture_output=True,
-            text=True,
-            timeout=10,
-            check=True,
-        ).stdout.strip()
-        dirty = subprocess.run(
-            ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
-            capture_output=True,
-            text=True,
-            timeout=10,
-            check=True,
-        ).stdout.strip()
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
-    return rev + (" (working tree modified)" if dirty else "")
 
 
 def results_json(results: Sequence[CaseResult], meta: dict) -> dict:

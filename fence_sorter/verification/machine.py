@@ -1,0 +1,79 @@
+"""What machine and revision a verification run ran on (shared by accuracy, stability, bench)."""
+
+from __future__ import annotations
+
+import os
+import platform
+import subprocess
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def _first_field(path: str, prefix: str) -> str | None:
+    try:
+        with open(path, encoding="utf-8") as fh:
+            for line in fh:
+                if line.startswith(prefix):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return None
+
+
+def machine_info() -> dict[str, str]:
+    """CPU model, cores, memory, OS, Python and library versions, whether the JIT is on."""
+    import numba
+    import numpy as np
+    import scipy
+
+    cpu = _first_field("/proc/cpuinfo", "model name") or platform.processor() or platform.machine()
+    mem_kib = _first_field("/proc/meminfo", "MemTotal")
+    try:
+        mem = f"{int(mem_kib.split()[0]) / 1024**2:.1f} GiB" if mem_kib else "unknown"
+    except ValueError:
+        mem = "unknown"
+    try:
+        usable = str(len(os.sched_getaffinity(0)))
+    except AttributeError:
+        usable = "?"
+    return {
+        "cpu": cpu,
+        "cores": f"{os.cpu_count()} logical ({usable} usable by this process)",
+        "memory": mem,
+        "os": platform.platform(),
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+        "numba": numba.__version__,
+        "numba_jit": "disabled (NUMBA_DISABLE_JIT)" if numba.config.DISABLE_JIT else "enabled",
+    }
+
+
+def load_average() -> str:
+    try:
+        return " ".join(f"{x:.2f}" for x in os.getloadavg())
+    except OSError:
+        return "unknown"
+
+
+def git_revision(root: Path | str = REPO) -> str:
+    """Short HEAD, marked when tracked files differ from it."""
+    try:
+        rev = subprocess.run(
+            ["git", "-C", str(root), "rev-parse", "--short", "HEAD"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=True,
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=True,
+        ).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    return rev + (" (working tree modified)" if dirty else "")
