@@ -51,6 +51,45 @@ class Scenario:
 
 
 @dataclass
+class EnergyAudit:
+    """The balance r(t) = E_load(t) - E_load(0) - W_sources(t), both ways, and E_flow.
+
+    E_load is kinetic energy plus sum k_p D^5 / 5; W_sources the work of the fence surface
+    velocity on the contact forces, of the belt velocity on the belt friction, and of the
+    external wrench (trapezoidal quadrature over the accepted points). Energy never rises
+    without a source: r never grows over any interval ([t1, t2], ``max_rise``); in the elastic
+    limit it stays ~0 both ways. E_flow = E_load(0) + integral |P_sources| dt scales the
+    quadrature's tolerance.
+    """
+
+    max_residual: float = 0.0  # max r (the result's energy_excess) [J]
+    min_residual: float = 0.0  # min r: energy dissipated [J]
+    flow: float = math.nan  # E_flow [J]
+    e0: float = math.nan
+    t_max: float = 0.0  # when max_residual happened [s]
+    t_min: float = 0.0
+    max_rise: float = 0.0  # largest rise of r over any interval [t1, t2] [J]
+    t_rise: tuple[float, float] = (0.0, 0.0)  # that interval [s]
+    run_min: float = 0.0
+    t_run_min: float = 0.0
+
+    def update(self, t: float, r: float) -> None:
+        if not math.isfinite(r):
+            self.max_residual = self.min_residual = r
+            return
+        if not math.isfinite(self.max_residual):
+            return
+        if r > self.max_residual:
+            self.max_residual, self.t_max = r, t
+        if r < self.min_residual:
+            self.min_residual, self.t_min = r, t
+        if r < self.run_min:
+            self.run_min, self.t_run_min = r, t
+        if r - self.run_min > self.max_rise:
+            self.max_rise, self.t_rise = r - self.run_min, (self.t_run_min, t)
+
+
+@dataclass
 class SimulationResult:
     """Outcome of one event; ``series`` holds only the time series the scenario asked for."""
 
@@ -74,6 +113,7 @@ class SimulationResult:
     method: str = ""
     events: int = 0  # contact onsets / releases located
     energy_excess: float = 0.0  # max over t of E_load(t) - E_load(0) - W_sources(t) [J]
+    energy: EnergyAudit = field(default_factory=EnergyAudit)  # the whole balance
     max_penetration: float = 0.0  # deepest D of any contact [m]
     # (onset time [s], w_n [m/s], peak N_stiff [N]) per impact
     impacts: list[tuple[float, float, float]] = field(default_factory=list)
@@ -262,8 +302,7 @@ class Observer:
         self.last_n = [0.0, 0.0, 0.0]
         self.last_t = [0.0, 0.0, 0.0]
         self.first = True
-        self.e0 = 0.0
-        self.energy_excess = 0.0
+        self.audit = EnergyAudit()
         self.mask = -1
 
     def __call__(self, st, on_belt: bool) -> tuple[bool, bool]:
@@ -276,15 +315,17 @@ class Observer:
         power = res[K.R_POWER_FENCE] + ext[0] * vx + ext[1] * vy + ext[2] * om
         if on_belt:
             power += st.lam[0] * md.belt
+        audit = self.audit
         if self.first:
             self.first = False
-            self.e0 = energy
+            audit.e0 = energy
+            audit.flow = abs(energy)
             self.y_max = y[1]
         else:
-            self.work += 0.5 * (t - self.prev_t) * (power + self.prev_power)
-            excess = energy - self.e0 - self.work
-            if excess > self.energy_excess:
-                self.energy_excess = excess
+            h = t - self.prev_t
+            self.work += 0.5 * h * (power + self.prev_power)
+            audit.flow += 0.5 * h * (abs(power) + abs(self.prev_power))
+            audit.update(t, energy - audit.e0 - self.work)
             if y[1] >= self.width > self.prev_y[1] and not self.sorted:
                 frac = (self.width - self.prev_y[1]) / (y[1] - self.prev_y[1])
                 self.exit_speed = self.prev_y[4] + frac * (vy - self.prev_y[4])
@@ -384,7 +425,8 @@ class Observer:
             forced_steps=forced,
             method=md.sc.solver.method,
             events=events,
-            energy_excess=self.energy_excess,
+            energy_excess=self.audit.max_residual,
+            energy=self.audit,
             max_penetration=self.max_depth,
             impacts=self.impacts,
             series={k: np.asarray(v) for k, v in self.rec.items()},

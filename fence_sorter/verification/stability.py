@@ -44,6 +44,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from fence_sorter.physics.simulate import EnergyAudit, SortingModel, simulate
 from fence_sorter.verification.machine import git_revision, machine_info
 
 __all__ = [
@@ -564,87 +565,6 @@ def select_cases(names: Iterable[str] | None = None, quick: bool = False) -> lis
     return [c for c in CASES if c.name in keep]
 
 
-# -- one run with a two-sided energy audit --------------------------------------------------------
-@dataclass
-class EnergyAudit:
-    """The Observer's balance E_load(t) - E_load(0) - W_sources(t), both ways, and E_flow."""
-
-    max_residual: float = 0.0  # the Observer's energy_excess (energy never rises: <= tol)
-    min_residual: float = 0.0  # energy dissipated (elastic cases: >= -tol)
-    flow: float = 0.0  # E_load(0) + integral of |P_sources| dt [J]
-    e0: float = math.nan
-    t_max: float = 0.0  # when the largest rise happened [s]
-    t_min: float = 0.0
-    max_rise: float = 0.0  # largest rise of the balance over any interval [t1, t2] [J]
-    t_rise: tuple[float, float] = (0.0, 0.0)  # that interval [s]
-    run_min: float = 0.0
-    t_run_min: float = 0.0
-
-
-class _AuditedObserver:
-    """Wraps the run's Observer: the same energy balance as ``Observer``'s energy_excess, kept
-    both ways (max and min) and with E_flow, recomputed here from the accepted points."""
-
-    def __init__(self, inner, model, audit: EnergyAudit):
-        from fence_sorter.physics import kernel as K
-
-        self.inner, self.md, self.audit = inner, model, audit
-        self.i_energy, self.i_power = K.R_ENERGY_CONTACT, K.R_POWER_FENCE
-        self.ext = model.sc.external_wrench
-        self.t_prev = self.p_prev = self.work = 0.0
-        self.first = True
-
-    def __call__(self, st, on_belt):
-        md, y, a = self.md, st.y, self.audit
-        energy = (
-            0.5 * md.mass * (y[3] * y[3] + y[4] * y[4])
-            + 0.5 * md.inertia * y[5] * y[5]
-            + st.res[self.i_energy]
-        )
-        ext = self.ext
-        power = st.res[self.i_power] + ext[0] * y[3] + ext[1] * y[4] + ext[2] * y[5]
-        if on_belt:
-            power += st.lam[0] * md.belt
-        if self.first:
-            self.first = False
-            a.e0 = energy
-            a.flow = abs(energy)
-        else:
-            h = st.t - self.t_prev
-            self.work += 0.5 * h * (power + self.p_prev)
-            a.flow += 0.5 * h * (abs(power) + abs(self.p_prev))
-            r = energy - a.e0 - self.work
-            if not math.isfinite(r):
-                a.max_residual = a.min_residual = r
-            elif math.isfinite(a.max_residual):
-                if r > a.max_residual:
-                    a.max_residual, a.t_max = r, st.t
-                if r < a.min_residual:
-                    a.min_residual, a.t_min = r, st.t
-                if r < a.run_min:
-                    a.run_min, a.t_run_min = r, st.t
-                if r - a.run_min > a.max_rise:
-                    a.max_rise, a.t_rise = r - a.run_min, (a.t_run_min, st.t)
-        self.t_prev, self.p_prev = st.t, power
-        return self.inner(st, on_belt)
-
-
-def _audited_simulate(scenario, model):
-    """``simulate`` (our methods) with the energy balance kept both ways; (result, audit)."""
-    from fence_sorter.physics.integrators import Integrator
-    from fence_sorter.physics.simulate import Observer
-
-    audit = EnergyAudit()
-    wall0 = time.perf_counter()
-    obs = Observer(model)
-    integ = Integrator(model)
-    t, diagnosis, steps, rejected = integ.run(_AuditedObserver(obs, model, audit))
-    result = obs.result(
-        t, diagnosis, steps, rejected, time.perf_counter() - wall0, integ.forced, integ.events
-    )
-    return result, audit
-
-
 def _refined_solver(sv):
     """The same solve with the step halved (adaptive: tolerances / 10 as well)."""
     if sv.method == "adaptive":
@@ -879,10 +799,9 @@ def _named_diagnosis(diagnosis: str | None, cause: str = "") -> Invariant:
 
 def _second_solve(name: str, sc2, r, what: str) -> tuple[object | None, list[Invariant]]:
     """Solve ``sc2`` and compare it with ``r``; a failed or crashed solve fails ``name``."""
-    from fence_sorter.physics.simulate import SortingModel
 
     try:
-        rr = _audited_simulate(sc2, SortingModel(sc2))[0]
+        rr = simulate(sc2, SortingModel(sc2))
     except Exception as exc:  # a crash is a bug, not a diagnosis
         return None, [Invariant(f"{name}_solve", False, f"{type(exc).__name__}: {exc}", "solved")]
     if not rr.success:
@@ -901,7 +820,6 @@ def _second_solve(name: str, sc2, r, what: str) -> tuple[object | None, list[Inv
 def run_case(case: Case, convergence: bool = True) -> CaseResult:
     """Load, solve (nominal, halved step, fine reference if any), check the invariants, judge."""
     from fence_sorter.physics.params import ParameterError
-    from fence_sorter.physics.simulate import SortingModel
     from fence_sorter.scene import load_scene
 
     wall0 = time.perf_counter()
@@ -940,7 +858,8 @@ def run_case(case: Case, convergence: bool = True) -> CaseResult:
         )
     try:
         model = SortingModel(sc)
-        r, audit = _audited_simulate(sc, model)
+        r = simulate(sc, model)
+        audit = r.energy
     except Exception as exc:  # a crash is a bug, not a diagnosis
         invs.append(Invariant("no_exception", False, f"{type(exc).__name__}: {exc}", "none"))
         return CaseResult(
@@ -1069,7 +988,6 @@ def run_case(case: Case, convergence: bool = True) -> CaseResult:
 
 def warm_up(cases: Sequence[Case]) -> float:
     """Compile the kernel for the methods the cases use (a short solve each); return seconds."""
-    from fence_sorter.physics.simulate import SortingModel, simulate
     from fence_sorter.scene import load_scene
 
     wall0 = time.perf_counter()
