@@ -145,3 +145,20 @@ def test_modes_stiff_scene_exits_2() -> None:
     assert r.returncode == 2
     assert "modes needs a flexible fence (fence.type: flexible)" in r.stderr
     assert "Traceback" not in r.stderr
+
+
+@pytest.mark.parametrize(
+    ("override", "named", "allowed"),
+    [
+        ("solver.method=rk4", "solver.method", "adaptive"),
+        ("solver.rho_inf=1.5", "solver.rho_inf", "[0, 1]"),
+        ("solver.rtol=0", "solver.rtol", "1e-13"),
+        ("solver.dt_max=1", "solver.dt_max", "0.05"),
+    ],
+)
+def test_bad_solver_settings_exit_2_naming_the_key(override, named, allowed) -> None:
+    r = fence_sorter("simulate", "impact_flexible", "--set", override)
+    assert r.returncode == 2, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and named in lines[0] and allowed in lines[0], r.stderr
+    assert "Traceback" not in r.stderr
