@@ -86,3 +86,18 @@ def managed_process(
         for stream in (proc.stdout, proc.stderr):
             if stream is not None:
                 stream.close()
+
+
+def run_cli(*args: str, timeout: float = 600.0) -> subprocess.CompletedProcess:
+    """``fence-sorter ARGS`` as a separate process run from the checkout."""
+    repo = Path(__file__).resolve().parents[1]
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(repo), env.get("PYTHONPATH")]))
+    return subprocess.run(
+        [sys.executable, "-m", "fence_sorter.cli.main", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=repo,
+        env=env,
+    )

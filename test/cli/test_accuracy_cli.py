@@ -7,14 +7,13 @@ arguments run as processes (exit code 2, one line, no traceback). ROS-free.
 from __future__ import annotations
 
 import json
-import os
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
 from fence_sorter.cli import main as cli_main
+from fence_sorter.testing import run_cli
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -88,16 +87,7 @@ def test_default_point_is_marked_and_timed(quick) -> None:
 
 
 def fence_sorter(*args: str) -> subprocess.CompletedProcess:
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH")]))
-    return subprocess.run(
-        [sys.executable, "-m", "fence_sorter.cli.main", *args],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        cwd=REPO,
-        env=env,
-    )
+    return run_cli(*args, timeout=120)
 
 
 @pytest.mark.parametrize(

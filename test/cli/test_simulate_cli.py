@@ -4,12 +4,12 @@ one-line errors without a traceback. ROS-free (python -m fence_sorter.cli.main).
 from __future__ import annotations
 
 import json
-import os
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
+
+from fence_sorter.testing import run_cli
 
 REPO = Path(__file__).resolve().parents[2]
 TIMEOUT = 120.0
@@ -31,16 +31,7 @@ REQUIRED_KEYS = (
 
 
 def fence_sorter(*args: str) -> subprocess.CompletedProcess:
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH")]))
-    return subprocess.run(
-        [sys.executable, "-m", "fence_sorter.cli.main", *args],
-        capture_output=True,
-        text=True,
-        timeout=TIMEOUT,
-        cwd=REPO,
-        env=env,
-    )
+    return run_cli(*args, timeout=TIMEOUT)
 
 
 def test_simulate_json() -> None:

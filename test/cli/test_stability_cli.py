@@ -4,11 +4,10 @@ results.json, summary.png); exit codes 0 / 1 / 2. ROS-free (python -m fence_sort
 from __future__ import annotations
 
 import json
-import os
 import subprocess
-import sys
 from pathlib import Path
 
+from fence_sorter.testing import run_cli
 from fence_sorter.verification import stability as S
 
 REPO = Path(__file__).resolve().parents[2]
@@ -17,16 +16,7 @@ TABLE_HEADER = "| case | description | expected | verdict |"
 
 
 def fence_sorter(*args: str) -> subprocess.CompletedProcess:
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH")]))
-    return subprocess.run(
-        [sys.executable, "-m", "fence_sorter.cli.main", *args],
-        capture_output=True,
-        text=True,
-        timeout=TIMEOUT,
-        cwd=REPO,
-        env=env,
-    )
+    return run_cli(*args, timeout=TIMEOUT)
 
 
 def test_quick_writes_the_report(tmp_path: Path) -> None:
