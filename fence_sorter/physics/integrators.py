@@ -281,6 +281,7 @@ class Integrator:
         self.cur, self.trial, self.loc = State(n, m), State(n, m), State(n, m)
         self.forced = 0
         self.events = 0
+        self.outcome: tuple[float, str | None, int, int] | None = None
         body = model.body
         v_ref = max(model.belt, 0.1)
         self.err_scale = (sv.atol, sv.rtol, v_ref, v_ref / min(body.length_a, body.width_b))
@@ -335,6 +336,21 @@ class Integrator:
 
         ``observer(state, on_belt) -> (stop, on_belt)`` is called at every accepted point.
         """
+        for _ in self.stepping(observer):
+            pass
+        return self.outcome
+
+    def advance(self, stepper, t_target: float) -> bool:
+        """Step ``stepper`` (from :meth:`stepping`) until the accepted time reaches ``t_target``;
+        False once the solve has ended (see :attr:`outcome`). For soft-real-time stepping."""
+        while self.cur.t < t_target - 1e-12:
+            if next(stepper, None) is None:
+                return False
+        return True
+
+    def stepping(self, observer):
+        """Generator form of :meth:`run`: yields the accepted time after every step, and leaves
+        ``(t, diagnosis, steps, rejected)`` in :attr:`outcome` when the solve ends."""
         md, sv, sch = self.model, self.sv, self.scheme
         a, b = self.cur, self.trial
         on_belt = True
@@ -416,7 +432,8 @@ class Integrator:
             diagnosis = self._diverged(a)
             if diagnosis:
                 break
-        return a.t, diagnosis, steps, rejected
+            yield a.t
+        self.outcome = (a.t, diagnosis, steps, rejected)
 
     def _diverged(self, st: State) -> str | None:
         y = st.y
