@@ -1,0 +1,383 @@
+"""The controller's stroke planner: (R_s, t1) per load, best capacity W_t (1) first.
+
+Candidates (R_s, t1) from the ranges (3) and (5) are ordered once by W_t (1) (t_z ascending,
+then the gentler stroke first). For a load, the candidates its timing admits (the load front
+must still be upstream of R_s when the command is out, the fence must be free) are searched
+by galloping then bisection (feasibility assumed to grow along the order): few evaluations on
+the twin, and the answer is always an evaluated, feasible stroke, or a reason naming the
+constraint. Evaluations are cached per quantised load class.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field, replace
+
+from fence_sorter.capacity.constraints import (
+    CONSTRAINT_IDS,
+    ConstraintProfile,
+    footprint_length,
+    margin_working_time,
+)
+from fence_sorter.capacity.evaluate import StrokeEvaluation, evaluate_stroke, planning_scenario
+from fence_sorter.capacity.formulas import scraping_time
+from fence_sorter.physics.params import ParameterError, ParcelParams, check_range
+from fence_sorter.physics.simulate import Scenario
+
+
+@dataclass(frozen=True)
+class PlannerConfig:
+    """Planner settings (SI; the config's degrees are converted by :meth:`from_mapping`)."""
+
+    alpha_k: float = math.radians(40.0)
+    t1_min: float = 0.2
+    t1_max: float = 1.5
+    t1_step: float = 0.05
+    r_s_min: float = -0.5
+    r_s_max: float = 1.0
+    r_s_step: float = 0.1
+    profile: ConstraintProfile = ConstraintProfile()
+    pitch_gap: float = 0.1  # Delta of (2) [m]
+    fence_model: str = "stiff"  # "stiff" or "scene"
+    max_evaluations: int = 10  # twin evaluations per load (cached ones are free)
+    start_margin: float = 0.1  # command out at least this long before the front is at R_s [s]
+    busy_margin: float = 0.05  # idle time between two strokes [s]
+    quantum_size: float = 0.05  # [m] A, B, cog offsets
+    quantum_mass: float = 0.2  # relative mass bin (log steps of 1 + q)
+    quantum_gap: float = 0.05  # [m] Delta_s
+    quantum_yaw: float = math.radians(5.0)  # [rad]
+    quantum_mu: float = 0.05
+
+    FLOAT_KEYS = {
+        "alpha_k_deg": (1.0, 89.0, "deg"),
+        "t1_min": (0.02, 10.0, "s"),
+        "t1_max": (0.02, 10.0, "s"),
+        "t1_step": (0.001, 10.0, "s"),
+        "r_s_min": (-5.0, 5.0, "m"),
+        "r_s_max": (-5.0, 5.0, "m"),
+        "r_s_step": (0.001, 10.0, "m"),
+        "pitch_gap": (0.0, 10.0, "m"),
+        "start_margin": (0.0, 10.0, "s"),
+        "busy_margin": (0.0, 10.0, "s"),
+        "quantum_size": (1e-4, 1.0, "m"),
+        "quantum_mass": (1e-3, 10.0, ""),
+        "quantum_gap": (1e-4, 1.0, "m"),
+        "quantum_yaw_deg": (1e-3, 90.0, "deg"),
+        "quantum_mu": (1e-4, 1.0, ""),
+        "w_dop": (1e-6, 100.0, "m/s"),
+        "a_ndop": (1e-6, 1e5, "m/s^2"),
+        "ydot_dop": (1e-6, 100.0, "m/s"),
+    }
+
+    def validate(self, prefix: str = "controller") -> PlannerConfig:
+        if self.t1_min > self.t1_max:
+            raise ParameterError(
+                f"{prefix}.t1_min ({self.t1_min:g} s) must not exceed t1_max ({self.t1_max:g} s)"
+            )
+        if self.r_s_min > self.r_s_max:
+            raise ParameterError(
+                f"{prefix}.r_s_min ({self.r_s_min:g} m) must not exceed r_s_max "
+                f"({self.r_s_max:g} m)"
+            )
+        if self.fence_model not in ("stiff", "scene"):
+            raise ParameterError(
+                f"{prefix}.fence_model must be one of stiff, scene, got {self.fence_model!r}"
+            )
+        check_range(f"{prefix}.max_evaluations", self.max_evaluations, 1, 1000)
+        self.profile.validate(prefix)
+        return self
+
+    @classmethod
+    def from_mapping(cls, data: Mapping, prefix: str = "controller") -> PlannerConfig:
+        """From flat config keys (the controller's ROS parameters); unknown keys are ignored
+        (the node has other parameters too). Raises ParameterError naming key and range."""
+        kw: dict = {}
+        for key, (lo, hi, unit) in cls.FLOAT_KEYS.items():
+            if key not in data:
+                continue
+            value = data[key]
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise ParameterError(f"{prefix}.{key} must be a number, got {value!r}")
+            check_range(f"{prefix}.{key}", float(value), lo, hi, unit=unit)
+            kw[key] = float(value)
+        if "alpha_k_deg" in kw:
+            kw["alpha_k"] = math.radians(kw.pop("alpha_k_deg"))
+        if "quantum_yaw_deg" in kw:
+            kw["quantum_yaw"] = math.radians(kw.pop("quantum_yaw_deg"))
+        prof = {k: kw.pop(k) for k in ("w_dop", "a_ndop", "ydot_dop") if k in kw}
+        if "active_constraints" in data:
+            prof["active"] = list(data["active_constraints"])
+        if "fence_model" in data:
+            kw["fence_model"] = str(data["fence_model"])
+        if "max_evaluations" in data:
+            value = data["max_evaluations"]
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise ParameterError(f"{prefix}.max_evaluations must be an integer, got {value!r}")
+            kw["max_evaluations"] = value
+        try:
+            kw["profile"] = ConstraintProfile.from_mapping(prof, prefix)
+        except ParameterError as exc:
+            raise ParameterError(
+                str(exc).replace(f"{prefix}.active", f"{prefix}.active_constraints")
+            ) from None
+        return cls(**kw).validate(prefix)
+
+    def candidates(self, v: float) -> list[tuple[float, float]]:
+        """(R_s, t1) pairs, best W_t (1) first: t_z ascending, then larger t1, then |R_s|."""
+        t1s = _grid(self.t1_min, self.t1_max, self.t1_step)
+        rss = _grid(self.r_s_min, self.r_s_max, self.r_s_step)
+        pairs = [(r, t) for r in rss for t in t1s]
+        pairs.sort(key=lambda p: (round(scraping_time(v, p[1], p[0]), 9), -p[1], abs(p[0])))
+        return pairs
+
+
+def _grid(lo: float, hi: float, step: float) -> list[float]:
+    n = int(math.floor((hi - lo) / step + 1e-9))
+    return [round(lo + i * step, 9) for i in range(n + 1)]
+
+
+@dataclass(frozen=True)
+class LoadRequest:
+    """A load to plan for, with its timing (sim time [s])."""
+
+    parcel_id: int
+    parcel: ParcelParams
+    scan_time: float  # when the front was at scan_position_x
+    scan_position_x: float
+    mu_belt: float = math.nan  # NaN: the scene's value
+    mu_fence: float = math.nan
+
+
+@dataclass
+class Plan:
+    """The planner's answer for one load."""
+
+    parcel_id: int
+    feasible: bool
+    evaluation: StrokeEvaluation | None
+    start_time: float  # when the front reaches R_s (fence start) [s]
+    end_time: float  # start + 2 t1 [s]
+    reason: str
+    evaluations: int = 0  # twin evaluations made for this load
+    cache_hits: int = 0
+    wall_time: float = 0.0
+    admissible: int = 0  # candidates the timing admitted
+    tried: list[StrokeEvaluation] = field(default_factory=list)
+
+
+class Planner:
+    """Picks (R_s, t1) per load on the twin; keeps the fence-busy window of its own strokes."""
+
+    def __init__(self, base: Scenario, config: PlannerConfig = PlannerConfig()):
+        self.config = config.validate()
+        self.base = planning_scenario(base, fence=config.fence_model)
+        self.v = base.conveyor.belt_speed
+        self.width = base.conveyor.width
+        self.candidate_list = config.candidates(self.v)
+        self.cache: dict[tuple, StrokeEvaluation] = {}
+        self.busy_until = -math.inf
+        self.evaluations = 0
+        self.cache_hits = 0
+
+    # -- load classes ----------------------------------------------------------------------
+    def quantise(self, req: LoadRequest) -> tuple[tuple, ParcelParams, float, float]:
+        """(class key, representative load, mu1, mu2) of a load (bin centres)."""
+        c, p = self.config, req.parcel
+        qs = c.quantum_size
+
+        def q(x: float, step: float) -> int:
+            return int(round(x / step))
+
+        mass_bin = int(round(math.log(p.mass) / math.log1p(c.quantum_mass)))
+        mu1 = req.mu_belt if math.isfinite(req.mu_belt) else self.base.conveyor.mu_belt
+        mu2 = req.mu_fence if math.isfinite(req.mu_fence) else self.base.contact.mu_fence
+        key = (
+            q(p.length_a, qs),
+            q(p.width_b, qs),
+            mass_bin,
+            q(p.cog_offset_x, qs),
+            q(p.cog_offset_y, qs),
+            q(p.lateral_gap, c.quantum_gap),
+            q(p.yaw, c.quantum_yaw),
+            q(mu1, c.quantum_mu),
+            q(mu2, c.quantum_mu),
+        )
+        a = max(key[0] * qs, qs)
+        b = max(key[1] * qs, qs)
+        rep = replace(
+            p,
+            length_a=a,
+            width_b=b,
+            mass=math.exp(mass_bin * math.log1p(c.quantum_mass)),
+            cog_offset_x=max(-0.5 * a, min(0.5 * a, key[3] * qs)),
+            cog_offset_y=max(-0.5 * b, min(0.5 * b, key[4] * qs)),
+            yaw=key[6] * c.quantum_yaw,
+        )
+        room = max(self.width - rep.footprint_width(), 0.0)
+        rep = replace(rep, lateral_gap=max(0.0, min(room, key[5] * c.quantum_gap)))
+        return key, rep, key[7] * c.quantum_mu, key[8] * c.quantum_mu
+
+    # -- planning --------------------------------------------------------------------------
+    def evaluate(self, key: tuple, rep: ParcelParams, mu1: float, mu2: float, cand) -> tuple:
+        """(StrokeEvaluation, cached?) of one candidate for a load class."""
+        full = (key, cand)
+        hit = self.cache.get(full)
+        if hit is not None:
+            self.cache_hits += 1
+            return hit, True
+        r_s, t1 = cand
+        ev = evaluate_stroke(
+            self.base,
+            rep,
+            r_s,
+            t1,
+            self.config.alpha_k,
+            self.config.profile,
+            gap=self.config.pitch_gap,
+            mu_belt=mu1,
+            mu_fence=mu2,
+        )
+        self.evaluations += 1
+        self.cache[full] = ev
+        return ev, False
+
+    def admissible(self, req: LoadRequest, now: float) -> list[tuple[float, float]]:
+        """Candidates the load's timing and the fence-busy window admit, best W_t first.
+
+        (7) is analytic and filters here too when active: no simulation for a stroke it
+        already rules out.
+        """
+        c = self.config
+        out = []
+        extent = footprint_length(req.parcel)
+        earliest = max(now + c.start_margin, self.busy_until + c.busy_margin)
+        for r_s, t1 in self.candidate_list:
+            start = req.scan_time + (r_s - req.scan_position_x) / self.v
+            if start < earliest:
+                continue
+            if 7 in c.profile.active and margin_working_time(extent, r_s, self.v, t1) > 0.0:
+                continue
+            out.append((r_s, t1))
+        return out
+
+    def plan(self, req: LoadRequest, now: float, *, commit: bool = True) -> Plan:
+        """Plan one load at sim time ``now``; with ``commit`` a feasible stroke books the fence."""
+        wall0 = time.perf_counter()
+        key, rep, mu1, mu2 = self.quantise(req)
+        cands = self.admissible(req, now)
+        plan = Plan(req.parcel_id, False, None, math.nan, math.nan, "", admissible=len(cands))
+        if not cands:
+            plan.reason = self._no_candidate_reason(req, now)
+            plan.wall_time = time.perf_counter() - wall0
+            return plan
+        budget = self.config.max_evaluations
+        results: dict[int, StrokeEvaluation] = {}
+
+        def probe(i: int) -> StrokeEvaluation | None:
+            if i in results:
+                return results[i]
+            if plan.evaluations >= budget:
+                return None
+            ev, cached = self.evaluate(key, rep, mu1, mu2, cands[i])
+            if cached:
+                plan.cache_hits += 1
+            else:
+                plan.evaluations += 1
+            results[i] = ev
+            plan.tried.append(ev)
+            return ev
+
+        # galloping: 0, 1, 3, 7, ... then the last one; then bisection back to the first
+        # feasible index (feasibility assumed to grow along the order)
+        lo, hi, step, i = -1, None, 1, 0
+        while i < len(cands):
+            ev = probe(i)
+            if ev is None:
+                break
+            if ev.feasible:
+                hi = i
+                break
+            lo, i, step = i, i + step, step * 2
+        if hi is None and lo < len(cands) - 1 and plan.evaluations < budget:
+            ev = probe(len(cands) - 1)
+            if ev is not None and ev.feasible:
+                hi = len(cands) - 1
+        if hi is not None:
+            while hi - lo > 1:
+                mid = (lo + hi) // 2
+                ev = probe(mid)
+                if ev is None:
+                    break
+                if ev.feasible:
+                    hi = mid
+                else:
+                    lo = mid
+            best = results[hi]
+            start = req.scan_time + (best.r_s - req.scan_position_x) / self.v
+            plan.feasible = True
+            plan.evaluation = best
+            plan.start_time = start
+            plan.end_time = start + 2.0 * best.t1
+            plan.reason = ""
+            if commit:
+                self.busy_until = plan.end_time
+        else:
+            plan.reason = self._infeasible_reason(plan, len(cands))
+        plan.wall_time = time.perf_counter() - wall0
+        return plan
+
+    def _no_candidate_reason(self, req: LoadRequest, now: float) -> str:
+        c = self.config
+        last = max(r for r, _ in self.candidate_list)
+        t_last = req.scan_time + (last - req.scan_position_x) / self.v
+        if t_last < now + c.start_margin:
+            return (
+                f"too late: the front passes R_s = {last:g} m at t = {t_last:.3f} s, "
+                f"before the command can be out (now {now:.3f} s + {c.start_margin:g} s)"
+            )
+        if t_last < self.busy_until + c.busy_margin:
+            return (
+                f"fence busy until t = {self.busy_until:.3f} s, after the load's last "
+                f"admissible start ({t_last:.3f} s)"
+            )
+        return "(7) working time: no (R_s, t1) in the ranges lets the load into the working space"
+
+    def _infeasible_reason(self, plan: Plan, n: int) -> str:
+        if not plan.tried:
+            return "evaluation budget exhausted before any candidate"
+        best = min(plan.tried, key=lambda ev: len(ev.violated))
+        tail = (
+            "budget of evaluations exhausted"
+            if plan.evaluations >= self.config.max_evaluations
+            else "none feasible"
+        )
+        return (
+            f"no feasible stroke ({len(plan.tried)} of {n} candidates evaluated, {tail}); "
+            f"R_s = {best.r_s:g} m, t1 = {best.t1:g} s: {best.diagnosis}"
+        )
+
+    # -- warm-up ---------------------------------------------------------------------------
+    def warm_up(self, loads: Iterable[ParcelParams], time_budget: float = 10.0) -> int:
+        """Fill the cache for the classes of ``loads`` (timing ignored); return classes done.
+
+        The first call compiles/loads the JIT kernel; run this before subscribing."""
+        wall0 = time.perf_counter()
+        busy = self.busy_until
+        done: set[tuple] = set()
+        for p in loads:
+            if time.perf_counter() - wall0 > time_budget:
+                break
+            req = LoadRequest(0, p, scan_time=1e6, scan_position_x=-1e6)
+            key = self.quantise(req)[0]
+            if key in done:
+                continue
+            done.add(key)
+            self.busy_until = -math.inf
+            self.plan(req, now=-math.inf, commit=False)
+        self.busy_until = busy
+        return len(done)
+
+
+__all__ = ["CONSTRAINT_IDS", "LoadRequest", "Plan", "Planner", "PlannerConfig"]
