@@ -1,0 +1,48 @@
+"""The sorting line with many parcels at once, ROS-free (the simulator node's model).
+
+See :class:`SortingLine`; data types in :mod:`fence_sorter.line.types`, input checks in
+:mod:`fence_sorter.line.validate`. Nothing here imports rclpy.
+"""
+
+from .line import LineConfig, SortingLine, in_swept_sector
+from .types import (
+    CommandResult,
+    FenceSnapshot,
+    LineEvent,
+    LineSnapshot,
+    Outcome,
+    OutcomeCode,
+    OverlapWarning,
+    ParcelSnapshot,
+    ParcelSpec,
+    SolverWarning,
+    Stage,
+    StartMode,
+    StrokeCommand,
+    StrokeStarted,
+)
+from .validate import PARCEL_REASONS, InputError, validate_command, validate_parcel
+
+__all__ = [
+    "PARCEL_REASONS",
+    "CommandResult",
+    "FenceSnapshot",
+    "InputError",
+    "LineConfig",
+    "LineEvent",
+    "LineSnapshot",
+    "Outcome",
+    "OutcomeCode",
+    "OverlapWarning",
+    "ParcelSnapshot",
+    "ParcelSpec",
+    "SolverWarning",
+    "SortingLine",
+    "Stage",
+    "StartMode",
+    "StrokeCommand",
+    "StrokeStarted",
+    "in_swept_sector",
+    "validate_command",
+    "validate_parcel",
+]

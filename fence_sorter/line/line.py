@@ -1,0 +1,712 @@
+"""The sorting line: many parcels on the belt, one rotary fence, strokes integrated in step.
+
+Parcels ride the belt kinematically (front x_f(t) = scan_position_x + v (t - scan_time), frame
+sorter, C_s from :func:`fence_sorter.physics.parcel.initial_pose`) until their stroke starts.
+A stroke starts when the commanded parcel's front reaches R_s (``START_AT_RS``) or at a given
+time (``START_AT_TIME``); the fence is then busy for one cycle t_c = t1 + t2 = 2 t1. Each stroke
+is one physics :class:`~fence_sorter.physics.simulate.Scenario` (the parcel, DriveParams(alpha_k,
+t1, R_s) with R_s the front position at the start, the line's conveyor/fence/contact/solver)
+stepped by :meth:`Integrator.stepping` / :meth:`Integrator.advance` in step with the line clock,
+so the event is integrated as sim time passes, never precomputed. The solve runs on after the
+parcel is sorted until the fence cycle ends (the fence shape comes from it); a parcel that is not
+sorted stays in its solve to the solver's end (2 t1 + settle_time) and then rides on.
+
+Every parcel gets exactly one :class:`Outcome`. Not modelled: parcel-parcel contact and the
+fence acting on any parcel other than its stroke's; a parcel inside the fence's swept sector
+during another parcel's stroke is reported as :class:`OverlapWarning`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from fence_sorter.physics import kernel as K
+from fence_sorter.physics.contacts import STAGE_E1, STAGE_E2, STAGE_E3, STAGE_E4, STAGE_SORTED
+from fence_sorter.physics.drive import drive_state
+from fence_sorter.physics.fence import FenceParams, build_fence, node_positions
+from fence_sorter.physics.integrators import Integrator
+from fence_sorter.physics.params import (
+    OUR_METHODS,
+    ContactParams,
+    ConveyorParams,
+    DriveParams,
+    SolverParams,
+)
+from fence_sorter.physics.parcel import ParcelBody, initial_pose, parcel_body, world_corners
+from fence_sorter.physics.simulate import Observer, Scenario, SimulationResult, SortingModel
+
+from .types import (
+    CommandResult,
+    FenceSnapshot,
+    LineEvent,
+    LineSnapshot,
+    Outcome,
+    OutcomeCode,
+    OverlapWarning,
+    ParcelSnapshot,
+    ParcelSpec,
+    SolverWarning,
+    Stage,
+    StartMode,
+    StrokeCommand,
+    StrokeStarted,
+)
+from .validate import validate_command, validate_parcel
+
+STAGES = {
+    STAGE_E1: Stage.E1,
+    STAGE_E2: Stage.E2,
+    STAGE_E3: Stage.E3,
+    STAGE_E4: Stage.E4,
+    STAGE_SORTED: Stage.SORTED,
+}
+#: nodes drawn along a stiff fence (it has no FEM mesh)
+STIFF_NODES = 11
+#: a parcel corner this far inside the swept sector counts as overlapping [m]
+OVERLAP_TOL = 1e-3
+
+
+@dataclass(frozen=True)
+class LineConfig:
+    """The line: conveyor, fence, contact and solver of a scene plus the line geometry.
+
+    ``r_s_range``: R_s a command may ask for (paper range (3)); its upper end is the point of no
+    return of a divert parcel (front passing it with no accepted command: NO_COMMAND).
+    ``line_end_x``: a parcel whose rear passes it leaves the line.
+    """
+
+    conveyor: ConveyorParams = ConveyorParams()
+    contact: ContactParams = ContactParams()
+    solver: SolverParams = SolverParams()
+    fence: FenceParams | None = None  # None: stiff fence
+    fence_length: float = 1.2  # R_z of a stiff fence [m]
+    fence_modes: int | None = None
+    r_s_range: tuple[float, float] = (-0.5, 2.0)
+    line_end_x: float = 3.0
+
+    @classmethod
+    def from_scenario(cls, sc: Scenario, **line: object) -> LineConfig:
+        """The line of a scene's Scenario (its parcel and drive are per-parcel/per-command)."""
+        return cls(
+            conveyor=sc.conveyor,
+            contact=sc.contact,
+            solver=sc.solver,
+            fence=sc.fence,
+            fence_length=sc.fence_length,
+            fence_modes=sc.fence_modes,
+            **line,
+        )
+
+    @property
+    def length(self) -> float:
+        return self.fence.length if self.fence is not None else self.fence_length
+
+    def validate(self) -> None:
+        """Raise ValueError naming the setting: bad geometry or a solver that cannot step."""
+        if self.solver.method not in OUR_METHODS:
+            raise ValueError(
+                f"solver.method must be one of {', '.join(OUR_METHODS)} on the line (SciPy "
+                f"baselines cannot be stepped in real time), got {self.solver.method!r}"
+            )
+        lo, hi = self.r_s_range
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+            raise ValueError(f"r_s_range must be finite with min < max, got {self.r_s_range}")
+        if not math.isfinite(self.line_end_x) or self.line_end_x <= hi:
+            raise ValueError(
+                f"line_end_x must exceed the point of no return r_s_range[1] = {hi:g} m, "
+                f"got {self.line_end_x!r}"
+            )
+
+
+class _Tap:
+    """Observer wrapper keeping the last two accepted points for snapshots at the line time."""
+
+    __slots__ = ("obs", "prev", "cur", "t_sorted", "width")
+
+    def __init__(self, obs: Observer, width: float):
+        self.obs = obs
+        self.prev = None
+        self.cur = None
+        self.t_sorted: float | None = None  # C_s crossing y0 = s (interpolated) [s]
+        self.width = width
+
+    def __call__(self, st, on_belt: bool):
+        out = self.obs(st, on_belt)
+        res, slots = st.res, st.out
+        active = np.flatnonzero(slots[: K.SLOT_BORDER, K.C_ACTIVE])
+        if len(active):
+            k = active[np.argmax(slots[active, K.C_N])]
+            px, py, ddot = slots[k, K.C_PX], slots[k, K.C_PY], slots[k, K.C_DDOT]
+        else:
+            px = py = math.nan
+            ddot = 0.0
+        extra = np.array(
+            [
+                res[K.R_ALPHA],
+                res[K.R_RATE],
+                res[K.R_ACCEL],
+                res[K.R_FENCE_N],
+                res[K.R_MAX_D],
+                ddot,
+                px,
+                py,
+            ]
+        )
+        self.prev, self.cur = self.cur, (st.t, st.y.copy(), extra)
+        if self.obs.sorted and self.t_sorted is None:
+            t0, y0 = (self.prev[0], self.prev[1][1]) if self.prev is not None else (st.t, 0.0)
+            y1 = st.y[1]
+            frac = (self.width - y0) / (y1 - y0) if y1 > y0 else 1.0
+            self.t_sorted = t0 + min(max(frac, 0.0), 1.0) * (st.t - t0)
+        return out
+
+    def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """State vector and extras linearly interpolated at local time ``t`` (clamped)."""
+        t1, y1, e1 = self.cur
+        if self.prev is None or t >= t1:
+            return y1, e1
+        t0, y0, e0 = self.prev
+        if t <= t0 or t1 <= t0:
+            return y0, e0
+        w = (t - t0) / (t1 - t0)
+        return y0 + w * (y1 - y0), e0 + w * (e1 - e0)
+
+
+class _Stroke:
+    """One running sorting event: its Scenario, model, integrator and generator."""
+
+    def __init__(self, parcel: _Parcel, t_start: float, sc: Scenario):
+        self.parcel = parcel
+        self.t_start = t_start
+        self.sc = sc
+        self.model = SortingModel(sc)
+        self.integ = Integrator(self.model)
+        self.observer = Observer(self.model)
+        self.tap = _Tap(self.observer, sc.conveyor.width)
+        self.stepper = self.integ.stepping(self.tap)
+        next(self.stepper, None)  # the initial point (t = 0) and the first step
+        self.alive = self.integ.outcome is None
+        self.failed: str | None = None
+        self.failure_reported = False
+        self.steps = 1
+        self.warned: set[int] = set()
+
+    @property
+    def t_cycle(self) -> float:
+        return 2.0 * self.sc.drive.t1
+
+    def advance(self, t_local: float) -> None:
+        if self.alive and not self.integ.advance(self.stepper, t_local):
+            self.alive = False
+            self.failed = self.integ.outcome[1]
+
+    def close(self) -> None:
+        self.stepper.close()
+        self.alive = False
+
+    def result(self) -> SimulationResult:
+        """The observer's reduction so far (same figures :func:`simulate` reports)."""
+        if self.integ.outcome is not None:
+            t, diagnosis, steps, rejected = self.integ.outcome
+        else:
+            t, diagnosis, steps, rejected = self.integ.cur.t, None, 0, 0
+        return self.observer.result(t, diagnosis, steps, rejected, 0.0)
+
+
+class _Parcel:
+    """A parcel on the line: kinematic ride (pose at t_ref, velocity (v, 0, 0)) or a stroke."""
+
+    def __init__(self, spec: ParcelSpec, body: ParcelBody, v: float):
+        self.spec = spec
+        self.body = body
+        self.v = v
+        self.x, self.y, self.yaw = initial_pose(
+            body, spec.scan_position_x, spec.lateral_gap, spec.yaw
+        )
+        self.t_ref = spec.scan_time
+        self.stroke: _Stroke | None = None
+        self.command: StrokeCommand | None = None
+        self.t_start = math.nan
+        self.rejected: str | None = None  # why the last command was refused (fence busy, ...)
+        self.late: str | None = None
+        self.outcome: Outcome | None = None
+        self.passed = False  # stroke done, not sorted: riding on
+        self.t_enter = math.nan  # front crossing x0 = 0 (entering the working space)
+        # rear corner's x relative to C_s while riding (the yaw does not change on the belt)
+        self.rear_offset = min(c[0] for c in world_corners(body, 0.0, 0.0, spec.yaw))
+        self.r_s = math.nan  # R_s of the planned stroke [m]
+
+    def front_at(self, t: float) -> float:
+        """Kinematic front position (scan formula) at time t."""
+        return self.spec.scan_position_x + self.v * (t - self.spec.scan_time)
+
+    def time_front_at(self, x: float) -> float:
+        return self.spec.scan_time + (x - self.spec.scan_position_x) / self.v
+
+    def rear_end_time(self, x_end: float) -> float:
+        """When the rear (lowest corner x) of the riding parcel passes ``x_end``."""
+        return self.t_ref + (x_end - self.x - self.rear_offset) / self.v
+
+    def pose(self, t: float) -> tuple[float, float, float]:
+        return self.x + self.v * (t - self.t_ref), self.y, self.yaw
+
+
+class SortingLine:
+    """The line model under the simulator node: plain methods, sim time in seconds.
+
+    Use: :meth:`add_parcel` for each scanned parcel, :meth:`command` for each fence command,
+    :meth:`advance` to move sim time on (returns the events, outcomes among them),
+    :meth:`snapshot` for the fence and every parcel at the current time.
+    """
+
+    def __init__(self, config: LineConfig, t0: float = 0.0):
+        config.validate()
+        # the line steps solves in wall time: the solver's wall-clock limit counts elapsed
+        # time since the stroke began, so lift it to its maximum (see docs/simulator.md)
+        solver = replace(config.solver, stop_when_sorted=False, max_wall_time=3600.0)
+        self.config = replace(config, solver=solver)
+        self.t = float(t0)
+        self.v = config.conveyor.belt_speed
+        self.parcels: dict[int, _Parcel] = {}
+        self.done_ids: set[int] = set()  # parcels that had their outcome (ids stay taken)
+        self.strokes: list[_Stroke] = []
+        self.events: list[LineEvent] = []
+        self.fem = build_fence(config.fence) if config.fence is not None else None
+        self._rest_s = (
+            np.asarray(self.fem.node_s, dtype=float)
+            if self.fem is not None
+            else np.linspace(0.0, config.fence_length, STIFF_NODES)
+        )
+
+    # -- input --------------------------------------------------------------------------------
+    def add_parcel(self, spec: ParcelSpec, t: float | None = None) -> None:
+        """Put a scanned parcel on the belt; raises InputError (a ValueError) naming the field.
+
+        ``t`` (the line time the message arrived) only moves the clock when it is ahead; the
+        parcel's position follows its own scan_time and scan_position_x.
+        """
+        del t
+        validate_parcel(spec, self.config.conveyor.width, self.parcels.keys() | self.done_ids)
+        conv = self._conveyor(spec)
+        body = parcel_body(_physics(spec), conv)
+        p = _Parcel(spec, body, self.v)
+        p.t_enter = p.time_front_at(0.0)
+        self.parcels[spec.parcel_id] = p
+
+    def command(self, cmd: StrokeCommand, t: float | None = None) -> CommandResult:
+        """Accept or reject a stroke command (see :class:`CommandResult` for the codes)."""
+        now = self.t if t is None else max(self.t, t)
+        p = self.parcels.get(cmd.parcel_id)
+        if p is None:
+            if cmd.parcel_id in self.done_ids:
+                return CommandResult(
+                    False, "parcel_done", f"parcel {cmd.parcel_id} already has its outcome"
+                )
+            return CommandResult(False, "unknown_parcel", f"unknown parcel_id {cmd.parcel_id}")
+        if p.outcome is not None or p.stroke is not None or p.passed:
+            return CommandResult(
+                False, "parcel_done", f"parcel {cmd.parcel_id} already has its stroke or outcome"
+            )
+        if p.command is not None:
+            return CommandResult(
+                False,
+                "duplicate",
+                f"parcel {cmd.parcel_id} already has a stroke planned at t = {p.t_start:.4f} s",
+            )
+        if not p.spec.divert:
+            return CommandResult(
+                False, "not_divert", f"parcel {cmd.parcel_id} is not to be diverted"
+            )
+        if not cmd.feasible:
+            reason = cmd.reason or "the controller found no feasible stroke"
+            self._finish(p, OutcomeCode.NO_FEASIBLE_COMMAND, now, f"no feasible stroke: {reason}")
+            return CommandResult(True, "infeasible", reason)
+        try:
+            validate_command(cmd, self.config.r_s_range)
+        except ValueError as exc:
+            p.rejected = f"invalid command: {exc}"
+            return CommandResult(False, "invalid", str(exc))
+        if cmd.start_mode == StartMode.AT_RS:
+            t_start = p.time_front_at(cmd.r_s)
+            r_s = float(cmd.r_s)
+        else:
+            t_start = float(cmd.start_time)
+            r_s = p.front_at(t_start)
+            lo, hi = self.config.r_s_range
+            if not lo <= r_s <= hi:
+                reason = (
+                    f"start_time {t_start:.4f} s puts the parcel front at x0 = {r_s:.3f} m, "
+                    f"outside the R_s range [{lo:g}, {hi:g}] m"
+                )
+                p.rejected = f"invalid command: {reason}"
+                return CommandResult(False, "invalid", reason)
+        if t_start < now - 1e-9:
+            p.late = (
+                f"command arrived late: the stroke had to start at t = {t_start:.4f} s, "
+                f"the command came at t = {now:.4f} s ({now - t_start:.4f} s late)"
+            )
+            return CommandResult(False, "late", p.late)
+        t_end = t_start + 2.0 * cmd.t1
+        for other in self._planned():
+            if other is p:
+                continue
+            o_start = other.t_start
+            o_end = o_start + 2.0 * other.command.t1
+            if t_start < o_end - 1e-9 and o_start < t_end - 1e-9:
+                reason = (
+                    f"fence busy: stroke [{t_start:.4f}, {t_end:.4f}] s overlaps parcel "
+                    f"{other.spec.parcel_id}'s [{o_start:.4f}, {o_end:.4f}] s"
+                )
+                p.rejected = reason
+                return CommandResult(False, "fence_busy", reason)
+        p.command = cmd
+        p.t_start = t_start
+        p.r_s = r_s
+        p.rejected = p.late = None
+        return CommandResult(True, "accepted", "", t_start)
+
+    # -- time ---------------------------------------------------------------------------------
+    def advance(self, t_target: float) -> list[LineEvent]:
+        """Move sim time to ``t_target``, handling stroke starts, points of no return and line
+        ends in time order; return the events since the last call (outcomes among them)."""
+        t_target = max(float(t_target), self.t)
+        while True:
+            t_ev, kind, p = self._next_event()
+            if p is None or t_ev > t_target:
+                break
+            t_ev = max(t_ev, self.t)
+            self._step_strokes(t_ev)
+            self.t = t_ev
+            if kind == 0:
+                self._start_stroke(p)
+            elif kind == 1:
+                self._no_return(p)
+            else:
+                self._leave(p)
+        self._step_strokes(t_target)
+        self.t = t_target
+        self._check_overlap()
+        events, self.events = self.events, []
+        return events
+
+    def _next_event(self) -> tuple[float, int, _Parcel | None]:
+        """Earliest of: a planned stroke start (0), a point of no return (1), a line end (2)."""
+        best = (math.inf, 3, None)
+        hi = self.config.r_s_range[1]
+        for p in self.parcels.values():
+            if p.stroke is not None:
+                continue
+            if p.command is not None and not p.passed:
+                cand = (p.t_start, 0, p)
+            elif p.spec.divert and p.outcome is None and not p.passed:
+                cand = (p.time_front_at(hi), 1, p)
+            else:
+                cand = (p.rear_end_time(self.config.line_end_x), 2, p)
+            if cand[:2] < best[:2]:
+                best = cand
+        return best
+
+    def _step_strokes(self, t: float) -> None:
+        for s in list(self.strokes):
+            s.advance(t - s.t_start)
+            self._settle(s, t)
+
+    def _settle(self, s: _Stroke, t: float) -> None:
+        """Outcome and bookkeeping of a stroke after it advanced to line time ``t``.
+
+        Sorted: outcome at once, the parcel leaves the belt, the solve runs on for the fence
+        until the cycle ends. Solver failure: outcome (or a warning if the parcel already had
+        one), the parcel's diverged state is dropped, the fence follows the rigid drive to the
+        end of its cycle. Solve ended unsorted (2 t1 + settle_time): MISSED, the parcel rides on.
+        """
+        p = s.parcel
+        pid = p.spec.parcel_id
+        if s.failed is not None:
+            if not s.failure_reported:
+                s.failure_reported = True
+                if p.outcome is None:
+                    self._finish(
+                        p, OutcomeCode.SOLVER_FAILURE, t, f"solver failure: {s.failed}", s.result()
+                    )
+                else:
+                    self.events.append(SolverWarning(t, pid, s.failed))
+                self.parcels.pop(pid, None)
+        elif s.tap.t_sorted is not None and t - s.t_start >= s.tap.t_sorted and p.outcome is None:
+            self._finish(p, OutcomeCode.SORTED, t, "sorted: C_s crossed y0 = s", s.result())
+            self.parcels.pop(pid, None)
+        elif not s.alive and p.outcome is None:
+            res = s.result()
+            y, _ = s.tap.at(math.inf)
+            self._finish(p, OutcomeCode.MISSED, t, res.reason, res)
+            p.x, p.y, p.yaw, p.t_ref = float(y[0]), float(y[1]), float(y[2]), t
+            p.rear_offset = min(c[0] for c in world_corners(p.body, 0.0, 0.0, p.yaw))
+            p.stroke = None
+            p.passed = True
+        if p.outcome is not None and t - s.t_start >= s.t_cycle - 1e-12:
+            if s.alive:
+                s.close()
+            self.strokes.remove(s)
+
+    def _start_stroke(self, p: _Parcel) -> None:
+        cmd = p.command
+        r_s = p.r_s  # the commanded R_s exactly (START_AT_TIME: the front at start_time)
+        sc = Scenario(
+            conveyor=self._conveyor(p.spec),
+            parcel=_physics(p.spec),
+            drive=DriveParams(alpha_k=cmd.alpha_k, t1=cmd.t1, r_s=r_s),
+            contact=self._contact(p.spec),
+            solver=self.config.solver,
+            fence=self.config.fence,
+            fence_length=self.config.fence_length,
+            fence_modes=self.config.fence_modes,
+        )
+        p.stroke = _Stroke(p, self.t, sc)
+        self.strokes.append(p.stroke)
+        self.events.append(StrokeStarted(self.t, p.spec.parcel_id, r_s, cmd.t1, cmd.alpha_k))
+        self._settle(p.stroke, self.t)
+
+    def _no_return(self, p: _Parcel) -> None:
+        hi = self.config.r_s_range[1]
+        if p.rejected:
+            self._finish(p, OutcomeCode.REJECTED, self.t, f"command rejected: {p.rejected}")
+        elif p.late:
+            self._finish(p, OutcomeCode.NO_COMMAND, self.t, p.late)
+        else:
+            self._finish(
+                p,
+                OutcomeCode.NO_COMMAND,
+                self.t,
+                f"no command before the point of no return (front at x0 = {hi:g} m)",
+            )
+        p.passed = True
+
+    def _leave(self, p: _Parcel) -> None:
+        if p.outcome is None:
+            self._finish(
+                p, OutcomeCode.NOT_DIVERTED, self.t, "not to be diverted: passed the line end"
+            )
+        self.parcels.pop(p.spec.parcel_id, None)
+
+    def _finish(
+        self,
+        p: _Parcel,
+        code: OutcomeCode,
+        t: float,
+        reason: str,
+        res: SimulationResult | None = None,
+    ) -> None:
+        """Record the parcel's one outcome (with the solve's figures when there was one)."""
+        assert p.outcome is None, p.spec.parcel_id
+        fig = {}
+        if res is not None:
+            t_ws = t - p.t_enter if math.isfinite(p.t_enter) else math.nan
+            fig = dict(
+                peak_normal_force=float(res.peak_contact_force),
+                peak_normal_force_stiff=float(res.peak_contact_force_stiff),
+                peak_normal_accel=float(res.peak_normal_accel),
+                impact_normal_speed=float(res.impact_normal_speed),
+                exit_speed_y=float(res.exit_speed_y),
+                y_max=float(res.y_max),
+                time_in_working_space=max(t_ws, 0.0),
+            )
+        p.outcome = Outcome(p.spec.parcel_id, t, code, reason, **fig)
+        self.done_ids.add(p.spec.parcel_id)
+        self.events.append(p.outcome)
+
+    # -- overlap ------------------------------------------------------------------------------
+    def _check_overlap(self) -> None:
+        running = [s for s in self.strokes if 0.0 <= self.t - s.t_start <= s.t_cycle]
+        if not running:
+            return
+        snaps = self._parcel_snapshots()
+        for s in running:
+            alpha_k = s.sc.drive.alpha_k
+            own = s.parcel.spec.parcel_id
+            for snap in snaps:
+                pid = snap.parcel_id
+                if pid == own or pid in s.warned:
+                    continue
+                if in_swept_sector(list(snap.corners), self.config.length, alpha_k):
+                    s.warned.add(pid)
+                    self.events.append(OverlapWarning(self.t, own, pid))
+
+    # -- state --------------------------------------------------------------------------------
+    def snapshot(self) -> LineSnapshot:
+        """Fence and every parcel on the line at the current time (no diverged state ever)."""
+        return LineSnapshot(self.t, self._fence_snapshot(), self._parcel_snapshots())
+
+    def _fence_stroke(self) -> _Stroke | None:
+        owner = None
+        for s in self.strokes:
+            if 0.0 <= self.t - s.t_start <= s.t_cycle:
+                owner = s
+        return owner
+
+    def _fence_snapshot(self) -> FenceSnapshot:
+        s = self._fence_stroke()
+        n = len(self._rest_s)
+        zeros = np.zeros(n)
+        if s is None:
+            return FenceSnapshot(
+                0.0, 0.0, 0.0, self._rest_s, self._rest_s.copy(), zeros, zeros, zeros, 0.0,
+                None, False,
+            )  # fmt: skip
+        pid = s.parcel.spec.parcel_id
+        t_local = self.t - s.t_start
+        if s.alive and s.tap.cur is not None and s.model.flexible:
+            y, extra = s.tap.at(t_local)
+            m = s.model.n_modes
+            w_free = s.model.phi @ y[6 : 6 + m]
+            alpha = float(extra[0])
+            x_n, y_n = node_positions(self.fem, w_free, alpha)
+            defl = np.concatenate(([0.0], w_free[0::2]))
+            rot = np.concatenate(([0.0], w_free[1::2]))
+            return FenceSnapshot(
+                alpha, float(extra[1]), float(extra[2]), self._rest_s, x_n, y_n, defl, rot,
+                float(defl[-1]), pid, True,
+            )  # fmt: skip
+        d = drive_state(s.sc.drive, t_local)
+        c, sn = math.cos(d.alpha), math.sin(d.alpha)
+        return FenceSnapshot(
+            d.alpha, d.rate, d.accel, self._rest_s, c * self._rest_s, sn * self._rest_s, zeros,
+            zeros, 0.0, pid, s.alive,
+        )  # fmt: skip
+
+    def _parcel_snapshots(self) -> list[ParcelSnapshot]:
+        out = []
+        for p in self.parcels.values():
+            spec = p.spec
+            common = dict(
+                length_a=spec.length_a,
+                width_b=spec.width_b,
+                height=spec.height,
+                divert=spec.divert,
+            )
+            s = p.stroke
+            if s is not None and s.alive and s.tap.cur is not None:
+                y, e = s.tap.at(self.t - s.t_start)
+                stage = STAGES.get(s.observer.stage, Stage.ON_BELT)
+                impacts = s.observer.impacts
+                n = float(e[3])
+                out.append(
+                    ParcelSnapshot(
+                        spec.parcel_id,
+                        stage,
+                        float(y[0]),
+                        float(y[1]),
+                        float(y[2]),
+                        float(y[3]),
+                        float(y[4]),
+                        float(y[5]),
+                        contact_normal_force=n,
+                        contact_normal_force_stiff=impacts[-1][2] if impacts and n > 0 else 0.0,
+                        deformation=float(e[4]),
+                        deformation_rate=float(e[5]),
+                        contact_point=(float(e[6]), float(e[7])),
+                        corners=tuple(world_corners(p.body, y[0], y[1], y[2])),
+                        **common,
+                    )
+                )
+                continue
+            x, y_, yaw = p.pose(self.t)
+            out.append(
+                ParcelSnapshot(
+                    spec.parcel_id,
+                    Stage.PASSED if p.passed else Stage.ON_BELT,
+                    x,
+                    y_,
+                    yaw,
+                    self.v,
+                    0.0,
+                    0.0,
+                    corners=tuple(world_corners(p.body, x, y_, yaw)),
+                    **common,
+                )
+            )
+        return out
+
+    # -- helpers ------------------------------------------------------------------------------
+    def _planned(self) -> list[_Parcel]:
+        return [p for p in self.parcels.values() if p.command is not None] + [
+            s.parcel for s in self.strokes if s.parcel.spec.parcel_id not in self.parcels
+        ]
+
+    def _conveyor(self, spec: ParcelSpec) -> ConveyorParams:
+        c = self.config.conveyor
+        return c if math.isnan(spec.mu_belt) else replace(c, mu_belt=float(spec.mu_belt))
+
+    def _contact(self, spec: ParcelSpec) -> ContactParams:
+        c = self.config.contact
+        return c if math.isnan(spec.mu_fence) else replace(c, mu_fence=float(spec.mu_fence))
+
+    def stroke_scenario(self, parcel_id: int) -> Scenario | None:
+        """The physics Scenario of a parcel's running stroke (for checks against simulate())."""
+        for s in self.strokes:
+            if s.parcel.spec.parcel_id == parcel_id:
+                return s.sc
+        return None
+
+    @property
+    def fence_busy(self) -> bool:
+        return self._fence_stroke() is not None
+
+    @property
+    def parcels_on_line(self) -> int:
+        return len(self.parcels)
+
+
+def _physics(spec: ParcelSpec):
+    from .validate import physics_parcel
+
+    return physics_parcel(spec)
+
+
+def in_swept_sector(
+    corners: list[tuple[float, float]], length: float, alpha_k: float, tol: float = OVERLAP_TOL
+) -> bool:
+    """True if the convex polygon ``corners`` reaches into the sector the fence sweeps
+    (radius R_z about the axis, angles 0 to alpha_k) deeper than ``tol``."""
+
+    def inside_sector(x: float, y: float) -> bool:
+        r = math.hypot(x, y)
+        if r >= length - tol or r < tol:
+            return False
+        ang = math.atan2(y, x)
+        return tol / r < ang < alpha_k - tol / r
+
+    xs = [c[0] for c in corners]
+    ys = [c[1] for c in corners]
+    y_top = length * (math.sin(alpha_k) if alpha_k < 0.5 * math.pi else 1.0)
+    x_low = length * min(math.cos(alpha_k), 0.0)
+    if min(xs) > length or max(xs) < x_low or min(ys) > y_top or max(ys) < tol:
+        return False  # bounding boxes apart
+    if any(inside_sector(x, y) for x, y in corners):
+        return True
+    # sector sample points (radii and arc, slightly inside) inside the polygon
+    pts = []
+    for k in range(1, 17):
+        r = (length - 2 * tol) * k / 16
+        pts.append((r * math.cos(2 * tol / r), r * math.sin(2 * tol / r)))
+        pts.append((r * math.cos(alpha_k - 2 * tol / r), r * math.sin(alpha_k - 2 * tol / r)))
+        a = alpha_k * k / 17
+        pts.append(((length - 2 * tol) * math.cos(a), (length - 2 * tol) * math.sin(a)))
+    return any(_in_convex(corners, x, y) for x, y in pts)
+
+
+def _in_convex(poly: list[tuple[float, float]], x: float, y: float) -> bool:
+    sign = 0.0
+    n = len(poly)
+    for i in range(n):
+        x0, y0 = poly[i]
+        x1, y1 = poly[(i + 1) % n]
+        cross = (x1 - x0) * (y - y0) - (y1 - y0) * (x - x0)
+        if cross == 0.0:
+            continue
+        if sign == 0.0:
+            sign = cross
+        elif (cross > 0) != (sign > 0):
+            return False
+    return True

@@ -1,0 +1,207 @@
+"""Plain data of the sorting line: parcels, stroke commands, outcomes, snapshots (no ROS types).
+
+Frame "sorter" is the paper's O x0 y0: origin on the fence rotation axis at the fence-side belt
+border, x0 along the belt motion, y0 across the belt towards the chute (belt 0 <= y0 <= s).
+SI units, angles in rad. The integer codes mirror fence_sorter_msgs (SortOutcome, LoadState,
+FenceCommand) so the node layer converts them one to one.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from enum import IntEnum
+
+import numpy as np
+
+NAN = math.nan
+
+
+class OutcomeCode(IntEnum):
+    """SortOutcome.reason_code values."""
+
+    SORTED = 0
+    NOT_DIVERTED = 1
+    NO_FEASIBLE_COMMAND = 2
+    NO_COMMAND = 3
+    MISSED = 4
+    REJECTED = 5
+    SOLVER_FAILURE = 6
+
+
+class Stage(IntEnum):
+    """LoadState.stage values."""
+
+    ON_BELT = 0
+    E1 = 1
+    E2 = 2
+    E3 = 3
+    E4 = 4
+    SORTED = 5
+    PASSED = 6
+
+
+class StartMode(IntEnum):
+    """FenceCommand.start_mode values."""
+
+    AT_RS = 0  # start the working motion when the parcel front reaches r_s
+    AT_TIME = 1  # start the working motion at start_time
+
+
+@dataclass(frozen=True)
+class ParcelSpec:
+    """A scanned parcel (fence_sorter_msgs/Parcel without the header).
+
+    ``mu_belt``/``mu_fence`` NaN: use the line's configured mu1 / mu2. ``scan_position_x`` is the
+    front's x0 at ``scan_time`` (sim time [s]); the belt carries the front on at speed v.
+    """
+
+    parcel_id: int
+    length_a: float = 0.4  # A [m]
+    width_b: float = 0.3  # B [m]
+    height: float = 0.3  # [m] (visuals only)
+    mass: float = 15.0  # m_p [kg]
+    cog_offset_x: float = 0.0  # x_p [m]
+    cog_offset_y: float = 0.0  # y_p [m]
+    lateral_gap: float = 0.0  # Delta_s [m]
+    yaw: float = 0.0  # phi [rad]
+    mu_belt: float = NAN
+    mu_fence: float = NAN
+    divert: bool = False
+    scan_time: float = 0.0  # [s]
+    scan_position_x: float = -2.0  # [m]
+
+
+@dataclass(frozen=True)
+class StrokeCommand:
+    """A fence stroke for one parcel (fence_sorter_msgs/FenceCommand without header/predictions).
+
+    ``feasible`` False: the controller found no stroke meeting the constraints; ``reason`` says
+    why and the parcel passes unsorted (outcome NO_FEASIBLE_COMMAND).
+    """
+
+    parcel_id: int
+    start_mode: StartMode = StartMode.AT_RS
+    r_s: float = 0.0  # R_s [m] (AT_RS)
+    start_time: float = 0.0  # [s] (AT_TIME)
+    t1: float = 0.5  # working time [s]
+    alpha_k: float = math.radians(40.0)  # [rad]
+    feasible: bool = True
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class CommandResult:
+    """What the line did with a command: accepted, or rejected with a reason key and text.
+
+    ``code`` is one of ``accepted``, ``infeasible`` (accepted as the controller's "no stroke"),
+    ``unknown_parcel``, ``duplicate``, ``parcel_done``, ``not_divert``, ``invalid``, ``late``,
+    ``fence_busy``.
+    """
+
+    accepted: bool
+    code: str
+    reason: str
+    start_time: float = NAN  # planned start of the working motion [s] (accepted strokes)
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """Outcome of one parcel (SortOutcome); figures NaN when the parcel met no stroke."""
+
+    parcel_id: int
+    t: float  # sim time of the outcome [s]
+    code: OutcomeCode
+    reason: str
+    peak_normal_force: float = NAN  # N [N]
+    peak_normal_force_stiff: float = NAN  # N_stiff [N]
+    peak_normal_accel: float = NAN  # a_N [m/s^2]
+    impact_normal_speed: float = NAN  # w_n [m/s]
+    exit_speed_y: float = NAN  # ydot at y0 = s [m/s]
+    y_max: float = NAN  # [m]
+    time_in_working_space: float = NAN  # [s]
+
+    @property
+    def sorted(self) -> bool:
+        return self.code is OutcomeCode.SORTED
+
+
+@dataclass(frozen=True)
+class OverlapWarning:
+    """Another parcel lies in the fence's swept sector during a stroke (parcel-parcel and
+    fence-bystander contact are not modelled): reported once per stroke and parcel."""
+
+    t: float
+    stroke_parcel_id: int
+    other_parcel_id: int
+
+
+@dataclass(frozen=True)
+class StrokeStarted:
+    """The fence started the working motion for a parcel (informational)."""
+
+    t: float
+    parcel_id: int
+    r_s: float
+    t1: float
+    alpha_k: float
+
+
+@dataclass(frozen=True)
+class SolverWarning:
+    """The solve of a stroke failed after its parcel already had its outcome (fence only)."""
+
+    t: float
+    parcel_id: int
+    diagnosis: str
+
+
+LineEvent = Outcome | OverlapWarning | StrokeStarted | SolverWarning
+
+
+@dataclass(frozen=True)
+class FenceSnapshot:
+    """Drive angle and fence shape; arrays per beam node, root first (FenceState)."""
+
+    drive_angle: float  # alpha_w [rad]
+    drive_rate: float  # [rad/s]
+    drive_accel: float  # [rad/s^2]
+    node_s: np.ndarray  # arc position [m]
+    node_x: np.ndarray  # [m], frame sorter
+    node_y: np.ndarray
+    deflection: np.ndarray  # transverse, relative to the rigid fence line [m]
+    rotation: np.ndarray  # [rad]
+    tip_deflection: float  # [m]
+    stroke_parcel_id: int | None  # parcel of the running stroke, None at rest
+    from_solve: bool  # False: rigid drive kinematics (stiff fence, at rest, or after a failure)
+
+
+@dataclass(frozen=True)
+class ParcelSnapshot:
+    """One parcel on the line (LoadState): C_s pose and velocity, contact figures."""
+
+    parcel_id: int
+    stage: Stage
+    x: float  # C_s [m]
+    y: float
+    yaw: float  # [rad]
+    vx: float  # [m/s]
+    vy: float
+    yaw_rate: float  # [rad/s]
+    contact_normal_force: float = 0.0  # N [N]
+    contact_normal_force_stiff: float = 0.0  # peak N_stiff of the current impact [N]
+    deformation: float = 0.0  # D [m]
+    deformation_rate: float = 0.0  # dD/dt [m/s]
+    contact_point: tuple[float, float] = (NAN, NAN)  # [m]
+    length_a: float = 0.0
+    width_b: float = 0.0
+    height: float = 0.0
+    corners: tuple[tuple[float, float], ...] = ()  # world corners [m]
+    divert: bool = False
+
+
+@dataclass(frozen=True)
+class LineSnapshot:
+    t: float
+    fence: FenceSnapshot
+    parcels: list[ParcelSnapshot] = field(default_factory=list)
