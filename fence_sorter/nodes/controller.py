@@ -1,56 +1,291 @@
-"""Controller node: plans a fence stroke (R_s, t1, alpha_k) per scanned parcel.
+"""Controller node: plans a fence stroke (R_s, t1, alpha_k) per scanned parcel to divert.
 
-For now it only declares its parameters and reports through the diagnostic heartbeat.
+Subscribes /parcels, publishes one fence_sorter_msgs/FenceCommand per divert parcel on
+/fence_commands: feasible with the predicted figures, or feasible=false with the reason. The
+planning itself is :class:`fence_sorter.capacity.Planner` (ROS-free); this module only turns
+messages into its inputs and its plans into messages. A parcel whose R_s is already behind when
+the controller gets it (e.g. right after a restart) gets no command (logged and counted).
 """
 
 from __future__ import annotations
 
+import math
+import time
+from collections import deque
 from collections.abc import Sequence
 
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from rclpy.exceptions import ParameterException
 from rclpy.parameter import Parameter
+from rclpy.time import Time
 
+from fence_sorter.capacity.planner import LoadRequest, Plan, Planner, PlannerConfig
 from fence_sorter.nodes.base import FenceSorterNode, ParamSpec, run_node
+from fence_sorter.nodes.qos import RELIABLE_QOS
+from fence_sorter.physics.params import ParameterError, ParcelParams
+
+DEFAULT_SCENE = "impact_flexible"
+PARCELS_TOPIC = "/parcels"
+COMMANDS_TOPIC = "/fence_commands"
+
+
+def time_to_sec(stamp) -> float:
+    """builtin_interfaces/Time -> seconds."""
+    return stamp.sec + 1e-9 * stamp.nanosec
+
+
+class ParcelRejected(ValueError):
+    """A parcel message the controller cannot plan for (the message says why)."""
+
+
+def request_from_msg(msg, belt_width: float) -> LoadRequest:
+    """fence_sorter_msgs/Parcel -> LoadRequest; ParcelRejected names the bad field."""
+    values = {
+        "length_a": msg.length_a,
+        "width_b": msg.width_b,
+        "height": msg.height,
+        "mass": msg.mass,
+        "cog_offset_x": msg.cog_offset_x,
+        "cog_offset_y": msg.cog_offset_y,
+        "lateral_gap": msg.lateral_gap,
+        "yaw": msg.yaw,
+        "scan_position_x": msg.scan_position_x,
+    }
+    for name, v in values.items():
+        if not math.isfinite(v):
+            raise ParcelRejected(f"parcel {msg.parcel_id}: {name} is not finite ({v})")
+    values.pop("scan_position_x")
+    parcel = ParcelParams(**values)
+    try:
+        parcel.validate(prefix=f"parcel {msg.parcel_id}", belt_width=belt_width)
+    except ParameterError as exc:
+        raise ParcelRejected(str(exc)) from None
+    return LoadRequest(
+        parcel_id=int(msg.parcel_id),
+        parcel=parcel,
+        scan_time=time_to_sec(msg.scan_time),
+        scan_position_x=float(msg.scan_position_x),
+        mu_belt=float(msg.mu_belt),
+        mu_fence=float(msg.mu_fence),
+    )
+
+
+def fill_command(cmd, plan: Plan, alpha_k: float) -> None:
+    """Copy a plan into a FenceCommand (START_AT_RS; NaN figures when infeasible)."""
+    cmd.parcel_id = plan.parcel_id
+    cmd.start_mode = cmd.START_AT_RS
+    cmd.feasible = plan.feasible
+    cmd.reason = plan.reason
+    ev = plan.evaluation
+    cmd.alpha_k = alpha_k
+    if ev is None:
+        nan = math.nan
+        cmd.r_s = cmd.t1 = nan
+        cmd.predicted_capacity_pcs_h = cmd.predicted_impact_speed = nan
+        cmd.predicted_peak_accel = cmd.predicted_exit_speed = cmd.predicted_peak_force = nan
+        return
+    cmd.r_s = ev.r_s
+    cmd.t1 = ev.t1
+    cmd.start_time = Time(nanoseconds=int(round(plan.start_time * 1e9))).to_msg()
+    cmd.predicted_capacity_pcs_h = ev.capacity_pcs_h
+    cmd.predicted_impact_speed = ev.impact_speed
+    cmd.predicted_peak_accel = ev.peak_accel
+    cmd.predicted_exit_speed = ev.exit_speed
+    cmd.predicted_peak_force = ev.peak_force
+
+
+class ControllerStats:
+    """Counters and latency samples reported on /diagnostics (ROS-free)."""
+
+    def __init__(self, window: int = 10000):
+        self.latency = deque(maxlen=window)  # parcel callback to command published [s] (wall)
+        self.lead = deque(maxlen=window)  # command sim time before the front reaches R_s [s]
+        self.received = self.commands = self.infeasible = self.late = 0
+        self.rejected = self.not_diverted = self.evaluations = 0
+
+    def percentile(self, q: float) -> float:
+        return float(np.percentile(self.latency, q)) if self.latency else math.nan
+
+    def values(self) -> dict[str, str]:
+        return {
+            "parcels_received": str(self.received),
+            "commands": str(self.commands),
+            "infeasible": str(self.infeasible),
+            "late_no_command": str(self.late),
+            "rejected_parcels": str(self.rejected),
+            "not_diverted": str(self.not_diverted),
+            "evaluations": str(self.evaluations),
+            "latency_p50_ms": f"{1e3 * self.percentile(50):.3f}",
+            "latency_p99_ms": f"{1e3 * self.percentile(99):.3f}",
+            "latency_max_ms": f"{1e3 * max(self.latency, default=math.nan):.3f}",
+            "min_lead_s": f"{min(self.lead, default=math.nan):.4f}",
+        }
+
+
+PLANNER_PARAMETERS = (
+    ParamSpec("alpha_k_deg", 40.0, "Fence angle alpha_k of every stroke [deg]", True, 1.0, 89.0),
+    ParamSpec("t1_min", 0.2, "Shortest working time t1, range (5) [s]", True, 0.02, 10.0),
+    ParamSpec("t1_max", 1.5, "Longest working time t1, range (5) [s]", True, 0.02, 10.0),
+    ParamSpec("t1_step", 0.05, "Candidate step of t1 [s]", True, 0.001, 10.0),
+    ParamSpec("r_s_min", -0.5, "Smallest R_s, range (3) [m]", True, -5.0, 5.0),
+    ParamSpec("r_s_max", 1.0, "Largest R_s, range (3) [m]", True, -5.0, 5.0),
+    ParamSpec("r_s_step", 0.1, "Candidate step of R_s [m]", True, 0.001, 10.0),
+    ParamSpec("w_dop", 2.4, "(10) admissible impact speed w_dop [m/s]", True, 1e-6, 100.0),
+    ParamSpec("a_ndop", 300.0, "(11) admissible acceleration a_Ndop [m/s^2]", True, 1e-6, 1e5),
+    ParamSpec("ydot_dop", 2.5, "(12) admissible exit speed ydot_dop [m/s]", True, 1e-6, 100.0),
+    ParamSpec(
+        "active_constraints", [7, 8, 9, 10, 11, 12], "Constraints that count, of (7)-(12)", True
+    ),
+    ParamSpec("pitch_gap", 0.1, "Gap Delta between loads in Delta_c (2) [m]", True, 0.0, 10.0),
+    ParamSpec("fence_model", "stiff", "Fence the planner simulates: stiff | scene", True),
+    ParamSpec("max_evaluations", 10, "Twin evaluations per parcel (cached free)", True, 1, 1000),
+    ParamSpec(
+        "start_margin",
+        0.1,
+        "Command out this long before the front is at R_s [s]",
+        True,
+        0.0,
+        10.0,
+    ),
+    ParamSpec("busy_margin", 0.05, "Idle time between two strokes [s]", True, 0.0, 10.0),
+    ParamSpec("quantum_size", 0.05, "Class bin of sizes and cog offsets [m]", True, 1e-4, 1.0),
+    ParamSpec("quantum_mass", 0.2, "Class bin of mass (relative, log steps)", True, 1e-3, 10.0),
+    ParamSpec("quantum_gap", 0.05, "Class bin of the lateral gap [m]", True, 1e-4, 1.0),
+    ParamSpec("quantum_yaw_deg", 5.0, "Class bin of the yaw [deg]", True, 1e-3, 90.0),
+    ParamSpec("quantum_mu", 0.05, "Class bin of mu1 and mu2", True, 1e-4, 1.0),
+)
 
 
 class ControllerNode(FenceSorterNode):
     """Fence controller: turns scanned parcels into fence_sorter_msgs/FenceCommand."""
 
     NODE_NAME = "controller"
-    STATUS = "not yet implemented (issue: controller node)"
+    STATUS = "planning fence strokes"
+    STATUS_LEVEL = DiagnosticStatus.OK
     PARAMETERS = (
-        ParamSpec("t1_min", 0.2, "Shortest working time t1 [s]", min_value=0.01, max_value=10.0),
-        ParamSpec("t1_max", 1.5, "Longest working time t1 [s]", min_value=0.01, max_value=10.0),
-        ParamSpec(
-            "alpha_k_max",
-            1.0,
-            "Largest fence angle alpha_k [rad]",
-            min_value=0.0,
-            max_value=1.5707963267948966,
-        ),
-        ParamSpec(
-            "max_peak_force",
-            0.0,
-            "Limit on the predicted contact force N [N]; 0: no limit",
-            min_value=0.0,
-            max_value=1.0e6,
-        ),
-        ParamSpec(
-            "max_peak_accel",
-            0.0,
-            "Limit on the predicted parcel acceleration [m/s^2]; 0: no limit",
-            min_value=0.0,
-            max_value=1.0e4,
-        ),
+        ParamSpec("scene", "", "Scene YAML (belt, fence, contact); empty: default", True),
+        ParamSpec("frame_id", "sorter", "Fixed frame of the sorter (REP-103, z up)", True),
+        *PLANNER_PARAMETERS,
+        ParamSpec("warmup_stream", "", "Stream whose parcel classes warm the cache", True),
+        ParamSpec("warmup_parcels", 50, "Parcels drawn for the warm-up", True, 0, 100000),
+        ParamSpec("warmup_time", 5.0, "Wall-time budget of the warm-up [s]", True, 0.0, 600.0),
     )
 
     def validate_parameters(self, parameters: Sequence[Parameter]) -> str | None:
-        """Refuse t1_min > t1_max."""
+        """Refuse a planner configuration the planner would refuse (names key and range)."""
         values = {p.name: p.value for p in parameters}
-        t1_min = values.get("t1_min", self.get_parameter("t1_min").value)
-        t1_max = values.get("t1_max", self.get_parameter("t1_max").value)
-        if t1_min > t1_max:
-            return f"t1_min ({t1_min} s) must not exceed t1_max ({t1_max} s)"
+        if "t1_min" not in values:  # a runtime change: all planner keys are read-only
+            return None
+        try:
+            PlannerConfig.from_mapping(values)
+        except ParameterError as exc:
+            return str(exc)
         return None
+
+    def __init__(self) -> None:
+        super().__init__()
+        try:
+            self._setup()
+        except ParameterError as exc:  # bad scene, stream or planner settings
+            raise ParameterException(str(exc), "controller") from None
+
+    def _setup(self) -> None:
+        from fence_sorter.scene import load_scene
+        from fence_sorter_msgs.msg import FenceCommand, Parcel
+
+        self._command_class = FenceCommand
+        p = {spec.name: self.get_parameter(spec.name).value for spec in self.PARAMETERS}
+        scene = p["scene"] or DEFAULT_SCENE
+        self.base = load_scene(scene).scenario
+        self.config = PlannerConfig.from_mapping(p)
+        self.planner = Planner(self.base, self.config)
+        self.frame_id = p["frame_id"]
+        self.stats = ControllerStats()
+        self.seen: set[int] = set()
+        self._warm_up(p)
+        self._pub = self.create_publisher(FenceCommand, COMMANDS_TOPIC, RELIABLE_QOS)
+        self._sub = self.create_subscription(Parcel, PARCELS_TOPIC, self.on_parcel, RELIABLE_QOS)
+        self.get_logger().info(
+            f"controller ready: scene {scene}, {len(self.planner.candidate_list)} candidates, "
+            f"fence model {self.config.fence_model}, {len(self.planner.cache)} cached evaluations"
+        )
+
+    def _warm_up(self, p: dict) -> None:
+        """Compile the kernel and fill the cache before subscribing (first plans are fast)."""
+        from fence_sorter.stream import load_stream
+
+        wall0 = time.perf_counter()
+        loads = [ParcelParams(length_a=0.4, width_b=0.3, mass=5.0)]
+        if p["warmup_stream"] and p["warmup_parcels"] > 0:
+            specs = load_stream(
+                p["warmup_stream"],
+                self.base.conveyor.belt_speed,
+                count=int(p["warmup_parcels"]),
+                seed=987654321,  # not the scanner's draw: classes, not the same parcels
+                belt_width=self.base.conveyor.width,
+            )
+            loads += [s.to_parcel_params() for s in specs if s.divert]
+        classes = self.planner.warm_up(loads, float(p["warmup_time"]))
+        self.planner.evaluations = self.planner.cache_hits = 0
+        self.get_logger().info(
+            f"warm-up: {classes} load classes in {time.perf_counter() - wall0:.2f} s"
+        )
+
+    def on_parcel(self, msg) -> None:
+        """Hand the parcel to :func:`handle_parcel`; publish what it returns."""
+        wall0 = time.perf_counter()
+        cmd = handle_parcel(self, msg)
+        if cmd is not None:
+            self._pub.publish(cmd)
+            self.stats.latency.append(time.perf_counter() - wall0)
+
+    def heartbeat_status(self) -> DiagnosticStatus:
+        status = super().heartbeat_status()
+        values = self.stats.values()
+        values["cache_entries"] = str(len(self.planner.cache))
+        status.values.extend(KeyValue(key=k, value=v) for k, v in values.items())
+        return status
+
+
+def handle_parcel(node: ControllerNode, msg):
+    """One parcel message -> a FenceCommand to publish, or None (not to divert, rejected, late)."""
+    stats = node.stats
+    stats.received += 1
+    log = node.get_logger()
+    if msg.parcel_id in node.seen:
+        stats.rejected += 1
+        log.warning(f"parcel {msg.parcel_id}: duplicate id, ignored")
+        return None
+    node.seen.add(msg.parcel_id)
+    if not msg.divert:
+        stats.not_diverted += 1
+        return None
+    try:
+        req = request_from_msg(msg, node.base.conveyor.width)
+    except ParcelRejected as exc:
+        stats.rejected += 1
+        log.warning(f"rejected: {exc}")
+        return None
+    now = node.get_clock().now()
+    evals0 = node.planner.evaluations
+    plan = node.planner.plan(req, now.nanoseconds * 1e-9)
+    stats.evaluations += node.planner.evaluations - evals0
+    if not plan.feasible and plan.reason.startswith("too late"):
+        stats.late += 1
+        log.warning(f"parcel {req.parcel_id}: no command: {plan.reason}")
+        return None
+    cmd = node._command_class()
+    cmd.header.stamp = now.to_msg()
+    cmd.header.frame_id = node.frame_id
+    fill_command(cmd, plan, node.config.alpha_k)
+    stats.commands += 1
+    if plan.feasible:
+        stats.lead.append(plan.start_time - now.nanoseconds * 1e-9)
+    else:
+        stats.infeasible += 1
+        log.warning(f"parcel {req.parcel_id}: infeasible: {plan.reason}")
+    return cmd
 
 
 def main(args: Sequence[str] | None = None) -> int:

@@ -1,47 +1,150 @@
-"""Scanner node: measures parcels upstream of the fence and publishes fence_sorter_msgs/Parcel.
+"""Scanner node: injects the parcel stream at the scan line and publishes fence_sorter_msgs/Parcel.
 
-For now it only declares its parameters and reports through the diagnostic heartbeat.
+The stream (random from a config in config/streams/, or a CSV manifest) is drawn once at start
+(:mod:`fence_sorter.stream`); each parcel is published on /parcels when its front crosses the
+scan line x = scan_line_x in sim time, with scan_time (the crossing time) and scan_position_x.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from rclpy.exceptions import ParameterException
+from rclpy.time import Time
+
 from fence_sorter.nodes.base import FenceSorterNode, ParamSpec, run_node
+from fence_sorter.nodes.qos import RELIABLE_QOS
+from fence_sorter.physics.params import ParameterError
+from fence_sorter.stream import ParcelSpec, load_stream
+
+DEFAULT_SCENE = "impact_flexible"
+DEFAULT_STREAM = "default"
+PARCELS_TOPIC = "/parcels"
+
+
+def fill_parcel(msg, spec: ParcelSpec, scan_time: float, scan_x: float, frame_id: str) -> None:
+    """Copy a ParcelSpec into a Parcel message scanned at ``scan_time`` at x = ``scan_x``."""
+    stamp = Time(nanoseconds=int(round(scan_time * 1e9))).to_msg()
+    msg.header.stamp = stamp
+    msg.header.frame_id = frame_id
+    msg.parcel_id = spec.parcel_id
+    msg.length_a = spec.length_a
+    msg.width_b = spec.width_b
+    msg.height = spec.height
+    msg.mass = spec.mass
+    msg.cog_offset_x = spec.cog_offset_x
+    msg.cog_offset_y = spec.cog_offset_y
+    msg.lateral_gap = spec.lateral_gap
+    msg.yaw = spec.yaw
+    msg.mu_belt = spec.mu_belt
+    msg.mu_fence = spec.mu_fence
+    msg.divert = spec.divert
+    msg.scan_time = stamp
+    msg.scan_position_x = scan_x
+
+
+def due(stream: Sequence[ParcelSpec], next_index: int, t0: float, now: float) -> int:
+    """Index past the last parcel whose front has crossed the scan line by ``now``."""
+    i = next_index
+    while i < len(stream) and t0 + stream[i].arrival_time <= now:
+        i += 1
+    return i
 
 
 class ScannerNode(FenceSorterNode):
-    """Scanner upstream of the fence: size, mass, gap Delta_s and yaw phi of each parcel."""
+    """Scanner upstream of the fence: publishes each parcel as it crosses the scan line."""
 
     NODE_NAME = "scanner"
-    STATUS = "not yet implemented (issue: scanner node)"
+    STATUS = "scanning"
+    STATUS_LEVEL = DiagnosticStatus.OK
     PARAMETERS = (
+        ParamSpec("frame_id", "sorter", "Fixed frame of the sorter (REP-103, z up)", True),
+        ParamSpec("scene", "", "Scene YAML (belt speed and width); empty: default", True),
+        ParamSpec("stream", "", "Stream config (YAML) or CSV manifest; empty: default", True),
+        ParamSpec("seed", -1, "Seed of a random stream; -1: the file's", True, -1, 2**31 - 1),
         ParamSpec(
-            "frame_id", "sorter", "Fixed frame of the sorter (REP-103, z up)", read_only=True
+            "scan_line_x", -3.0, "Scan line along the belt, frame sorter [m]", True, -100.0, 0.0
         ),
+        ParamSpec("parcels", 0, "Parcels to inject; 0: use duration", True, 0, 10**7),
         ParamSpec(
-            "scan_position_x",
-            -2.0,
-            "Scan line position along the belt, frame sorter (fence axis at x = 0) [m]",
-            read_only=True,
-            min_value=-100.0,
-            max_value=0.0,
+            "duration", 0.0, "Inject parcels arriving within [s]; 0: use parcels", True, 0.0, 1e6
         ),
-        ParamSpec(
-            "position_noise",
-            0.0,
-            "Standard deviation of the measured gap and sizes [m]",
-            min_value=0.0,
-            max_value=0.1,
-        ),
-        ParamSpec(
-            "yaw_noise",
-            0.0,
-            "Standard deviation of the measured yaw phi [rad]",
-            min_value=0.0,
-            max_value=0.5,
-        ),
+        ParamSpec("start_delay", 0.5, "Sim time before the first parcel [s]", True, 0.0, 1e4),
+        ParamSpec("tick_period", 0.005, "Sim-time period of the scan check [s]", True, 1e-4, 1.0),
     )
+
+    def __init__(self) -> None:
+        super().__init__()
+        try:
+            self._setup()
+        except ParameterError as exc:  # bad scene, stream or planner settings
+            raise ParameterException(str(exc), "scanner") from None
+
+    def _setup(self) -> None:
+        from fence_sorter.scene import load_scene
+        from fence_sorter_msgs.msg import Parcel
+
+        p = {spec.name: self.get_parameter(spec.name).value for spec in self.PARAMETERS}
+        base = load_scene(p["scene"] or DEFAULT_SCENE).scenario
+        self.belt_speed = base.conveyor.belt_speed
+        count = int(p["parcels"]) or None
+        duration = float(p["duration"]) or None
+        if count is None and duration is None:
+            count = 100
+        self.stream_name = p["stream"] or DEFAULT_STREAM
+        self.stream = load_stream(
+            self.stream_name,
+            self.belt_speed,
+            count=count,
+            duration=duration,
+            seed=None if p["seed"] < 0 else int(p["seed"]),
+            belt_width=base.conveyor.width,
+        )
+        self.scan_x = float(p["scan_line_x"])
+        self.start_delay = float(p["start_delay"])
+        self.frame_id = p["frame_id"]
+        self.t0: float | None = None
+        self.next_index = 0
+        self._parcel_class = Parcel
+        self._pub = self.create_publisher(Parcel, PARCELS_TOPIC, RELIABLE_QOS)
+        # a sim-time timer: it fires only while /clock advances
+        self._timer = self.create_timer(float(p["tick_period"]), self.tick)
+        self.get_logger().info(
+            f"scanner: {len(self.stream)} parcels from {self.stream_name} at x = "
+            f"{self.scan_x:g} m, belt {self.belt_speed:g} m/s"
+        )
+
+    def tick(self) -> None:
+        """Publish the parcels whose front crossed the scan line since the last tick."""
+        now = self.get_clock().now().nanoseconds * 1e-9
+        if now <= 0.0:
+            return
+        if self.t0 is None:
+            self.t0 = now + self.start_delay
+        end = due(self.stream, self.next_index, self.t0, now)
+        for spec in self.stream[self.next_index : end]:
+            msg = self._parcel_class()
+            fill_parcel(msg, spec, self.t0 + spec.arrival_time, self.scan_x, self.frame_id)
+            self._pub.publish(msg)
+        self.next_index = end
+
+    def heartbeat_status(self) -> DiagnosticStatus:
+        status = super().heartbeat_status()
+        done = self.next_index >= len(self.stream)
+        last = self.stream[-1].arrival_time if self.stream else math.nan
+        status.values.extend(
+            KeyValue(key=k, value=v)
+            for k, v in {
+                "stream": self.stream_name,
+                "parcels_total": str(len(self.stream)),
+                "parcels_published": str(self.next_index),
+                "done": str(done).lower(),
+                "last_arrival_s": f"{last:.3f}",
+            }.items()
+        )
+        return status
 
 
 def main(args: Sequence[str] | None = None) -> int:
