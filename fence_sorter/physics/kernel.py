@@ -86,7 +86,8 @@ R_TIP_W = 9  # tip deflection [m]
 R_MAX_W = 10  # largest nodal |w| [m]
 R_ENERGY_CONTACT = 11  # potential of the k_p D^4 springs, sum k D^5 / 5 [J]
 R_ACTIVE_MASK = 12  # bit k set: slot k carries a force
-N_RES = 13
+R_ITERATIONS = 13  # contact iterations the step that produced this point took
+N_RES = 14
 
 
 def pack(
@@ -247,39 +248,71 @@ def _fence_friction(n, slide, applied_t, mu, v_min):
 
 
 @njit(cache=True)
+def _clip_force(f_cap, ax, ay):
+    """The friction force that cancels the applied force (ax, ay), at most f_cap long."""
+    p = math.hypot(ax, ay)
+    if f_cap >= p:
+        return -ax, -ay
+    return -f_cap * ax / p, -f_cap * ay / p
+
+
+@njit(cache=True)
 def stick_wrench(P, ax, ay, am):
-    """Karnopp's stick branch of (34)-(36): cancel the applied wrench up to F_max, T_max."""
+    """Karnopp's stick branch of (34)-(36): cancel the applied wrench (ax, ay, am) inside the
+    same elliptic limit surface (F/F_max)^2 + (T/T_max)^2 <= 1 the slip branch lies on; an
+    applied wrench outside it is scaled radially onto it."""
     f_max = P[P_FMAX]
     t_max = P[P_TMAX]
-    p = math.hypot(ax, ay)
-    if f_max >= p:
-        fx, fy = -ax, -ay
-    else:
-        fx, fy = -f_max * ax / p, -f_max * ay / p
-    if t_max >= abs(am):
-        tz = -am
-    else:
-        tz = -math.copysign(t_max, am)
-    return fx, fy, tz
+    q = 0.0
+    if f_max > 0.0:
+        q += (ax * ax + ay * ay) / (f_max * f_max)
+    elif ax != 0.0 or ay != 0.0:
+        q = math.inf
+    if t_max > 0.0:
+        q += am * am / (t_max * t_max)
+    elif am != 0.0:
+        q = math.inf
+    if q <= 1.0:
+        return -ax, -ay, -am
+    if math.isinf(q):
+        fx, fy = _clip_force(f_max, ax, ay)
+        tz = -math.copysign(min(t_max, abs(am)), am)
+        return fx, fy, tz
+    k = 1.0 / math.sqrt(q)
+    return -k * ax, -k * ay, -k * am
 
 
 @njit(cache=True)
 def karnopp_belt(P, ux, uy, spin, ax, ay, am):
-    """Belt friction (34)-(36) in the explicit Karnopp form (elliptic limit surface)."""
+    """Belt friction (34)-(36) in the explicit Karnopp form on the elliptic limit surface.
+
+    Slip (|u| > v_min or |phidot| > phidot_min): the maximum-dissipation wrench on the ellipse,
+    F = -F_max^2 u / n, T = -T_max^2 phidot / n with n = |(F_max |u|, T_max phidot)|. A component
+    inside its window sticks: both -> ``stick_wrench``; one -> it cancels its applied part up to
+    what the ellipse leaves beside the sliding one, so explicit and implicit (``implicit_belt``)
+    friction bound the same set of wrenches.
+    """
     f_max = P[P_FMAX]
     t_max = P[P_TMAX]
     v_o = math.hypot(ux, uy)
     norm = math.hypot(f_max * v_o, t_max * spin)
-    sx, sy, sz = stick_wrench(P, ax, ay, am)
-    if v_o > P[P_VMIN]:
-        k = f_max * f_max / norm if norm > 0.0 else 0.0
+    slide_t = v_o > P[P_VMIN]
+    slide_r = abs(spin) > P[P_PHIDOT_MIN]
+    if not slide_t and not slide_r:
+        return stick_wrench(P, ax, ay, am)
+    fx = fy = tz = 0.0
+    if slide_t and norm > 0.0:
+        k = f_max * f_max / norm
         fx, fy = -k * ux, -k * uy
-    else:
-        fx, fy = sx, sy
-    if abs(spin) > P[P_PHIDOT_MIN]:
-        tz = -t_max * t_max * spin / norm if norm > 0.0 else 0.0
-    else:
-        tz = sz
+    if slide_r and norm > 0.0:
+        tz = -t_max * t_max * spin / norm
+    if not slide_t:
+        share = tz / t_max if t_max > 0.0 else 0.0
+        fx, fy = _clip_force(f_max * math.sqrt(max(0.0, 1.0 - share * share)), ax, ay)
+    elif not slide_r:
+        share = math.hypot(fx, fy) / f_max if f_max > 0.0 else 0.0
+        cap = t_max * math.sqrt(max(0.0, 1.0 - share * share))
+        tz = -math.copysign(min(cap, abs(am)), am)
     return fx, fy, tz
 
 
@@ -723,7 +756,26 @@ def trapezoidal_step(
     stuck = False
     lam1[0] = lam1[1] = lam1[2] = 0.0
     converged = False
+    iterations = 0
+    # Anderson acceleration (depth 1) of the fixed point x = G(x) on (q, v, eta, etadot): the
+    # contact couples the load to the fence's modal deflection so tightly that the plain
+    # iteration contracts slowly (often > 10 iterations per step on a flexible fence)
+    n = 6 + 2 * m
+    wts = np.empty(n)
+    for k in range(3):
+        wts[k] = 1.0
+        wts[3 + k] = h
+    for j in range(m):
+        wts[6 + j] = phi_scale
+        wts[6 + m + j] = h * phi_scale
+    g_new = np.empty(n)
+    g_old = np.empty(n)
+    f_old = np.empty(n)
+    have_old = False
+    accelerate = True
+    fn_old = 0.0
     for _ in range(max_iter):
+        iterations += 1
         evaluate(
             P,
             corners,
@@ -767,16 +819,38 @@ def trapezoidal_step(
         err = abs(q0 - y1[0]) + h * abs(vi0 - y1[3])
         err = max(err, abs(q1 - y1[1]) + h * abs(vi1 - y1[4]))
         err = max(err, abs(q2 - y1[2]) + h * abs(vi2 - y1[5]))
+        g_new[0], g_new[1], g_new[2], g_new[3], g_new[4], g_new[5] = q0, q1, q2, vi0, vi1, vi2
         for j in range(m):
             z0 = base[j, 0] + g1[j, 0] * modal1[j]
-            z1 = base[j, 1] + g1[j, 1] * modal1[j]
+            g_new[6 + j] = z0
+            g_new[6 + m + j] = base[j, 1] + g1[j, 1] * modal1[j]
             err = max(err, abs(z0 - y1[6 + j]) * phi_scale)
-            y1[6 + j] = z0
-            y1[6 + m + j] = z1
-        y1[0], y1[1], y1[2], y1[3], y1[4], y1[5] = q0, q1, q2, vi0, vi1, vi2
         if err <= tol:
+            for k in range(n):
+                y1[k] = g_new[k]
             converged = True
             break
+        # secant step on the scaled residual f = G(x) - x; a residual that grows (a friction
+        # or contact switch inside the iteration: G is not smooth there) turns it off
+        num = 0.0
+        den = 0.0
+        fn = 0.0
+        for k in range(n):
+            fk = (g_new[k] - y1[k]) * wts[k]
+            fn += fk * fk
+            if have_old:
+                dfk = fk - f_old[k]
+                num += dfk * fk
+                den += dfk * dfk
+        if have_old and fn > fn_old:
+            accelerate = False
+        fn_old = fn
+        gamma = num / den if accelerate and den > 0.0 else 0.0
+        for k in range(n):
+            f_old[k] = (g_new[k] - y1[k]) * wts[k]
+            y1[k] = g_new[k] - gamma * (g_new[k] - g_old[k]) if have_old else g_new[k]
+            g_old[k] = g_new[k]
+        have_old = True
     if not converged and not force:
         return STEP_REJECTED
     evaluate(
@@ -801,6 +875,7 @@ def trapezoidal_step(
     _unring_stick(P, phi, out0, out, res, modal1, y1[0], y1[1])
     if stuck:
         lam1[0], lam1[1], lam1[2] = stick_wrench(P, res[R_FX], res[R_FY], res[R_MZ])
+    res[R_ITERATIONS] = iterations
     return STEP_OK if converged else STEP_FORCED
 
 
@@ -1190,6 +1265,30 @@ def modal_propagators(omega, zeta, h, a_out, g0_out, g1_out):
             a_out[j, r, 1] = e[r, 1]
             g0_out[j, r] = e[r, 2] - e[r, 3] / h
             g1_out[j, r] = e[r, 3] / h
+
+
+@njit(cache=True)
+def milne_error(y0, acc0, y1, prev_v, prev_a, r, h, atol, rtol, v_ref, om_ref):
+    """Scaled local error of a trapezoidal step y0 -> y1 on the load's state: Milne's device
+    (see ``integrators._local_error``), corrector minus variable-step AB2 (r > 0) or Euler
+    (r = 0) predictor, each component over atol + rtol * its block magnitude."""
+    if r > 0.0:
+        c1, c2 = 1.0 + 0.5 * r, 0.5 * r
+        fac = r / (3.0 * (r + 1.0))
+    else:
+        c1, c2, fac = 1.0, 0.0, 1.0
+    pos = atol + rtol * max(math.hypot(y1[0], y1[1]), 1.0)
+    ang = atol + rtol * max(abs(y1[2]), 1.0)
+    vel = atol + rtol * max(math.hypot(y1[3], y1[4]), v_ref)
+    rot = atol + rtol * max(abs(y1[5]), om_ref)
+    err = 0.0
+    for k in range(3):
+        sq = ang if k == 2 else pos
+        sv = rot if k == 2 else vel
+        qp = y0[k] + h * (c1 * y0[3 + k] - c2 * prev_v[k])
+        vp = y0[3 + k] + h * (c1 * acc0[k] - c2 * prev_a[k])
+        err = max(err, abs(y1[k] - qp) / sq, abs(y1[3 + k] - vp) / sv)
+    return fac * err
 
 
 @njit(cache=True)

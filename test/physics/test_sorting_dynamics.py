@@ -107,13 +107,28 @@ def test_rigid_model_gives_the_same_answer_as_a_very_stiff_flexible_fence():
     assert flex.impact_normal_speed == pytest.approx(rigid.impact_normal_speed, rel=1e-3)
 
 
-def test_a_diverging_solve_is_reported_not_returned_as_data():
+@pytest.mark.parametrize(
+    ("contact", "solver", "cause"),
+    [
+        # a contact 6e6 times stiffer than the paper's with the iteration capped at 2: it
+        # cannot converge at any step the 5 ms grid can halve to before min_dt = 1 ms
+        (
+            ContactParams(k_p=1.72e16, b_p=0.0),
+            {"method": "trapezoidal", "dt": 5e-3, "min_dt": 1e-3, "max_iterations": 2},
+            "min_dt",
+        ),
+        # a contact 1e6 times softer: the load sinks through the fence
+        (ContactParams(k_p=1.72e3, b_p=0.0), {}, "deep penetration"),
+    ],
+)
+def test_a_diverging_solve_is_reported_not_returned_as_data(contact, solver, cause):
     absurd = replace(
         IMPACT,
-        contact=ContactParams(k_p=1.72e17, b_p=0.0),
-        solver=replace(IMPACT.solver, method="trapezoidal", dt=5e-3, min_dt=1e-4),
-        record=(),
+        contact=contact,
+        solver=replace(IMPACT.solver, **solver),
+        record=("trajectory",),
     )
     r = simulate(absurd)
     assert not r.success and not r.sorted
-    assert r.diagnosis and "solver failure" in r.reason
+    assert r.diagnosis and cause in r.diagnosis
+    assert "solver failure" in r.reason
