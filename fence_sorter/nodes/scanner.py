@@ -72,6 +72,14 @@ class ScannerNode(FenceSorterNode):
             "duration", 0.0, "Inject parcels arriving within [s]; 0: use parcels", True, 0.0, 1e6
         ),
         ParamSpec("start_delay", 0.5, "Sim time before the first parcel [s]", True, 0.0, 1e4),
+        ParamSpec(
+            "wait_for_subscribers",
+            0,
+            "Start the stream only once /parcels has this many subscribers",
+            True,
+            0,
+            100,
+        ),
         ParamSpec("tick_period", 0.005, "Sim-time period of the scan check [s]", True, 1e-4, 1.0),
     )
 
@@ -104,6 +112,7 @@ class ScannerNode(FenceSorterNode):
         )
         self.scan_x = float(p["scan_line_x"])
         self.start_delay = float(p["start_delay"])
+        self.wait_for_subscribers = int(p["wait_for_subscribers"])
         self.frame_id = p["frame_id"]
         self.t0: float | None = None
         self.next_index = 0
@@ -122,6 +131,8 @@ class ScannerNode(FenceSorterNode):
         if now <= 0.0:
             return
         if self.t0 is None:
+            if self._pub.get_subscription_count() < self.wait_for_subscribers:
+                return
             self.t0 = now + self.start_delay
         end = due(self.stream, self.next_index, self.t0, now)
         for spec in self.stream[self.next_index : end]:

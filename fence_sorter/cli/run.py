@@ -1,0 +1,99 @@
+"""``fence-sorter run``: the node suite (simulator, scanner, controller, recorder with --bag)
+as separate processes on an isolated ROS domain; stops when every parcel has its outcome or on
+Ctrl-C, then prints a summary.
+
+Exit codes: 0 a clean run, 1 a node failed or the run timed out, 2 bad input (one line naming
+the option and its range), 130 interrupted. ``--rrd`` is not available yet (issue 6): exit 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "run",
+        help="run the node suite on a parcel stream and print a summary",
+        description="Start simulator, scanner and controller (and the recorder with --bag) as "
+        "separate processes on an isolated ROS domain, run the stream, stop cleanly, summarise.",
+    )
+    parser.add_argument("--scene", default="impact_flexible", help="scene file or name")
+    amount = parser.add_mutually_exclusive_group()
+    amount.add_argument("--parcels", type=int, help="parcels to inject (default 20)")
+    amount.add_argument("--duration", type=float, help="inject the parcels arriving within S s")
+    parser.add_argument(
+        "--rtf", type=float, default=1.0, help="real-time factor (0: as fast as it can)"
+    )
+    parser.add_argument("--bag", metavar="DIR", help="record the run (rosbag2 MCAP) into DIR")
+    parser.add_argument("--rrd", metavar="FILE", help="Rerun recording (not yet available)")
+    parser.add_argument(
+        "--stream", default="default", help="stream config (YAML) or CSV manifest, or a name"
+    )
+    parser.add_argument("--seed", type=int, help="seed of a random stream (default: the file's)")
+    parser.add_argument(
+        "--timeout", type=float, help="wall-time limit [s] (default: from the stream)"
+    )
+    parser.add_argument("--log-dir", help="node logs (default: a new temporary directory)")
+    parser.add_argument(
+        "--param",
+        dest="params",
+        action="append",
+        default=[],
+        metavar="NODE:KEY=VALUE",
+        help="node parameter override, e.g. controller:max_evaluations=5 (repeatable)",
+    )
+    parser.add_argument("--json", action="store_true", help="print the summary as JSON")
+    parser.set_defaults(func=run)
+
+
+def _clean(value):
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {str(k): _clean(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_clean(v) for v in value]
+    return value
+
+
+def run(args: argparse.Namespace) -> int:
+    from fence_sorter.runner.job import BadInput, RunOptions, run_job
+    from fence_sorter.runner.summary import format_summary
+
+    if args.rrd:
+        print(
+            "fence-sorter: error: --rrd: Rerun recording is not yet available (issue 6)",
+            file=sys.stderr,
+        )
+        return 2
+    opts = RunOptions(
+        scene=args.scene,
+        parcels=args.parcels,
+        duration=args.duration,
+        rtf=args.rtf,
+        bag=args.bag,
+        stream=args.stream,
+        seed=args.seed,
+        timeout=args.timeout,
+        log_dir=args.log_dir,
+        params=args.params,
+    )
+    say = (lambda s: print(s, file=sys.stderr)) if args.json else print
+    try:
+        result = run_job(opts, say=say)
+    except BadInput as exc:
+        print(f"fence-sorter: error: {exc}", file=sys.stderr)
+        return 2
+    if args.json:
+        print(
+            json.dumps(_clean({**result.summary, "exit": result.code, "message": result.message}))
+        )
+    else:
+        print(format_summary(result.summary))
+    if result.code != 0:
+        print(f"fence-sorter run: {result.message} (logs: {result.log_dir})", file=sys.stderr)
+    return result.code

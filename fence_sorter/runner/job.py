@@ -1,0 +1,299 @@
+"""`fence-sorter run` end to end: validate the input, start the nodes as separate processes on
+an isolated ROS domain, watch the run until every parcel has its outcome, stop cleanly, sum up.
+"""
+
+from __future__ import annotations
+
+import math
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from fence_sorter.physics.params import ParameterError
+from fence_sorter.runner.processes import (
+    ProcessGroup,
+    leftovers,
+    node_command,
+    node_env,
+    run_domain_id,
+    wait_until,
+)
+from fence_sorter.runner.summary import summarise
+
+REPO_CONFIG = Path(__file__).resolve().parents[2] / "config"
+DEFAULT_SCENE = "impact_flexible"
+DEFAULT_STREAM = "default"
+DEFAULT_PARCELS = 20
+SCAN_LINE_X = -3.0
+START_DELAY = 0.5
+#: sim time a parcel needs after its scan to leave the line (line end ~3 m) plus margin [s]
+LINE_END_X = 3.0
+STOP_ORDER = ("scanner", "controller", "simulator", "recorder")
+
+EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+
+
+class BadInput(ValueError):
+    """Bad command-line input: one line, exit status 2."""
+
+
+@dataclass
+class RunOptions:
+    scene: str = DEFAULT_SCENE
+    parcels: int | None = None
+    duration: float | None = None
+    rtf: float = 1.0
+    bag: str | None = None
+    stream: str = DEFAULT_STREAM
+    seed: int | None = None
+    timeout: float | None = None
+    log_dir: str | None = None
+    heartbeat_period: float = 1.0
+    params: list[str] = field(default_factory=list)  # NODE:KEY=VALUE
+
+
+@dataclass
+class RunResult:
+    code: int
+    summary: dict
+    message: str
+    log_dir: Path
+    pgids: list[int]
+    leftovers: list[int]
+    exit_codes: dict[str, int | None]
+    records: object = None
+
+
+@dataclass
+class Plan:
+    """What the job will run (validated input)."""
+
+    scene_path: Path
+    belt_speed: float
+    belt_width: float
+    stream_path: Path
+    expected_ids: list[int]
+    sim_duration: float  # expected sim time until the last parcel leaves the line [s]
+    node_params: dict[str, list[str]]
+
+
+def prepare(opts: RunOptions) -> Plan:
+    """Check every input before anything starts; BadInput names the option and the range."""
+    from fence_sorter.scene import load_scene, resolve_scene
+    from fence_sorter.stream import load_stream, resolve_stream
+
+    if opts.parcels is not None and opts.parcels < 1:
+        raise BadInput(f"--parcels must be in [1, inf), got {opts.parcels}")
+    if opts.duration is not None and not opts.duration > 0:
+        raise BadInput(f"--duration must be in (0, inf) s, got {opts.duration}")
+    if not (math.isfinite(opts.rtf) and 0.0 <= opts.rtf <= 100.0):
+        raise BadInput(f"--rtf must be in [0, 100] (0: unpaced), got {opts.rtf}")
+    if opts.seed is not None and opts.seed < 0:
+        raise BadInput(f"--seed must be in [0, inf), got {opts.seed}")
+    try:
+        scene_path = resolve_scene(opts.scene).resolve()
+        base = load_scene(scene_path).scenario
+    except (ParameterError, OSError) as exc:
+        raise BadInput(str(exc)) from None
+    v, width = base.conveyor.belt_speed, base.conveyor.width
+    count = opts.parcels if opts.parcels is not None or opts.duration is not None else None
+    if count is None and opts.duration is None:
+        count = DEFAULT_PARCELS
+    try:
+        stream_path = resolve_stream(opts.stream).resolve()
+        stream = load_stream(
+            stream_path, v, count=count, duration=opts.duration, seed=opts.seed, belt_width=width
+        )
+    except (ParameterError, OSError) as exc:
+        raise BadInput(str(exc)) from None
+    if not stream:
+        raise BadInput(f"stream {stream_path}: no parcels within the requested count/duration")
+    node_params: dict[str, list[str]] = {}
+    for item in opts.params:
+        node, sep, kv = item.partition(":")
+        if not sep or "=" not in kv or node not in STOP_ORDER:
+            raise BadInput(
+                f"--param {item!r} must be NODE:KEY=VALUE with NODE one of {', '.join(STOP_ORDER)}"
+            )
+        key, _, value = kv.partition("=")
+        node_params.setdefault(node, []).append(f"{key}:={value}")
+    sim_duration = START_DELAY + stream[-1].arrival_time + (LINE_END_X - SCAN_LINE_X) / v + 5.0
+    return Plan(
+        scene_path,
+        v,
+        width,
+        stream_path,
+        [s.parcel_id for s in stream],
+        sim_duration,
+        node_params,
+    )
+
+
+def _ros_args(node: str, plan: Plan, opts: RunOptions, extra: list[str]) -> list[str]:
+    args: list[str] = []
+    params_file = REPO_CONFIG / f"{node}.yaml"
+    if params_file.is_file():
+        args += ["--params-file", str(params_file)]
+    overrides = [f"heartbeat_period:={opts.heartbeat_period}", *extra]
+    overrides += plan.node_params.get(node, [])
+    for o in overrides:
+        args += ["-p", o]
+    return args
+
+
+def run_job(opts: RunOptions, say: Callable[[str], None] = print) -> RunResult:
+    """Run the suite once; never leaves a node process behind."""
+    plan = prepare(opts)
+    domain = run_domain_id()
+    log_dir = Path(opts.log_dir or tempfile.mkdtemp(prefix="fence_sorter_run_"))
+    log_dir.mkdir(parents=True, exist_ok=True)
+    env = node_env(domain, log_dir / "ros")
+    group = ProcessGroup(env, log_dir)
+    from fence_sorter.runner.monitor import Monitor
+
+    monitor = Monitor(domain)
+    code, message = EXIT_OK, "done"
+    count = len(plan.expected_ids)
+    scene = f"scene:={plan.scene_path}"
+    say(
+        f"fence-sorter run: {count} parcels from {plan.stream_path.name}, scene "
+        f"{plan.scene_path.stem}, rtf {opts.rtf:g}, ROS domain {domain}, logs {log_dir}"
+    )
+    wall0 = time.monotonic()
+    try:
+        group.start(
+            "controller",
+            node_command(
+                "controller",
+                _ros_args(
+                    "controller",
+                    plan,
+                    opts,
+                    [scene, "use_sim_time:=true", f"warmup_stream:={plan.stream_path}"],
+                ),
+            ),
+        )
+        subscribers = 3  # simulator, controller, this monitor
+        if opts.bag:
+            Path(opts.bag).mkdir(parents=True, exist_ok=True)
+            group.start(
+                "recorder",
+                node_command(
+                    "recorder",
+                    _ros_args("recorder", plan, opts, [f"output_dir:={Path(opts.bag).resolve()}"]),
+                ),
+            )
+            subscribers += 1
+        _wait_for(monitor, group, "controller", 120.0)
+        group.start(
+            "simulator",
+            node_command(
+                "simulator",
+                _ros_args("simulator", plan, opts, [scene, f"real_time_factor:={opts.rtf}"]),
+            ),
+        )
+        _wait_for(monitor, group, "simulator", 60.0)
+        scanner_args = [
+            scene,
+            "use_sim_time:=true",
+            f"stream:={plan.stream_path}",
+            f"scan_line_x:={SCAN_LINE_X}",
+            f"start_delay:={START_DELAY}",
+            f"wait_for_subscribers:={subscribers}",
+        ]
+        if opts.parcels is not None or opts.duration is None:
+            scanner_args.append(f"parcels:={count}")
+        if opts.duration is not None:
+            scanner_args.append(f"duration:={opts.duration}")
+        if opts.seed is not None:
+            scanner_args.append(f"seed:={opts.seed}")
+        group.start(
+            "scanner", node_command("scanner", _ros_args("scanner", plan, opts, scanner_args))
+        )
+        say(f"nodes up in {time.monotonic() - wall0:.1f} s; running")
+        timeout = opts.timeout or 120.0 + 3.0 * plan.sim_duration / max(opts.rtf, 1.0)
+        deadline = time.monotonic() + timeout
+        expected = set(plan.expected_ids)
+        sim_start = None
+        while True:
+            monitor.spin_for(0.1)
+            rec = monitor.records
+            if expected <= rec.outcomes.keys():
+                break
+            dead = group.dead()
+            if dead:
+                n = dead[0]
+                code, message = (
+                    EXIT_FAILED,
+                    (
+                        f"node {n.name} exited with status {n.proc.returncode}; "
+                        f"log tail:\n{n.tail()}"
+                    ),
+                )
+                break
+            if sim_start is None and rec.sim_time > 0:
+                sim_start = rec.sim_time
+            if sim_start is not None and rec.sim_time - sim_start > plan.sim_duration + 30.0:
+                code, message = (
+                    EXIT_FAILED,
+                    (
+                        f"sim time {rec.sim_time:.1f} s is past the stream's end and "
+                        f"{len(expected - rec.outcomes.keys())} parcels have no outcome"
+                    ),
+                )
+                break
+            if time.monotonic() > deadline:
+                code, message = (
+                    EXIT_FAILED,
+                    (
+                        f"timeout after {timeout:.0f} s: "
+                        f"{len(expected - rec.outcomes.keys())} parcels have no outcome"
+                    ),
+                )
+                break
+        # one more heartbeat round for the final counters
+        monitor.spin_for(opts.heartbeat_period + 0.3)
+    except KeyboardInterrupt:
+        code, message = EXIT_INTERRUPTED, "interrupted (Ctrl-C)"
+    except _StartFailure as exc:
+        code, message = EXIT_FAILED, str(exc)
+    finally:
+        exit_codes = group.stop(STOP_ORDER)
+        left = leftovers(group.pgids)
+        summary = summarise(monitor.records, plan.belt_speed, plan.expected_ids)
+        monitor.close()
+    bad_exit = {n: c for n, c in exit_codes.items() if c not in (0, None)}
+    if code == EXIT_OK and bad_exit:
+        code, message = EXIT_FAILED, f"nodes did not exit cleanly: {bad_exit}"
+    if left:
+        code, message = EXIT_FAILED, f"processes left behind: {left}"
+    summary["wall_time_s"] = time.monotonic() - wall0
+    summary["exit_codes"] = exit_codes
+    summary["log_dir"] = str(log_dir)
+    return RunResult(
+        code, summary, message, log_dir, list(group.pgids), left, exit_codes, monitor.records
+    )
+
+
+class _StartFailure(RuntimeError):
+    pass
+
+
+def _wait_for(monitor, group: ProcessGroup, node: str, timeout: float) -> None:
+    """Wait for the first heartbeat of ``node`` (it is spinning, so it is ready)."""
+
+    def ready() -> bool:
+        monitor.spin_for(0.05)
+        return monitor.node_diag(node) is not None or group.nodes[node].proc.poll() is not None
+
+    wait_until(ready, timeout, step=0.0)
+    proc = group.nodes[node]
+    if proc.proc.poll() is not None:
+        raise _StartFailure(
+            f"node {node} exited with status {proc.proc.returncode} at start; log tail:\n"
+            f"{proc.tail()}"
+        )
+    if monitor.node_diag(node) is None:
+        raise _StartFailure(f"node {node} sent no heartbeat within {timeout:.0f} s")

@@ -1,0 +1,165 @@
+"""The run's own rclpy node: listens to /parcels, /fence_commands, /sort_outcomes, /diagnostics
+and /clock, and keeps plain records for :mod:`fence_sorter.runner.summary`."""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass, field
+
+REASON_NAMES = {
+    0: "SORTED",
+    1: "NOT_DIVERTED",
+    2: "NO_FEASIBLE_COMMAND",
+    3: "NO_COMMAND",
+    4: "MISSED",
+    5: "REJECTED",
+    6: "SOLVER_FAILURE",
+}
+
+
+def stamp_sec(stamp) -> float:
+    return stamp.sec + 1e-9 * stamp.nanosec
+
+
+@dataclass
+class Records:
+    """What the monitor saw (plain data, no messages)."""
+
+    sim_time: float = 0.0
+    parcels: dict[int, dict] = field(default_factory=dict)
+    parcel_messages: int = 0
+    commands: dict[int, dict] = field(default_factory=dict)
+    command_messages: int = 0
+    outcomes: dict[int, dict] = field(default_factory=dict)
+    outcome_messages: int = 0
+    diagnostics: dict[str, dict[str, str]] = field(default_factory=dict)
+    diagnostics_history: dict[str, list[dict[str, str]]] = field(default_factory=dict)
+
+
+class Monitor:
+    """An rclpy context and node of its own (no signal handlers: the job handles Ctrl-C)."""
+
+    def __init__(self, domain_id: int, name: str = "fence_sorter_run"):
+        import rclpy
+        from diagnostic_msgs.msg import DiagnosticArray
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.qos import QoSProfile, ReliabilityPolicy
+        from rclpy.signals import SignalHandlerOptions
+        from rosgraph_msgs.msg import Clock
+
+        from fence_sorter.nodes.qos import RELIABLE_QOS
+        from fence_sorter_msgs.msg import FenceCommand, Parcel, SortOutcome
+
+        os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+        self.rclpy = rclpy
+        self.context = rclpy.Context()
+        rclpy.init(
+            context=self.context,
+            domain_id=domain_id,
+            signal_handler_options=SignalHandlerOptions.NO,
+        )
+        self.node = rclpy.create_node(name, context=self.context)
+        self.records = Records()
+        n = self.node
+        n.create_subscription(Parcel, "/parcels", self._on_parcel, RELIABLE_QOS)
+        n.create_subscription(FenceCommand, "/fence_commands", self._on_command, RELIABLE_QOS)
+        n.create_subscription(SortOutcome, "/sort_outcomes", self._on_outcome, RELIABLE_QOS)
+        n.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, RELIABLE_QOS)
+        n.create_subscription(
+            Clock,
+            "/clock",
+            self._on_clock,
+            QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT),
+        )
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    # -- callbacks (record only) -----------------------------------------------------------
+    def _on_clock(self, msg) -> None:
+        self.records.sim_time = stamp_sec(msg.clock)
+
+    def _on_parcel(self, msg) -> None:
+        r = self.records
+        r.parcel_messages += 1
+        r.parcels.setdefault(
+            int(msg.parcel_id),
+            {
+                "scan_time": stamp_sec(msg.scan_time),
+                "scan_position_x": msg.scan_position_x,
+                "divert": bool(msg.divert),
+                "length_a": msg.length_a,
+                "mass": msg.mass,
+                "wall": time.monotonic(),
+            },
+        )
+
+    def _on_command(self, msg) -> None:
+        r = self.records
+        r.command_messages += 1
+        r.commands.setdefault(
+            int(msg.parcel_id),
+            {
+                "feasible": bool(msg.feasible),
+                "reason": msg.reason,
+                "r_s": msg.r_s,
+                "t1": msg.t1,
+                "alpha_k": msg.alpha_k,
+                "stamp": stamp_sec(msg.header.stamp),
+                "received_sim": r.sim_time,
+                "wall": time.monotonic(),
+                "predicted_capacity_pcs_h": msg.predicted_capacity_pcs_h,
+                "predicted_peak_accel": msg.predicted_peak_accel,
+            },
+        )
+
+    def _on_outcome(self, msg) -> None:
+        r = self.records
+        r.outcome_messages += 1
+        r.outcomes.setdefault(
+            int(msg.parcel_id),
+            {
+                "sorted": bool(msg.sorted),
+                "reason": msg.reason,
+                "reason_code": int(msg.reason_code),
+                "reason_name": REASON_NAMES.get(int(msg.reason_code), str(msg.reason_code)),
+                "time": stamp_sec(msg.header.stamp),
+                "peak_normal_force": msg.peak_normal_force,
+                "peak_normal_force_stiff": msg.peak_normal_force_stiff,
+                "peak_normal_accel": msg.peak_normal_accel,
+                "impact_normal_speed": msg.impact_normal_speed,
+                "exit_speed_y": msg.exit_speed_y,
+            },
+        )
+
+    def _on_diag(self, msg) -> None:
+        r = self.records
+        for status in msg.status:
+            values = {kv.key: kv.value for kv in status.values}
+            values["_message"] = status.message
+            values["_level"] = (
+                str(int.from_bytes(status.level, "little"))
+                if isinstance(status.level, bytes)
+                else str(status.level)
+            )
+            r.diagnostics[status.name] = values
+            r.diagnostics_history.setdefault(status.name, []).append(values)
+
+    # -- driving ---------------------------------------------------------------------------
+    def spin_for(self, seconds: float) -> None:
+        end = time.monotonic() + seconds
+        while True:
+            left = end - time.monotonic()
+            if left <= 0:
+                break
+            self.executor.spin_once(timeout_sec=min(left, 0.05))
+
+    def node_diag(self, node: str) -> dict[str, str] | None:
+        return self.records.diagnostics.get(f"fence_sorter/{node}")
+
+    def close(self) -> None:
+        try:
+            self.executor.shutdown()
+            self.node.destroy_node()
+        finally:
+            self.rclpy.try_shutdown(context=self.context)
