@@ -23,10 +23,10 @@ from fence_sorter.physics.simulate import Scenario, SimulationResult, simulate
 
 DEFAULT_PROFILE = ConstraintProfile()
 
-#: Solver settings for planning: looser than the scene's (peak figures agree within ~1 %,
+#: Solver settings for planning: looser than the scenes' (peak figures agree within ~3 %,
 #: see test/capacity), several times faster.
-PLANNING_RTOL = 1e-3
-PLANNING_DT_MAX = 1e-2
+PLANNING_RTOL = 3e-4
+PLANNING_DT_MAX = 2e-2
 PLANNING_SETTLE = 0.3
 
 

@@ -2,10 +2,11 @@
 
 Candidates (R_s, t1) from the ranges (3) and (5) are ordered once by W_t (1) (t_z ascending,
 then the gentler stroke first). For a load, the candidates its timing admits (the load front
-must still be upstream of R_s when the command is out, the fence must be free) are searched
-by galloping then bisection (feasibility assumed to grow along the order): few evaluations on
-the twin, and the answer is always an evaluated, feasible stroke, or a reason naming the
-constraint. Evaluations are cached per quantised load class.
+must still be upstream of R_s when the command is out, the fence must be free) are tried in
+W_t order for half the evaluation budget, then on an even spread over the rest (feasibility is
+not monotone along the order), stopping at the first feasible one: the answer is always an
+evaluated, feasible stroke, or a reason naming the violated constraint. Evaluations are
+cached per quantised load class.
 """
 
 from __future__ import annotations
@@ -25,6 +26,13 @@ from fence_sorter.capacity.evaluate import StrokeEvaluation, evaluate_stroke, pl
 from fence_sorter.capacity.formulas import scraping_time
 from fence_sorter.physics.params import ParameterError, ParcelParams, check_range
 from fence_sorter.physics.simulate import Scenario
+
+#: a candidate feasible for fewer than HOPELESS_RATE of the (at least HOPELESS_AFTER) load
+#: classes it was tried on is moved behind the others
+HOPELESS_AFTER = 3
+HOPELESS_RATE = 0.5
+#: evaluations per load class during the warm-up (it also learns which candidates never work)
+WARMUP_BUDGET = 30
 
 
 @dataclass(frozen=True)
@@ -180,6 +188,8 @@ class Planner:
         self.busy_until = -math.inf
         self.evaluations = 0
         self.cache_hits = 0
+        # per candidate: [evaluations, feasible ones] over all load classes so far
+        self.record: dict[tuple[float, float], list[int]] = {}
 
     # -- load classes ----------------------------------------------------------------------
     def quantise(self, req: LoadRequest) -> tuple[tuple, ParcelParams, float, float]:
@@ -241,7 +251,16 @@ class Planner:
         )
         self.evaluations += 1
         self.cache[full] = ev
+        rec = self.record.setdefault(cand, [0, 0])
+        rec[0] += 1
+        rec[1] += int(ev.feasible)
         return ev, False
+
+    def hopeless(self, cand: tuple[float, float]) -> bool:
+        """A candidate that failed for most load classes it was tried on (at least
+        HOPELESS_AFTER of them): tried after the others."""
+        n, ok = self.record.get(cand, (0, 0))
+        return n >= HOPELESS_AFTER and ok < HOPELESS_RATE * n
 
     def admissible(self, req: LoadRequest, now: float) -> list[tuple[float, float]]:
         """Candidates the load's timing and the fence-busy window admit, best W_t first.
@@ -262,17 +281,24 @@ class Planner:
             out.append((r_s, t1))
         return out
 
-    def plan(self, req: LoadRequest, now: float, *, commit: bool = True) -> Plan:
-        """Plan one load at sim time ``now``; with ``commit`` a feasible stroke books the fence."""
+    def plan(
+        self, req: LoadRequest, now: float, *, commit: bool = True, budget: int | None = None
+    ) -> Plan:
+        """Plan one load at sim time ``now``; with ``commit`` a feasible stroke books the fence.
+
+        Candidates that failed for most load classes seen so far go behind the others
+        (:meth:`hopeless`); the warm-up teaches the planner which ones.
+        """
         wall0 = time.perf_counter()
         key, rep, mu1, mu2 = self.quantise(req)
         cands = self.admissible(req, now)
+        cands = [c for c in cands if not self.hopeless(c)] + [c for c in cands if self.hopeless(c)]
         plan = Plan(req.parcel_id, False, None, math.nan, math.nan, "", admissible=len(cands))
         if not cands:
             plan.reason = self._no_candidate_reason(req, now)
             plan.wall_time = time.perf_counter() - wall0
             return plan
-        budget = self.config.max_evaluations
+        budget = self.config.max_evaluations if budget is None else budget
         results: dict[int, StrokeEvaluation] = {}
 
         def probe(i: int) -> StrokeEvaluation | None:
@@ -289,31 +315,30 @@ class Planner:
             plan.tried.append(ev)
             return ev
 
-        # galloping: 0, 1, 3, 7, ... then the last one; then bisection back to the first
-        # feasible index (feasibility assumed to grow along the order)
-        lo, hi, step, i = -1, None, 1, 0
-        while i < len(cands):
+        # first in W_t order while half the budget lasts, then an even spread over the rest
+        # (feasibility is not monotone along the order: some R_s fail (8) for every t1)
+        hi = None
+        linear = max(1, budget // 2)
+        for i in range(min(linear, len(cands))):
             ev = probe(i)
-            if ev is None:
-                break
-            if ev.feasible:
+            if ev is not None and ev.feasible:
                 hi = i
                 break
-            lo, i, step = i, i + step, step * 2
-        if hi is None and lo < len(cands) - 1 and plan.evaluations < budget:
-            ev = probe(len(cands) - 1)
-            if ev is not None and ev.feasible:
-                hi = len(cands) - 1
-        if hi is not None:
-            while hi - lo > 1:
-                mid = (lo + hi) // 2
-                ev = probe(mid)
+        if hi is None and len(cands) > linear:
+            left = budget - plan.evaluations
+            rest = range(linear, len(cands))
+            n = max(1, left)
+            picks = sorted(
+                {rest[int(round(k * (len(rest) - 1) / max(n - 1, 1)))] for k in range(n)}
+            )
+            for i in picks:
+                ev = probe(i)
                 if ev is None:
                     break
                 if ev.feasible:
-                    hi = mid
-                else:
-                    lo = mid
+                    hi = i
+                    break
+        if hi is not None:
             best = results[hi]
             start = req.scan_time + (best.r_s - req.scan_position_x) / self.v
             plan.feasible = True
@@ -375,7 +400,7 @@ class Planner:
                 continue
             done.add(key)
             self.busy_until = -math.inf
-            self.plan(req, now=-math.inf, commit=False)
+            self.plan(req, now=-math.inf, commit=False, budget=WARMUP_BUDGET)
         self.busy_until = busy
         return len(done)
 
