@@ -57,6 +57,7 @@ class PlannerConfig:
     quantum_gap: float = 0.05  # [m] Delta_s
     quantum_yaw: float = math.radians(5.0)  # [rad]
     quantum_mu: float = 0.05
+    min_exit_speed: float = 0.3  # (8) counts only if C_s crosses y0 = s at least this fast [m/s]
 
     FLOAT_KEYS = {
         "alpha_k_deg": (1.0, 89.0, "deg"),
@@ -74,6 +75,7 @@ class PlannerConfig:
         "quantum_gap": (1e-4, 1.0, "m"),
         "quantum_yaw_deg": (1e-3, 90.0, "deg"),
         "quantum_mu": (1e-4, 1.0, ""),
+        "min_exit_speed": (0.0, 100.0, "m/s"),
         "w_dop": (1e-6, 100.0, "m/s"),
         "a_ndop": (1e-6, 1e5, "m/s^2"),
         "ydot_dop": (1e-6, 100.0, "m/s"),
@@ -250,11 +252,28 @@ class Planner:
             mu_fence=mu2,
         )
         self.evaluations += 1
+        ev = self._robust(ev)
         self.cache[full] = ev
         rec = self.record.setdefault(cand, [0, 0])
         rec[0] += 1
         rec[1] += int(ev.feasible)
         return ev, False
+
+    def _robust(self, ev: StrokeEvaluation) -> StrokeEvaluation:
+        """(8) with a reserve: a load that crawls over y0 = s slower than min_exit_speed would
+        miss the chute on a slightly softer fence (the line's flexible one), so it fails (8)."""
+        c = self.config
+        if not (ev.feasible and 8 in c.profile.active and ev.exit_speed < c.min_exit_speed):
+            return ev
+        return replace(
+            ev,
+            feasible=False,
+            violated=(8,),
+            diagnosis=(
+                f"(8) push-off marginal: C_s crosses y0 = s at {ev.exit_speed:.3g} m/s "
+                f"< min_exit_speed {c.min_exit_speed:g} m/s"
+            ),
+        )
 
     def hopeless(self, cand: tuple[float, float]) -> bool:
         """A candidate that failed for most load classes it was tried on (at least
