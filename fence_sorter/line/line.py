@@ -521,17 +521,24 @@ class SortingLine:
         running = [s for s in self.strokes if 0.0 <= self.t - s.t_start <= s.t_cycle]
         if not running:
             return
-        snaps = self._parcel_snapshots()
         for s in running:
             alpha_k = s.sc.drive.alpha_k
             own = s.parcel.spec.parcel_id
-            for snap in snaps:
-                pid = snap.parcel_id
+            for p in self.parcels.values():
+                pid = p.spec.parcel_id
                 if pid == own or pid in s.warned:
                     continue
-                if in_swept_sector(list(snap.corners), self.config.length, alpha_k):
+                if in_swept_sector(self._corners(p), self.config.length, alpha_k):
                     s.warned.add(pid)
                     self.events.append(OverlapWarning(self.t, own, pid))
+
+    def _corners(self, p: _Parcel) -> list[tuple[float, float]]:
+        """World corners of a parcel now (from its solve while it has one)."""
+        s = p.stroke
+        if s is not None and s.alive and s.tap.cur is not None:
+            y, _ = s.tap.at(self.t - s.t_start)
+            return world_corners(p.body, y[0], y[1], y[2])
+        return world_corners(p.body, *p.pose(self.t))
 
     # -- state --------------------------------------------------------------------------------
     def snapshot(self) -> LineSnapshot:

@@ -1,16 +1,47 @@
-"""rclpy messages to and from plain dicts (the representation of fence_sorter.recording.samples).
+"""Conversions at the ROS edge: messages to and from plain dicts and the line's dataclasses.
 
-Nested messages become dicts, sequences and arrays become lists of Python numbers, so a
-message received over DDS compares exactly with one read back from a bag.
+Dicts (the representation of fence_sorter.recording.samples): nested messages become dicts,
+sequences and arrays become lists of Python numbers, so a message received over DDS compares
+exactly with one read back from a bag.
+
+Line dataclasses (:mod:`fence_sorter.line`): ``parcel_from_msg``/``parcel_to_msg``,
+``command_from_msg``/``command_to_msg``, ``outcome_to_msg``/``outcome_from_msg`` and the state
+messages of a :class:`~fence_sorter.line.LineSnapshot` (FenceState, JointState, LoadState,
+MarkerArray). Times are sim seconds (float) below this layer; SI units throughout.
 """
 
 from __future__ import annotations
 
 import array
 import importlib
+import math
 from typing import Any
 
 import numpy as np
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Point, Quaternion, Vector3
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import ColorRGBA, Header
+from visualization_msgs.msg import Marker, MarkerArray
+
+from fence_sorter.line.types import (
+    FenceSnapshot,
+    LineSnapshot,
+    Outcome,
+    OutcomeCode,
+    ParcelSnapshot,
+    ParcelSpec,
+    StartMode,
+    StrokeCommand,
+)
+from fence_sorter_msgs.msg import (
+    FenceCommand,
+    FenceState,
+    LoadState,
+    Parcel,
+    SortOutcome,
+)
 
 MessageDict = dict[str, Any]
 
@@ -68,3 +99,322 @@ def dict_to_msg(msg_class: type, values: MessageDict) -> Any:
         else:
             setattr(msg, name, value)
     return msg
+
+
+# -- line dataclasses <-> fence_sorter messages ------------------------------------------------
+FRAME_ID = "sorter"
+JOINT_NAME = "fence_drive"
+
+
+def time_to_sec(stamp: Time) -> float:
+    """builtin_interfaces/Time -> seconds."""
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def sec_to_time(t: float) -> Time:
+    """Seconds (>= 0) -> builtin_interfaces/Time (rounded to the nanosecond)."""
+    ns = max(round(t * 1e9), 0)
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def header(t: float, frame_id: str = FRAME_ID) -> Header:
+    return Header(stamp=sec_to_time(t), frame_id=frame_id)
+
+
+def clock_msg(t: float) -> Clock:
+    return Clock(clock=sec_to_time(t))
+
+
+def parcel_from_msg(msg: Parcel) -> ParcelSpec:
+    """fence_sorter_msgs/Parcel -> ParcelSpec (no checks: see fence_sorter.line.validate)."""
+    return ParcelSpec(
+        parcel_id=int(msg.parcel_id),
+        length_a=float(msg.length_a),
+        width_b=float(msg.width_b),
+        height=float(msg.height),
+        mass=float(msg.mass),
+        cog_offset_x=float(msg.cog_offset_x),
+        cog_offset_y=float(msg.cog_offset_y),
+        lateral_gap=float(msg.lateral_gap),
+        yaw=float(msg.yaw),
+        mu_belt=float(msg.mu_belt),
+        mu_fence=float(msg.mu_fence),
+        divert=bool(msg.divert),
+        scan_time=time_to_sec(msg.scan_time),
+        scan_position_x=float(msg.scan_position_x),
+    )
+
+
+def parcel_to_msg(p: ParcelSpec, frame_id: str = FRAME_ID) -> Parcel:
+    """ParcelSpec -> fence_sorter_msgs/Parcel stamped with its scan time."""
+    return Parcel(
+        header=header(p.scan_time, frame_id),
+        parcel_id=int(p.parcel_id),
+        length_a=float(p.length_a),
+        width_b=float(p.width_b),
+        height=float(p.height),
+        mass=float(p.mass),
+        cog_offset_x=float(p.cog_offset_x),
+        cog_offset_y=float(p.cog_offset_y),
+        lateral_gap=float(p.lateral_gap),
+        yaw=float(p.yaw),
+        mu_belt=float(p.mu_belt),
+        mu_fence=float(p.mu_fence),
+        divert=bool(p.divert),
+        scan_time=sec_to_time(p.scan_time),
+        scan_position_x=float(p.scan_position_x),
+    )
+
+
+def command_from_msg(msg: FenceCommand) -> StrokeCommand:
+    """fence_sorter_msgs/FenceCommand -> StrokeCommand (predicted figures are not needed)."""
+    mode = int(msg.start_mode)
+    return StrokeCommand(
+        parcel_id=int(msg.parcel_id),
+        start_mode=StartMode(mode) if mode in (0, 1) else mode,
+        r_s=float(msg.r_s),
+        start_time=time_to_sec(msg.start_time),
+        t1=float(msg.t1),
+        alpha_k=float(msg.alpha_k),
+        feasible=bool(msg.feasible),
+        reason=str(msg.reason),
+    )
+
+
+def command_to_msg(
+    cmd: StrokeCommand,
+    stamp: float,
+    predicted: dict[str, float] | None = None,
+    frame_id: str = FRAME_ID,
+) -> FenceCommand:
+    """StrokeCommand -> FenceCommand; ``predicted`` fills the predicted_* fields by their
+    names without the prefix (capacity_pcs_h, impact_speed, peak_accel, exit_speed, peak_force)."""
+    msg = FenceCommand(
+        header=header(stamp, frame_id),
+        parcel_id=int(cmd.parcel_id),
+        start_mode=int(cmd.start_mode),
+        r_s=float(cmd.r_s),
+        start_time=sec_to_time(cmd.start_time),
+        t1=float(cmd.t1),
+        alpha_k=float(cmd.alpha_k),
+        feasible=bool(cmd.feasible),
+        reason=str(cmd.reason),
+    )
+    for key, value in (predicted or {}).items():
+        setattr(msg, f"predicted_{key}", float(value))
+    return msg
+
+
+def outcome_to_msg(o: Outcome, frame_id: str = FRAME_ID) -> SortOutcome:
+    """Outcome -> SortOutcome (NaN figures stay NaN: the parcel met no stroke)."""
+    return SortOutcome(
+        header=header(o.t, frame_id),
+        parcel_id=int(o.parcel_id),
+        sorted=o.sorted,
+        reason=o.reason,
+        reason_code=int(o.code),
+        peak_normal_force=float(o.peak_normal_force),
+        peak_normal_force_stiff=float(o.peak_normal_force_stiff),
+        peak_normal_accel=float(o.peak_normal_accel),
+        impact_normal_speed=float(o.impact_normal_speed),
+        exit_speed_y=float(o.exit_speed_y),
+        y_max=float(o.y_max),
+        time_in_working_space=float(o.time_in_working_space),
+    )
+
+
+def outcome_from_msg(msg: SortOutcome) -> Outcome:
+    """SortOutcome -> Outcome (for summaries of a run)."""
+    return Outcome(
+        parcel_id=int(msg.parcel_id),
+        t=time_to_sec(msg.header.stamp),
+        code=OutcomeCode(int(msg.reason_code)),
+        reason=str(msg.reason),
+        peak_normal_force=float(msg.peak_normal_force),
+        peak_normal_force_stiff=float(msg.peak_normal_force_stiff),
+        peak_normal_accel=float(msg.peak_normal_accel),
+        impact_normal_speed=float(msg.impact_normal_speed),
+        exit_speed_y=float(msg.exit_speed_y),
+        y_max=float(msg.y_max),
+        time_in_working_space=float(msg.time_in_working_space),
+    )
+
+
+def _stamp(msg_header: Header, t: float, frame_id: str) -> None:
+    """Set a header in place (cheaper than building a new Header and Time)."""
+    ns = max(round(t * 1e9), 0)
+    stamp = msg_header.stamp
+    stamp.sec = ns // 1_000_000_000
+    stamp.nanosec = ns % 1_000_000_000
+    msg_header.frame_id = frame_id
+
+
+def fill_clock(msg: Clock, t: float) -> Clock:
+    """Set a Clock message in place to sim time ``t``."""
+    ns = max(round(t * 1e9), 0)
+    msg.clock.sec = ns // 1_000_000_000
+    msg.clock.nanosec = ns % 1_000_000_000
+    return msg
+
+
+def fill_fence_state(
+    msg: FenceState, f: FenceSnapshot, t: float, frame_id: str = FRAME_ID
+) -> FenceState:
+    """Set a FenceState in place from a fence snapshot (the node reuses one message: publish
+    serialises it at once)."""
+    _stamp(msg.header, t, frame_id)
+    msg.drive_angle = float(f.drive_angle)
+    msg.drive_rate = float(f.drive_rate)
+    msg.drive_accel = float(f.drive_accel)
+    msg.node_s = f.node_s
+    msg.node_x = f.node_x
+    msg.node_y = f.node_y
+    msg.deflection = f.deflection
+    msg.rotation = f.rotation
+    msg.tip_deflection = float(f.tip_deflection)
+    return msg
+
+
+def fence_state_to_msg(f: FenceSnapshot, t: float, frame_id: str = FRAME_ID) -> FenceState:
+    return fill_fence_state(FenceState(), f, t, frame_id)
+
+
+def fill_joint_state(msg: JointState, f: FenceSnapshot, t: float) -> JointState:
+    """The drive as sensor_msgs/JointState ``fence_drive``: alpha_w and its rate (effort left
+    empty: the model does not compute the drive torque)."""
+    _stamp(msg.header, t, "")
+    msg.name = [JOINT_NAME]
+    msg.position = [float(f.drive_angle)]
+    msg.velocity = [float(f.drive_rate)]
+    return msg
+
+
+def joint_state_to_msg(f: FenceSnapshot, t: float) -> JointState:
+    return fill_joint_state(JointState(), f, t)
+
+
+def _yaw_quaternion(yaw: float) -> Quaternion:
+    return Quaternion(x=0.0, y=0.0, z=math.sin(0.5 * yaw), w=math.cos(0.5 * yaw))
+
+
+def fill_load_state(
+    msg: LoadState, p: ParcelSnapshot, t: float, frame_id: str = FRAME_ID
+) -> LoadState:
+    """Set a LoadState in place from a parcel snapshot (C_s pose, yaw quaternion, twist)."""
+    _stamp(msg.header, t, frame_id)
+    msg.parcel_id = int(p.parcel_id)
+    msg.stage = int(p.stage)
+    pos, q = msg.pose.position, msg.pose.orientation
+    pos.x, pos.y, pos.z = float(p.x), float(p.y), 0.0
+    q.x, q.y, q.z, q.w = 0.0, 0.0, math.sin(0.5 * p.yaw), math.cos(0.5 * p.yaw)
+    lin, ang = msg.twist.linear, msg.twist.angular
+    lin.x, lin.y, lin.z = float(p.vx), float(p.vy), 0.0
+    ang.x, ang.y, ang.z = 0.0, 0.0, float(p.yaw_rate)
+    msg.contact_normal_force = float(p.contact_normal_force)
+    msg.contact_normal_force_stiff = float(p.contact_normal_force_stiff)
+    msg.deformation = float(p.deformation)
+    msg.deformation_rate = float(p.deformation_rate)
+    cp = msg.contact_point
+    cp.x, cp.y, cp.z = float(p.contact_point[0]), float(p.contact_point[1]), 0.0
+    return msg
+
+
+def load_state_to_msg(p: ParcelSnapshot, t: float, frame_id: str = FRAME_ID) -> LoadState:
+    return fill_load_state(LoadState(), p, t, frame_id)
+
+
+def _color(r: float, g: float, b: float, a: float = 1.0) -> ColorRGBA:
+    return ColorRGBA(r=r, g=g, b=b, a=a)
+
+
+class MarkerBuilder:
+    """RViz/Foxglove markers of the line: belt, borders, chute, the fence (LINE_STRIP through
+    its nodes, deflection included) and one CUBE per parcel with its id as text above it.
+
+    Marker objects are kept and updated in place between calls (building ~10 nested messages
+    per parcel each time costs milliseconds); markers of parcels that left the line are sent
+    once with action DELETE.
+    """
+
+    def __init__(self, belt_width: float, belt_x: tuple[float, float], frame_id: str = FRAME_ID):
+        self.frame_id = frame_id
+        x0, x1 = belt_x
+        belt = self._new("belt", 0, Marker.CUBE)
+        belt.pose.position = Point(x=0.5 * (x0 + x1), y=0.5 * belt_width, z=-0.01)
+        belt.scale = Vector3(x=x1 - x0, y=belt_width, z=0.02)
+        belt.color = _color(0.25, 0.25, 0.25)
+        border = self._new("border", 0, Marker.LINE_LIST)
+        border.scale.x = 0.01
+        border.color = _color(0.8, 0.8, 0.2)
+        border.points = [
+            Point(x=x0, y=0.0, z=0.0),
+            Point(x=x1, y=0.0, z=0.0),
+            Point(x=x0, y=belt_width, z=0.0),
+            Point(x=x1, y=belt_width, z=0.0),
+        ]
+        chute = self._new("chute", 0, Marker.CUBE)
+        chute.pose.position = Point(x=0.75, y=belt_width + 0.3, z=-0.05)
+        chute.scale = Vector3(x=1.5, y=0.6, z=0.02)
+        chute.color = _color(0.2, 0.4, 0.8, 0.6)
+        self.fence = self._new("fence", 0, Marker.LINE_STRIP)
+        self.fence.scale.x = 0.02
+        self.fence.color = _color(0.9, 0.3, 0.1)
+        self.static = [belt, border, chute, self.fence]
+        self.parcels: dict[int, tuple[Marker, Marker]] = {}
+
+    def _new(self, ns: str, mid: int, kind: int) -> Marker:
+        m = Marker(ns=ns, id=mid, type=kind, action=Marker.ADD)
+        m.header.frame_id = self.frame_id
+        m.pose.orientation.w = 1.0
+        return m
+
+    def build(self, snap: LineSnapshot) -> MarkerArray:
+        t = snap.t
+        out = list(self.static)
+        self.fence.points = [
+            Point(x=float(x), y=float(y), z=0.05)
+            for x, y in zip(snap.fence.node_x, snap.fence.node_y, strict=True)
+        ]
+        seen = set()
+        for p in snap.parcels:
+            pid = int(p.parcel_id)
+            seen.add(pid)
+            pair = self.parcels.get(pid)
+            if pair is None:
+                cube = self._new("parcels", pid % 2**31, Marker.CUBE)
+                cube.scale = Vector3(x=p.length_a, y=p.width_b, z=p.height)
+                cube.color = _color(0.9, 0.6, 0.2) if p.divert else _color(0.6, 0.6, 0.6)
+                label = self._new("parcel_ids", pid % 2**31, Marker.TEXT_VIEW_FACING)
+                label.scale.z = 0.1
+                label.color = _color(1.0, 1.0, 1.0)
+                label.text = str(pid)
+                pair = self.parcels[pid] = (cube, label)
+            cube, label = pair
+            # the cube is centred on the footprint's centre, not on C_s
+            n = max(len(p.corners), 1)
+            cx = sum(c[0] for c in p.corners) / n
+            cy = sum(c[1] for c in p.corners) / n
+            pos = cube.pose.position
+            pos.x, pos.y, pos.z = float(cx), float(cy), 0.5 * p.height
+            q = cube.pose.orientation
+            q.z, q.w = math.sin(0.5 * p.yaw), math.cos(0.5 * p.yaw)
+            pos = label.pose.position
+            pos.x, pos.y, pos.z = float(cx), float(cy), p.height + 0.1
+            out += pair
+        for pid in [pid for pid in self.parcels if pid not in seen]:
+            for m in self.parcels.pop(pid):
+                m.action = Marker.DELETE
+                out.append(m)
+        for m in out:
+            _stamp(m.header, t, self.frame_id)
+        return MarkerArray(markers=out)
+
+
+def markers_to_msg(
+    snap: LineSnapshot,
+    belt_width: float,
+    belt_x: tuple[float, float],
+    frame_id: str = FRAME_ID,
+) -> MarkerArray:
+    """The markers of one snapshot (see :class:`MarkerBuilder`, which the node keeps)."""
+    return MarkerBuilder(belt_width, belt_x, frame_id).build(snap)

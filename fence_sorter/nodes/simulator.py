@@ -1,25 +1,112 @@
-"""Simulator node: runs the physics of belt, fence and parcels and publishes /clock and states.
+"""Simulator node: the sorting line (:class:`fence_sorter.line.SortingLine`) in soft real time.
 
-For now it only declares its parameters and reports through the diagnostic heartbeat.
+Threads: rclpy's executor spins in the main thread; its callbacks only put messages into
+thread-safe queues. A dedicated pacing loop thread owns the line: every cycle (period
+1 / physics_rate on the steady clock, ``time.perf_counter``) it sleeps until ``spin_margin``
+before its deadline, busy-waits to it, hands the queued parcels and commands to the line,
+advances sim time by period x real_time_factor and publishes outcomes at once and /clock and
+states every publish period. ``real_time_factor`` 0 runs unpaced (no sleep: each cycle advances
+one period of sim time as fast as it can). A cycle that wakes late advances the sim by the
+missed periods in one go, up to ``max_catch_up`` of sim time; beyond that sim time slips
+(counted). Lateness (wake - deadline) of every paced cycle feeds the percentiles on
+/diagnostics. See docs/simulator.md.
 """
 
 from __future__ import annotations
 
+import math
+import queue
+import sys
+import threading
+import time
+from collections import Counter
 from collections.abc import Sequence
 
-from fence_sorter.nodes.base import FenceSorterNode, ParamSpec, run_node
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from visualization_msgs.msg import MarkerArray
+
+from fence_sorter.line import (
+    InputError,
+    LineConfig,
+    Outcome,
+    OutcomeCode,
+    OverlapWarning,
+    ParcelSpec,
+    SolverWarning,
+    SortingLine,
+    StrokeCommand,
+    StrokeStarted,
+)
+from fence_sorter.nodes import convert
+from fence_sorter.nodes.base import FenceSorterNode, ParamSpec
+from fence_sorter.nodes.qos import RELIABLE_QOS, SENSOR_QOS
+from fence_sorter.scene import load_scene
+from fence_sorter_msgs.msg import FenceCommand, FenceState, LoadState, Parcel, SortOutcome
+
+DEFAULT_SCENE = "impact_flexible"
+#: sim time a command for a not-yet-known parcel waits for its parcel message [s]
+COMMAND_HOLD = 0.5
+
+# /clock: reliable keep-last, compatible with rclpy/rclcpp's best-effort clock subscriptions
+# and with reliable ones (recorders).
+CLOCK_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=10,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
+# /joint_states and /markers: reliable keep-last, what robot_state_publisher and RViz ask for.
+VIEWER_QOS = CLOCK_QOS
+
+
+class LatenessHistogram:
+    """Cycle lateness [s] in 10 us bins up to 100 ms (exact max kept): percentiles over a
+    whole run in constant memory and O(1) per cycle."""
+
+    BIN = 1e-5
+    BINS = 10_000
+
+    def __init__(self) -> None:
+        self.counts = np.zeros(self.BINS + 1, dtype=np.int64)
+        self.n = 0
+        self.max = 0.0
+
+    def add(self, lateness: float) -> None:
+        k = int(max(lateness, 0.0) / self.BIN)
+        self.counts[min(k, self.BINS)] += 1
+        self.n += 1
+        if lateness > self.max:
+            self.max = lateness
+
+    def percentile(self, q: float) -> float:
+        """Upper edge of the bin holding the q-th percentile [s] (NaN before any sample)."""
+        if self.n == 0:
+            return math.nan
+        rank = math.ceil(q / 100.0 * self.n)
+        k = int(np.searchsorted(np.cumsum(self.counts), max(rank, 1)))
+        return min((k + 1) * self.BIN, self.max) if k < self.BINS else self.max
 
 
 class SimulatorNode(FenceSorterNode):
     """Digital twin of the sorter: belt, rotary fence and parcels, paced by wall time."""
 
     NODE_NAME = "simulator"
-    STATUS = "not yet implemented (issue: simulator node)"
+    STATUS = "running"
+    STATUS_LEVEL = DiagnosticStatus.OK
     PARAMETERS = (
         ParamSpec(
             "scene",
-            "",
-            "Scene YAML file (config/scenes/...); empty: the default scene",
+            DEFAULT_SCENE,
+            "Scene (name in config/scenes or YAML path): conveyor, fence, contact and solver "
+            "of the line (its parcel and drive are only used to warm the JIT up)",
             read_only=True,
         ),
         ParamSpec(
@@ -28,39 +115,430 @@ class SimulatorNode(FenceSorterNode):
         ParamSpec(
             "real_time_factor",
             1.0,
-            "Sim time advanced per wall second [-]",
-            min_value=0.01,
+            "Sim time advanced per wall second [-]; 0: unpaced, as fast as possible",
+            min_value=0.0,
             max_value=100.0,
         ),
         ParamSpec(
-            "physics_dt",
-            1.0e-4,
-            "Physics integration step [s]",
+            "physics_rate",
+            1000.0,
+            "Pacing loop rate [Hz] (wall clock); each cycle advances 1/physics_rate x rtf of sim",
             read_only=True,
-            min_value=1.0e-6,
-            max_value=1.0e-2,
+            min_value=10.0,
+            max_value=10000.0,
         ),
         ParamSpec(
             "publish_rate",
             50.0,
-            "Rate of /clock, state and marker publication [Hz] (wall clock)",
+            "Rate of /clock, /fence_state, /joint_states, /load_states [Hz] (in cycles: wall "
+            "Hz when paced, sim Hz when unpaced)",
             read_only=True,
             min_value=1.0,
             max_value=1000.0,
         ),
         ParamSpec(
+            "marker_rate",
+            10.0,
+            "Rate of /markers [Hz] (same clock as publish_rate); 0: no markers",
+            read_only=True,
+            min_value=0.0,
+            max_value=100.0,
+        ),
+        ParamSpec(
             "max_catch_up",
             0.1,
-            "Largest sim time advanced in one pacing step after a stall [s]",
-            min_value=0.0,
+            "Largest sim time one late cycle may advance to catch up [s]; beyond it sim time "
+            "slips behind the wall clock",
+            read_only=True,
+            min_value=0.001,
             max_value=10.0,
+        ),
+        ParamSpec(
+            "spin_margin",
+            0.0004,
+            "Busy-wait this long before each deadline instead of sleeping [s]",
+            read_only=True,
+            min_value=0.0,
+            max_value=0.005,
+        ),
+        ParamSpec(
+            "line_end_x",
+            3.0,
+            "x0 where parcels leave the line (rear passing it) [m]",
+            read_only=True,
+            min_value=-10.0,
+            max_value=100.0,
+        ),
+        ParamSpec(
+            "r_s_min",
+            -0.5,
+            "Smallest R_s a command may ask for [m] (paper range (3))",
+            read_only=True,
+            min_value=-10.0,
+            max_value=10.0,
+        ),
+        ParamSpec(
+            "r_s_max",
+            2.0,
+            "Largest R_s a command may ask for [m]; a divert parcel whose front passes it with "
+            "no accepted command is NO_COMMAND (point of no return)",
+            read_only=True,
+            min_value=-10.0,
+            max_value=10.0,
+        ),
+        ParamSpec(
+            "warm_up",
+            True,
+            "Run one short stroke before starting so the compiled kernel is loaded",
+            read_only=True,
         ),
     )
 
+    def __init__(self, **kwargs: object) -> None:
+        super().__init__(**kwargs)
+        p = {spec.name: self.get_parameter(spec.name).value for spec in self.PARAMETERS}
+        self.frame_id = str(p["frame_id"])
+        loaded = load_scene(p["scene"] or DEFAULT_SCENE)  # SceneError: exit 2 in main()
+        self.scene_name = loaded.name
+        self.line_config = LineConfig.from_scenario(
+            loaded.scenario,
+            r_s_range=(float(p["r_s_min"]), float(p["r_s_max"])),
+            line_end_x=float(p["line_end_x"]),
+        )
+        self.line = SortingLine(self.line_config)  # ValueError: exit 2 in main()
+        if p["warm_up"]:
+            _warm_up(self.line_config, loaded.scenario)
+        self.rtf = float(p["real_time_factor"])
+        self.period = 1.0 / float(p["physics_rate"])
+        self.publish_every = max(1, round(float(p["physics_rate"]) / float(p["publish_rate"])))
+        rate = float(p["marker_rate"])
+        self.marker_every = max(1, round(float(p["physics_rate"]) / rate)) if rate > 0.0 else 0
+        self.max_catch_up = float(p["max_catch_up"])
+        self.spin_margin = float(p["spin_margin"])
+
+        self._inbox: queue.SimpleQueue = queue.SimpleQueue()
+        self._held: list[tuple[float, StrokeCommand]] = []  # commands for unknown parcels
+        self.create_subscription(Parcel, "/parcels", self._on_parcel, RELIABLE_QOS)
+        self.create_subscription(FenceCommand, "/fence_commands", self._on_command, RELIABLE_QOS)
+        self.pub_clock = self.create_publisher(Clock, "/clock", CLOCK_QOS)
+        self.pub_fence = self.create_publisher(FenceState, "/fence_state", SENSOR_QOS)
+        self.pub_joint = self.create_publisher(JointState, "/joint_states", VIEWER_QOS)
+        self.pub_loads = self.create_publisher(LoadState, "/load_states", SENSOR_QOS)
+        self.pub_markers = self.create_publisher(MarkerArray, "/markers", VIEWER_QOS)
+        self.pub_outcomes = self.create_publisher(SortOutcome, "/sort_outcomes", RELIABLE_QOS)
+
+        belt_x = (min(-3.0, self.line_config.r_s_range[0]), self.line_config.line_end_x)
+        self._markers = convert.MarkerBuilder(
+            self.line_config.conveyor.width, belt_x, self.frame_id
+        )
+        self._clock_msg, self._fence_msg = Clock(), FenceState()
+        self._joint_msg, self._load_msg = JointState(), LoadState()
+
+        # statistics: written by the loop thread, read by the heartbeat under the lock
+        self._lock = threading.Lock()
+        self.hist = LatenessHistogram()
+        self.work = LatenessHistogram()  # cycle work time (wake to done) [s]
+        self.cycles = 0
+        self.misses = 0
+        self.slips = 0
+        self.counts: Counter[str] = Counter()
+        self.bad_parcels: Counter[str] = Counter()
+        self.rejected_commands: Counter[str] = Counter()
+        self.outcome_counts: Counter[str] = Counter()
+        self.sim_time = self.line.t
+        self.loop_error: str | None = None
+        self._rtf_window = (time.perf_counter(), self.line.t)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, name="simulator-loop", daemon=True)
+
+    # -- callbacks: hand off only --------------------------------------------------------------
+    def _on_parcel(self, msg: Parcel) -> None:
+        self._inbox.put(("parcel", msg))
+
+    def _on_command(self, msg: FenceCommand) -> None:
+        self._inbox.put(("command", msg))
+
+    # -- lifecycle -----------------------------------------------------------------------------
+    def start(self) -> None:
+        # A thread waking from sleep waits for the GIL until the holder's switch interval
+        # (5 ms by default) expires: keep it well below the cycle period.
+        sys.setswitchinterval(min(sys.getswitchinterval(), 0.25 * self.period))
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout=5.0)
+
+    # -- the pacing loop -------------------------------------------------------------------------
+    def _loop(self) -> None:
+        try:
+            self._run_loop()
+        except Exception as exc:  # report, then end the process through the executor
+            self.loop_error = f"{type(exc).__name__}: {exc}"
+            if not self._stop.is_set():
+                self.get_logger().fatal(f"pacing loop failed: {self.loop_error}")
+                self.context.try_shutdown()
+
+    def _run_loop(self) -> None:
+        clock = time.perf_counter
+        period, line = self.period, self.line
+        start_wall, start_sim = clock(), line.t
+        k = 0  # deadlines since start_wall: deadline_k = start_wall + k * period
+        next_pub = next_marker = 0  # cycle index of the next publication (k may skip)
+        self._publish(line.snapshot())
+        while not self._stop.is_set():
+            rtf = self.rtf
+            # unpaced: a cycle is one publish period of sim time (a 1 ms cycle would spend
+            # its time in Python overhead, not physics)
+            k += 1 if rtf > 0.0 else self.publish_every
+            if rtf > 0.0:
+                deadline = start_wall + k * period
+                remaining = deadline - clock()
+                if remaining > self.spin_margin:
+                    time.sleep(remaining - self.spin_margin)
+                while clock() < deadline:
+                    pass
+                wake = clock()
+                late = wake - deadline
+                with self._lock:
+                    self.hist.add(late)
+                if late >= period:
+                    # skip the deadlines already past: one cycle advances them all, up to the cap
+                    behind = int(late / period)
+                    if behind * period * rtf > self.max_catch_up:
+                        keep = max(int(self.max_catch_up / (period * rtf)), 0)
+                        # drop the rest: shift the grid so sim time slips behind the wall
+                        start_wall += (behind - keep) * period
+                        with self._lock:
+                            self.slips += 1
+                        behind = keep
+                    k += behind
+                t_target = start_sim + k * period * rtf
+            else:
+                deadline = math.inf
+                t_target = start_sim + k * period
+            self._drain_inbox()
+            self._handle(line.advance(t_target))
+            if k >= next_pub:
+                next_pub = (k // self.publish_every + 1) * self.publish_every
+                self._publish(line.snapshot())
+            elif self.marker_every and k >= next_marker:
+                # markers in a cycle of their own (paced), so their cost does not add up with
+                # the states' in one cycle
+                next_marker = (k // self.marker_every + 1) * self.marker_every
+                self.pub_markers.publish(self._markers.build(line.snapshot()))
+            if rtf == 0.0 and self.marker_every and k >= next_marker:
+                next_marker = (k // self.marker_every + 1) * self.marker_every
+                self.pub_markers.publish(self._markers.build(line.snapshot()))
+            done = clock()
+            with self._lock:
+                if rtf > 0.0:
+                    self.work.add(done - wake)
+                self.cycles += 1
+                self.sim_time = line.t
+                if done > deadline + period:
+                    self.misses += 1
+            if rtf != self.rtf:  # changed at run time: restart the grid from here
+                start_wall, start_sim, k = clock(), line.t, 0
+                next_pub = next_marker = 0
+
+    def _drain_inbox(self) -> None:
+        """Hand queued messages to the line: parcels first, then commands. A command for a
+        parcel the line does not know yet is held up to ``COMMAND_HOLD`` of sim time (the
+        parcel may still be in flight on the other topic) before it is rejected."""
+        parcels, commands = [], []
+        while True:
+            try:
+                kind, msg = self._inbox.get_nowait()
+            except queue.Empty:
+                break
+            (parcels if kind == "parcel" else commands).append(msg)
+        line = self.line
+        log = self.get_logger()
+        for msg in parcels:
+            self.counts["parcels_received"] += 1
+            try:
+                line.add_parcel(convert.parcel_from_msg(msg), line.t)
+            except InputError as exc:
+                self.bad_parcels[exc.key] += 1
+                log.warning(f"parcel {msg.parcel_id} rejected ({exc.key}): {exc}")
+            except (ValueError, OverflowError) as exc:
+                self.bad_parcels["invalid"] += 1
+                log.warning(f"parcel {msg.parcel_id} rejected (invalid): {exc}")
+        held, self._held = self._held, []
+        for msg in commands:
+            self.counts["commands_received"] += 1
+            held.append((line.t, convert.command_from_msg(msg)))
+        for t_in, cmd in held:
+            res = line.command(cmd, line.t)
+            if res.code == "unknown_parcel" and line.t - t_in < COMMAND_HOLD:
+                self._held.append((t_in, cmd))
+            elif res.accepted:
+                self.counts[f"commands_{res.code}"] += 1
+                if res.code == "accepted":
+                    log.info(
+                        f"parcel {cmd.parcel_id}: stroke planned at t = "
+                        f"{res.start_time:.3f} s (t1 = {cmd.t1:g} s)"
+                    )
+            else:
+                self.rejected_commands[res.code] += 1
+                log.warning(f"command for parcel {cmd.parcel_id} rejected: {res.reason}")
+
+    def _handle(self, events: list) -> None:
+        log = self.get_logger()
+        for e in events:
+            if isinstance(e, Outcome):
+                self.pub_outcomes.publish(convert.outcome_to_msg(e, self.frame_id))
+                self.outcome_counts[e.code.name] += 1
+                text = f"parcel {e.parcel_id}: {e.code.name} at t = {e.t:.3f} s: {e.reason}"
+                if e.code in (OutcomeCode.SORTED, OutcomeCode.NOT_DIVERTED):
+                    log.info(text)
+                else:
+                    log.warning(text)
+            elif isinstance(e, OverlapWarning):
+                self.counts["overlap_warnings"] += 1
+                log.warning(
+                    f"parcel {e.other_parcel_id} is in the fence's swept area during the stroke "
+                    f"for parcel {e.stroke_parcel_id} at t = {e.t:.3f} s (parcel-parcel contact "
+                    "is not modelled)"
+                )
+            elif isinstance(e, SolverWarning):
+                self.counts["solver_failures_after_outcome"] += 1
+                log.error(f"stroke for parcel {e.parcel_id}: solver failure: {e.diagnosis}")
+            elif isinstance(e, StrokeStarted):
+                self.counts["strokes"] += 1
+
+    def _publish(self, snap) -> None:
+        t, fid = snap.t, self.frame_id
+        # one message object per topic, filled in place: publish() serialises it at once
+        self.pub_clock.publish(convert.fill_clock(self._clock_msg, t))
+        self.pub_fence.publish(convert.fill_fence_state(self._fence_msg, snap.fence, t, fid))
+        self.pub_joint.publish(convert.fill_joint_state(self._joint_msg, snap.fence, t))
+        load = self._load_msg
+        for p in snap.parcels:
+            self.pub_loads.publish(convert.fill_load_state(load, p, t, fid))
+
+    # -- diagnostics -----------------------------------------------------------------------------
+    def heartbeat_status(self) -> DiagnosticStatus:
+        status = super().heartbeat_status()
+        now = time.perf_counter()
+        with self._lock:
+            hist = self.hist
+            p50, p99, p999 = (hist.percentile(q) * 1e3 for q in (50.0, 99.0, 99.9))
+            lat_max = hist.max * 1e3
+            w50, w99, w999 = (self.work.percentile(q) * 1e3 for q in (50.0, 99.0, 99.9))
+            w_max = self.work.max * 1e3
+            cycles, misses, slips, sim_t = self.cycles, self.misses, self.slips, self.sim_time
+            counts = dict(self.counts)
+            bad = dict(self.bad_parcels)
+            rejected = dict(self.rejected_commands)
+            outcomes = dict(self.outcome_counts)
+        w0, s0 = self._rtf_window
+        self._rtf_window = (now, sim_t)
+        rtf = (sim_t - s0) / (now - w0) if now > w0 else math.nan
+        values = {
+            "scene": self.scene_name,
+            "sim_time_s": f"{sim_t:.3f}",
+            "real_time_factor_target": f"{self.rtf:g}",
+            "real_time_factor_achieved": f"{rtf:.3f}",
+            "cycles": str(cycles),
+            "deadline_misses": str(misses),
+            "catch_up_slips": str(slips),
+            "cycle_lateness_p50_ms": f"{p50:.4f}",
+            "cycle_lateness_p99_ms": f"{p99:.4f}",
+            "cycle_lateness_p99_9_ms": f"{p999:.4f}",
+            "cycle_lateness_max_ms": f"{lat_max:.4f}",
+            "cycle_work_p50_ms": f"{w50:.4f}",
+            "cycle_work_p99_ms": f"{w99:.4f}",
+            "cycle_work_p99_9_ms": f"{w999:.4f}",
+            "cycle_work_max_ms": f"{w_max:.4f}",
+            "parcels_on_line": str(self.line.parcels_on_line),
+            "bad_parcels": str(sum(bad.values())),
+            "commands_rejected": str(sum(rejected.values())),
+            "overlap_warnings": str(counts.get("overlap_warnings", 0)),
+        }
+        values.update({k: str(v) for k, v in counts.items() if k != "overlap_warnings"})
+        values.update({f"bad_parcels.{k}": str(v) for k, v in sorted(bad.items())})
+        values.update({f"commands_rejected.{k}": str(v) for k, v in sorted(rejected.items())})
+        values.update({f"outcomes.{k}": str(v) for k, v in sorted(outcomes.items())})
+        status.values.extend(KeyValue(key=k, value=v) for k, v in values.items())
+        if self.loop_error:
+            status.level = DiagnosticStatus.ERROR
+            status.message = f"pacing loop failed: {self.loop_error}"
+        elif cycles and misses > 0.001 * cycles:
+            status.level = DiagnosticStatus.WARN
+            status.message = f"running; deadline misses {misses} of {cycles} cycles"
+        return status
+
+    def validate_parameters(self, parameters: Sequence[Parameter]) -> str | None:
+        values = {p.name: p.value for p in parameters}
+        lo = values.get("r_s_min")
+        hi = values.get("r_s_max")
+        end = values.get("line_end_x")
+        if lo is not None and hi is not None and not lo < hi:
+            return f"r_s_min ({lo}) must be below r_s_max ({hi})"
+        if hi is not None and end is not None and not end > hi:
+            return f"line_end_x ({end}) must exceed r_s_max ({hi})"
+        if "real_time_factor" in values and hasattr(self, "_thread"):
+            self.rtf = float(values["real_time_factor"])  # the loop restarts its grid
+        return None
+
+
+def _warm_up(config: LineConfig, scenario) -> None:
+    """One short stroke on a scratch line so the kernel's compiled code is loaded before the
+    pacing loop starts (loading it inside the loop would stall it by a few hundred ms)."""
+    line = SortingLine(config)
+    pp = scenario.parcel
+    spec = ParcelSpec(
+        0,
+        length_a=pp.length_a,
+        width_b=pp.width_b,
+        height=pp.height,
+        mass=pp.mass,
+        cog_offset_x=pp.cog_offset_x,
+        cog_offset_y=pp.cog_offset_y,
+        lateral_gap=pp.lateral_gap,
+        yaw=pp.yaw,
+        divert=True,
+        scan_position_x=scenario.drive.r_s,
+    )
+    line.add_parcel(spec)
+    drive = scenario.drive
+    line.command(StrokeCommand(0, r_s=drive.r_s, t1=drive.t1, alpha_k=drive.alpha_k))
+    for k in range(1, 41):
+        line.advance(0.01 * k)
+        line.snapshot()
+
 
 def main(args: Sequence[str] | None = None) -> int:
-    """Run the simulator node until Ctrl-C or SIGTERM."""
-    return run_node(SimulatorNode, args)
+    """Run the simulator until Ctrl-C or SIGTERM; exit 2 with one line on a bad scene or
+    parameter, 1 if the pacing loop failed."""
+    rclpy.init(args=list(args) if args is not None else None)
+    node: SimulatorNode | None = None
+    code = 0
+    try:
+        node = SimulatorNode()
+        node.start()
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except ParameterException as exc:
+        print(f"simulator: invalid parameter: {exc}", file=sys.stderr)
+        code = 2
+    except ValueError as exc:  # SceneError, a line setting out of range
+        print(f"simulator: {exc}", file=sys.stderr)
+        code = 2
+    finally:
+        if node is not None:
+            node.stop()
+            if node.loop_error:
+                code = 1
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code
 
 
 if __name__ == "__main__":

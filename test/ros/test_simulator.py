@@ -1,0 +1,190 @@
+"""The simulator executable as a separate process over DDS: parcels and commands in, clock,
+states, outcomes and diagnostics out; malformed parcels counted while it keeps running.
+
+Line: impact_flexible (belt 1 m/s, flexible fence); the test places parcels relative to the
+simulator's clock so every outcome comes within a few seconds of sim time at rtf 1.
+"""
+
+from __future__ import annotations
+
+import math
+import signal
+import time
+from pathlib import Path
+
+import pytest
+
+from fence_sorter.testing import managed_process
+
+pytestmark = pytest.mark.ros
+
+TIMEOUT = 40.0
+
+
+@pytest.fixture
+def probe(domain_id: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    """A test-process rclpy node: publishers of /parcels and /fence_commands, listeners."""
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import JointState
+    from visualization_msgs.msg import MarkerArray
+
+    from fence_sorter.nodes.qos import RELIABLE_QOS, SENSOR_QOS
+    from fence_sorter_msgs.msg import FenceCommand, FenceState, LoadState, Parcel, SortOutcome
+
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    monkeypatch.setenv("ROS_LOG_DIR", str(tmp_path / "ros_log_probe"))
+    context = rclpy.Context()
+    rclpy.init(
+        context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO
+    )
+    node = rclpy.create_node("test_probe", context=context)
+    got: dict[str, list] = {k: [] for k in ("clock", "fence", "joint", "loads", "markers")}
+    got["outcomes"], got["diag"] = [], []
+    node.create_subscription(Clock, "/clock", got["clock"].append, 10)
+    node.create_subscription(FenceState, "/fence_state", got["fence"].append, SENSOR_QOS)
+    node.create_subscription(JointState, "/joint_states", got["joint"].append, 10)
+    node.create_subscription(LoadState, "/load_states", got["loads"].append, SENSOR_QOS)
+    node.create_subscription(MarkerArray, "/markers", got["markers"].append, 10)
+    node.create_subscription(SortOutcome, "/sort_outcomes", got["outcomes"].append, RELIABLE_QOS)
+    node.create_subscription(DiagnosticArray, "/diagnostics", got["diag"].append, RELIABLE_QOS)
+    pubs = (
+        node.create_publisher(Parcel, "/parcels", RELIABLE_QOS),
+        node.create_publisher(FenceCommand, "/fence_commands", RELIABLE_QOS),
+    )
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    try:
+        yield executor, pubs, got
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
+def _spin_until(executor, proc, cond, timeout: float = TIMEOUT) -> None:
+    deadline = time.monotonic() + timeout
+    while not cond():
+        assert proc.poll() is None, proc.communicate()
+        assert time.monotonic() < deadline, "timed out"
+        executor.spin_once(timeout_sec=0.05)
+
+
+def _sim_diag(got) -> dict[str, str]:
+    status = [s for m in got["diag"] for s in m.status if s.name == "fence_sorter/simulator"]
+    return {kv.key: kv.value for kv in status[-1].values} if status else {}
+
+
+def test_simulator_sorts_reports_and_survives_bad_parcels(env, tmp_path: Path, probe) -> None:
+    from fence_sorter.line import ParcelSpec, StrokeCommand
+    from fence_sorter.nodes import convert
+    from fence_sorter_msgs.msg import SortOutcome
+
+    executor, (pub_parcels, pub_commands), got = probe
+    params = tmp_path / "sim.yaml"
+    params.write_text(
+        "simulator:\n  ros__parameters:\n    heartbeat_period: 0.3\n    physics_rate: 500.0\n"
+    )
+    cmd = ["simulator", "--ros-args", "--params-file", str(params)]
+    from fence_sorter.testing import venv_executable
+
+    cmd[0] = venv_executable("python")
+    cmd[1:1] = ["-m", "fence_sorter.nodes.simulator"]
+    with managed_process(cmd, env) as proc:
+        _spin_until(executor, proc, lambda: len(got["clock"]) >= 3)
+        _spin_until(
+            executor,
+            proc,
+            lambda: pub_parcels.get_subscription_count() and pub_commands.get_subscription_count(),
+        )
+        clocks = [convert.time_to_sec(c.clock) for c in got["clock"]]
+        assert clocks == sorted(clocks) and clocks[-1] > clocks[0]
+        t0 = clocks[-1]
+
+        def parcel(pid: int, **kw) -> None:
+            base = dict(length_a=0.4, width_b=0.3, mass=15.0, lateral_gap=0.25, divert=True)
+            base.update(kw)
+            pub_parcels.publish(
+                convert.parcel_to_msg(ParcelSpec(pid, scan_time=t0, **base), "sorter")
+            )
+
+        parcel(1, scan_position_x=-0.8)  # stroke at front 0.42 m: t0 + 1.22 s
+        parcel(2, scan_position_x=1.0, divert=False)  # rear passes 3 m at t0 + 2.4 s
+        parcel(3, scan_position_x=0.5)  # divert, no command: front at 2 m at t0 + 1.5 s
+        parcel(4, scan_position_x=-1.5)  # the controller says infeasible
+        parcel(10, scan_position_x=-1.0, mass=math.nan)
+        parcel(11, scan_position_x=-1.0, mass=-3.0)
+        parcel(12, scan_position_x=-1.0, width_b=0.6)  # 0.25 + 0.6 m > s = 0.7 m
+        parcel(1, scan_position_x=-1.0)  # duplicate id
+        alpha_k = math.radians(40.0)
+        pub_commands.publish(
+            convert.command_to_msg(StrokeCommand(1, r_s=0.42, t1=0.35, alpha_k=alpha_k), t0)
+        )
+        pub_commands.publish(
+            convert.command_to_msg(
+                StrokeCommand(4, feasible=False, reason="no stroke meets (12)"), t0
+            )
+        )
+        pub_commands.publish(convert.command_to_msg(StrokeCommand(77, r_s=0.0), t0))
+
+        _spin_until(executor, proc, lambda: len(got["outcomes"]) >= 4)
+        executor.spin_once(timeout_sec=0.5)
+        out = {o.parcel_id: o for o in got["outcomes"]}
+        assert sorted(out) == [1, 2, 3, 4], [(o.parcel_id, o.reason) for o in got["outcomes"]]
+        assert out[1].reason_code == SortOutcome.SORTED and out[1].sorted
+        assert 500.0 < out[1].peak_normal_force < out[1].peak_normal_force_stiff
+        assert out[1].exit_speed_y > 0.0 and out[1].y_max >= 0.7
+        assert out[2].reason_code == SortOutcome.NOT_DIVERTED and not out[2].sorted
+        assert out[3].reason_code == SortOutcome.NO_COMMAND
+        assert out[4].reason_code == SortOutcome.NO_FEASIBLE_COMMAND
+        assert "no stroke meets (12)" in out[4].reason
+        assert convert.time_to_sec(out[2].header.stamp) == pytest.approx(t0 + 2.4, abs=0.05)
+
+        # states: the fence swung and bent during parcel 1's stroke, parcels were on the belt
+        assert max(f.drive_angle for f in got["fence"]) > 0.5 * alpha_k
+        assert max(abs(f.tip_deflection) for f in got["fence"]) > 1e-3
+        assert all(len(f.node_x) == 11 for f in got["fence"])
+        assert got["joint"][-1].name == ["fence_drive"]
+        assert {s.parcel_id for s in got["loads"]} >= {1, 2, 3, 4}
+        assert all(s.header.frame_id == "sorter" for s in got["loads"])
+        assert any(m.ns == "fence" for a in got["markers"] for m in a.markers)
+
+        # malformed parcels and the unknown command are counted; the node keeps running
+        _spin_until(executor, proc, lambda: _sim_diag(got).get("bad_parcels") == "4")
+        d = _sim_diag(got)
+        for key in ("non_finite", "mass", "wider_than_belt", "duplicate_id"):
+            assert d[f"bad_parcels.{key}"] == "1", d
+        assert d["commands_rejected.unknown_parcel"] == "1"
+        assert float(d["real_time_factor_achieved"]) == pytest.approx(1.0, abs=0.2)
+        for key in ("cycle_lateness_p50_ms", "cycle_lateness_p99_ms", "cycle_lateness_p99_9_ms"):
+            assert math.isfinite(float(d[key]))
+        n = len(got["clock"])
+        _spin_until(executor, proc, lambda: len(got["clock"]) > n + 5)
+
+        proc.send_signal(signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=TIMEOUT)
+    assert proc.returncode == 0, stdout + stderr
+    assert "Traceback" not in stdout + stderr
+    assert "mass must be a finite number" in stderr + stdout  # logged with its reason
+
+
+def test_bad_scene_exits_2_with_one_line(env) -> None:
+    from fence_sorter.testing import venv_executable
+
+    cmd = [
+        venv_executable("python"),
+        "-m",
+        "fence_sorter.nodes.simulator",
+        "--ros-args",
+        "-p",
+        "scene:=no_such_scene",
+    ]
+    with managed_process(cmd, env) as proc:
+        stdout, stderr = proc.communicate(timeout=TIMEOUT)
+    assert proc.returncode == 2
+    lines = [ln for ln in stderr.splitlines() if ln.startswith("simulator:")]
+    assert len(lines) == 1 and "no_such_scene" in lines[0]
+    assert "Traceback" not in stdout + stderr
