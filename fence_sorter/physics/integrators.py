@@ -270,6 +270,7 @@ class Integrator:
         n = model.n_state
         m = model.n_modes
         self.cur, self.trial, self.loc = State(n, m), State(n, m), State(n, m)
+        self.before = State(n, m)
         self.forced = 0
         self.events = 0
         self.outcome: tuple[float, str | None, int, int] | None = None
@@ -290,36 +291,49 @@ class Integrator:
             else 0.0
         )
 
-    def _locate(self, h: float, on_belt: bool, slot: int, onset: bool, g0: float, g1: float):
+    def _locate(self, h: float, on_belt: bool, slot: int, kind: int, g0: float, g1: float):
         """Shorten the step to end just past the sign change of ``slot``'s event function.
 
         Regula falsi until an onset step ends within ``EVENT_TOL`` m of D = 0 (so w_n is read
-        at the onset) or a release bracket is below 1e-7 of the step. The located trial is left
-        in ``self.trial``; returns the step taken.
+        at the onset) or a release / slide-off bracket is below 1e-7 of the step. The located
+        trial is left in ``self.trial``; returns the step taken.
         """
         a, sch = self.cur, self.scheme
-        col = K.C_D if onset else K.C_NRAW
+        onset = kind == K.EVENT_ONSET
         sign0 = g0 > 0.0
         lo, g_lo = 0.0, g0
         hi, g_hi = h, g1
         jump = self.jump_at(a.t)
         best = None
+        # a corner sliding off the tip drops its force from N(D) to zero: end that step just
+        # before the slide-off (the force there is the peak the step would otherwise skip);
+        # the next step then crosses it with a bracket of ~1e-7 of a step
+        keep_before = kind == K.EVENT_SLIDE_OFF
+        before = None
         for _ in range(60):
             if hi - lo <= 1e-7 * h or (onset and g_hi <= EVENT_TOL):
                 break
             h_loc = lo + (hi - lo) * (g_lo / (g_lo - g_hi))
             h_loc = min(max(h_loc, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
             st = sch.step(h_loc, a, self.loc, jump, on_belt, False)
-            if st == K.STEP_REJECTED or not self.loc.out[slot, K.C_GAP]:
+            if st == K.STEP_REJECTED:
                 break
-            g = float(self.loc.out[slot, col])
+            g = K.event_value(self.model.P, self.loc.out, slot, kind)
+            if math.isnan(g):
+                break
             if (g > 0.0) != sign0:
                 hi, g_hi = h_loc, g
                 best = h_loc
                 self.trial.copy_from(self.loc)
             else:
                 lo, g_lo = h_loc, g
+                if keep_before:
+                    before = h_loc
+                    self.before.copy_from(self.loc)
         self.events += 1
+        if before is not None:
+            self.trial.copy_from(self.before)
+            return before
         return best if best is not None else h
 
     def run(self, observer) -> tuple[float, str | None, int, int]:
@@ -367,6 +381,10 @@ class Integrator:
                 next_break += 1
             to_break = self.breaks[next_break] - a.t
             h_try = min(h, to_break)
+            if self.adaptive:
+                # do not step over a contact: end the step by the time the closest gap closes
+                # at its closing speed (floor 10 min_dt: a grazing approach does not stall)
+                h_try = min(h_try, max(K.time_to_contact(a.out), 10.0 * sv.min_dt))
             tiny = h_try <= 1e-3 * self.h_nom if not self.adaptive else h_try <= 4.0 * sv.min_dt
             status = sch.step(h_try, a, b, self.jump_at(a.t), on_belt, tiny)
             if status == K.STEP_REJECTED:
@@ -386,10 +404,10 @@ class Integrator:
                 self.forced += 1
             h_taken = h_try
             # contact onset / release inside the step: end the step on it
-            slot, onset, g0, g1 = K.first_event(a.out, b.out)
+            slot, kind, g0, g1 = K.first_event(self.model.P, a.out, b.out)
             located = False
             if slot >= 0 and h_try > 1e-9:
-                h_taken = self._locate(h_try, on_belt, slot, onset, g0, g1)
+                h_taken = self._locate(h_try, on_belt, slot, kind, g0, g1)
                 located = True
             if self.adaptive:
                 # the solution is smooth on [t, t + h_taken] (a located event is at its end)

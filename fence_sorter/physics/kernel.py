@@ -525,6 +525,7 @@ def evaluate(
             ux, uy, tx, ty, _, _ = surface(P, r, alpha, rate, w, wdot, nodes)
             s_arc = r + (px - ux) * tx + (py - uy) * ty
         if s_arc > length:
+            out[k, C_S] = s_arc  # beyond the tip: the slide-off event function is R_z - s
             passed[k] = use_tip and (tip_x - px) * ntx + (tip_y - py) * nty > 0.0
             any_passed = any_passed or passed[k]
             continue
@@ -570,10 +571,18 @@ def evaluate(
                 True,
                 alpha,
             )
-    # the fence tip inside the load after a corner slid past it (ray from the tip along -n)
+    # the fence tip inside the load after a corner slid past it: the tip presses on the face
+    # that faces the fence (outward normal most against the fence normal; the face that slid
+    # along the fence), the depth is the tip's distance to that face's plane (the corner's D
+    # when it slides off a face lying along the fence, so the hand-over is continuous) and the
+    # force acts along the face normal: the gradient of the potential k_p D^5 / 5, zero at
+    # release. (Depth measured along the fence normal with the force along it did work in a
+    # closed elastic cycle.)
     if use_tip and any_passed:
-        depth = math.inf
         exit_face = -1
+        facing = -math.inf
+        depth = 0.0
+        fnx = fny = 0.0
         for k in range(4):
             nbx, nby = normals[k, 0], normals[k, 1]
             mx, my = c * nbx - s * nby, s * nbx + c * nby
@@ -582,16 +591,17 @@ def evaluate(
                 exit_face = -1
                 break
             cos_dir = -(ntx * mx + nty * my)
-            if cos_dir > 1e-12:
-                lm = inside / cos_dir
-                if lm < depth:
-                    depth = lm
-                    exit_face = k
+            if cos_dir > facing:
+                facing = cos_dir
+                exit_face = k
+                depth = inside
+                fnx, fny = -mx, -my  # on the load: pushed away from the tip
         if exit_face >= 0 and (passed[exit_face] or passed[(exit_face + 1) % 4]):
             vpx = vx - om * (tip_y - yy)
             vpy = vy + om * (tip_x - x)
-            d_rate = (vtx - vpx) * ntx + (vty - vpy) * nty
-            slide = (vpx - vtx) * ttx + (vpy - vty) * tty
+            d_rate = (vtx - vpx) * fnx + (vty - vpy) * fny
+            ftx, fty = fny, -fnx
+            slide = (vpx - vtx) * ftx + (vpy - vty) * fty
             slot = SLOT_TIP + exit_face
             out[slot, C_GAP] = 1.0
             _add(
@@ -606,10 +616,10 @@ def evaluate(
                 d_rate,
                 tip_x,
                 tip_y,
-                ntx,
-                nty,
-                ttx,
-                tty,
+                fnx,
+                fny,
+                ftx,
+                fty,
                 slide,
                 vtx,
                 vty,
@@ -1291,32 +1301,68 @@ def milne_error(y0, acc0, y1, prev_v, prev_a, r, h, atol, rtol, v_ref, om_ref):
     return fac * err
 
 
+EVENT_ONSET = 0  # event function D: a separated candidate starts to push
+EVENT_RELEASE = 1  # the law (16) unclipped: the force falls to zero (or the clip engages)
+EVENT_SLIDE_OFF = 2  # R_z - s: a pushing corner slides past the fence tip
+
+
 @njit(cache=True)
-def first_event(out_a, out_b):
+def event_value(P, out, slot, kind):
+    """The event function of ``kind`` for ``slot`` at a point (nan where it is not defined)."""
+    if kind == EVENT_SLIDE_OFF:
+        s_arc = out[slot, C_S]
+        return P[P_LENGTH] - s_arc if s_arc > 0.0 else math.nan
+    if out[slot, C_GAP] == 0.0:
+        return math.nan
+    return out[slot, C_D] if kind == EVENT_ONSET else out[slot, C_NRAW]
+
+
+@njit(cache=True)
+def first_event(P, out_a, out_b):
     """The fence slot whose event function changes sign first between two points, or -1.
 
     A slot without force at a can start one (onset; the function is D), a slot with force can
-    lose it (release or the N >= 0 clamp engaging; the function is the law (16) unclipped); only
-    slots whose gap is known at both points count. The first is estimated by linear
-    interpolation. Returns (slot, is_onset, g_a, g_b).
+    lose it (release or the N >= 0 clamp engaging; the function is the law (16) unclipped), and
+    a pushing corner can slide past the fence tip (the function is R_z - s); only functions
+    defined at both points count. The first is estimated by linear interpolation.
+    Returns (slot, kind, g_a, g_b).
     """
     best = -1
     best_fr = 2.0
-    onset_best = False
+    kind_best = EVENT_ONSET
     ga_best = gb_best = 0.0
     for k in range(SLOT_BORDER):
-        if out_a[k, C_GAP] == 0.0 or out_b[k, C_GAP] == 0.0:
-            continue
-        onset = out_a[k, C_ACTIVE] == 0.0
-        col = C_D if onset else C_NRAW
-        ga = out_a[k, col]
-        gb = out_b[k, col]
-        if (ga > 0.0) == (gb > 0.0):
+        active = out_a[k, C_ACTIVE] != 0.0
+        kind = EVENT_RELEASE if active else EVENT_ONSET
+        if active and k < SLOT_TIP and out_b[k, C_GAP] == 0.0:
+            kind = EVENT_SLIDE_OFF
+        ga = event_value(P, out_a, k, kind)
+        gb = event_value(P, out_b, k, kind)
+        if math.isnan(ga) or math.isnan(gb) or (ga > 0.0) == (gb > 0.0):
             continue
         fr = ga / (ga - gb)
         if fr < best_fr:
             best_fr = fr
             best = k
-            onset_best = onset
+            kind_best = kind
             ga_best, gb_best = ga, gb
-    return best, onset_best, ga_best, gb_best
+    return best, kind_best, ga_best, gb_best
+
+
+@njit(cache=True)
+def time_to_contact(out):
+    """Shortest time until a separated fence candidate closes its gap at its present closing
+    speed, min over slots of -D / Ddot (D < 0, Ddot > 0); inf if none approaches. An adaptive
+    step no longer than this cannot jump over a contact shorter than one step (grazing), since
+    the onset then shows as a sign change of D within the step."""
+    best = math.inf
+    for k in range(SLOT_BORDER):
+        if out[k, C_GAP] == 0.0 or out[k, C_ACTIVE] != 0.0:
+            continue
+        d = out[k, C_D]
+        rate = out[k, C_DDOT]
+        if d < 0.0 and rate > 0.0:
+            ttc = -d / rate
+            if ttc < best:
+                best = ttc
+    return best

@@ -301,6 +301,7 @@ class Observer:
         self.work = 0.0
         self.last_n = [0.0, 0.0, 0.0]
         self.last_t = [0.0, 0.0, 0.0]
+        self.last_mask = [-1, -1]  # contact masks at the two points before this one
         self.first = True
         self.audit = EnergyAudit()
         self.mask = -1
@@ -345,9 +346,14 @@ class Observer:
         if n > self.peak_n:
             self.peak_n = n
         # a local maximum of N at the previous point: the parabola through the last three
-        # points recovers the peak between steps (third-order accurate; adaptive steps)
+        # points recovers the peak between steps (third-order accurate; adaptive steps), if
+        # the same contacts carried the force at all three (N is smooth there; across an
+        # event, e.g. a corner sliding off the tip, it is not)
         n1, n2 = self.last_n[1], self.last_n[2]
-        if n2 > n1 and n2 >= n and n1 > 0.0:
+        masks = self.last_mask
+        smooth = masks[0] == masks[1] == mask
+        masks[0], masks[1] = masks[1], mask
+        if smooth and n2 > n1 and n2 >= n and n1 > 0.0:
             t0, t1 = self.last_t[1], self.last_t[2]
             peak = _parabola_peak(t0, n1, t1, n2, t, n)
             if peak > self.peak_n:

@@ -87,6 +87,27 @@ def test_coupled_slip_wrench_lies_on_the_limit_ellipse():
     assert lam == pytest.approx(ref, rel=1e-9)
 
 
+def test_explicit_stick_uses_the_same_ellipse_as_slip_and_the_implicit_law():
+    """The Karnopp stick branch holds any applied wrench inside the limit ellipse and scales one
+    outside it onto the ellipse (a box |F| <= F_max, |T| <= T_max would let SciPy's explicit
+    rhs hold wrenches the implicit steppers let slip)."""
+    f_max, t_max = 10.0, 1.0
+    inside = karnopp_belt_wrench(0, 0, 0, 6.0, 0.0, 0.7, f_max, t_max, 1e-6, 1e-6)
+    assert inside == pytest.approx((-6.0, 0.0, -0.7))
+    fx, fy, t = karnopp_belt_wrench(0, 0, 0, 8.0, 0.0, 0.8, f_max, t_max, 1e-6, 1e-6)
+    assert (fx**2 + fy**2) / f_max**2 + t**2 / t_max**2 == pytest.approx(1.0, rel=1e-12)
+    assert fx / -8.0 == pytest.approx(t / -0.8)  # radial scaling: the same direction
+    # the implicit law sticks exactly on the same set: inside -> stuck, outside -> slip
+    w = (1e-4, 1e-4, 1e-3)
+    for applied, stuck_expected in (((6.0, 0.0, 0.7), True), ((8.0, 0.0, 0.8), False)):
+        u_star = tuple(-applied[k] * w[k] for k in range(3))  # the velocity lambda must cancel
+        _, _, stuck = implicit_belt_wrench(u_star, w, f_max, t_max)
+        assert stuck is stuck_expected
+    # translation sticking while the load spins: the force left is what the ellipse allows
+    fx, fy, t = karnopp_belt_wrench(0, 0, 2.0, 9.0, 0.0, 0.0, f_max, t_max, 1e-6, 1e-6)
+    assert t == pytest.approx(-t_max) and fx == pytest.approx(0.0, abs=1e-9)
+
+
 def _free_parcel(**kw) -> Scenario:
     """A parcel far upstream of the fence: only the belt acts on it."""
     base = dict(
