@@ -27,7 +27,7 @@ DEFAULT_PROFILE = ConstraintProfile()
 #: see test/capacity), several times faster.
 PLANNING_RTOL = 3e-4
 PLANNING_DT_MAX = 2e-2
-PLANNING_SETTLE = 0.3
+PLANNING_SETTLE = 0.15
 
 
 def planning_scenario(

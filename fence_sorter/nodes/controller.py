@@ -127,10 +127,10 @@ PLANNER_PARAMETERS = (
     ParamSpec("alpha_k_deg", 40.0, "Fence angle alpha_k of every stroke [deg]", True, 1.0, 89.0),
     ParamSpec("t1_min", 0.2, "Shortest working time t1, range (5) [s]", True, 0.02, 10.0),
     ParamSpec("t1_max", 1.5, "Longest working time t1, range (5) [s]", True, 0.02, 10.0),
-    ParamSpec("t1_step", 0.05, "Candidate step of t1 [s]", True, 0.001, 10.0),
-    ParamSpec("r_s_min", -0.5, "Smallest R_s, range (3) [m]", True, -5.0, 5.0),
+    ParamSpec("t1_step", 0.1, "Candidate step of t1 [s]", True, 0.001, 10.0),
+    ParamSpec("r_s_min", -0.4, "Smallest R_s, range (3) [m]", True, -5.0, 5.0),
     ParamSpec("r_s_max", 1.0, "Largest R_s, range (3) [m]", True, -5.0, 5.0),
-    ParamSpec("r_s_step", 0.1, "Candidate step of R_s [m]", True, 0.001, 10.0),
+    ParamSpec("r_s_step", 0.2, "Candidate step of R_s [m]", True, 0.001, 10.0),
     ParamSpec("w_dop", 2.4, "(10) admissible impact speed w_dop [m/s]", True, 1e-6, 100.0),
     ParamSpec("a_ndop", 300.0, "(11) admissible acceleration a_Ndop [m/s^2]", True, 1e-6, 1e5),
     ParamSpec("ydot_dop", 2.5, "(12) admissible exit speed ydot_dop [m/s]", True, 1e-6, 100.0),
@@ -139,7 +139,7 @@ PLANNER_PARAMETERS = (
     ),
     ParamSpec("pitch_gap", 0.1, "Gap Delta between loads in Delta_c (2) [m]", True, 0.0, 10.0),
     ParamSpec("fence_model", "stiff", "Fence the planner simulates: stiff | scene", True),
-    ParamSpec("max_evaluations", 10, "Twin evaluations per parcel (cached free)", True, 1, 1000),
+    ParamSpec("max_evaluations", 6, "Twin evaluations per parcel (cached free)", True, 1, 1000),
     ParamSpec(
         "start_margin",
         0.1,
@@ -153,6 +153,14 @@ PLANNER_PARAMETERS = (
     ParamSpec("quantum_mass", 0.2, "Class bin of mass (relative, log steps)", True, 1e-3, 10.0),
     ParamSpec("quantum_gap", 0.05, "Class bin of the lateral gap [m]", True, 1e-4, 1.0),
     ParamSpec("quantum_yaw_deg", 5.0, "Class bin of the yaw [deg]", True, 1e-3, 90.0),
+    ParamSpec(
+        "min_exit_speed",
+        0.3,
+        "(8) reserve: cross y0 = s at least this fast [m/s]",
+        True,
+        0.0,
+        100.0,
+    ),
     ParamSpec("quantum_mu", 0.05, "Class bin of mu1 and mu2", True, 1e-4, 1.0),
 )
 
@@ -168,8 +176,8 @@ class ControllerNode(FenceSorterNode):
         ParamSpec("frame_id", "sorter", "Fixed frame of the sorter (REP-103, z up)", True),
         *PLANNER_PARAMETERS,
         ParamSpec("warmup_stream", "", "Stream whose parcel classes warm the cache", True),
-        ParamSpec("warmup_parcels", 50, "Parcels drawn for the warm-up", True, 0, 100000),
-        ParamSpec("warmup_time", 5.0, "Wall-time budget of the warm-up [s]", True, 0.0, 600.0),
+        ParamSpec("warmup_parcels", 100, "Parcels drawn for the warm-up", True, 0, 100000),
+        ParamSpec("warmup_time", 8.0, "Wall-time budget of the warm-up [s]", True, 0.0, 600.0),
     )
 
     def validate_parameters(self, parameters: Sequence[Parameter]) -> str | None:
@@ -282,6 +290,13 @@ def handle_parcel(node: ControllerNode, msg):
     stats.commands += 1
     if plan.feasible:
         stats.lead.append(plan.start_time - now.nanoseconds * 1e-9)
+        ev = plan.evaluation
+        log.info(
+            f"parcel {req.parcel_id}: R_s {ev.r_s:g} m, t1 {ev.t1:g} s, W_t "
+            f"{ev.capacity_pcs_h:.0f} pcs/h, start t = {plan.start_time:.3f} s "
+            f"({plan.evaluations} evaluations, {plan.cache_hits} cached, "
+            f"{1e3 * plan.wall_time:.1f} ms)"
+        )
     else:
         stats.infeasible += 1
         log.warning(f"parcel {req.parcel_id}: infeasible: {plan.reason}")

@@ -145,7 +145,7 @@ def test_planner_cache_makes_a_repeated_class_free(base) -> None:
 
 def test_lower_friction_gives_no_lower_capacity(base) -> None:
     """Paper, Fig. 4: smaller mu1, mu2 -> higher (here: not lower) capacity."""
-    cfg = PlannerConfig(t1_step=0.1, r_s_step=0.25, max_evaluations=40)
+    cfg = PlannerConfig(max_evaluations=400)  # linear over all candidates: the true first
     p = ParcelParams(0.7, 0.1, 0.1, 5.0, -0.35, -0.05, 0.0, 0.0)
     caps = []
     for mu1, mu2 in ((0.65, 0.35), (0.3, 0.15)):
