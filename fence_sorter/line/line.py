@@ -449,6 +449,8 @@ class SortingLine:
             if s.alive:
                 s.close()
             self.strokes.remove(s)
+            if p.stroke is s:
+                p.stroke = None  # no parcel <-> stroke cycle left for the GC
 
     def _start_stroke(self, p: _Parcel) -> None:
         cmd = p.command

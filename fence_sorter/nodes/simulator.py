@@ -14,6 +14,7 @@ missed periods in one go, up to ``max_catch_up`` of sim time; beyond that sim ti
 
 from __future__ import annotations
 
+import gc
 import math
 import queue
 import sys
@@ -54,6 +55,10 @@ from fence_sorter_msgs.msg import FenceCommand, FenceState, LoadState, Parcel, S
 DEFAULT_SCENE = "impact_flexible"
 #: sim time a command for a not-yet-known parcel waits for its parcel message [s]
 COMMAND_HOLD = 0.5
+#: the loop collects garbage only with this much time left before the next deadline [s]
+GC_SLACK = 0.0006
+#: cycles' worth of wall time between full collections [s]
+FULL_GC_PERIOD = 10.0
 
 # /clock: reliable keep-last, compatible with rclpy/rclcpp's best-effort clock subscriptions
 # and with reliable ones (recorders).
@@ -263,6 +268,12 @@ class SimulatorNode(FenceSorterNode):
         # A thread waking from sleep waits for the GIL until the holder's switch interval
         # (5 ms by default) expires: keep it well below the cycle period.
         sys.setswitchinterval(min(sys.getswitchinterval(), 0.25 * self.period))
+        # The cyclic GC would stop the loop for 1-60 ms at moments of its choosing: freeze
+        # what exists after start-up (modules, compiled kernel, scene) and let the loop collect
+        # the young generation in the slack after its work, the old one every few seconds.
+        gc.collect()
+        gc.freeze()
+        gc.disable()
         self._thread.start()
 
     def stop(self) -> None:
@@ -286,6 +297,7 @@ class SimulatorNode(FenceSorterNode):
         start_wall, start_sim = clock(), line.t
         k = 0  # deadlines since start_wall: deadline_k = start_wall + k * period
         next_pub = next_marker = 0  # cycle index of the next publication (k may skip)
+        next_gc = next_full_gc = 0
         self._publish(line.snapshot())
         while not self._stop.is_set():
             rtf = self.rtf
@@ -332,6 +344,12 @@ class SimulatorNode(FenceSorterNode):
                 next_marker = (k // self.marker_every + 1) * self.marker_every
                 self.pub_markers.publish(self._markers.build(line.snapshot()))
             done = clock()
+            if k >= next_gc and (rtf == 0.0 or deadline + period - done > GC_SLACK):
+                gen = 2 if k >= next_full_gc else 0
+                gc.collect(gen)
+                next_gc = k + self.publish_every
+                if gen == 2:
+                    next_full_gc = k + round(FULL_GC_PERIOD / period)
             with self._lock:
                 if rtf > 0.0:
                     self.work.add(done - wake)
@@ -532,6 +550,7 @@ def main(args: Sequence[str] | None = None) -> int:
         print(f"simulator: {exc}", file=sys.stderr)
         code = 2
     finally:
+        gc.enable()
         if node is not None:
             node.stop()
             if node.loop_error:
