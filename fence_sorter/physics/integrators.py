@@ -17,7 +17,8 @@ All three share the events that would otherwise cost the schemes their order: co
 release (a fence contact's law (16) crossing N = 0, which includes the N >= 0 clamp engaging)
 are located by regula falsi so a step ends on them; the drive's acceleration jumps (0, t1, 2 t1)
 are step ends; belt and fence stick/slip is implicit (exact stick, the paper's 1e-6 m/s Karnopp
-window kept); the sorting line y0 = s is interpolated. A step whose contact iteration fails is
+window kept); C_s crossing the sorting line y0 = s ends a step (the belt stops carrying the
+load there). A step whose contact iteration fails is
 halved; a step this small that still fails straddles a switch and is taken and counted (forced).
 
 Divergence (NaN, runaway speed, deep penetration, step below min_dt, wall-time limit) stops the
@@ -35,6 +36,7 @@ from . import kernel as K
 from .contacts import STAGE_SORTED, classify
 
 EVENT_TOL = 1e-10  # a located onset's step ends with 0 < D <= EVENT_TOL [m]
+EVENT_SORT = 3  # C_s crossing the sorting line y0 = s (belt friction ends there)
 
 
 class Propagators:
@@ -271,6 +273,7 @@ class Integrator:
         m = model.n_modes
         self.cur, self.trial, self.loc = State(n, m), State(n, m), State(n, m)
         self.before = State(n, m)
+        self.width = sc.conveyor.width
         self.forced = 0
         self.events = 0
         self.outcome: tuple[float, str | None, int, int] | None = None
@@ -318,7 +321,10 @@ class Integrator:
             st = sch.step(h_loc, a, self.loc, jump, on_belt, False)
             if st == K.STEP_REJECTED:
                 break
-            g = K.event_value(self.model.P, self.loc.out, slot, kind)
+            if kind == EVENT_SORT:
+                g = self.width - self.loc.y[1]
+            else:
+                g = K.event_value(self.model.P, self.loc.out, slot, kind)
             if math.isnan(g):
                 break
             if (g > 0.0) != sign0:
@@ -405,8 +411,11 @@ class Integrator:
             h_taken = h_try
             # contact onset / release inside the step: end the step on it
             slot, kind, g0, g1 = K.first_event(self.model.P, a.out, b.out)
+            if slot < 0 and on_belt and a.y[1] < self.width <= b.y[1]:
+                # C_s crosses the belt edge y0 = s: the belt stops carrying the load there
+                slot, kind, g0, g1 = -1, EVENT_SORT, self.width - a.y[1], self.width - b.y[1]
             located = False
-            if slot >= 0 and h_try > 1e-9:
+            if (slot >= 0 or kind == EVENT_SORT) and h_try > 1e-9:
                 h_taken = self._locate(h_try, on_belt, slot, kind, g0, g1)
                 located = True
             if self.adaptive:
