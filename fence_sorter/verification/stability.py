@@ -251,6 +251,13 @@ CASES: tuple[Case, ...] = (
         "positioned_stiff",
         {"contact.k_p": 1.72e12},
         item="contact stiffness k_p x1000",
+        note=(
+            "Known failure (convergence, ~2.6 % against 2.4 %): the load rattles on the two "
+            "stiff corner contacts at ~25 Hz with mm amplitude; rtol 1e-4 scales position "
+            "errors by 1 m, so the 2 ms steps drift in phase and the peak N is ~3.5 % low "
+            "(90.7 N against 94.0 N at dt = 1e-5 s); rtol 1e-6 gives 93.8 N, 1e-7 93.9 N. "
+            "A contact-aware error scale is the fix (follow-up)."
+        ),
     ),
     Case(
         "kp_x1000_slide",
@@ -443,6 +450,13 @@ CASES: tuple[Case, ...] = (
         dict(_ELASTIC),
         elastic=True,
         item="zero damping",
+        note=(
+            "Known failure (energy +0.036 J against 0.020 J): the fence-tip contact starts at "
+            "nonzero depth when a corner that is not pushing crosses the fence line beyond the "
+            "tip while the tip is already inside the load (face along the fence behind the "
+            "line), so its spring potential appears at once; the contact model of the fence "
+            "end needs the overlap of the fence segment and the load (follow-up)."
+        ),
     ),
     # -- parcel exactly on the border (E3) --------------------------------------------------------
     Case(
