@@ -16,6 +16,7 @@ from collections.abc import Sequence
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException
 from rclpy.parameter import Parameter
 from rclpy.time import Time
@@ -177,6 +178,14 @@ class ControllerNode(FenceSorterNode):
         *PLANNER_PARAMETERS,
         ParamSpec("warmup_stream", "", "Stream whose parcel classes warm the cache", True),
         ParamSpec("warmup_parcels", 100, "Parcels drawn for the warm-up", True, 0, 100000),
+        ParamSpec(
+            "wait_for_command_subscribers",
+            1,
+            "Listen to /parcels once /fence_commands has this many subscribers",
+            True,
+            0,
+            100,
+        ),
         ParamSpec("warmup_time", 8.0, "Wall-time budget of the warm-up [s]", True, 0.0, 600.0),
     )
 
@@ -213,7 +222,14 @@ class ControllerNode(FenceSorterNode):
         self.seen: set[int] = set()
         self._warm_up(p)
         self._pub = self.create_publisher(FenceCommand, COMMANDS_TOPIC, RELIABLE_QOS)
-        self._sub = self.create_subscription(Parcel, PARCELS_TOPIC, self.on_parcel, RELIABLE_QOS)
+        # Listen to /parcels only once a commands subscriber (the simulator) is matched: a
+        # command published before discovery completes would be lost (volatile QoS).
+        self._parcel_class = Parcel
+        self._sub = None
+        self._min_subscribers = int(p["wait_for_command_subscribers"])
+        self._listen_timer = self.create_timer(
+            0.02, self._listen_when_matched, clock=Clock(clock_type=ClockType.STEADY_TIME)
+        )
         self.get_logger().info(
             f"controller ready: scene {scene}, {len(self.planner.candidate_list)} candidates, "
             f"fence model {self.config.fence_model}, {len(self.planner.cache)} cached evaluations"
@@ -240,6 +256,15 @@ class ControllerNode(FenceSorterNode):
             f"warm-up: {classes} load classes in {time.perf_counter() - wall0:.2f} s"
         )
 
+    def _listen_when_matched(self) -> None:
+        if self._pub.get_subscription_count() < self._min_subscribers:
+            return
+        self._listen_timer.cancel()
+        self._sub = self.create_subscription(
+            self._parcel_class, PARCELS_TOPIC, self.on_parcel, RELIABLE_QOS
+        )
+        self.get_logger().info("listening on /parcels")
+
     def on_parcel(self, msg) -> None:
         """Hand the parcel to :func:`handle_parcel`; publish what it returns."""
         wall0 = time.perf_counter()
@@ -252,6 +277,7 @@ class ControllerNode(FenceSorterNode):
         status = super().heartbeat_status()
         values = self.stats.values()
         values["cache_entries"] = str(len(self.planner.cache))
+        values["listening"] = str(self._sub is not None).lower()
         status.values.extend(KeyValue(key=k, value=v) for k, v in values.items())
         return status
 

@@ -272,6 +272,8 @@ def run_job(opts: RunOptions, say: Callable[[str], None] = print) -> RunResult:
     summary["wall_time_s"] = time.monotonic() - wall0
     summary["exit_codes"] = exit_codes
     summary["log_dir"] = str(log_dir)
+    summary["process_groups"] = list(group.pgids)
+    summary["leftover_processes"] = left
     return RunResult(
         code, summary, message, log_dir, list(group.pgids), left, exit_codes, monitor.records
     )

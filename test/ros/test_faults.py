@@ -1,0 +1,170 @@
+"""Faults over DDS: the controller killed mid-run (SIGKILL) and restarted; malformed parcels.
+
+- Kill: the simulator keeps running; divert parcels scanned while no controller listens get
+  NO_COMMAND; a restarted controller plans the parcels scanned after it is up (SORTED).
+- Malformed parcels (NaN, negative mass, wider than the belt, duplicate id) published by the
+  test are rejected, counted in the simulator's and the controller's diagnostics, and both keep
+  running (a valid parcel published afterwards still gets its outcome).
+"""
+
+from __future__ import annotations
+
+import math
+import signal
+import time
+from pathlib import Path
+
+import pytest
+
+from fence_sorter.runner.processes import ProcessGroup, leftovers, node_command
+
+pytestmark = pytest.mark.ros
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def ros_args(node: str, *overrides: str) -> list[str]:
+    args = ["--params-file", str(REPO / "config" / f"{node}.yaml"), "-p", "heartbeat_period:=0.25"]
+    for o in overrides:
+        args += ["-p", o]
+    return args
+
+
+@pytest.fixture
+def suite(domain_id: int, env: dict[str, str], tmp_path: Path):
+    """A ProcessGroup on this run's domain and a Monitor (the job's listener) in the test."""
+    from fence_sorter.runner.monitor import Monitor
+
+    group = ProcessGroup(env, tmp_path / "logs")
+    monitor = Monitor(domain_id, name="test_faults_monitor")
+    try:
+        yield group, monitor
+    finally:
+        group.stop(("scanner", "controller", "controller2", "simulator"))
+        assert leftovers(group.pgids) == []
+        monitor.close()
+
+
+def wait(monitor, predicate, timeout: float, what: str) -> None:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        monitor.spin_for(0.1)
+        if predicate():
+            return
+    raise AssertionError(f"timed out after {timeout:.0f} s waiting for {what}")
+
+
+def heartbeat(monitor, node: str) -> dict | None:
+    return monitor.records.diagnostics.get(f"fence_sorter/{node}")
+
+
+def test_controller_killed_and_restarted(suite, tmp_path: Path) -> None:
+    group, monitor = suite
+    rows = ["parcel_id,arrival_time,length_a,width_b,height,mass,lateral_gap,divert"]
+    rows += [f"{i},{2.5 * (i - 1):.1f},0.30,0.25,0.2,4.0,0.1,true" for i in range(1, 13)]
+    manifest = tmp_path / "stream.csv"
+    manifest.write_text("\n".join(rows) + "\n")
+    ctrl = ros_args("controller", f"warmup_stream:={manifest}", "use_sim_time:=true")
+    group.start("controller", node_command("controller", ctrl))
+    wait(monitor, lambda: heartbeat(monitor, "controller"), 60, "the controller")
+    group.start("simulator", node_command("simulator", ros_args("simulator")))
+    wait(monitor, lambda: heartbeat(monitor, "simulator"), 60, "the simulator")
+    scan = ros_args(
+        "scanner",
+        f"stream:={manifest}",
+        "parcels:=12",
+        "wait_for_subscribers:=3",
+        "use_sim_time:=true",
+    )
+    group.start("scanner", node_command("scanner", scan))
+    rec = monitor.records
+    # the first parcel sorted with the first controller, then kill it
+    wait(monitor, lambda: rec.outcomes.get(1, {}).get("sorted"), 40, "parcel 1 sorted")
+    group.nodes["controller"].proc.send_signal(signal.SIGKILL)
+    group.nodes["controller"].proc.wait(timeout=5)
+    killed = time.monotonic()
+    monitor.spin_for(5.0)  # two parcels scanned with nobody planning
+    sim = group.nodes["simulator"].proc
+    assert sim.poll() is None, "the simulator must keep going without a controller"
+    beats = len(rec.diagnostics_history["fence_sorter/simulator"])
+    group.start("controller2", node_command("controller", ctrl))
+    wait(
+        monitor,
+        lambda: (
+            len(rec.diagnostics_history.get("fence_sorter/controller", [])) > 0
+            and heartbeat(monitor, "controller").get("parcels_received") == "0"
+        ),
+        60,
+        "the restarted controller",
+    )
+    ready = time.monotonic()
+    wait(monitor, lambda: len(rec.outcomes) == 12, 60, "all 12 outcomes")
+    assert sim.poll() is None
+    assert len(rec.diagnostics_history["fence_sorter/simulator"]) > beats  # kept beating
+    dead = [p for p, d in rec.parcels.items() if killed < d["wall"] < ready]
+    after = [p for p, d in rec.parcels.items() if d["wall"] > ready + 0.5]
+    assert len(dead) >= 1 and len(after) >= 2, (dead, after)
+    for pid in dead:
+        assert rec.outcomes[pid]["reason_name"] == "NO_COMMAND", rec.outcomes[pid]
+    for pid in after:
+        assert rec.outcomes[pid]["reason_name"] == "SORTED", rec.outcomes[pid]
+    # the restarted controller only planned parcels that were still ahead of their R_s
+    c2 = heartbeat(monitor, "controller")
+    assert int(c2["commands"]) >= len(after) and c2["late_no_command"] == "0"
+
+
+def _parcel(msg_class, pid: int, scan_time, **fields):
+    msg = msg_class()
+    msg.header.frame_id = "sorter"
+    msg.parcel_id = pid
+    msg.length_a, msg.width_b, msg.height, msg.mass = 0.3, 0.2, 0.2, 3.0
+    msg.lateral_gap, msg.yaw = 0.1, 0.0
+    msg.mu_belt = msg.mu_fence = math.nan
+    msg.divert = True
+    msg.scan_time = scan_time
+    msg.scan_position_x = -3.0
+    for k, v in fields.items():
+        setattr(msg, k, v)
+    return msg
+
+
+def test_malformed_parcels_are_rejected_and_counted(suite) -> None:
+    from rclpy.time import Time
+
+    from fence_sorter.nodes.qos import RELIABLE_QOS
+    from fence_sorter_msgs.msg import Parcel
+
+    group, monitor = suite
+    ctrl = ros_args("controller", "warmup_parcels:=0", "use_sim_time:=true")
+    group.start("controller", node_command("controller", ctrl))
+    group.start("simulator", node_command("simulator", ros_args("simulator")))
+    wait(
+        monitor,
+        lambda: heartbeat(monitor, "controller") and heartbeat(monitor, "simulator"),
+        60,
+        "controller and simulator",
+    )
+    pub = monitor.node.create_publisher(Parcel, "/parcels", RELIABLE_QOS)
+    wait(monitor, lambda: pub.get_subscription_count() >= 3, 20, "subscribers of /parcels")
+    rec = monitor.records
+    wait(monitor, lambda: rec.sim_time > 0.5, 20, "sim time")
+    now = Time(nanoseconds=int(rec.sim_time * 1e9)).to_msg()
+    bad = [
+        _parcel(Parcel, 101, now, length_a=math.nan),
+        _parcel(Parcel, 102, now, mass=-1.0),
+        _parcel(Parcel, 103, now, width_b=0.9),  # wider than the 0.7 m belt
+    ]
+    good = _parcel(Parcel, 104, now, divert=False, scan_position_x=1.0)
+    dup = _parcel(Parcel, 104, now, divert=False, scan_position_x=1.0)
+    for msg in [*bad, good, dup]:
+        pub.publish(msg)
+    wait(monitor, lambda: 104 in rec.outcomes, 30, "the valid parcel's outcome")
+    monitor.spin_for(1.0)  # the next heartbeats carry the counts
+    sim, ctl = heartbeat(monitor, "simulator"), heartbeat(monitor, "controller")
+    assert sim["bad_parcels"] == "4", sim
+    assert ctl["rejected_parcels"] == "4", ctl  # 3 malformed (divert) + the duplicate id
+    assert rec.outcomes[104]["reason_name"] == "NOT_DIVERTED"
+    assert not ({101, 102, 103} & rec.outcomes.keys())  # rejected: no outcome invented
+    assert group.nodes["simulator"].proc.poll() is None
+    assert group.nodes["controller"].proc.poll() is None
+    wait(monitor, lambda: rec.sim_time > 3.0, 20, "sim time still advancing")
