@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import gc
 import math
+import os
 import queue
 import sys
 import threading
@@ -192,6 +193,15 @@ class SimulatorNode(FenceSorterNode):
             max_value=10.0,
         ),
         ParamSpec(
+            "realtime_priority",
+            0,
+            "SCHED_FIFO priority of the pacing thread (1-99; needs CAP_SYS_NICE or an rtprio "
+            "limit, otherwise a warning); 0: normal scheduling",
+            read_only=True,
+            min_value=0,
+            max_value=99,
+        ),
+        ParamSpec(
             "warm_up",
             True,
             "Run one short stroke before starting so the compiled kernel is loaded",
@@ -220,6 +230,7 @@ class SimulatorNode(FenceSorterNode):
         self.marker_every = max(1, round(float(p["physics_rate"]) / rate)) if rate > 0.0 else 0
         self.max_catch_up = float(p["max_catch_up"])
         self.spin_margin = float(p["spin_margin"])
+        self.rt_priority = int(p["realtime_priority"])
 
         self._inbox: queue.SimpleQueue = queue.SimpleQueue()
         self._held: list[tuple[float, StrokeCommand]] = []  # commands for unknown parcels
@@ -291,7 +302,19 @@ class SimulatorNode(FenceSorterNode):
                 self.get_logger().fatal(f"pacing loop failed: {self.loop_error}")
                 self.context.try_shutdown()
 
+    def _set_priority(self) -> None:
+        """SCHED_FIFO for this (the pacing) thread if asked for: on a loaded machine normal
+        scheduling lets other processes' time slices delay a wake-up by milliseconds."""
+        if self.rt_priority <= 0:
+            return
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self.rt_priority))
+            self.get_logger().info(f"pacing thread: SCHED_FIFO priority {self.rt_priority}")
+        except (OSError, AttributeError) as exc:
+            self.get_logger().warning(f"realtime_priority not applied ({exc}); normal scheduling")
+
     def _run_loop(self) -> None:
+        self._set_priority()
         clock = time.perf_counter
         period, line = self.period, self.line
         start_wall, start_sim = clock(), line.t
