@@ -767,7 +767,7 @@ def trapezoidal_step(
     lam1[0] = lam1[1] = lam1[2] = 0.0
     converged = False
     iterations = 0
-    # Anderson acceleration (depth 1) of the fixed point x = G(x) on (q, v, eta, etadot): the
+    # Anderson acceleration (depth 2) of the fixed point x = G(x) on (q, v, eta, etadot): the
     # contact couples the load to the fence's modal deflection so tightly that the plain
     # iteration contracts slowly (often > 10 iterations per step on a flexible fence)
     n = 6 + 2 * m
@@ -779,9 +779,13 @@ def trapezoidal_step(
         wts[6 + j] = phi_scale
         wts[6 + m + j] = h * phi_scale
     g_new = np.empty(n)
-    g_old = np.empty(n)
-    f_old = np.empty(n)
-    have_old = False
+    # depth-2 history: columns 0 (latest) and 1 of the differences of f and G between iterates
+    df = np.zeros((2, n))
+    dg = np.zeros((2, n))
+    f_prev = np.empty(n)
+    g_prev = np.empty(n)
+    f_cur = np.empty(n)
+    depth = 0
     accelerate = True
     fn_old = 0.0
     for _ in range(max_iter):
@@ -840,27 +844,44 @@ def trapezoidal_step(
                 y1[k] = g_new[k]
             converged = True
             break
-        # secant step on the scaled residual f = G(x) - x; a residual that grows (a friction
-        # or contact switch inside the iteration: G is not smooth there) turns it off
-        num = 0.0
-        den = 0.0
+        # Anderson step on the scaled residual f = G(x) - x over the last two differences
+        # (least squares); a residual that grows (a friction or contact switch inside the
+        # iteration: G is not smooth there) turns it off
         fn = 0.0
         for k in range(n):
-            fk = (g_new[k] - y1[k]) * wts[k]
-            fn += fk * fk
-            if have_old:
-                dfk = fk - f_old[k]
-                num += dfk * fk
-                den += dfk * dfk
-        if have_old and fn > fn_old:
+            f_cur[k] = (g_new[k] - y1[k]) * wts[k]
+            fn += f_cur[k] * f_cur[k]
+        if depth > 0 and fn > fn_old:
             accelerate = False
         fn_old = fn
-        gamma = num / den if accelerate and den > 0.0 else 0.0
+        if depth > 0:
+            for k in range(n):
+                df[1, k] = df[0, k]
+                dg[1, k] = dg[0, k]
+                df[0, k] = f_cur[k] - f_prev[k]
+                dg[0, k] = g_new[k] - g_prev[k]
+        g0 = 0.0
+        g1_ = 0.0
+        if accelerate and depth > 0:
+            a00 = a01 = a11 = b0 = b1 = 0.0
+            for k in range(n):
+                a00 += df[0, k] * df[0, k]
+                b0 += df[0, k] * f_cur[k]
+                if depth > 1:
+                    a01 += df[0, k] * df[1, k]
+                    a11 += df[1, k] * df[1, k]
+                    b1 += df[1, k] * f_cur[k]
+            det = a00 * a11 - a01 * a01
+            if depth > 1 and det > 1e-12 * a00 * a11 and a11 > 0.0:
+                g0 = (b0 * a11 - b1 * a01) / det
+                g1_ = (a00 * b1 - a01 * b0) / det
+            elif a00 > 0.0:
+                g0 = b0 / a00
         for k in range(n):
-            f_old[k] = (g_new[k] - y1[k]) * wts[k]
-            y1[k] = g_new[k] - gamma * (g_new[k] - g_old[k]) if have_old else g_new[k]
-            g_old[k] = g_new[k]
-        have_old = True
+            f_prev[k] = f_cur[k]
+            g_prev[k] = g_new[k]
+            y1[k] = g_new[k] - g0 * dg[0, k] - g1_ * dg[1, k]
+        depth = min(depth + 1, 2)
     if not converged and not force:
         return STEP_REJECTED
     evaluate(
