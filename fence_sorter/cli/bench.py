@@ -137,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
     text = B.render_markdown(report)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(text, encoding="utf-8")
+    out.write_text(text + _suite_section(out), encoding="utf-8")
     if args.json:
         path = Path(args.json)
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -159,3 +159,15 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 if __name__ == "__main__":
     raise SystemExit(main())
+
+
+def _suite_section(out: Path) -> str:
+    """The node-suite section ``fence-sorter bench-suite`` keeps in the same file (between its
+    markers): carried over, since this command regenerates everything else."""
+    from fence_sorter.verification.bench_suite import BEGIN, END
+
+    old = out.read_text(encoding="utf-8") if out.is_file() else ""
+    if BEGIN not in old or END not in old or old.index(BEGIN) > old.index(END):
+        return ""
+    start, stop = old.index(BEGIN), old.index(END) + len(END)
+    return "\n" + old[start:stop] + "\n"

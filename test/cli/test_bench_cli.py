@@ -122,3 +122,16 @@ def test_bad_repeats_exit_2() -> None:
     r = bench("--repeats", "0", "--out", os.devnull)
     assert r.returncode == 2
     assert r.stderr.strip().startswith("fence-sorter: error: --repeats")
+
+
+def test_bench_keeps_the_node_suite_section_of_the_file(tmp_path):
+    """``fence-sorter bench`` regenerates docs/benchmarks.md but must carry over the section
+    ``fence-sorter bench-suite`` writes between its markers."""
+    from fence_sorter.cli.bench import _suite_section
+
+    out = tmp_path / "benchmarks.md"
+    assert _suite_section(out) == ""
+    out.write_text("# old\n<!-- suite:begin -->\n| rtf | 1.0 |\n<!-- suite:end -->\nold tail\n")
+    kept = _suite_section(out)
+    assert kept.strip().startswith("<!-- suite:begin -->")
+    assert "| rtf | 1.0 |" in kept and "old tail" not in kept and "# old" not in kept
