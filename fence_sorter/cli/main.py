@@ -25,6 +25,7 @@ SUBCOMMAND_MODULES: tuple[str, ...] = (
     "stability",
     "bench",
     "run",
+    "bench_suite",
 )
 
 

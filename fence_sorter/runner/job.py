@@ -233,8 +233,10 @@ def run_job(opts: RunOptions, say: Callable[[str], None] = print) -> RunResult:
                     ),
                 )
                 break
-            if sim_start is None and rec.sim_time > 0:
-                sim_start = rec.sim_time
+            if sim_start is None and rec.parcels:
+                # the stream's sim time starts with the first scan (at rtf 0 the scanner may
+                # come up long after the simulator's clock started)
+                sim_start = min(p["scan_time"] for p in rec.parcels.values()) - START_DELAY
             if sim_start is not None and rec.sim_time - sim_start > plan.sim_duration + 30.0:
                 code, message = (
                     EXIT_FAILED,

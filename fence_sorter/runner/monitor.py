@@ -142,6 +142,7 @@ class Monitor:
                 if isinstance(status.level, bytes)
                 else str(status.level)
             )
+            values["_wall"] = f"{time.monotonic():.6f}"
             r.diagnostics[status.name] = values
             r.diagnostics_history.setdefault(status.name, []).append(values)
 

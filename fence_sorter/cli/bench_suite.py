@@ -1,0 +1,59 @@
+"""``fence-sorter bench-suite``: the node suite against the issue 5 targets.
+
+Runs :mod:`fence_sorter.verification.bench_suite` (a paced run at rtf 1.0 for 60 s at
+2400 pcs/h, then an unpaced run), prints the section and writes it between the suite markers
+of the output file (default ``docs/benchmarks.md``; the rest of the file is left as it is).
+
+Exit codes: 0 the bench ran (missed targets are reported in the table), 1 a run failed,
+2 bad arguments.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from pathlib import Path
+
+DEFAULT_OUT = "docs/benchmarks.md"
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "bench-suite",
+        help="node suite benchmark: pacing, lost messages, controller latency, unpaced RTF",
+        description="Paced run (rtf 1.0, 60 s, 2400 pcs/h) and unpaced run of the node suite; "
+        "writes the figures between <!-- suite:begin --> and <!-- suite:end --> in --out.",
+    )
+    parser.add_argument("--out", default=DEFAULT_OUT, help="markdown file (section replaced)")
+    parser.add_argument("--duration", type=float, default=60.0, help="paced stream length [s]")
+    parser.add_argument("--unpaced-parcels", type=int, default=40, help="parcels, unpaced run")
+    parser.add_argument("--no-write", action="store_true", help="print only")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from fence_sorter.verification.bench_suite import render, run_bench, write_section
+    from fence_sorter.verification.machine import git_revision, machine_info
+
+    if not args.duration > 0 or args.unpaced_parcels < 1:
+        print(
+            "fence-sorter: error: --duration must be in (0, inf) s and --unpaced-parcels in "
+            "[1, inf)",
+            file=sys.stderr,
+        )
+        return 2
+    out = Path(args.out)
+    if not args.no_write and not out.parent.is_dir():
+        print(f"fence-sorter: error: --out {out}: no such directory", file=sys.stderr)
+        return 2
+    fig = run_bench(args.duration, args.unpaced_parcels, say=lambda s: print(s, file=sys.stderr))
+    command = "fence-sorter bench-suite " + " ".join(
+        shlex.quote(a) for a in sys.argv[2:] if a != "--no-write"
+    )
+    section = render(fig, command.strip(), machine_info(), git_revision())
+    print(section)
+    if not args.no_write:
+        write_section(out, section)
+        print(f"wrote the suite section of {out}", file=sys.stderr)
+    return 0 if fig["paced_exit"] == 0 and fig["unpaced_exit"] == 0 else 1

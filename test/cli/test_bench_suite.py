@@ -1,0 +1,39 @@
+"""bench-suite writes only its own section of docs/benchmarks.md; lost-message arithmetic."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from fence_sorter.verification.bench_suite import BEGIN, END, lost, message_counts, write_section
+
+
+def test_section_is_appended_then_replaced_in_place(tmp_path: Path) -> None:
+    doc = tmp_path / "benchmarks.md"
+    doc.write_text("# Benchmarks\n\nthe lead's tables\n")
+    write_section(doc, f"{BEGIN}\nfirst\n{END}")
+    assert doc.read_text() == f"# Benchmarks\n\nthe lead's tables\n\n{BEGIN}\nfirst\n{END}\n"
+    doc.write_text(doc.read_text() + "\n## after\nmore of the lead's\n")
+    write_section(doc, f"{BEGIN}\nsecond\n{END}")
+    text = doc.read_text()
+    assert "first" not in text and text.count(BEGIN) == 1
+    assert text.startswith("# Benchmarks\n\nthe lead's tables\n\n" + BEGIN + "\nsecond\n" + END)
+    assert text.endswith("## after\nmore of the lead's\n")
+
+
+def test_lost_messages_counts_every_subscriber_short() -> None:
+    summary = {
+        "simulator": {
+            "parcels_received": "10",
+            "commands_received": "4",
+            "outcomes.SORTED": "4",
+            "outcomes.NOT_DIVERTED": "6",
+        },
+        "controller": {"parcels_received": "9", "commands": "5"},
+        "scanner": {"parcels_published": "10"},
+        "parcel_messages": 10,
+        "command_messages": 5,
+        "outcome_messages": 10,
+    }
+    counts = message_counts(summary)
+    assert counts["/sort_outcomes"]["published (simulator)"] == 10
+    assert lost(counts) == 2  # one parcel missing at the controller, one command at the simulator
