@@ -1036,19 +1036,35 @@ def generalized_alpha_step(
         if it == max_iter:
             break
         err = 0.0
-        # load: (1 - am) a1 + am a0 = (F + lambda) / M, lambda from the end-velocity law
+        # load: (1 - am) a1 + am a0 = (F + lambda_a) / M with the belt wrench at the alpha
+        # point lambda_a = (1 - af) lambda1 + af lambda0, lambda1 from the end-velocity law
+        # (stick is exact at the step end); applying lambda1 itself at the alpha point made
+        # the scheme first order under sliding friction
         fa0, fa1, fa2 = res[R_FX], res[R_FY], res[R_MZ]
         vs0 = y0[3] + h * (1.0 - gamma) * acc0[0] + wv * (fa0 * im[0] - am * acc0[0])
         vs1 = y0[4] + h * (1.0 - gamma) * acc0[1] + wv * (fa1 * im[1] - am * acc0[1])
         vs2 = y0[5] + h * (1.0 - gamma) * acc0[2] + wv * (fa2 * im[2] - am * acc0[2])
         if on_belt:
+            wl = wv * (1.0 - af)
             stuck = implicit_belt(
-                P, vs0 - belt, vs1, vs2, wv * im[0], wv * im[1], wv * im[2], lam1
+                P,
+                vs0 + wv * af * lam0[0] * im[0] - belt,
+                vs1 + wv * af * lam0[1] * im[1],
+                vs2 + wv * af * lam0[2] * im[2],
+                wl * im[0],
+                wl * im[1],
+                wl * im[2],
+                lam1,
+            )
+            fa = (
+                fa0 + (1.0 - af) * lam1[0] + af * lam0[0],
+                fa1 + (1.0 - af) * lam1[1] + af * lam0[1],
+                fa2 + (1.0 - af) * lam1[2] + af * lam0[2],
             )
         else:
             lam1[0] = lam1[1] = lam1[2] = 0.0
             stuck = False
-        fa = (fa0 + lam1[0], fa1 + lam1[1], fa2 + lam1[2])
+            fa = (fa0, fa1, fa2)
         for i in range(3):
             a_new = (fa[i] * im[i] - am * acc0[i]) / (1.0 - am)
             err = max(err, h * h * abs(a_new - acc1[i]))

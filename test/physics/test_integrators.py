@@ -187,3 +187,28 @@ def test_the_sorting_line_crossing_ends_a_step():
     for key in ("x", "y"):
         assert default.series[key][-1] == pytest.approx(fine.series[key][-1], abs=3e-3)
     assert default.exit_speed_y == pytest.approx(fine.exit_speed_y, rel=1e-3)
+
+
+@pytest.mark.parametrize("method", ["trapezoidal", "generalized_alpha"])
+def test_schemes_stay_second_order_under_coupled_belt_slip(method):
+    """A parcel sliding and spinning on the belt (no fence): the elliptic friction law turns the
+    wrench smoothly, so both schemes must keep order 2 (generalized-alpha was first order while
+    it applied the end-of-step belt wrench at its alpha point)."""
+    from fence_sorter.physics.params import ConveyorParams, DriveParams, ParcelParams, SolverParams
+    from fence_sorter.physics.simulate import Scenario
+
+    def end(dt: float) -> np.ndarray:
+        sc = Scenario(
+            conveyor=ConveyorParams(belt_speed=1.5, mu_belt=0.5),
+            parcel=ParcelParams(length_a=0.3, width_b=0.2, mass=4.0, lateral_gap=0.2),
+            drive=DriveParams(r_s=-3.0, t1=0.3),
+            initial_velocity=(0.2, 0.6, 4.0),  # slipping and spinning until t ~ 0.25 s
+            solver=SolverParams(method=method, t_end=0.1, dt=dt),
+            record=("trajectory",),
+        )
+        s = simulate(sc).series
+        return np.array([s[k][-1] for k in ("x", "y", "phi", "vx", "vy", "phidot")])
+
+    ends = [end(dt) for dt in (2e-3, 1e-3, 5e-4)]
+    order = math.log2(np.abs(ends[0] - ends[1]).max() / np.abs(ends[1] - ends[2]).max())
+    assert 1.8 < order < 2.3, order
