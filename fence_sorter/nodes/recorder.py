@@ -1,49 +1,293 @@
-"""Recorder node: writes the sorter topics to a rosbag2 (MCAP) bag.
+"""Recorder node: every topic of the suite into a rosbag2 bag (MCAP by default, or sqlite3).
 
-For now it only declares its parameters and reports through the diagnostic heartbeat.
+Subscriptions are raw (the CDR bytes pass through untouched) with the QoS each topic is
+published with (best effort for the high-rate states, reliable for the rest). Callbacks only
+stamp a message and queue it; a writer thread writes the queue into a
+:class:`~fence_sorter.recording.writer.SegmentedBagWriter`, whose segments close every
+``max_segment_duration`` seconds or ``max_segment_size_mb``, so a SIGKILL loses at most the open
+segment. SIGINT/SIGTERM drain the queue and close the bag. Received, written and queued counts
+per topic are on /diagnostics.
+
+The bag is ``output_dir`` itself when it does not exist or is empty (``fence-sorter run --bag
+DIR``); otherwise a new ``output_dir/run_<UTC time>`` (never overwrites a bag). Bag timestamps
+are this node's clock at reception (system time; sim time with ``use_sim_time:=true``, as
+``ros2 bag record --use-sim-time``).
 """
 
 from __future__ import annotations
 
+import importlib
+import os
+import queue
+import sys
+import threading
+import time
 from collections.abc import Sequence
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rosbags.interfaces import (
+    Qos,
+    QosDurability,
+    QosHistory,
+    QosLiveliness,
+    QosReliability,
+    QosTime,
+)
 
 from fence_sorter.nodes.base import FenceSorterNode, ParamSpec, run_node
+from fence_sorter.recording.topics import TOPIC_TYPES
 
-DEFAULT_TOPICS = [
-    "/clock",
-    "/parcels",
-    "/fence_commands",
-    "/fence_state",
-    "/load_states",
-    "/sort_outcomes",
-    "/joint_states",
-    "/markers",
-    "/diagnostics",
-]
+DEFAULT_TOPICS = list(TOPIC_TYPES)
+#: history kept per subscription while the executor is busy (the writer has its own queue)
+SUBSCRIPTION_DEPTH = 1000
 
 
-class RecorderNode(FenceSorterNode):
-    """Bag recorder: subscribes raw (CDR passed through) and writes rosbag2 MCAP."""
-
-    NODE_NAME = "recorder"
-    STATUS = "not yet implemented (issue: recorder node)"
-    PARAMETERS = (
-        ParamSpec(
-            "output_dir",
-            "bags",
-            "Directory that receives one bag per run (created if missing)",
-            read_only=True,
-        ),
-        ParamSpec(
-            "storage", "mcap", "rosbag2 storage plugin (only mcap is supported)", read_only=True
-        ),
-        ParamSpec("topics", list(DEFAULT_TOPICS), "Topics to record", read_only=True),
+def rclpy_qos(reliable: bool) -> QoSProfile:
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=SUBSCRIPTION_DEPTH,
+        reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.VOLATILE,
     )
 
 
+def bag_qos(reliable: bool) -> Qos:
+    """The QoS stored with a topic in the bag (what replay offers again)."""
+    zero = QosTime(0, 0)
+    return Qos(
+        QosHistory.KEEP_LAST,
+        100 if reliable else 5,
+        QosReliability.RELIABLE if reliable else QosReliability.BEST_EFFORT,
+        QosDurability.VOLATILE,
+        zero,
+        zero,
+        QosLiveliness.AUTOMATIC,
+        zero,
+        False,
+    )
+
+
+def message_class(msgtype: str) -> type:
+    """'pkg/msg/Name' -> the generated rclpy class."""
+    pkg, kind, name = msgtype.split("/")
+    return getattr(importlib.import_module(f"{pkg}.{kind}"), name)
+
+
+def default_output_dir(value: str) -> Path:
+    """``output_dir`` as a path; empty: $ROS_HOME/bags (ROS_HOME defaults to ~/.ros)."""
+    if value:
+        return Path(value).expanduser()
+    return Path(os.environ.get("ROS_HOME") or Path.home() / ".ros").expanduser() / "bags"
+
+
+def bag_path(output_dir: Path) -> Path:
+    """``output_dir`` if it is free (missing or empty), else a new run_<UTC time> inside it."""
+    if not output_dir.exists() or (output_dir.is_dir() and not any(output_dir.iterdir())):
+        return output_dir
+    stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
+    candidate = output_dir / f"run_{stamp}"
+    k = 1
+    while candidate.exists():
+        candidate = output_dir / f"run_{stamp}_{k}"
+        k += 1
+    return candidate
+
+
+@dataclass
+class _Topic:
+    name: str
+    msgtype: str
+    handle: int
+    received: int = 0
+    written: int = 0
+
+
+class RecorderNode(FenceSorterNode):
+    """Bag recorder: subscribes raw (CDR passed through) and writes rosbag2 MCAP or sqlite3."""
+
+    NODE_NAME = "recorder"
+    STATUS = "recording"
+    STATUS_LEVEL = DiagnosticStatus.OK
+    PARAMETERS = (
+        ParamSpec(
+            "output_dir",
+            "",
+            "The bag directory if missing or empty, else the directory that receives a new "
+            "run_<UTC time> bag; empty: $ROS_HOME/bags (~/.ros/bags)",
+            read_only=True,
+        ),
+        ParamSpec("storage", "mcap", "rosbag2 storage: mcap or sqlite3", read_only=True),
+        ParamSpec("topics", list(DEFAULT_TOPICS), "Topics to record", read_only=True),
+        ParamSpec(
+            "max_segment_duration",
+            10.0,
+            "A segment is closed (complete, readable) after this long [s] (wall clock)",
+            read_only=True,
+            min_value=0.1,
+            max_value=3600.0,
+        ),
+        ParamSpec(
+            "max_segment_size_mb",
+            64.0,
+            "A segment is closed when its messages reach this size [MiB]",
+            read_only=True,
+            min_value=0.01,
+            max_value=100000.0,
+        ),
+    )
+
+    def __init__(self, **kwargs: object) -> None:
+        super().__init__(**kwargs)
+        from fence_sorter.recording.writer import SegmentedBagWriter
+
+        p = {spec.name: self.get_parameter(spec.name).value for spec in self.PARAMETERS}
+        self.path = bag_path(default_output_dir(str(p["output_dir"])))
+        self.writer = SegmentedBagWriter(
+            self.path,
+            storage=str(p["storage"]),
+            max_segment_bytes=int(float(p["max_segment_size_mb"]) * 2**20),
+            max_segment_duration=float(p["max_segment_duration"]),
+            custom_data={"recorder": "fence_sorter", "node": self.get_fully_qualified_name()},
+        ).open()
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        self._queued_max = 0
+        self._lock = threading.Lock()
+        self.write_error: str | None = None
+        self.topics: list[_Topic] = []
+        for name in p["topics"]:
+            if name not in TOPIC_TYPES:
+                raise ValueError(
+                    f"recorder: topics: {name} is not one of the suite's topics "
+                    f"({', '.join(TOPIC_TYPES)})"
+                )
+            msgtype, reliable = TOPIC_TYPES[name]
+            handle = self.writer.add_topic(name, msgtype, [bag_qos(reliable)])
+            topic = _Topic(name, msgtype, handle)
+            self.topics.append(topic)
+            self.create_subscription(
+                message_class(msgtype),
+                name,
+                self._callback(topic),
+                rclpy_qos(reliable),
+                raw=True,
+            )
+        self._stop = threading.Event()
+        self._started = time.monotonic()
+        self._thread = threading.Thread(target=self._write_loop, name="recorder-writer")
+        self._thread.start()
+        self.get_logger().info(
+            f"recording {len(self.topics)} topics into {self.path} ({p['storage']})"
+        )
+
+    # -- callbacks: stamp and hand off only -------------------------------------------------
+    def _callback(self, topic: _Topic):
+        put, clock = self._queue.put, self.get_clock()
+
+        def on_message(data: bytes) -> None:
+            topic.received += 1
+            put((topic, clock.now().nanoseconds, data))
+
+        return on_message
+
+    # -- writer thread ------------------------------------------------------------------------
+    def _write_loop(self) -> None:
+        q, writer = self._queue, self.writer
+        while True:
+            try:
+                item = q.get(timeout=0.1)
+            except queue.Empty:
+                if self._stop.is_set():
+                    break
+                self._guard(writer.poll)
+                continue
+            size = q.qsize() + 1
+            if size > self._queued_max:
+                self._queued_max = size
+            topic, t_ns, data = item
+            if self._guard(writer.write, topic.handle, t_ns, data):
+                topic.written += 1
+
+    def _guard(self, func, *args) -> bool:
+        if self.write_error is not None:
+            return False
+        try:
+            func(*args)
+            return True
+        except Exception as exc:  # a full disk must not kill the node silently
+            self.write_error = f"{type(exc).__name__}: {exc}"
+            self.get_logger().error(f"bag {self.path}: writing failed: {self.write_error}")
+            return False
+
+    def close(self) -> None:
+        """Drain the queue, close the open segment and the bag (idempotent)."""
+        if self._stop.is_set():
+            return
+        self._stop.set()
+        self._thread.join()
+        try:
+            self.writer.close()
+        except Exception as exc:
+            self.write_error = f"{type(exc).__name__}: {exc}"
+            self.get_logger().error(f"bag {self.path}: closing failed: {self.write_error}")
+        received = sum(t.received for t in self.topics)
+        written = sum(t.written for t in self.topics)
+        self.get_logger().info(
+            f"bag {self.path} closed: {written} of {received} received messages written in "
+            f"{len(self.writer.segments)} segments"
+        )
+
+    def destroy_node(self) -> None:
+        self.close()
+        super().destroy_node()
+
+    # -- diagnostics ----------------------------------------------------------------------------
+    def heartbeat_status(self) -> DiagnosticStatus:
+        status = super().heartbeat_status()
+        received = sum(t.received for t in self.topics)
+        written = sum(t.written for t in self.topics)
+        elapsed = max(time.monotonic() - self._started, 1e-9)
+        values = {
+            "bag": str(self.path),
+            "storage": self.writer.storage,
+            "segments_closed": str(len(self.writer.segments)),
+            "received": str(received),
+            "written": str(written),
+            "queued": str(self._queue.qsize()),
+            "queued_max": str(self._queued_max),
+            "bytes_written": str(self.writer.bytes_written),
+            "write_rate_msgs_s": f"{written / elapsed:.1f}",
+        }
+        for t in self.topics:
+            values[f"received{t.name.replace('/', '.')}"] = str(t.received)
+            values[f"written{t.name.replace('/', '.')}"] = str(t.written)
+        status.values.extend(KeyValue(key=k, value=v) for k, v in values.items())
+        if self.write_error:
+            status.level = DiagnosticStatus.ERROR
+            status.message = f"writing failed: {self.write_error}"
+        return status
+
+    def validate_parameters(self, parameters: Sequence[Parameter]) -> str | None:
+        for param in parameters:
+            if param.name == "storage" and param.value not in ("mcap", "sqlite3"):
+                return f"storage must be mcap or sqlite3, got {param.value!r}"
+        return None
+
+
 def main(args: Sequence[str] | None = None) -> int:
-    """Run the recorder node until Ctrl-C or SIGTERM."""
-    return run_node(RecorderNode, args)
+    """Run the recorder until Ctrl-C or SIGTERM; the bag is closed on the way out. Exit 2 with
+    one line when the bag cannot be created or a topic is unknown."""
+    from fence_sorter.recording.writer import BagWriteError
+
+    try:
+        return run_node(RecorderNode, args)
+    except (ValueError, BagWriteError) as exc:
+        print(f"recorder: {exc}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

@@ -160,7 +160,9 @@ def from_mcap_ros2(message: Any) -> MessageDict:
 
 
 def _plain(value: Any) -> Any:
-    if hasattr(value, "__slots__") and not isinstance(value, (str, bytes)):
+    if isinstance(value, (bytes, bytearray)):  # mcap_ros2 decodes uint8[]/byte[] as bytes
+        return list(value)
+    if hasattr(value, "__slots__") and not isinstance(value, str):
         return from_mcap_ros2(value)
     if isinstance(value, np.ndarray):
         return value.tolist()

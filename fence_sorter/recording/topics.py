@@ -1,0 +1,18 @@
+"""The topics of the node suite as they are recorded: type and whether they are reliable."""
+
+from __future__ import annotations
+
+#: topic -> (type, reliable). Reliable topics are recorded (and replayed) reliable, the others
+#: best effort: what their publishers offer (fence_sorter/nodes/qos.py, nodes/simulator.py).
+TOPIC_TYPES: dict[str, tuple[str, bool]] = {
+    "/clock": ("rosgraph_msgs/msg/Clock", True),
+    "/parcels": ("fence_sorter_msgs/msg/Parcel", True),
+    "/fence_commands": ("fence_sorter_msgs/msg/FenceCommand", True),
+    "/fence_state": ("fence_sorter_msgs/msg/FenceState", False),
+    "/load_states": ("fence_sorter_msgs/msg/LoadState", False),
+    "/sort_outcomes": ("fence_sorter_msgs/msg/SortOutcome", True),
+    "/joint_states": ("sensor_msgs/msg/JointState", True),
+    "/markers": ("visualization_msgs/msg/MarkerArray", True),
+    "/diagnostics": ("diagnostic_msgs/msg/DiagnosticArray", True),
+}
+SUITE_TOPICS = list(TOPIC_TYPES)
