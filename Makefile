@@ -1,6 +1,6 @@
 # fence_sorter: the two commands of the README.
-#   make run   set up (idempotent) + environment check + two-node message round trip
-#              + one offline sorting event of the default scene (the node suite comes later)
+#   make run   set up (idempotent) + the node suite on the default scene (impact_flexible) with
+#              a short stream (12 parcels of config/streams/default.yaml), recorded to bags/
 #   make test  set up (idempotent) + ruff + pytest
 SHELL := /bin/bash
 .SHELLFLAGS := -euo pipefail -c
@@ -15,8 +15,7 @@ bootstrap:
 	bash scripts/bootstrap.sh
 
 run: bootstrap
-	$(ENV) && fence-sorter check && fence-sorter demo-roundtrip \
-		&& fence-sorter simulate impact_flexible
+	$(ENV) && fence-sorter run --parcels 12 --bag bags/run-$$(date -u +%Y%m%dT%H%M%SZ)
 
 check: bootstrap
 	$(ENV) && fence-sorter check

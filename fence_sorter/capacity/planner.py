@@ -192,6 +192,8 @@ class Planner:
         self.cache_hits = 0
         # per candidate: [evaluations, feasible ones] over all load classes so far
         self.record: dict[tuple[float, float], list[int]] = {}
+        # per load class: the stroke chosen for it (the hint for its neighbours)
+        self.chosen: dict[tuple, tuple[float, float]] = {}
 
     # -- load classes ----------------------------------------------------------------------
     def quantise(self, req: LoadRequest) -> tuple[tuple, ParcelParams, float, float]:
@@ -300,18 +302,41 @@ class Planner:
             out.append((r_s, t1))
         return out
 
+    def hint(self, key: tuple) -> tuple[float, float] | None:
+        """The stroke chosen for the nearest load class planned so far (L1 over the bins)."""
+        if key in self.chosen:
+            return self.chosen[key]
+        best, dist = None, math.inf
+        for other, cand in self.chosen.items():
+            d = sum(abs(a - b) for a, b in zip(key, other, strict=True))
+            if d < dist:
+                best, dist = cand, d
+        return best
+
     def plan(
-        self, req: LoadRequest, now: float, *, commit: bool = True, budget: int | None = None
+        self,
+        req: LoadRequest,
+        now: float,
+        *,
+        commit: bool = True,
+        budget: int | None = None,
+        use_hint: bool = True,
     ) -> Plan:
         """Plan one load at sim time ``now``; with ``commit`` a feasible stroke books the fence.
 
-        Candidates that failed for most load classes seen so far go behind the others
-        (:meth:`hopeless`); the warm-up teaches the planner which ones.
+        Order: the stroke chosen for the nearest load class first (``use_hint``; similar loads
+        need similar strokes, so this is mostly the only evaluation), then W_t order with the
+        candidates that failed for most load classes seen so far behind the others
+        (:meth:`hopeless`); the warm-up (no hint, a larger budget) teaches the planner both.
         """
         wall0 = time.perf_counter()
         key, rep, mu1, mu2 = self.quantise(req)
         cands = self.admissible(req, now)
         cands = [c for c in cands if not self.hopeless(c)] + [c for c in cands if self.hopeless(c)]
+        hint = self.hint(key) if use_hint else None
+        if hint is not None and hint in cands:
+            cands.remove(hint)
+            cands.insert(0, hint)
         plan = Plan(req.parcel_id, False, None, math.nan, math.nan, "", admissible=len(cands))
         if not cands:
             plan.reason = self._no_candidate_reason(req, now)
@@ -359,6 +384,7 @@ class Planner:
                     break
         if hi is not None:
             best = results[hi]
+            self.chosen[key] = (best.r_s, best.t1)
             start = req.scan_time + (best.r_s - req.scan_position_x) / self.v
             plan.feasible = True
             plan.evaluation = best
@@ -419,7 +445,7 @@ class Planner:
                 continue
             done.add(key)
             self.busy_until = -math.inf
-            self.plan(req, now=-math.inf, commit=False, budget=WARMUP_BUDGET)
+            self.plan(req, now=-math.inf, commit=False, budget=WARMUP_BUDGET, use_hint=False)
         self.busy_until = busy
         return len(done)
 

@@ -177,7 +177,7 @@ class ControllerNode(FenceSorterNode):
         ParamSpec("frame_id", "sorter", "Fixed frame of the sorter (REP-103, z up)", True),
         *PLANNER_PARAMETERS,
         ParamSpec("warmup_stream", "", "Stream whose parcel classes warm the cache", True),
-        ParamSpec("warmup_parcels", 100, "Parcels drawn for the warm-up", True, 0, 100000),
+        ParamSpec("warmup_parcels", 400, "Parcels drawn for the warm-up", True, 0, 100000),
         ParamSpec(
             "wait_for_command_subscribers",
             1,

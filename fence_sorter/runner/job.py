@@ -31,6 +31,8 @@ START_DELAY = 0.5
 #: sim time a parcel needs after its scan to leave the line (line end ~3 m) plus margin [s]
 LINE_END_X = 3.0
 STOP_ORDER = ("scanner", "controller", "simulator", "recorder")
+#: wall time after the scanner's start without any parcel on /parcels before the run gives up
+NO_PARCEL_TIMEOUT = 60.0
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 
@@ -185,8 +187,9 @@ def run_job(opts: RunOptions, say: Callable[[str], None] = print) -> RunResult:
                     _ros_args("recorder", plan, opts, [f"output_dir:={Path(opts.bag).resolve()}"]),
                 ),
             )
-            subscribers += 1
         _wait_for(monitor, group, "controller", 120.0)
+        if opts.bag:
+            _wait_for(monitor, group, "recorder", 60.0)
         group.start(
             "simulator",
             node_command(
@@ -212,6 +215,7 @@ def run_job(opts: RunOptions, say: Callable[[str], None] = print) -> RunResult:
         group.start(
             "scanner", node_command("scanner", _ros_args("scanner", plan, opts, scanner_args))
         )
+        scanner_started = time.monotonic()
         say(f"nodes up in {time.monotonic() - wall0:.1f} s; running")
         timeout = opts.timeout or 120.0 + 3.0 * plan.sim_duration / max(opts.rtf, 1.0)
         deadline = time.monotonic() + timeout
@@ -231,6 +235,13 @@ def run_job(opts: RunOptions, say: Callable[[str], None] = print) -> RunResult:
                         f"node {n.name} exited with status {n.proc.returncode}; "
                         f"log tail:\n{n.tail()}"
                     ),
+                )
+                break
+            if not rec.parcels and time.monotonic() - scanner_started > NO_PARCEL_TIMEOUT:
+                code, message = (
+                    EXIT_FAILED,
+                    f"no parcel on /parcels within {NO_PARCEL_TIMEOUT:.0f} s of the scanner's "
+                    f"start (scanner: {monitor.node_diag('scanner')})",
                 )
                 break
             if sim_start is None and rec.parcels:
