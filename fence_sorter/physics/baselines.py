@@ -30,6 +30,7 @@ import time
 
 import numpy as np
 import scipy.integrate
+from scipy.optimize import brentq
 
 from . import kernel as K
 from .integrators import Integrator, State
@@ -107,6 +108,12 @@ class RightHandSide:
             st.acc[3:] = dy[6 + m :]
 
 
+def _edge_crossing(dense, t0: float, t1: float, width: float) -> tuple[float, np.ndarray]:
+    """Time and state where C_s's y reaches ``width`` on the step's dense output."""
+    t = float(brentq(lambda tt: dense(tt)[1] - width, t0, t1, xtol=1e-12))
+    return t, np.array(dense(t), dtype=np.float64)
+
+
 def end_time(sc) -> float:
     """The run's end time: ``solver.t_end``, or the fence cycle 2 t1 plus the settle time."""
     sv = sc.solver
@@ -134,6 +141,7 @@ def run_solve_ivp(model):
     stop, on_belt = obs(st, on_belt)
     t = 0.0
     y = st.y.copy()
+    width = sc.conveyor.width
     steps = 0
     diagnosis = None
     solver = None
@@ -163,9 +171,16 @@ def run_solve_ivp(model):
         if solver.status == "failed":
             diagnosis = f"{sv.method} failed at t = {solver.t:.6f} s: {message}"
             break
+        t_old, y_old1 = t, y[1]
         t = float(solver.t)
         y = np.array(solver.y, dtype=np.float64)
         steps += 1
+        if on_belt and y_old1 < width <= y[1]:
+            # C_s crossed the belt edge y0 = s inside the step: end the step there (dense
+            # output), as our integrators do, so belt friction stops at the crossing
+            t, y = _edge_crossing(solver.dense_output(), t_old, t, width)
+            y[1] = max(y[1], width)
+            solver.status = "finished"  # restart from the crossing without belt friction
         fun.on_belt = on_belt
         fun.observe_at(st, t, y)
         was_on_belt = on_belt

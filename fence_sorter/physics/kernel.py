@@ -512,8 +512,6 @@ def evaluate(
     if use_tip:
         tip_x, tip_y, ttx, tty, vtx, vty = surface(P, length, alpha, rate, w, wdot, nodes)
     ntx, nty = -tty, ttx
-    passed = np.zeros(4, dtype=np.bool_)
-    any_passed = False
     for k in range(4):
         px, py = cxs[k], cys[k]
         if -px * sa + py * ca > reach:
@@ -526,8 +524,6 @@ def evaluate(
             s_arc = r + (px - ux) * tx + (py - uy) * ty
         if s_arc > length:
             out[k, C_S] = s_arc  # beyond the tip: the slide-off event function is R_z - s
-            passed[k] = use_tip and (tip_x - px) * ntx + (tip_y - py) * nty > 0.0
-            any_passed = any_passed or passed[k]
             continue
         if s_arc < 0.0:
             continue
@@ -571,14 +567,16 @@ def evaluate(
                 True,
                 alpha,
             )
-    # the fence tip inside the load after a corner slid past it: the tip presses on the face
-    # that faces the fence (outward normal most against the fence normal; the face that slid
-    # along the fence), the depth is the tip's distance to that face's plane (the corner's D
-    # when it slides off a face lying along the fence, so the hand-over is continuous) and the
-    # force acts along the face normal: the gradient of the potential k_p D^5 / 5, zero at
-    # release. (Depth measured along the fence normal with the force along it did work in a
-    # closed elastic cycle.)
-    if use_tip and any_passed:
+    # the fence tip inside the load (past a corner that slid off it, or pressed into a face
+    # beyond the last pushing corner): it presses on the face that faces the fence (outward
+    # normal most against the fence normal), the depth is the tip's distance to that face's
+    # plane, which starts from 0 as the tip enters through it and equals the corner's D when a
+    # corner of a face along the fence slides off (continuous hand-over), and the force acts
+    # along the face normal: the gradient of the potential k_p D^5 / 5, zero at release.
+    # (Measuring the depth along the fence normal and pushing along it did work in a closed
+    # elastic cycle; starting the contact only once a corner had passed the tip let it appear at
+    # finite depth.)
+    if use_tip:
         exit_face = -1
         facing = -math.inf
         depth = 0.0
@@ -596,7 +594,7 @@ def evaluate(
                 exit_face = k
                 depth = inside
                 fnx, fny = -mx, -my  # on the load: pushed away from the tip
-        if exit_face >= 0 and (passed[exit_face] or passed[(exit_face + 1) % 4]):
+        if exit_face >= 0:
             vpx = vx - om * (tip_y - yy)
             vpy = vy + om * (tip_x - x)
             d_rate = (vtx - vpx) * fnx + (vty - vpy) * fny

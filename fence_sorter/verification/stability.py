@@ -450,13 +450,6 @@ CASES: tuple[Case, ...] = (
         dict(_ELASTIC),
         elastic=True,
         item="zero damping",
-        note=(
-            "Known failure (energy +0.036 J against 0.020 J): the fence-tip contact starts at "
-            "nonzero depth when a corner that is not pushing crosses the fence line beyond the "
-            "tip while the tip is already inside the load (face along the fence behind the "
-            "line), so its spring potential appears at once; the contact model of the fence "
-            "end needs the overlap of the fence segment and the load (follow-up)."
-        ),
     ),
     # -- parcel exactly on the border (E3) --------------------------------------------------------
     Case(

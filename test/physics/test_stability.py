@@ -17,9 +17,6 @@ from fence_sorter.verification import stability as S
 KNOWN_ISSUES = {
     "kp_x1000_stiff": "peak contact force changes by ~3 % when the adaptive step is halved "
     "(rtol 1e-4 samples the peak of the stiff pushing contact too coarsely)",
-    "elastic_stiff": "energy rises 0.036 J (1.8x tolerance) without a power source when the "
-    "fence-tip contact starts at nonzero depth (a corner that was not pushing crosses the fence "
-    "line beyond the tip while the tip is inside the load)",
 }
 
 
