@@ -25,6 +25,9 @@ SUBCOMMAND_MODULES: tuple[str, ...] = (
     "stability",
     "bench",
     "run",
+    "replay",
+    "analyze",
+    "rrd",
     "bench_suite",
 )
 

@@ -1,0 +1,1 @@
+"""Views of the twin (Rerun), ROS-free."""

@@ -1,0 +1,330 @@
+"""Rerun views of the twin (no ROS): conveyor, chute, scan line, the fence polyline with its
+real deflection, parcels as one Boxes3D batch labelled with their ids, contact force arrows, and
+time series (N, N_stiff, tip deflection, alpha_w, parcel speeds) on the ``sim_time`` timeline.
+
+The logger is driven by plain frames (:class:`FenceFrame`, :class:`ParcelFrame`), made from the
+line's snapshots (:func:`frames_from_snapshot`, used live by the simulator) or from a recorded
+bag (:func:`log_bag`, ``fence-sorter rrd``). Entity paths:
+
+- ``world/conveyor/belt``, ``world/conveyor/borders``, ``world/chute``, ``world/scan_line``
+  (static), ``world/fence``, ``world/parcels``, ``world/contact_forces``;
+- ``plots/contact/<id>/N`` and ``.../N_stiff`` [N], ``plots/fence/tip_deflection`` [m],
+  ``plots/fence/alpha_w`` [rad], ``plots/speed/<id>`` [m/s].
+
+Frame "sorter" (REP-103, z up): x0 along the belt, y0 across it towards the chute.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+APP_ID = "fence_sorter"
+TIMELINE = "sim_time"
+FENCE_Z = 0.05  # height the fence polyline is drawn at [m]
+FORCE_SCALE = 1.0 / 1000.0  # contact arrow length per newton [m/N]
+DIVERT_COLOR = (230, 150, 50)
+PASS_COLOR = (150, 150, 150)
+SORTED_COLOR = (60, 180, 75)
+
+
+@dataclass(frozen=True)
+class SceneGeometry:
+    """What does not move: belt width s and x range, chute box, scan line [m]."""
+
+    belt_width: float
+    belt_x: tuple[float, float] = (-3.0, 3.0)
+    chute: tuple[float, float, float, float] | None = None  # centre x, y, size x, y
+    scan_line_x: float | None = None
+
+
+@dataclass(frozen=True)
+class FenceFrame:
+    alpha: float  # alpha_w [rad]
+    node_x: np.ndarray  # [m]
+    node_y: np.ndarray
+    tip_deflection: float  # [m]
+
+
+@dataclass(frozen=True)
+class ParcelFrame:
+    parcel_id: int
+    x: float  # C_s [m]
+    y: float
+    yaw: float  # [rad]
+    vx: float  # [m/s]
+    vy: float
+    center_x: float  # centre of the box (not C_s) [m]
+    center_y: float
+    length_a: float
+    width_b: float
+    height: float
+    n: float = 0.0  # contact normal force N [N]
+    n_stiff: float = 0.0  # N_stiff [N]
+    contact_x: float = math.nan  # contact point [m]
+    contact_y: float = math.nan
+    divert: bool = False
+    stage: int = 0
+
+
+def _rr():
+    os.environ.setdefault("RERUN_ANALYTICS_ENABLED", "false")  # no outside network here
+    import rerun as rr
+
+    return rr
+
+
+def blueprint():
+    """Default layout: the 3D scene on the left, force / fence / speed series on the right."""
+    import rerun.blueprint as rrb
+
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Spatial3DView(name="sorter", origin="world"),
+            rrb.Vertical(
+                rrb.TimeSeriesView(name="contact force N, N_stiff [N]", origin="plots/contact"),
+                rrb.TimeSeriesView(name="fence tip deflection [m], alpha_w [rad]",
+                                   origin="plots/fence"),
+                rrb.TimeSeriesView(name="parcel speed [m/s]", origin="plots/speed"),
+            ),
+            column_shares=[3, 2],
+        ),
+        collapse_panels=True,
+    )  # fmt: skip
+
+
+def open_recording(path: Path | str | None = None, spawn: bool = False, recording_id=None):
+    """A RecordingStream saving to ``path`` (.rrd) and/or spawning a viewer."""
+    rr = _rr()
+    rec = rr.RecordingStream(APP_ID, recording_id=recording_id)
+    if spawn:
+        rec.spawn(default_blueprint=blueprint())
+    if path is not None:
+        if spawn:
+            rec.set_sinks(rr.FileSink(str(path)), rr.GrpcSink())
+            rec.send_blueprint(blueprint())
+        else:
+            rec.save(str(path), default_blueprint=blueprint())
+    return rec
+
+
+class RerunLogger:
+    """Logs the scene once and then one frame per call of :meth:`log_frame`."""
+
+    def __init__(self, rec, scene: SceneGeometry) -> None:
+        self.rr = _rr()
+        self.rec = rec
+        self.scene = scene
+        self.frames = 0
+        self._series_ids: set[int] = set()
+        self._log_static()
+
+    def _log_static(self) -> None:
+        rr, rec, sc = self.rr, self.rec, self.scene
+        rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        x0, x1 = sc.belt_x
+        s = sc.belt_width
+        rec.log(
+            "world/conveyor/belt",
+            rr.Boxes3D(
+                centers=[(0.5 * (x0 + x1), 0.5 * s, -0.01)],
+                sizes=[(x1 - x0, s, 0.02)],
+                colors=[(70, 70, 70)],
+                fill_mode="solid",
+            ),
+            static=True,
+        )
+        rec.log(
+            "world/conveyor/borders",
+            rr.LineStrips3D([[(x0, 0.0, 0.0), (x1, 0.0, 0.0)], [(x0, s, 0.0), (x1, s, 0.0)]],
+                            colors=[(220, 220, 60)], radii=0.005),
+            static=True,
+        )  # fmt: skip
+        if sc.chute is not None:
+            cx, cy, sx, sy = sc.chute
+            rec.log(
+                "world/chute",
+                rr.Boxes3D(centers=[(cx, cy, -0.05)], sizes=[(sx, sy, 0.02)],
+                           colors=[(50, 100, 200, 150)], fill_mode="solid", labels=["chute"]),
+                static=True,
+            )  # fmt: skip
+        if sc.scan_line_x is not None:
+            x = sc.scan_line_x
+            rec.log(
+                "world/scan_line",
+                rr.LineStrips3D([[(x, 0.0, 0.01), (x, s, 0.01)]], colors=[(255, 60, 60)],
+                                radii=0.006, labels=["scan line"]),
+                static=True,
+            )  # fmt: skip
+        rec.log(
+            "plots/fence/tip_deflection", rr.SeriesLines(names="tip deflection [m]"), static=True
+        )
+        rec.log("plots/fence/alpha_w", rr.SeriesLines(names="alpha_w [rad]"), static=True)
+
+    def log_frame(self, t: float, fence: FenceFrame | None, parcels: list[ParcelFrame]) -> None:
+        """Everything that moves, at sim time ``t`` [s]."""
+        rr, rec = self.rr, self.rec
+        rec.set_time(TIMELINE, duration=float(t))
+        if fence is not None:
+            pts = np.column_stack(
+                (fence.node_x, fence.node_y, np.full(len(fence.node_x), FENCE_Z))
+            )
+            rec.log("world/fence", rr.LineStrips3D([pts], colors=[(230, 80, 30)], radii=0.01))
+            rec.log("plots/fence/tip_deflection", rr.Scalars(float(fence.tip_deflection)))
+            rec.log("plots/fence/alpha_w", rr.Scalars(float(fence.alpha)))
+        centers, sizes, quats, labels, colors = [], [], [], [], []
+        origins, vectors = [], []
+        for p in parcels:
+            centers.append((p.center_x, p.center_y, 0.5 * p.height))
+            sizes.append((p.length_a, p.width_b, p.height))
+            quats.append((0.0, 0.0, math.sin(0.5 * p.yaw), math.cos(0.5 * p.yaw)))
+            labels.append(str(p.parcel_id))
+            colors.append(SORTED_COLOR if p.stage == 5 else (DIVERT_COLOR if p.divert
+                                                              else PASS_COLOR))  # fmt: skip
+            if p.n > 0.0 and math.isfinite(p.contact_x) and fence is not None:
+                normal = _fence_normal(fence, p.contact_x, p.contact_y, p.center_x, p.center_y)
+                origins.append((p.contact_x, p.contact_y, FENCE_Z))
+                vectors.append((normal[0] * p.n * FORCE_SCALE, normal[1] * p.n * FORCE_SCALE, 0))
+            pid = p.parcel_id
+            if pid not in self._series_ids:
+                self._series_ids.add(pid)
+                rec.log(f"plots/contact/{pid}/N", rr.SeriesLines(names=f"N {pid}"), static=True)
+                rec.log(
+                    f"plots/contact/{pid}/N_stiff",
+                    rr.SeriesLines(names=f"N_stiff {pid}"),
+                    static=True,
+                )
+                rec.log(f"plots/speed/{pid}", rr.SeriesLines(names=f"parcel {pid}"), static=True)
+            if p.stage > 0:  # forces only while the fence works on the parcel
+                rec.log(f"plots/contact/{pid}/N", rr.Scalars(float(p.n)))
+                rec.log(f"plots/contact/{pid}/N_stiff", rr.Scalars(float(p.n_stiff)))
+            rec.log(f"plots/speed/{pid}", rr.Scalars(math.hypot(p.vx, p.vy)))
+        rec.log(
+            "world/parcels",
+            rr.Boxes3D(centers=centers, sizes=sizes, quaternions=quats, labels=labels,
+                       colors=colors, fill_mode="solid", show_labels=True),
+        )  # fmt: skip
+        arrows = rr.Arrows3D(origins=origins, vectors=vectors, colors=[(255, 0, 255)], radii=0.008)
+        rec.log("world/contact_forces", arrows)
+        self.frames += 1
+
+    def close(self) -> None:
+        self.rec.flush()
+        self.rec.disconnect()
+
+
+def _fence_normal(fence: FenceFrame, x: float, y: float, cx: float, cy: float):
+    """Unit normal of the fence segment nearest (x, y), pointing towards the parcel centre."""
+    nx, ny = np.asarray(fence.node_x), np.asarray(fence.node_y)
+    if nx.size < 2:
+        return (0.0, 1.0)
+    k = int(np.argmin((nx - x) ** 2 + (ny - y) ** 2))
+    k = min(max(k, 0), nx.size - 2)
+    dx, dy = nx[k + 1] - nx[k], ny[k + 1] - ny[k]
+    norm = math.hypot(dx, dy) or 1.0
+    n = (-dy / norm, dx / norm)
+    if (cx - x) * n[0] + (cy - y) * n[1] < 0:
+        n = (-n[0], -n[1])
+    return n
+
+
+# -- frames from the line's snapshots ------------------------------------------------------------
+def frames_from_snapshot(snap) -> tuple[FenceFrame, list[ParcelFrame]]:
+    """FenceFrame and ParcelFrames of a :class:`fence_sorter.line.LineSnapshot`."""
+    f = snap.fence
+    fence = FenceFrame(float(f.drive_angle), f.node_x, f.node_y, float(f.tip_deflection))
+    parcels = []
+    for p in snap.parcels:
+        n = max(len(p.corners), 1)
+        cx = sum(c[0] for c in p.corners) / n if p.corners else p.x
+        cy = sum(c[1] for c in p.corners) / n if p.corners else p.y
+        parcels.append(
+            ParcelFrame(
+                int(p.parcel_id), p.x, p.y, p.yaw, p.vx, p.vy, cx, cy, p.length_a, p.width_b,
+                p.height, p.contact_normal_force, p.contact_normal_force_stiff,
+                p.contact_point[0], p.contact_point[1], bool(p.divert), int(p.stage),
+            )
+        )  # fmt: skip
+    return fence, parcels
+
+
+# -- frames from a recorded bag ------------------------------------------------------------------
+def _stamp(h) -> float:
+    return h.stamp.sec + h.stamp.nanosec * 1e-9
+
+
+def scene_from_bag(contents) -> SceneGeometry:
+    """Belt, chute (from /markers) and scan line (from /parcels) as the bag shows them."""
+    from fence_sorter.analysis.run import DEFAULT_BELT_WIDTH
+
+    width, belt_x, chute = DEFAULT_BELT_WIDTH, (-3.0, 3.0), None
+    for m in contents.by_topic("/markers"):
+        for mk in m.msg.markers:
+            if mk.ns == "belt":
+                width = float(mk.scale.y)
+                belt_x = (mk.pose.position.x - 0.5 * mk.scale.x,
+                          mk.pose.position.x + 0.5 * mk.scale.x)  # fmt: skip
+            elif mk.ns == "chute":
+                chute = (mk.pose.position.x, mk.pose.position.y, mk.scale.x, mk.scale.y)
+        break
+    scans = [m.msg.scan_position_x for m in contents.by_topic("/parcels")]
+    scan_x = float(np.median(scans)) if scans else None
+    return SceneGeometry(width, belt_x, chute, scan_x)
+
+
+def bag_frames(contents) -> Iterable[tuple[float, FenceFrame | None, list[ParcelFrame]]]:
+    """(t, fence, parcels) per published snapshot of a recorded run, in sim-time order."""
+    specs = {m.msg.parcel_id: m.msg for m in contents.by_topic("/parcels")}
+    loads: dict[float, list] = {}
+    for m in contents.by_topic("/load_states"):
+        loads.setdefault(round(_stamp(m.msg.header), 9), []).append(m.msg)
+    fences = {round(_stamp(m.msg.header), 9): m.msg for m in contents.by_topic("/fence_state")}
+    for t in sorted(set(loads) | set(fences)):
+        fm = fences.get(t)
+        fence = (
+            FenceFrame(fm.drive_angle, np.asarray(fm.node_x), np.asarray(fm.node_y),
+                       fm.tip_deflection)
+            if fm is not None
+            else None
+        )  # fmt: skip
+        parcels = []
+        for s in loads.get(t, []):
+            spec = specs.get(s.parcel_id)
+            a = spec.length_a if spec else 0.4
+            b = spec.width_b if spec else 0.3
+            h = spec.height if spec else 0.3
+            xp = spec.cog_offset_x if spec else 0.0
+            yp = spec.cog_offset_y if spec else 0.0
+            q = s.pose.orientation
+            yaw = 2.0 * math.atan2(q.z, q.w)
+            c, sn = math.cos(yaw), math.sin(yaw)
+            x, y = s.pose.position.x, s.pose.position.y
+            parcels.append(
+                ParcelFrame(
+                    int(s.parcel_id), x, y, yaw, s.twist.linear.x, s.twist.linear.y,
+                    x - c * xp + sn * yp, y - sn * xp - c * yp, a, b, h,
+                    s.contact_normal_force, s.contact_normal_force_stiff,
+                    s.contact_point.x, s.contact_point.y,
+                    bool(spec.divert) if spec else False, int(s.stage),
+                )
+            )  # fmt: skip
+        yield t, fence, parcels
+
+
+def log_bag(contents, rec) -> RerunLogger:
+    """Log a recorded run (read with :func:`fence_sorter.recording.bagread.read_bag`)."""
+    logger = RerunLogger(rec, scene_from_bag(contents))
+    rr = logger.rr
+    for m in contents.by_topic("/sort_outcomes"):
+        o = m.msg
+        rec.set_time(TIMELINE, duration=_stamp(o.header))
+        rec.log("events/outcomes", rr.TextLog(f"parcel {o.parcel_id}: {o.reason}",
+                                              level="INFO" if o.sorted else "WARN"))  # fmt: skip
+    for t, fence, parcels in bag_frames(contents):
+        logger.log_frame(t, fence, parcels)
+    return logger
