@@ -12,7 +12,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from fence_sorter.analysis.run import RecordedRun  # noqa: E402
+from fence_sorter.analysis.run import WORKED_STAGES, RecordedRun  # noqa: E402
 
 OUTLINES = 8  # parcel outlines drawn along a trajectory
 
@@ -34,7 +34,7 @@ def _window(run: RecordedRun, pid: int) -> tuple[float, float] | None:
     s = run.series.get(pid)
     if s is None or s.t.size == 0:
         return None
-    touched = np.nonzero(s.stage > 0)[0]
+    touched = np.nonzero(np.isin(s.stage, WORKED_STAGES))[0]
     if touched.size == 0:
         return None
     return float(s.t[touched[0]] - 0.3), float(s.t[-1] + 0.1)

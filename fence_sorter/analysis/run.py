@@ -33,6 +33,8 @@ OUTCOME_NAMES = {
     6: "SOLVER_FAILURE",
 }
 STAGE_SORTED = 5
+#: LoadState stages while the fence works on the parcel (E1 .. E4)
+WORKED_STAGES = (1, 2, 3, 4)
 DEFAULT_BELT_WIDTH = 0.7  # [m] impact_flexible, used only when the bag has no /markers
 
 # Tolerances of the check against the live outcomes (sampling at the publish rate explains
@@ -229,7 +231,7 @@ def sampled_figures(run: RecordedRun, pid: int) -> dict:
         return out
     out["samples"] = int(s.t.size)
     out["y_max"] = float(np.max(s.y))
-    touched = s.stage > 0
+    touched = np.isin(s.stage, WORKED_STAGES)
     if np.any(touched):
         out["peak_normal_force"] = float(np.max(s.n))
         out["peak_normal_force_stiff"] = float(np.max(s.n_stiff))

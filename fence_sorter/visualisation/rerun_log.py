@@ -200,7 +200,7 @@ class RerunLogger:
                     static=True,
                 )
                 rec.log(f"plots/speed/{pid}", rr.SeriesLines(names=f"parcel {pid}"), static=True)
-            if p.stage > 0:  # forces only while the fence works on the parcel
+            if 1 <= p.stage <= 4:  # forces only while the fence works on it (E1 .. E4)
                 rec.log(f"plots/contact/{pid}/N", rr.Scalars(float(p.n)))
                 rec.log(f"plots/contact/{pid}/N_stiff", rr.Scalars(float(p.n_stiff)))
             rec.log(f"plots/speed/{pid}", rr.Scalars(math.hypot(p.vx, p.vy)))
