@@ -24,7 +24,6 @@ import time
 from collections import Counter
 from collections.abc import Sequence
 
-import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rclpy.exceptions import ParameterException
@@ -47,6 +46,7 @@ from fence_sorter.line import (
     StrokeCommand,
     StrokeStarted,
 )
+from fence_sorter.line.pacing import LatenessHistogram, Pacer
 from fence_sorter.nodes import convert
 from fence_sorter.nodes.base import FenceSorterNode, ParamSpec
 from fence_sorter.nodes.qos import RELIABLE_QOS, SENSOR_QOS
@@ -71,34 +71,6 @@ CLOCK_QOS = QoSProfile(
 )
 # /joint_states and /markers: reliable keep-last, what robot_state_publisher and RViz ask for.
 VIEWER_QOS = CLOCK_QOS
-
-
-class LatenessHistogram:
-    """Cycle lateness [s] in 10 us bins up to 100 ms (exact max kept): percentiles over a
-    whole run in constant memory and O(1) per cycle."""
-
-    BIN = 1e-5
-    BINS = 10_000
-
-    def __init__(self) -> None:
-        self.counts = np.zeros(self.BINS + 1, dtype=np.int64)
-        self.n = 0
-        self.max = 0.0
-
-    def add(self, lateness: float) -> None:
-        k = int(max(lateness, 0.0) / self.BIN)
-        self.counts[min(k, self.BINS)] += 1
-        self.n += 1
-        if lateness > self.max:
-            self.max = lateness
-
-    def percentile(self, q: float) -> float:
-        """Upper edge of the bin holding the q-th percentile [s] (NaN before any sample)."""
-        if self.n == 0:
-            return math.nan
-        rank = math.ceil(q / 100.0 * self.n)
-        k = int(np.searchsorted(np.cumsum(self.counts), max(rank, 1)))
-        return min((k + 1) * self.BIN, self.max) if k < self.BINS else self.max
 
 
 class SimulatorNode(FenceSorterNode):
@@ -317,42 +289,30 @@ class SimulatorNode(FenceSorterNode):
         self._set_priority()
         clock = time.perf_counter
         period, line = self.period, self.line
-        start_wall, start_sim = clock(), line.t
-        k = 0  # deadlines since start_wall: deadline_k = start_wall + k * period
+        # unpaced: a cycle is one publish period of sim time (a 1 ms cycle would spend its time
+        # in Python overhead, not physics)
+        pacer = Pacer(
+            period,
+            self.rtf,
+            line.t,
+            self.max_catch_up,
+            self.spin_margin,
+            unpaced_step=self.publish_every * period,
+        )
         next_pub = next_marker = 0  # cycle index of the next publication (k may skip)
         next_gc = next_full_gc = 0
         self._publish(line.snapshot())
         while not self._stop.is_set():
-            rtf = self.rtf
-            # unpaced: a cycle is one publish period of sim time (a 1 ms cycle would spend
-            # its time in Python overhead, not physics)
-            k += 1 if rtf > 0.0 else self.publish_every
+            rtf = pacer.rtf
+            tick = pacer.wait()
+            deadline, t_target = tick.deadline, tick.t_sim
+            # k counts periods of 1/physics_rate in both modes (publication schedule)
+            k = tick.k if rtf > 0.0 else tick.k * self.publish_every
             if rtf > 0.0:
-                deadline = start_wall + k * period
-                remaining = deadline - clock()
-                if remaining > self.spin_margin:
-                    time.sleep(remaining - self.spin_margin)
-                while clock() < deadline:
-                    pass
-                wake = clock()
-                late = wake - deadline
+                wake = deadline + tick.lateness
                 with self._lock:
-                    self.hist.add(late)
-                if late >= period:
-                    # skip the deadlines already past: one cycle advances them all, up to the cap
-                    behind = int(late / period)
-                    if behind * period * rtf > self.max_catch_up:
-                        keep = max(int(self.max_catch_up / (period * rtf)), 0)
-                        # drop the rest: shift the grid so sim time slips behind the wall
-                        start_wall += (behind - keep) * period
-                        with self._lock:
-                            self.slips += 1
-                        behind = keep
-                    k += behind
-                t_target = start_sim + k * period * rtf
-            else:
-                deadline = math.inf
-                t_target = start_sim + k * period
+                    self.hist.add(tick.lateness)
+                    self.slips = pacer.slips
             self._drain_inbox()
             self._handle(line.advance(t_target))
             if k >= next_pub:
@@ -367,7 +327,7 @@ class SimulatorNode(FenceSorterNode):
                 next_marker = (k // self.marker_every + 1) * self.marker_every
                 self.pub_markers.publish(self._markers.build(line.snapshot()))
             done = clock()
-            if k >= next_gc and (rtf == 0.0 or deadline + period - done > GC_SLACK):
+            if k >= next_gc and pacer.next_deadline - done > GC_SLACK:
                 gen = 2 if k >= next_full_gc else 0
                 gc.collect(gen)
                 next_gc = k + self.publish_every
@@ -380,9 +340,9 @@ class SimulatorNode(FenceSorterNode):
                 self.sim_time = line.t
                 if done > deadline + period:
                     self.misses += 1
-            if rtf != self.rtf:  # changed at run time: restart the grid from here
-                start_wall, start_sim, k = clock(), line.t, 0
-                next_pub = next_marker = 0
+            if self.rtf != pacer.rtf:  # changed at run time: a new grid from here
+                pacer.restart(self.rtf, line.t)
+                next_pub = next_marker = next_gc = next_full_gc = 0
 
     def _drain_inbox(self) -> None:
         """Hand queued messages to the line: parcels first, then commands. A command for a

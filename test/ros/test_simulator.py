@@ -158,7 +158,7 @@ def test_simulator_sorts_reports_and_survives_bad_parcels(env, tmp_path: Path, p
         for key in ("non_finite", "mass", "wider_than_belt", "duplicate_id"):
             assert d[f"bad_parcels.{key}"] == "1", d
         assert d["commands_rejected.unknown_parcel"] == "1"
-        assert float(d["real_time_factor_achieved"]) == pytest.approx(1.0, abs=0.2)
+        assert 0.5 < float(d["real_time_factor_achieved"]) < 1.5  # paced at rtf 1 (loaded CI)
         for key in ("cycle_lateness_p50_ms", "cycle_lateness_p99_ms", "cycle_lateness_p99_9_ms"):
             assert math.isfinite(float(d[key]))
         n = len(got["clock"])

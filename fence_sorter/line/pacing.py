@@ -1,0 +1,126 @@
+"""Soft-real-time pacing of the line: a fixed grid of wall-clock deadlines on a steady clock.
+
+Cycle k has the deadline ``start + k * period``; :meth:`Pacer.wait` sleeps until ``spin_margin``
+before it, busy-waits to it and returns the sim time the line should reach,
+``sim0 + k * period * rtf``, so sim time stays locked to wall time. A cycle that wakes late
+skips the deadlines already past (one cycle advances them all) up to ``max_catch_up`` of sim
+time; the rest is dropped by moving the grid (a *slip*: sim time falls behind the wall clock
+instead of racing to catch up). With ``rtf`` 0 nothing waits and each cycle advances
+``unpaced_step`` of sim time. The clock and sleep functions are injectable for tests; nothing
+here reads ROS time.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class Tick:
+    """One cycle: its index on the grid, the sim time to reach, the deadline it was scheduled
+    for and how late it woke (a cycle whose work ends after ``deadline + period`` missed)."""
+
+    k: int
+    t_sim: float
+    deadline: float  # wall [s] (inf when unpaced)
+    lateness: float  # wake - deadline [s] (0 when unpaced)
+    slipped: bool  # the catch-up cap dropped sim time in this cycle
+
+
+class Pacer:
+    """Deadline grid for a loop with period ``period`` wall seconds at real-time factor ``rtf``."""
+
+    def __init__(
+        self,
+        period: float,
+        rtf: float,
+        sim0: float = 0.0,
+        max_catch_up: float = 0.1,
+        spin_margin: float = 3e-4,
+        unpaced_step: float | None = None,
+        clock: Callable[[], float] = time.perf_counter,
+        sleep: Callable[[float], None] = time.sleep,
+    ):
+        if not period > 0.0 or not rtf >= 0.0 or not max_catch_up > 0.0:
+            raise ValueError("period and max_catch_up must be > 0 and rtf >= 0")
+        self.period = period
+        self.max_catch_up = max_catch_up
+        self.spin_margin = spin_margin
+        self.unpaced_step = unpaced_step if unpaced_step is not None else period
+        self.clock = clock
+        self.sleep = sleep
+        self.slips = 0
+        self.restart(rtf, sim0)
+
+    def restart(self, rtf: float, sim0: float) -> None:
+        """Start a new grid now (at start-up or when the real-time factor changes)."""
+        self.rtf = rtf
+        self.start = self.clock()
+        self.sim0 = sim0
+        self.k = 0
+
+    @property
+    def next_deadline(self) -> float:
+        """Wall time of the next cycle's deadline (inf when unpaced)."""
+        return self.start + (self.k + 1) * self.period if self.rtf > 0.0 else math.inf
+
+    def wait(self) -> Tick:
+        """Wait for the next deadline; return the cycle's tick."""
+        if self.rtf <= 0.0:
+            self.k += 1
+            return Tick(self.k, self.sim0 + self.k * self.unpaced_step, math.inf, 0.0, False)
+        self.k += 1
+        period = self.period
+        deadline = self.start + self.k * period
+        remaining = deadline - self.clock()
+        if remaining > self.spin_margin:
+            self.sleep(remaining - self.spin_margin)
+        while self.clock() < deadline:
+            pass
+        late = self.clock() - deadline
+        slipped = False
+        if late >= period:
+            behind = int(late / period)  # deadlines already past
+            step = period * self.rtf
+            if behind * step > self.max_catch_up:
+                keep = int(self.max_catch_up / step)
+                self.start += (behind - keep) * period  # drop the rest: sim time slips
+                behind = keep
+                self.slips += 1
+                slipped = True
+            self.k += behind
+        return Tick(self.k, self.sim0 + self.k * period * self.rtf, deadline, late, slipped)
+
+
+class LatenessHistogram:
+    """Durations [s] in 10 us bins up to 100 ms (exact max kept): percentiles over a whole
+    run in constant memory and O(1) per sample."""
+
+    BIN = 1e-5
+    BINS = 10_000
+
+    def __init__(self) -> None:
+        self.counts = np.zeros(self.BINS + 1, dtype=np.int64)
+        self.n = 0
+        self.max = 0.0
+
+    def add(self, value: float) -> None:
+        k = int(max(value, 0.0) / self.BIN)
+        self.counts[min(k, self.BINS)] += 1
+        self.n += 1
+        if value > self.max:
+            self.max = value
+
+    def percentile(self, q: float) -> float:
+        """Upper edge of the bin holding the q-th percentile [s], capped at the max (NaN
+        before any sample)."""
+        if self.n == 0:
+            return math.nan
+        rank = max(math.ceil(q / 100.0 * self.n), 1)
+        k = int(np.searchsorted(np.cumsum(self.counts), rank))
+        return min((k + 1) * self.BIN, self.max) if k < self.BINS else self.max

@@ -1,0 +1,92 @@
+"""The pacing grid (fence_sorter.line.pacing) on a fake clock: deadlines, catch-up, slips."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from fence_sorter.line.pacing import LatenessHistogram, Pacer
+
+
+class FakeClock:
+    """A steady clock that sleeps exactly; every reading advances it 1 us (a busy-wait ends)."""
+
+    def __init__(self) -> None:
+        self.now = 100.0
+        self.sleeps: list[float] = []
+
+    def __call__(self) -> float:
+        self.now += 1e-6
+        return self.now
+
+    def sleep(self, dt: float) -> None:
+        self.sleeps.append(dt)
+        self.now += dt
+
+
+def pacer(clock: FakeClock, **kw) -> Pacer:
+    base = dict(period=1e-3, rtf=1.0, sim0=5.0, max_catch_up=0.01, spin_margin=3e-4)
+    base.update(kw)
+    return Pacer(clock=clock, sleep=clock.sleep, **base)
+
+
+def test_cycles_follow_the_grid_and_lock_sim_time_to_wall_time():
+    clock = FakeClock()
+    p = pacer(clock, rtf=2.0)
+    for k in range(1, 6):
+        tick = p.wait()
+        assert tick.k == k
+        assert tick.deadline == pytest.approx(100.0 + k * 1e-3)
+        assert tick.t_sim == pytest.approx(5.0 + 2.0 * k * 1e-3)  # period x rtf per cycle
+        assert clock.now >= tick.deadline and tick.lateness == pytest.approx(0.0, abs=1e-5)
+        clock.now += 2e-4  # the cycle's work
+    # it slept until spin_margin before each deadline (the rest is the busy-wait)
+    assert clock.sleeps[1] == pytest.approx(1e-3 - 2e-4 - 3e-4, abs=1e-5)
+
+
+def test_a_late_cycle_catches_up_in_one_step():
+    clock = FakeClock()
+    p = pacer(clock)
+    p.wait()
+    clock.now += 3.5e-3  # a stall of 3.5 periods
+    tick = p.wait()
+    assert tick.lateness == pytest.approx(2.5e-3, abs=1e-5)
+    assert tick.k == 4 and tick.t_sim == pytest.approx(5.0 + 4e-3)  # no sim time lost
+    assert not tick.slipped and p.slips == 0
+    assert p.wait().k == 5
+
+
+def test_catch_up_beyond_the_cap_slips_sim_time():
+    clock = FakeClock()
+    p = pacer(clock, max_catch_up=0.01)
+    p.wait()
+    clock.now += 0.1  # 100 periods lost, the cap allows 10 ms of sim
+    tick = p.wait()
+    assert tick.slipped and p.slips == 1
+    assert tick.t_sim == pytest.approx(5.0 + 2e-3 + 0.01, abs=1e-9)
+    # the grid moved: the next cycle is on time again, one period later
+    nxt = p.wait()
+    assert nxt.lateness == pytest.approx(0.0, abs=1e-5)
+    assert nxt.t_sim - tick.t_sim == pytest.approx(1e-3)
+
+
+def test_unpaced_never_waits():
+    clock = FakeClock()
+    p = pacer(clock, rtf=0.0, unpaced_step=0.02)
+    ticks = [p.wait() for _ in range(3)]
+    assert [t.t_sim for t in ticks] == pytest.approx([5.02, 5.04, 5.06])
+    assert clock.sleeps == [] and math.isinf(ticks[0].deadline)
+    p.restart(1.0, 5.06)
+    assert p.wait().t_sim == pytest.approx(5.061)
+
+
+def test_histogram_percentiles():
+    h = LatenessHistogram()
+    assert math.isnan(h.percentile(50))
+    for i in range(1000):
+        h.add(i * 1e-6)  # 0 .. 0.999 ms
+    h.add(0.5)  # beyond the last bin: counted, max exact
+    assert h.percentile(50) == pytest.approx(0.5e-3, abs=2e-5)  # one 10 us bin
+    assert h.percentile(99) == pytest.approx(0.99e-3, abs=2e-5)
+    assert h.percentile(100) == 0.5 and h.max == 0.5
