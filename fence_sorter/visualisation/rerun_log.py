@@ -98,18 +98,25 @@ def blueprint():
     )  # fmt: skip
 
 
-def open_recording(path: Path | str | None = None, spawn: bool = False, recording_id=None):
-    """A RecordingStream saving to ``path`` (.rrd) and/or spawning a viewer."""
+def open_recording(
+    path: Path | str | None = None,
+    spawn: bool = False,
+    url: str | None = None,
+    recording_id=None,
+):
+    """A RecordingStream saving to ``path`` (.rrd), and/or streaming to a viewer: a spawned one
+    (``spawn``) or one listening at ``url`` (gRPC, e.g. rerun+http://127.0.0.1:9876/proxy)."""
     rr = _rr()
     rec = rr.RecordingStream(APP_ID, recording_id=recording_id)
     if spawn:
-        rec.spawn(default_blueprint=blueprint())
+        rec.spawn(connect=False)
+    sinks = []
     if path is not None:
-        if spawn:
-            rec.set_sinks(rr.FileSink(str(path)), rr.GrpcSink())
-            rec.send_blueprint(blueprint())
-        else:
-            rec.save(str(path), default_blueprint=blueprint())
+        sinks.append(rr.FileSink(str(path)))
+    if spawn or url:
+        sinks.append(rr.GrpcSink(url) if url else rr.GrpcSink())
+    if sinks:
+        rec.set_sinks(*sinks, default_blueprint=blueprint())
     return rec
 
 
@@ -328,3 +335,71 @@ def log_bag(contents, rec) -> RerunLogger:
     for t, fence, parcels in bag_frames(contents):
         logger.log_frame(t, fence, parcels)
     return logger
+
+
+class LiveRerun:
+    """Rerun logging beside a real-time loop: :meth:`offer` only queues a line snapshot (a few
+    microseconds); a daemon thread logs it. When the thread falls behind, the oldest queued
+    snapshots are dropped and counted, never the loop delayed."""
+
+    def __init__(self, rec, scene: SceneGeometry, max_queue: int = 64) -> None:
+        import queue
+        import threading
+
+        self.logger = RerunLogger(rec, scene)
+        self._queue: queue.Queue = queue.Queue(maxsize=max_queue)
+        self._empty = queue.Empty
+        self._full = queue.Full
+        self.offered = 0
+        self.dropped = 0
+        self.log_time = 0.0  # total time spent logging [s]
+        self.log_time_max = 0.0  # [s]
+        self.error: str | None = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="rerun-log", daemon=True)
+        self._thread.start()
+
+    def offer(self, snapshot=None, event: tuple[float, str, bool] | None = None) -> None:
+        """Queue a LineSnapshot, or an event (t, text, ok) for the outcome log."""
+        self.offered += 1
+        item = ("snap", snapshot) if snapshot is not None else ("event", event)
+        try:
+            self._queue.put_nowait(item)
+        except self._full:
+            self.dropped += 1
+
+    def _run(self) -> None:
+        import time
+
+        rr, rec = self.logger.rr, self.logger.rec
+        while not (self._stop.is_set() and self._queue.empty()):
+            try:
+                kind, item = self._queue.get(timeout=0.1)
+            except self._empty:
+                continue
+            if self.error is not None:
+                continue
+            t0 = time.perf_counter()
+            try:
+                if kind == "snap":
+                    fence, parcels = frames_from_snapshot(item)
+                    self.logger.log_frame(item.t, fence, parcels)
+                else:
+                    t, text, ok = item
+                    rec.set_time(TIMELINE, duration=float(t))
+                    rec.log("events/outcomes", rr.TextLog(text, level="INFO" if ok else "WARN"))
+            except Exception as exc:  # a viewer gone must not take the simulator down
+                self.error = f"{type(exc).__name__}: {exc}"
+            dt = time.perf_counter() - t0
+            self.log_time += dt
+            self.log_time_max = max(self.log_time_max, dt)
+
+    @property
+    def frames(self) -> int:
+        return self.logger.frames
+
+    def close(self, timeout: float = 10.0) -> None:
+        """Log what is queued, then flush and close the sinks."""
+        self._stop.set()
+        self._thread.join(timeout=timeout)
+        self.logger.close()
