@@ -5,6 +5,7 @@ See :class:`SortingLine`; data types in :mod:`fence_sorter.line.types`, input ch
 """
 
 from .line import LineConfig, SortingLine, in_swept_sector
+from .pacing import LatenessHistogram, Pacer, Tick
 from .types import (
     CommandResult,
     FenceSnapshot,
@@ -28,6 +29,7 @@ __all__ = [
     "CommandResult",
     "FenceSnapshot",
     "InputError",
+    "LatenessHistogram",
     "LineConfig",
     "LineEvent",
     "LineSnapshot",
@@ -35,6 +37,7 @@ __all__ = [
     "OutcomeCode",
     "OverlapWarning",
     "ParcelSnapshot",
+    "Pacer",
     "ParcelSpec",
     "SolverWarning",
     "SortingLine",
@@ -42,6 +45,7 @@ __all__ = [
     "StartMode",
     "StrokeCommand",
     "StrokeStarted",
+    "Tick",
     "in_swept_sector",
     "validate_command",
     "validate_parcel",

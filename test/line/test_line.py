@@ -326,3 +326,57 @@ def test_line_config_is_checked():
         )
     with pytest.raises(ValueError, match="line_end_x"):
         SortingLine(LineConfig.from_scenario(SCENE, line_end_x=1.0))
+
+
+def test_unsorted_stroke_is_missed_and_the_parcel_rides_on():
+    line = make_line()
+    line.add_parcel(heavy(5))
+    # a 25 deg stroke hits the load but cannot push its C_s 0.3 m further across the belt
+    assert line.command(stroke(5, alpha_k=math.radians(25.0))).accepted
+    stages = []
+    out = outcomes(
+        run(
+            line,
+            6.0,
+            on_step=lambda ln: stages.extend(p.stage for p in ln.snapshot().parcels),
+        )
+    )
+    assert out[5].code is OutcomeCode.MISSED and not out[5].sorted
+    assert "y_max" in out[5].reason and out[5].y_max < 0.7
+    # the solve ran the fence cycle plus settle_time: 2 x 0.35 + 0.5 s after the start at 1.42 s
+    assert out[5].t == pytest.approx(1.42 + 0.7 + 0.5, abs=DT)
+    assert Stage.E1 in stages or Stage.E2 in stages  # the fence touched it
+    assert stages[-1] is Stage.PASSED
+    assert line.parcels_on_line == 0  # it left at the line end, with no second outcome
+
+
+def test_stiff_fence_line_sorts_and_draws_a_straight_fence():
+    sc = load_scene("positioned_stiff").scenario
+    line = SortingLine(LineConfig.from_scenario(sc))
+    spec = ParcelSpec(
+        1,
+        length_a=0.7,
+        width_b=0.1,
+        height=0.1,
+        mass=5.0,
+        cog_offset_x=-0.35,
+        cog_offset_y=-0.05,
+        divert=True,
+        scan_position_x=-2.0,
+    )
+    line.add_parcel(spec)
+    # the scene's drive (t1 0.9 s, R_s 0.7 m) at its belt speed 2 m/s
+    assert line.command(StrokeCommand(1, r_s=0.7, t1=0.9, alpha_k=ALPHA_K)).accepted
+    angles = []
+
+    def watch(ln: SortingLine) -> None:
+        f = ln.snapshot().fence
+        angles.append(f.drive_angle)
+        assert not f.deflection.any()
+        np.testing.assert_allclose(np.hypot(f.node_x, f.node_y), f.node_s, atol=1e-12)
+
+    out = outcomes(run(line, 4.0, on_step=watch))
+    ref = simulate(replace(sc, parcel=replace(sc.parcel, lateral_gap=0.0)))
+    assert out[1].code is OutcomeCode.SORTED and ref.sorted
+    assert out[1].peak_normal_force == pytest.approx(ref.peak_contact_force, rel=1e-9)
+    assert max(angles) == pytest.approx(ALPHA_K, rel=1e-3)
