@@ -177,7 +177,7 @@ def run_job(opts: RunOptions, say: Callable[[str], None] = print) -> RunResult:
                 ),
             ),
         )
-        subscribers = 3  # simulator, controller, this monitor
+        subscribers = 3 + bool(opts.bag)  # simulator, controller, this monitor, recorder
         if opts.bag:
             Path(opts.bag).mkdir(parents=True, exist_ok=True)
             group.start(
@@ -198,6 +198,8 @@ def run_job(opts: RunOptions, say: Callable[[str], None] = print) -> RunResult:
             ),
         )
         _wait_for(monitor, group, "simulator", 60.0)
+        # the controller listens to /parcels once the simulator has matched its commands
+        _wait_for(monitor, group, "controller", 30.0, listening=True)
         scanner_args = [
             scene,
             "use_sim_time:=true",
@@ -296,12 +298,19 @@ class _StartFailure(RuntimeError):
     pass
 
 
-def _wait_for(monitor, group: ProcessGroup, node: str, timeout: float) -> None:
-    """Wait for the first heartbeat of ``node`` (it is spinning, so it is ready)."""
+def _wait_for(
+    monitor, group: ProcessGroup, node: str, timeout: float, listening: bool = False
+) -> None:
+    """Wait for the first heartbeat of ``node`` (it is spinning, so it is ready), with
+    ``listening``: for one that says it listens (the controller, once its commands match)."""
+
+    def up() -> bool:
+        diag = monitor.node_diag(node)
+        return diag is not None and (not listening or diag.get("listening") == "true")
 
     def ready() -> bool:
         monitor.spin_for(0.05)
-        return monitor.node_diag(node) is not None or group.nodes[node].proc.poll() is not None
+        return up() or group.nodes[node].proc.poll() is not None
 
     wait_until(ready, timeout, step=0.0)
     proc = group.nodes[node]
@@ -310,5 +319,6 @@ def _wait_for(monitor, group: ProcessGroup, node: str, timeout: float) -> None:
             f"node {node} exited with status {proc.proc.returncode} at start; log tail:\n"
             f"{proc.tail()}"
         )
-    if monitor.node_diag(node) is None:
-        raise _StartFailure(f"node {node} sent no heartbeat within {timeout:.0f} s")
+    if not up():
+        what = "no heartbeat saying it listens" if listening else "no heartbeat"
+        raise _StartFailure(f"node {node} sent {what} within {timeout:.0f} s")
