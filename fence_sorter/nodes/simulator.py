@@ -237,6 +237,7 @@ class SimulatorNode(FenceSorterNode):
         self.loop_error: str | None = None
         self._rtf_window = (time.perf_counter(), self.line.t)
         self._stop = threading.Event()
+        self._saved_switch: float | None = None
         self._thread = threading.Thread(target=self._loop, name="simulator-loop", daemon=True)
 
     # -- callbacks: hand off only --------------------------------------------------------------
@@ -250,7 +251,8 @@ class SimulatorNode(FenceSorterNode):
     def start(self) -> None:
         # A thread waking from sleep waits for the GIL until the holder's switch interval
         # (5 ms by default) expires: keep it well below the cycle period.
-        sys.setswitchinterval(min(sys.getswitchinterval(), 0.25 * self.period))
+        self._saved_switch = sys.getswitchinterval()
+        sys.setswitchinterval(min(self._saved_switch, 0.25 * self.period))
         # The cyclic GC would stop the loop for 1-60 ms at moments of its choosing: freeze
         # what exists after start-up (modules, compiled kernel, scene) and let the loop collect
         # the young generation in the slack after its work, the old one every few seconds.
@@ -260,9 +262,15 @@ class SimulatorNode(FenceSorterNode):
         self._thread.start()
 
     def stop(self) -> None:
+        """End the loop thread and give the process its GC and switch interval back."""
         self._stop.set()
         if self._thread.is_alive():
             self._thread.join(timeout=5.0)
+        if self._saved_switch is not None:
+            sys.setswitchinterval(self._saved_switch)
+            gc.unfreeze()
+            gc.enable()
+            self._saved_switch = None
 
     # -- the pacing loop -------------------------------------------------------------------------
     def _loop(self) -> None:
@@ -533,7 +541,6 @@ def main(args: Sequence[str] | None = None) -> int:
         print(f"simulator: {exc}", file=sys.stderr)
         code = 2
     finally:
-        gc.enable()
         if node is not None:
             node.stop()
             if node.loop_error:

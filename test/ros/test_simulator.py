@@ -188,3 +188,46 @@ def test_bad_scene_exits_2_with_one_line(env) -> None:
     lines = [ln for ln in stderr.splitlines() if ln.startswith("simulator:")]
     assert len(lines) == 1 and "no_such_scene" in lines[0]
     assert "Traceback" not in stdout + stderr
+
+
+def test_real_time_factor_can_change_at_run_time(domain_id: int) -> None:
+    """``ros2 param set /simulator real_time_factor 3``: the loop restarts its deadline grid
+    and sim time then runs three times faster than wall time; read-only and out-of-range
+    values are refused. In-process node on its own context (stop() restores the GC)."""
+    import gc
+
+    import rclpy
+    from rclpy.parameter import Parameter
+    from rclpy.signals import SignalHandlerOptions
+
+    from fence_sorter.nodes.simulator import SimulatorNode
+
+    context = rclpy.Context()
+    rclpy.init(
+        args=["--ros-args", "-p", "warm_up:=false"],
+        context=context,
+        domain_id=domain_id,
+        signal_handler_options=SignalHandlerOptions.NO,
+    )
+    node = SimulatorNode(context=context)
+    try:
+        node.start()
+
+        def rate() -> float:
+            s0, w0 = node.sim_time, time.perf_counter()
+            time.sleep(1.0)
+            return (node.sim_time - s0) / (time.perf_counter() - w0)
+
+        time.sleep(0.3)
+        assert rate() == pytest.approx(1.0, abs=0.1)
+        assert node.set_parameters([Parameter("real_time_factor", value=3.0)])[0].successful
+        time.sleep(0.1)
+        assert rate() == pytest.approx(3.0, abs=0.3)
+        res = node.set_parameters([Parameter("real_time_factor", value=500.0)])[0]
+        assert not res.successful and "real_time_factor" in res.reason
+        assert not node.set_parameters([Parameter("physics_rate", value=5.0)])[0].successful
+    finally:
+        node.stop()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+    assert gc.isenabled()
