@@ -1,0 +1,207 @@
+"""Analysis and Rerun views of a recorded run, without ROS: the committed example bag (recorded
+with `fence-sorter run --parcels 4 --bag bags/example_4_parcels`), damaged copies of it, and
+the Rerun logger driven by the line's snapshots."""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import subprocess
+import sys
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fence_sorter.analysis import analyze_bag
+from fence_sorter.analysis.run import Series, check_row, crossing
+from fence_sorter.recording.bagread import read_bag
+from fence_sorter.testing import run_cli
+
+REPO = Path(__file__).resolve().parents[2]
+EXAMPLE = REPO / "bags" / "example_4_parcels"
+
+
+@pytest.fixture(scope="module")
+def example() -> Path:
+    assert (EXAMPLE / "metadata.yaml").is_file(), f"{EXAMPLE} missing"
+    return EXAMPLE
+
+
+def test_example_bag_analysis_agrees_with_the_live_outcomes(example, tmp_path):
+    report = analyze_bag(example, tmp_path)
+    assert report.issues == []
+    s = report.summary
+    live = {m.msg.parcel_id: m.msg for m in read_bag(example, ["/sort_outcomes"]).messages}
+    scanned = read_bag(example, ["/parcels"]).messages
+    assert len(report.rows) == len(scanned) == len(live) >= 3
+    for row in report.rows:
+        o = live[row["parcel_id"]]
+        assert row["sorted"] == o.sorted
+        assert row["sampled_sorted"] == o.sorted  # derived from the states alone
+        assert row["agrees"] is True, row["disagreements"]
+        if o.sorted:
+            assert row["sampled_exit_speed_mps"] == pytest.approx(o.exit_speed_y, rel=0.06)
+            assert row["sampled_peak_N_stiff"] <= o.peak_normal_force_stiff * 1.001
+    assert s["agrees_with_live"] is True
+    assert s["sorted_divert"] == sum(1 for o in live.values() if o.sorted)
+    assert s["divert"] >= s["sorted_divert"] > 0
+    assert 0 < s["throughput_pcs_h"] < 20000
+    names = set(report.files)
+    assert {"parcels.csv", "analysis.json", "trajectories.png"} <= names
+    stroked = [o for o in live.values() if math.isfinite(o.peak_normal_force)]
+    assert sum(1 for n in names if n.startswith("parcel_")) == len(stroked) > 0
+    csv_lines = (tmp_path / "parcels.csv").read_text().splitlines()
+    assert len(csv_lines) == 1 + len(live)
+    assert csv_lines[0].startswith("parcel_id,divert,sorted,reason")
+    data = json.loads((tmp_path / "analysis.json").read_text())
+    assert data["summary"]["agrees_with_live"] is True
+
+
+def test_analyze_cli_json_and_exit_codes(example, tmp_path):
+    out = run_cli("analyze", str(example), "--json", "--no-plots", "--out", str(tmp_path / "a"))
+    assert out.returncode == 0, out.stderr
+    data = json.loads(out.stdout)
+    ids = [p["parcel_id"] for p in data["parcels"]]
+    assert ids == sorted(ids) and len(ids) == len(read_bag(example, ["/parcels"]).messages)
+    assert all(p["agrees"] is True for p in data["parcels"])
+    bad = run_cli("analyze", str(tmp_path / "nope"))
+    assert bad.returncode == 2 and "nope: no such bag" in bad.stderr
+
+
+def test_truncated_bag_reports_the_file_and_analyses_the_rest(example, tmp_path):
+    bag = tmp_path / "bag"
+    shutil.copytree(example, bag)
+    segs = sorted(bag.glob("*.mcap"))
+    assert len(segs) >= 2, "the example bag should have several segments"
+    last = segs[-1]
+    last.write_bytes(last.read_bytes()[:200])  # cut inside its first chunk
+    out = run_cli("analyze", str(bag), "--no-plots", "--out", str(tmp_path / "a"))
+    assert out.returncode == 1
+    assert f"{last}: damaged or truncated at byte" in out.stderr
+    assert "BAG PROBLEM" in out.stdout and "SORTED" in out.stdout  # still a table
+    full = read_bag(example).counts()
+    part = read_bag(bag).counts()
+    assert 0 < sum(part.values()) < sum(full.values())
+
+
+def test_crossing_is_extrapolated_from_the_last_samples():
+    t = np.array([0.0, 0.01, 0.02])
+    vy = np.array([1.2, 1.1, 1.0])
+    y = np.array([0.67, 0.681, 0.691])
+    z = np.zeros(3)
+    s = Series(t, z, z, y, z, z, vy, z, z, z, z)
+    tc, v = crossing(s, 0.7, 0.01)
+    assert tc == pytest.approx(0.02 + 0.009 / 1.0)
+    assert v == pytest.approx(1.0 - 10.0 * 0.009)
+    assert crossing(s, 0.8, 0.01) is None  # 0.109 m away: more than 1.5 periods
+
+
+def test_check_row_flags_contradictions():
+    outcome = dict(
+        sorted=True, peak_normal_force=300.0, peak_normal_force_stiff=700.0,
+        peak_normal_accel=100.0, exit_speed_y=1.0, time_in_working_space=1.0,
+    )  # fmt: skip
+    row = dict(
+        samples=10, sampled_sorted=True, sampled_peak_N=200.0, sampled_peak_N_stiff=700.0,
+        sampled_peak_accel_mps2=50.0, sampled_exit_speed_mps=1.01, sampled_time_in_ws_s=1.005,
+    )  # fmt: skip
+    assert check_row(row, outcome, 0.01) == []
+    assert len(check_row({**row, "sampled_sorted": False}, outcome, 0.01)) == 1
+    assert "exceeds the live peak" in check_row({**row, "sampled_peak_N": 400.0}, outcome, 0.01)[0]
+    assert "exit speed" in check_row({**row, "sampled_exit_speed_mps": 1.3}, outcome, 0.01)[0]
+    assert (
+        "time in working space"
+        in check_row({**row, "sampled_time_in_ws_s": 1.1}, outcome, 0.01)[0]
+    )
+
+
+# -- Rerun ---------------------------------------------------------------------------------------
+def rrd_rows(path: Path) -> tuple[Counter, Counter]:
+    """(rows per entity on the timeline, static entities) read back with Rerun's RrdReader."""
+    from rerun.chunk import RrdReader
+
+    rows, static = Counter(), Counter()
+    for chunk in RrdReader(path).stream():
+        (static if chunk.is_static else rows)[chunk.entity_path] += chunk.num_rows
+    return rows, static
+
+
+def test_rrd_from_the_example_bag(example, tmp_path):
+    out = tmp_path / "run.rrd"
+    res = run_cli("rrd", str(example), "--out", str(out))
+    assert res.returncode == 0, res.stderr
+    verify = subprocess.run(
+        [sys.executable, "-m", "rerun", "rrd", "verify", str(out)],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert verify.returncode == 0, verify.stderr
+    contents = read_bag(example)
+    counts = contents.counts()
+    rows, static = rrd_rows(out)
+    frames = counts["/fence_state"]
+    for entity in ("/world/fence", "/world/parcels", "/world/contact_forces",
+                   "/plots/fence/tip_deflection", "/plots/fence/alpha_w"):  # fmt: skip
+        assert rows[entity] == frames, entity
+    assert {"/world/conveyor/belt", "/world/chute", "/world/scan_line"} <= set(static)
+    per_parcel = Counter(m.msg.parcel_id for m in contents.by_topic("/load_states"))
+    for pid, n in per_parcel.items():
+        assert rows[f"/plots/speed/{pid}"] == n
+    contact = Counter(
+        m.msg.parcel_id for m in contents.by_topic("/load_states") if 1 <= m.msg.stage <= 4
+    )
+    for pid, n in contact.items():
+        assert rows[f"/plots/contact/{pid}/N"] == n == rows[f"/plots/contact/{pid}/N_stiff"]
+    assert rows["/events/outcomes"] == counts["/sort_outcomes"]
+
+
+def test_logger_from_line_snapshots(tmp_path):
+    from fence_sorter.line import LineConfig, ParcelSpec, SortingLine, StrokeCommand
+    from fence_sorter.scene import load_scene
+    from fence_sorter.visualisation.rerun_log import (
+        RerunLogger,
+        SceneGeometry,
+        frames_from_snapshot,
+        open_recording,
+    )
+
+    line = SortingLine(LineConfig.from_scenario(load_scene("impact_flexible").scenario))
+    line.add_parcel(ParcelSpec(7, lateral_gap=0.25, divert=True, scan_position_x=-1.0))
+    line.add_parcel(ParcelSpec(8, lateral_gap=0.1, divert=False, scan_position_x=-2.5))
+    line.command(StrokeCommand(7, r_s=0.42, t1=0.35, alpha_k=math.radians(40.0)))
+    out = tmp_path / "live.rrd"
+    logger = RerunLogger(open_recording(out), SceneGeometry(0.7, (-3.0, 3.0), None, -3.0))
+    frames = 0
+    for k in range(1, 101):  # 2 s at 50 Hz
+        line.advance(0.02 * k)
+        fence, parcels = frames_from_snapshot(line.snapshot())
+        logger.log_frame(line.t, fence, parcels)
+        frames += 1
+    logger.close()
+    rows, static = rrd_rows(out)
+    assert rows["/world/fence"] == rows["/world/parcels"] == frames
+    assert rows["/plots/speed/8"] == frames  # parcel 8 stays on the belt the whole time
+    assert 0 < rows["/plots/contact/7/N"] < frames  # only while the fence works on it
+    assert "/world/chute" not in static and "/world/scan_line" in static
+
+
+def test_live_logger_thread_from_line_snapshots(tmp_path):
+    from fence_sorter.line import LineConfig, ParcelSpec, SortingLine
+    from fence_sorter.scene import load_scene
+    from fence_sorter.visualisation.rerun_log import LiveRerun, SceneGeometry, open_recording
+
+    line = SortingLine(LineConfig.from_scenario(load_scene("impact_flexible").scenario))
+    line.add_parcel(ParcelSpec(3, lateral_gap=0.1, divert=False, scan_position_x=-2.5))
+    out = tmp_path / "live.rrd"
+    live = LiveRerun(open_recording(out), SceneGeometry(0.7), max_queue=1000)
+    for k in range(1, 51):
+        line.advance(0.02 * k)
+        live.offer(line.snapshot())
+    live.offer(event=(1.0, "parcel 3: test", True))
+    live.close()
+    assert live.error is None and live.dropped == 0
+    rows, _ = rrd_rows(out)
+    assert rows["/world/parcels"] == live.frames == 50
+    assert rows["/events/outcomes"] == 1
