@@ -25,8 +25,7 @@ def register(subparsers) -> None:
     parser.add_argument(
         "--out",
         metavar="DIR",
-        help="write parcels.csv, analysis.json and the plots here (default: <bag>_analysis "
-        "in the current directory)",
+        help="write parcels.csv, analysis.json and the plots here (default: print only)",
     )
     parser.add_argument("--no-plots", action="store_true", help="skip the plots")
     parser.set_defaults(func=run)
@@ -37,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
     from fence_sorter.recording.bagread import BagReadError
 
     bag = Path(args.bag)
-    out = Path(args.out) if args.out else Path(f"{bag.resolve().name}_analysis")
+    out = Path(args.out) if args.out else None
     try:
         report = analyze_bag(bag, out, plots=not args.no_plots)
     except BagReadError as exc:
