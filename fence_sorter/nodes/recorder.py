@@ -78,22 +78,21 @@ def message_class(msgtype: str) -> type:
     return getattr(importlib.import_module(f"{pkg}.{kind}"), name)
 
 
-def default_output_dir(value: str) -> Path:
-    """``output_dir`` as a path; empty: $ROS_HOME/bags (ROS_HOME defaults to ~/.ros)."""
-    if value:
-        return Path(value).expanduser()
-    return Path(os.environ.get("ROS_HOME") or Path.home() / ".ros").expanduser() / "bags"
-
-
-def bag_path(output_dir: Path) -> Path:
-    """``output_dir`` if it is free (missing or empty), else a new run_<UTC time> inside it."""
-    if not output_dir.exists() or (output_dir.is_dir() and not any(output_dir.iterdir())):
-        return output_dir
+def bag_path(output_dir: str) -> Path:
+    """Where the bag goes: ``output_dir`` itself if it is missing or empty, else a new
+    ``run_<UTC time>`` inside it; empty ``output_dir``: a new ``$ROS_HOME/bags/run_<UTC time>``
+    (ROS_HOME defaults to ~/.ros)."""
+    if output_dir:
+        base = Path(output_dir).expanduser()
+        if not base.exists() or (base.is_dir() and not any(base.iterdir())):
+            return base
+    else:
+        base = Path(os.environ.get("ROS_HOME") or Path.home() / ".ros").expanduser() / "bags"
     stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
-    candidate = output_dir / f"run_{stamp}"
+    candidate = base / f"run_{stamp}"
     k = 1
     while candidate.exists():
-        candidate = output_dir / f"run_{stamp}_{k}"
+        candidate = base / f"run_{stamp}_{k}"
         k += 1
     return candidate
 
@@ -118,7 +117,7 @@ class RecorderNode(FenceSorterNode):
             "output_dir",
             "",
             "The bag directory if missing or empty, else the directory that receives a new "
-            "run_<UTC time> bag; empty: $ROS_HOME/bags (~/.ros/bags)",
+            "run_<UTC time> bag; empty: a new $ROS_HOME/bags/run_<UTC time> (~/.ros/bags)",
             read_only=True,
         ),
         ParamSpec("storage", "mcap", "rosbag2 storage: mcap or sqlite3", read_only=True),
@@ -146,7 +145,7 @@ class RecorderNode(FenceSorterNode):
         from fence_sorter.recording.writer import SegmentedBagWriter
 
         p = {spec.name: self.get_parameter(spec.name).value for spec in self.PARAMETERS}
-        self.path = bag_path(default_output_dir(str(p["output_dir"])))
+        self.path = bag_path(str(p["output_dir"]))
         self.writer = SegmentedBagWriter(
             self.path,
             storage=str(p["storage"]),
@@ -236,9 +235,12 @@ class RecorderNode(FenceSorterNode):
             self.get_logger().error(f"bag {self.path}: closing failed: {self.write_error}")
         received = sum(t.received for t in self.topics)
         written = sum(t.written for t in self.topics)
-        self.get_logger().info(
-            f"bag {self.path} closed: {written} of {received} received messages written in "
-            f"{len(self.writer.segments)} segments"
+        # printed, not logged: after SIGINT/SIGTERM the context (and /rosout) is already gone
+        print(
+            f"[recorder] bag {self.path} closed: {written} of {received} received messages "
+            f"written in {len(self.writer.segments)} segments",
+            file=sys.stderr,
+            flush=True,
         )
 
     def destroy_node(self) -> None:

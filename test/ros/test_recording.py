@@ -262,3 +262,26 @@ def test_replay_republishes_the_run(recorded_run, ros_node, env):
     bag_span = float(stdout.split(" s of bag")[0].split()[-1])
     wall = float(stdout.split(" s wall")[0].split()[-1])
     assert wall == pytest.approx(bag_span / 4, rel=0.25, abs=0.5)
+
+
+def test_bag_path_never_overwrites(tmp_path, monkeypatch):
+    from fence_sorter.nodes.recorder import bag_path
+
+    assert bag_path(str(tmp_path / "new")) == tmp_path / "new"
+    (tmp_path / "empty").mkdir()
+    assert bag_path(str(tmp_path / "empty")) == tmp_path / "empty"
+    (tmp_path / "used").mkdir()
+    (tmp_path / "used" / "metadata.yaml").write_text("x")
+    inside = bag_path(str(tmp_path / "used"))
+    assert inside.parent == tmp_path / "used" and inside.name.startswith("run_")
+    monkeypatch.setenv("ROS_HOME", str(tmp_path / "home"))
+    assert bag_path("").parent == tmp_path / "home" / "bags"
+
+
+def test_bad_storage_is_refused_naming_it(env, tmp_path):
+    cmd = [sys.executable, "-m", "fence_sorter.nodes.recorder", "--ros-args",
+           "-p", f"output_dir:={tmp_path / 'bag'}", "-p", "storage:=rosbag1"]  # fmt: skip
+    out = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=60)
+    assert out.returncode != 0
+    assert "storage must be mcap or sqlite3" in out.stderr
+    assert not (tmp_path / "bag").exists()
