@@ -96,6 +96,29 @@ def fill_command(cmd, plan: Plan, alpha_k: float) -> None:
     cmd.predicted_peak_force = ev.peak_force
 
 
+#: wall time a plan may take, reserved (times the real-time factor) before a stroke start [s]
+PLANNING_ALLOWANCE = 0.06
+
+
+class RateEstimate:
+    """Real-time factor seen by the node: sim time over wall time since a reference point
+    at least ``window`` wall seconds back (1.0 until it can tell)."""
+
+    def __init__(self, window: float = 2.0):
+        self.window = window
+        self.points: deque[tuple[float, float]] = deque()
+        self.value = 1.0
+
+    def update(self, wall: float, sim: float) -> float:
+        self.points.append((wall, sim))
+        while len(self.points) > 2 and wall - self.points[1][0] >= self.window:
+            self.points.popleft()
+        w0, s0 = self.points[0]
+        if wall - w0 >= 0.2 and sim >= s0:
+            self.value = (sim - s0) / (wall - w0)
+        return self.value
+
+
 class ControllerStats:
     """Counters and latency samples reported on /diagnostics (ROS-free)."""
 
@@ -219,6 +242,13 @@ class ControllerNode(FenceSorterNode):
         self.planner = Planner(self.base, self.config)
         self.frame_id = p["frame_id"]
         self.stats = ControllerStats()
+        self.rtf = RateEstimate()
+        # sampled on the steady clock, so the estimate follows the sim clock between parcels
+        self._rtf_timer = self.create_timer(
+            0.25,
+            lambda: self.rtf.update(time.monotonic(), self.get_clock().now().nanoseconds * 1e-9),
+            clock=Clock(clock_type=ClockType.STEADY_TIME),
+        )
         self.seen: set[int] = set()
         self._warm_up(p)
         self._pub = self.create_publisher(FenceCommand, COMMANDS_TOPIC, RELIABLE_QOS)
@@ -281,6 +311,7 @@ class ControllerNode(FenceSorterNode):
         values = self.stats.values()
         values["cache_entries"] = str(len(self.planner.cache))
         values["listening"] = str(self._sub is not None).lower()
+        values["real_time_factor_seen"] = f"{self.rtf.value:.3f}"
         status.values.extend(KeyValue(key=k, value=v) for k, v in values.items())
         return status
 
@@ -305,8 +336,12 @@ def handle_parcel(node: ControllerNode, msg):
         log.warning(f"rejected: {exc}")
         return None
     now = node.get_clock().now()
+    t_now = now.nanoseconds * 1e-9
+    rtf = node.rtf.update(time.monotonic(), t_now)
     evals0 = node.planner.evaluations
-    plan = node.planner.plan(req, now.nanoseconds * 1e-9)
+    # the stroke must start after the command is out: planning takes up to PLANNING_ALLOWANCE
+    # of wall time, which is rtf times as much sim time
+    plan = node.planner.plan(req, t_now + rtf * PLANNING_ALLOWANCE)
     stats.evaluations += node.planner.evaluations - evals0
     if not plan.feasible and plan.reason.startswith("too late"):
         stats.late += 1
