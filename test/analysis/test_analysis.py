@@ -10,6 +10,7 @@ import shutil
 import subprocess
 import sys
 from collections import Counter
+from dataclasses import astuple
 from pathlib import Path
 
 import numpy as np
@@ -205,3 +206,32 @@ def test_live_logger_thread_from_line_snapshots(tmp_path):
     rows, _ = rrd_rows(out)
     assert rows["/world/parcels"] == live.frames == 50
     assert rows["/events/outcomes"] == 1
+
+
+def test_rerun_child_process_logs_what_the_loop_offers(tmp_path):
+    from fence_sorter.line import LineConfig, ParcelSpec, SortingLine
+    from fence_sorter.scene import load_scene
+    from fence_sorter.visualisation.rerun_live import RerunProcess, pack_snapshot, unpack_frame
+    from fence_sorter.visualisation.rerun_log import SceneGeometry, frames_from_snapshot
+
+    line = SortingLine(LineConfig.from_scenario(load_scene("impact_flexible").scenario))
+    line.add_parcel(ParcelSpec(5, lateral_gap=0.1, divert=True, scan_position_x=-2.5))
+    line.advance(0.1)
+    snap = line.snapshot()
+    t, fence, parcels = unpack_frame(pack_snapshot(snap)[5:])  # past the 5-byte header
+    ref_fence, ref_parcels = frames_from_snapshot(snap)
+    assert t == snap.t and len(parcels) == len(ref_parcels) == 1
+    np.testing.assert_equal(astuple(parcels[0]), astuple(ref_parcels[0]))  # NaN == NaN here
+    assert np.array_equal(fence.node_x, ref_fence.node_x)
+    out = tmp_path / "child.rrd"
+    proc = RerunProcess(SceneGeometry(0.7, (-3.0, 3.0), (0.75, 1.0, 1.5, 0.6), -3.0), out)
+    for k in range(2, 42):
+        line.advance(0.05 * k)
+        proc.offer(line.snapshot())
+    proc.event(line.t, "parcel 5: test", ok=False)
+    assert proc.close() == 0
+    assert proc.sent == 41 and proc.dropped == 0
+    rows, static = rrd_rows(out)
+    assert rows["/world/parcels"] == rows["/plots/speed/5"] == 40
+    assert rows["/events/outcomes"] == 1
+    assert "/world/chute" in static
