@@ -188,26 +188,6 @@ def test_logger_from_line_snapshots(tmp_path):
     assert "/world/chute" not in static and "/world/scan_line" in static
 
 
-def test_live_logger_thread_from_line_snapshots(tmp_path):
-    from fence_sorter.line import LineConfig, ParcelSpec, SortingLine
-    from fence_sorter.scene import load_scene
-    from fence_sorter.visualisation.rerun_log import LiveRerun, SceneGeometry, open_recording
-
-    line = SortingLine(LineConfig.from_scenario(load_scene("impact_flexible").scenario))
-    line.add_parcel(ParcelSpec(3, lateral_gap=0.1, divert=False, scan_position_x=-2.5))
-    out = tmp_path / "live.rrd"
-    live = LiveRerun(open_recording(out), SceneGeometry(0.7), max_queue=1000)
-    for k in range(1, 51):
-        line.advance(0.02 * k)
-        live.offer(line.snapshot())
-    live.offer(event=(1.0, "parcel 3: test", True))
-    live.close()
-    assert live.error is None and live.dropped == 0
-    rows, _ = rrd_rows(out)
-    assert rows["/world/parcels"] == live.frames == 50
-    assert rows["/events/outcomes"] == 1
-
-
 def test_rerun_child_process_logs_what_the_loop_offers(tmp_path):
     from fence_sorter.line import LineConfig, ParcelSpec, SortingLine
     from fence_sorter.scene import load_scene
