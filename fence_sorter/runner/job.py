@@ -5,7 +5,9 @@ an isolated ROS domain, watch the run until every parcel has its outcome, stop c
 from __future__ import annotations
 
 import math
+import signal
 import tempfile
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -145,9 +147,24 @@ def _ros_args(node: str, plan: Plan, opts: RunOptions, extra: list[str]) -> list
     return args
 
 
+def _terminate(signum, frame) -> None:
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
 def run_job(opts: RunOptions, say: Callable[[str], None] = print) -> RunResult:
-    """Run the suite once; never leaves a node process behind."""
+    """Run the suite once; never leaves a node process behind (SIGTERM stops it like Ctrl-C)."""
     plan = prepare(opts)
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGTERM, _terminate)
+    try:
+        return _run(plan, opts, say)
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None]) -> RunResult:
     domain = run_domain_id()
     log_dir = Path(opts.log_dir or tempfile.mkdtemp(prefix="fence_sorter_run_"))
     log_dir.mkdir(parents=True, exist_ok=True)
@@ -270,8 +287,9 @@ def run_job(opts: RunOptions, say: Callable[[str], None] = print) -> RunResult:
                 break
         # one more heartbeat round for the final counters
         monitor.spin_for(opts.heartbeat_period + 0.3)
-    except KeyboardInterrupt:
-        code, message = EXIT_INTERRUPTED, "interrupted (Ctrl-C)"
+    except KeyboardInterrupt as exc:
+        why = exc.args[0] if exc.args else "Ctrl-C"
+        code, message = EXIT_INTERRUPTED, f"interrupted ({why})"
     except _StartFailure as exc:
         code, message = EXIT_FAILED, str(exc)
     finally:

@@ -5,6 +5,11 @@ NOT_DIVERTED, the outcomes are published, the nodes exit cleanly and leave no pr
 from __future__ import annotations
 
 import json
+import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -50,3 +55,46 @@ def test_short_stream_end_to_end(tmp_path: Path, env: dict[str, str]) -> None:
     assert set(s["exit_codes"]) == {"simulator", "scanner", "controller"}
     assert s["leftover_processes"] == [] and leftovers(s["process_groups"]) == []
     assert s["controller"]["commands"] == "3" and s["controller"]["rejected_parcels"] == "0"
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_interrupted_run_stops_every_node(tmp_path: Path, sig: int) -> None:
+    """Ctrl-C (or SIGTERM) in the middle of a run: exit 130, a summary, no process left."""
+    repo = Path(__file__).resolve().parents[2]
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(repo), env.get("PYTHONPATH")]))
+    cmd = [sys.executable, "-m", "fence_sorter.cli.main", "run", "--parcels", "40", "--json"]
+    proc = subprocess.Popen(
+        cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=repo, env=env
+    )
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.5)
+            # the first parcel is out once the nodes are up ("running" on stderr)
+            if Path(f"/proc/{proc.pid}").exists() and _children(proc.pid) >= 3:
+                break
+        time.sleep(3.0)
+        proc.send_signal(sig)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err
+    s = json.loads(out)
+    assert s["message"].startswith("interrupted")
+    assert len(s["process_groups"]) == 3 and leftovers(s["process_groups"]) == []
+
+
+def _children(pid: int) -> int:
+    """Processes whose parent is ``pid`` (/proc)."""
+    n = 0
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / "stat").read_text()
+            except OSError:
+                continue
+            if int(stat[stat.rfind(")") + 2 :].split()[1]) == pid:
+                n += 1
+    return n
