@@ -210,6 +210,13 @@ class RecorderNode(FenceSorterNode):
             topic, t_ns, data = item
             if self._guard(writer.write, topic.handle, t_ns, data):
                 topic.written += 1
+        # closed by this thread: a storage may be bound to the thread that opened it (sqlite3)
+        try:
+            writer.close()
+        except Exception as exc:
+            self.write_error = f"{type(exc).__name__}: {exc}"
+            print(f"[recorder] bag {self.path}: closing failed: {self.write_error}",
+                  file=sys.stderr, flush=True)  # fmt: skip
 
     def _guard(self, func, *args) -> bool:
         if self.write_error is not None:
@@ -227,12 +234,7 @@ class RecorderNode(FenceSorterNode):
         if self._stop.is_set():
             return
         self._stop.set()
-        self._thread.join()
-        try:
-            self.writer.close()
-        except Exception as exc:
-            self.write_error = f"{type(exc).__name__}: {exc}"
-            self.get_logger().error(f"bag {self.path}: closing failed: {self.write_error}")
+        self._thread.join()  # the writer thread drains the queue and closes the bag
         received = sum(t.received for t in self.topics)
         written = sum(t.written for t in self.topics)
         # printed, not logged: after SIGINT/SIGTERM the context (and /rosout) is already gone

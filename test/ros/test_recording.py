@@ -49,11 +49,11 @@ def ros_node(domain_id: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
         rclpy.try_shutdown(context=context)
 
 
-def start_recorder(bag: Path, env: dict[str, str], segment: float = 0.5):
+def start_recorder(bag: Path, env: dict[str, str], segment: float = 0.5, storage="mcap"):
     cmd = [
         sys.executable, "-m", "fence_sorter.nodes.recorder", "--ros-args",
         "-p", f"output_dir:={bag}", "-p", f"max_segment_duration:={segment}",
-        "-p", "heartbeat_period:=0.2",
+        "-p", "heartbeat_period:=0.2", "-p", f"storage:={storage}",
     ]  # fmt: skip
     return managed_process(cmd, env)
 
@@ -110,9 +110,10 @@ def clock_values(bag: Path) -> list[int]:
     ]
 
 
-def test_sigint_closes_the_bag_with_every_message(ros_node, env, tmp_path):
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_sigint_closes_the_bag_with_every_message(ros_node, env, tmp_path, storage):
     bag = tmp_path / "bag"
-    with start_recorder(bag, env) as proc:
+    with start_recorder(bag, env, storage=storage) as proc:
         pubs = publishers(ros_node)
         wait_matched(pubs, proc)
         publish(pubs, CLOCKS)
@@ -127,6 +128,9 @@ def test_sigint_closes_the_bag_with_every_message(ros_node, env, tmp_path):
     assert counts["/parcels"] == PARCELS
     assert counts["/load_states"] >= 0.98 * LOADS  # best effort over localhost
     assert clock_values(bag) == list(range(CLOCKS))  # in order
+    if storage == "sqlite3":
+        assert len(sorted(bag.glob("*.db3"))) >= 2
+        return
     files = sorted(bag.glob("*.mcap"))
     assert len(files) >= 2  # 1.5 s of publishing, 0.5 s segments
     decoded = 0
