@@ -898,9 +898,10 @@ def findings(sr: SceneResult) -> list[str]:
         if whole > 10.0 * to_sort:
             out.append(
                 f"Up to the sort crossing the default's trajectory error is {_e(to_sort)} m; over "
-                f"the whole run, which goes on off the belt, it is {_e(whole)} m: the belt "
-                "friction ends at the first accepted point past the crossing, so a velocity "
-                "error of the order of mu1 g times the step is made there and then carried."
+                f"the whole run, which goes on off the belt, it is {_e(whole)} m: past the "
+                "crossing (a located event) the load flies on without belt friction, so the "
+                "velocity error it carries there grows into a position error with the flight "
+                "time."
             )
     elif default is not None:
         out.append(f"The default run did not finish: {default.status}, {default.note}.")
