@@ -43,6 +43,8 @@ from fence_sorter.nodes.base import FenceSorterNode, ParamSpec, run_node
 from fence_sorter.recording.topics import TOPIC_TYPES
 
 DEFAULT_TOPICS = list(TOPIC_TYPES)
+#: set when a recorder of this process failed to write or close its bag (exit status 1)
+_WRITE_FAILED: list[str] = []
 #: history kept per subscription while the executor is busy (the writer has its own queue)
 SUBSCRIPTION_DEPTH = 1000
 
@@ -235,6 +237,8 @@ class RecorderNode(FenceSorterNode):
             return
         self._stop.set()
         self._thread.join()  # the writer thread drains the queue and closes the bag
+        if self.write_error is not None:
+            _WRITE_FAILED.append(self.write_error)
         received = sum(t.received for t in self.topics)
         written = sum(t.written for t in self.topics)
         # printed, not logged: after SIGINT/SIGTERM the context (and /rosout) is already gone
@@ -283,12 +287,14 @@ class RecorderNode(FenceSorterNode):
 
 
 def main(args: Sequence[str] | None = None) -> int:
-    """Run the recorder until Ctrl-C or SIGTERM; the bag is closed on the way out. Exit 2 with
-    one line when the bag cannot be created or a topic is unknown."""
+    """Run the recorder until Ctrl-C or SIGTERM; the bag is closed on the way out. Exit 1 if
+    writing or closing the bag failed, 2 with one line when the bag cannot be created or a topic
+    is unknown."""
     from fence_sorter.recording.writer import BagWriteError
 
     try:
-        return run_node(RecorderNode, args)
+        code = run_node(RecorderNode, args)
+        return 1 if code == 0 and _WRITE_FAILED else code
     except (ValueError, BagWriteError) as exc:
         print(f"recorder: {exc}", file=sys.stderr)
         return 2
