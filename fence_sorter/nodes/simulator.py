@@ -18,6 +18,7 @@ import gc
 import math
 import os
 import queue
+import signal
 import sys
 import threading
 import time
@@ -277,6 +278,8 @@ class SimulatorNode(FenceSorterNode):
         try:
             self._run_loop()
         except Exception as exc:  # report, then end the process through the executor
+            if self._stop.is_set() or not self.context.ok():
+                return  # Ctrl-C/SIGTERM shut the context down under a publish: a clean stop
             self.loop_error = f"{type(exc).__name__}: {exc}"
             if not self._stop.is_set():
                 self.get_logger().fatal(f"pacing loop failed: {self.loop_error}")
@@ -523,7 +526,14 @@ def _warm_up(config: LineConfig, scenario) -> None:
 def main(args: Sequence[str] | None = None) -> int:
     """Run the simulator until Ctrl-C or SIGTERM; exit 2 with one line on a bad scene or
     parameter, 1 if the pacing loop failed."""
-    rclpy.init(args=list(args) if args is not None else None)
+    # A SIGINT/SIGTERM that arrives while rclpy.init installs its handlers, before the context
+    # exists, is lost (the process then runs on): hold them until init is done.
+    stop_signals = {signal.SIGINT, signal.SIGTERM}
+    signal.pthread_sigmask(signal.SIG_BLOCK, stop_signals)
+    try:
+        rclpy.init(args=list(args) if args is not None else None)
+    finally:
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, stop_signals)
     node: SimulatorNode | None = None
     code = 0
     try:
@@ -540,6 +550,10 @@ def main(args: Sequence[str] | None = None) -> int:
     except ValueError as exc:  # SceneError, a line setting out of range
         print(f"simulator: {exc}", file=sys.stderr)
         code = 2
+    except Exception as exc:  # RCLError: a signal shut the context down during start-up
+        if rclpy.ok():
+            raise
+        del exc
     finally:
         if node is not None:
             node.stop()
