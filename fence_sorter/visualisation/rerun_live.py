@@ -35,6 +35,7 @@ _HEAD = struct.Struct("<IB")  # payload length, kind
 _FRAME = struct.Struct("<dddII")  # t, alpha, tip deflection, nodes, parcels
 PARCEL_COLUMNS = 17
 MAX_BUFFER = 1 << 20  # bytes held back when the pipe is full before frames are dropped
+NICE = 19  # niceness of the child
 
 
 def pack_snapshot(snap) -> bytes:
@@ -107,7 +108,15 @@ class RerunProcess:
         if spawn:
             cmd.append("--spawn")
         env = dict(os.environ, RERUN_ANALYTICS_ENABLED="false")
-        self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, env=env)
+        self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
+        # wait until the child has imported Rerun and opened its sinks (a second or two of
+        # CPU that must not overlap the real-time loop)
+        ready = self.proc.stdout.readline()
+        self.proc.stdout.close()
+        if ready.strip() != b"ready":
+            self.proc.kill()
+            self.proc.wait()
+            raise RuntimeError(f"rerun_live child did not start (exit {self.proc.returncode})")
         self._fd = self.proc.stdin.fileno()
         flags = fcntl.fcntl(self._fd, fcntl.F_GETFL)
         fcntl.fcntl(self._fd, fcntl.F_SETFL, flags | os.O_NONBLOCK)
@@ -184,6 +193,10 @@ def child_main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides when we end
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    try:
+        os.nice(NICE)  # the real-time loop's process goes first when the CPUs are busy
+    except OSError:
+        pass
     from fence_sorter.visualisation.rerun_log import TIMELINE, RerunLogger, open_recording
 
     scene = SceneGeometry(
@@ -195,6 +208,8 @@ def child_main(argv: list[str] | None = None) -> int:
     rec = open_recording(args.out, spawn=args.spawn, url=args.url)
     logger = RerunLogger(rec, scene)
     rr = logger.rr
+    sys.stdout.write("ready\n")
+    sys.stdout.flush()
     stream = sys.stdin.buffer
     while True:
         head = _read_exact(stream, _HEAD.size)
