@@ -19,6 +19,7 @@ import argparse
 import errno
 import fcntl
 import os
+import select
 import signal
 import struct
 import subprocess
@@ -91,7 +92,10 @@ class RerunProcess:
         path: Path | str | None = None,
         url: str | None = None,
         spawn: bool = False,
+        lossless: bool = False,
     ) -> None:
+        """``lossless``: wait for the child instead of dropping frames (for unpaced runs,
+        where no deadline is at stake)."""
         if path is None and not url and not spawn:
             raise ValueError("RerunProcess needs an .rrd path, a viewer url or spawn")
         cmd = [sys.executable, "-m", "fence_sorter.visualisation.rerun_live",
@@ -121,6 +125,7 @@ class RerunProcess:
         flags = fcntl.fcntl(self._fd, fcntl.F_GETFL)
         fcntl.fcntl(self._fd, fcntl.F_SETFL, flags | os.O_NONBLOCK)
         self._buffer = bytearray()
+        self.lossless = lossless
         self.sent = 0
         self.dropped = 0
         self.broken = False
@@ -136,6 +141,10 @@ class RerunProcess:
         if self.broken:
             self.dropped += 1
             return
+        if self.lossless:
+            while len(self._buffer) > MAX_BUFFER // 4 and not self.broken:
+                select.select([], [self._fd], [], 1.0)
+                self._flush()
         if len(self._buffer) + len(message) > MAX_BUFFER:
             self.dropped += 1
         else:

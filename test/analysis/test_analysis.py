@@ -204,14 +204,16 @@ def test_rerun_child_process_logs_what_the_loop_offers(tmp_path):
     np.testing.assert_equal(astuple(parcels[0]), astuple(ref_parcels[0]))  # NaN == NaN here
     assert np.array_equal(fence.node_x, ref_fence.node_x)
     out = tmp_path / "child.rrd"
-    proc = RerunProcess(SceneGeometry(0.7, (-3.0, 3.0), (0.75, 1.0, 1.5, 0.6), -3.0), out)
+    scene = SceneGeometry(0.7, (-3.0, 3.0), (0.75, 1.0, 1.5, 0.6), -3.0)
+    proc = RerunProcess(scene, out, lossless=True)
     for k in range(2, 42):
         line.advance(0.05 * k)
-        proc.offer(line.snapshot())
+        for _ in range(1000 if k == 2 else 1):  # ~300 kB at once, beyond the pipe: waits
+            proc.offer(line.snapshot())
     proc.event(line.t, "parcel 5: test", ok=False)
     assert proc.close() == 0
-    assert proc.sent == 41 and proc.dropped == 0
+    assert proc.sent == 1040 and proc.dropped == 0
     rows, static = rrd_rows(out)
-    assert rows["/world/parcels"] == rows["/plots/speed/5"] == 40
+    assert rows["/world/parcels"] == rows["/plots/speed/5"] == 1039
     assert rows["/events/outcomes"] == 1
     assert "/world/chute" in static
