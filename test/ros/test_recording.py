@@ -289,3 +289,43 @@ def test_bad_storage_is_refused_naming_it(env, tmp_path):
     assert out.returncode != 0
     assert "storage must be mcap or sqlite3" in out.stderr
     assert not (tmp_path / "bag").exists()
+
+
+def test_a_sim_time_node_runs_against_the_replayed_clock(recorded_run, ros_node, env, tmp_path):
+    """The scanner (use_sim_time) re-run on the bag's /clock publishes the same seeded stream:
+    the spacing of its scan times equals the recorded one."""
+    from rclpy.executors import SingleThreadedExecutor
+
+    from fence_sorter.nodes.recorder import rclpy_qos
+    from fence_sorter_msgs.msg import Parcel
+
+    bag, _ = recorded_run
+    recorded = sorted(
+        m.msg.scan_time.sec + m.msg.scan_time.nanosec * 1e-9
+        for m in read_bag(bag, ["/parcels"]).messages
+    )
+    got: list = []
+    ros_node.create_subscription(Parcel, "/parcels", got.append, rclpy_qos(True))
+    executor = SingleThreadedExecutor(context=ros_node.context)
+    executor.add_node(ros_node)
+    scanner = [sys.executable, "-m", "fence_sorter.nodes.scanner", "--ros-args",
+               "-p", "use_sim_time:=true", "-p", "parcels:=3", "-p", "wait_for_subscribers:=1",
+               "-p", "start_delay:=0.5"]  # fmt: skip
+    replay = [sys.executable, "-m", "fence_sorter.cli.main", "replay", str(bag), "--rate", "2",
+              "--topics", "/clock", "--wait", "30"]  # fmt: skip
+    with managed_process(scanner, env) as scan_proc:
+        with managed_process(replay, env) as replay_proc:
+            deadline = time.monotonic() + 120
+            while replay_proc.poll() is None and time.monotonic() < deadline:
+                executor.spin_once(timeout_sec=0.05)
+                assert scan_proc.poll() is None, scan_proc.communicate()
+            assert replay_proc.returncode == 0, replay_proc.communicate()
+        for _ in range(20):
+            executor.spin_once(timeout_sec=0.05)
+    executor.shutdown()
+    scans = sorted(p.scan_time.sec + p.scan_time.nanosec * 1e-9 for p in got)
+    assert len(scans) == len(recorded) == 3
+    # the scanner checks the scan line every 5 ms of sim time; /clock arrives every 20 ms
+    spacing = [b - a for a, b in zip(scans, scans[1:], strict=False)]
+    expected = [b - a for a, b in zip(recorded, recorded[1:], strict=False)]
+    assert spacing == pytest.approx(expected, abs=0.05)
