@@ -97,8 +97,8 @@ def fill_command(cmd, plan: Plan, alpha_k: float) -> None:
     cmd.predicted_peak_force = ev.peak_force
 
 
-#: wall time a plan may take, reserved (times the real-time factor) before a stroke start [s]
-PLANNING_ALLOWANCE = 0.06
+#: wall time reserved (times the real-time factor) for a command to reach the simulator [s]
+DELIVERY_ALLOWANCE = 0.01
 
 
 class RateEstimate:
@@ -127,7 +127,7 @@ class ControllerStats:
         self.latency = deque(maxlen=window)  # parcel callback to command published [s] (wall)
         self.lead = deque(maxlen=window)  # command sim time before the front reaches R_s [s]
         self.received = self.commands = self.infeasible = self.late = 0
-        self.rejected = self.not_diverted = self.evaluations = 0
+        self.rejected = self.not_diverted = self.evaluations = self.replans = 0
 
     def percentile(self, q: float) -> float:
         return float(np.percentile(self.latency, q)) if self.latency else math.nan
@@ -141,6 +141,7 @@ class ControllerStats:
             "rejected_parcels": str(self.rejected),
             "not_diverted": str(self.not_diverted),
             "evaluations": str(self.evaluations),
+            "replans": str(self.replans),
             "latency_p50_ms": f"{1e3 * self.percentile(50):.3f}",
             "latency_p99_ms": f"{1e3 * self.percentile(99):.3f}",
             "latency_max_ms": f"{1e3 * max(self.latency, default=math.nan):.3f}",
@@ -341,9 +342,19 @@ def handle_parcel(node: ControllerNode, msg):
     t_now = now.nanoseconds * 1e-9
     rtf = node.rtf.update(time.monotonic(), t_now)
     evals0 = node.planner.evaluations
-    # the stroke must start after the command is out: planning takes up to PLANNING_ALLOWANCE
-    # of wall time, which is rtf times as much sim time
-    plan = node.planner.plan(req, t_now + rtf * PLANNING_ALLOWANCE)
+    # the stroke must start after the command is out: DELIVERY_ALLOWANCE of wall time (times
+    # the real-time factor in sim time) for the message; the planning time itself is checked
+    # after planning: a plan that took too long for its own stroke is made again from the
+    # new time (its evaluations are cached, so that is quick)
+    plan = node.planner.plan(req, t_now + rtf * DELIVERY_ALLOWANCE, commit=False)
+    if plan.feasible:
+        t_after = node.get_clock().now().nanoseconds * 1e-9
+        earliest = t_after + rtf * DELIVERY_ALLOWANCE + node.config.start_margin
+        if plan.start_time < earliest:
+            stats.replans += 1
+            plan = node.planner.plan(req, t_after + rtf * DELIVERY_ALLOWANCE, commit=False)
+    if plan.feasible:
+        node.planner.busy_until = plan.end_time
     stats.evaluations += node.planner.evaluations - evals0
     if not plan.feasible and plan.reason.startswith("too late"):
         stats.late += 1

@@ -91,6 +91,7 @@ class Monitor:
                 "length_a": msg.length_a,
                 "mass": msg.mass,
                 "wall": time.monotonic(),
+                "received_sim": r.sim_time,
             },
         )
 
