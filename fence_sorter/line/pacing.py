@@ -1,8 +1,10 @@
 """Soft-real-time pacing of the line: a fixed grid of wall-clock deadlines on a steady clock.
 
-Cycle k has the deadline ``start + k * period``; :meth:`Pacer.wait` sleeps until ``spin_margin``
+Cycle k has the deadline ``start + k * period``; :meth:`Pacer.wait` sleeps until a margin
 before it, busy-waits to it and returns the sim time the line should reach,
-``sim0 + k * period * rtf``, so sim time stays locked to wall time. A cycle that wakes late
+``sim0 + k * period * rtf``, so sim time stays locked to wall time. The margin follows the
+sleeps' recent overshoot, capped by ``spin_margin``: a quiet machine burns little CPU spinning,
+a loaded one spins longer. A cycle that wakes late
 skips the deadlines already past (one cycle advances them all) up to ``max_catch_up`` of sim
 time; the rest is dropped by moving the grid (a *slip*: sim time falls behind the wall clock
 instead of racing to catch up). With ``rtf`` 0 nothing waits and each cycle advances
@@ -18,6 +20,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+
+#: smallest busy-wait before a deadline [s] (a sleep's wake-up costs ~50 us on Linux)
+MIN_MARGIN = 5e-5
+#: per-cycle decay of the busy-wait envelope (1/e in ~1000 cycles)
+MARGIN_DECAY = 0.999
 
 
 @dataclass
@@ -51,6 +58,9 @@ class Pacer:
         self.period = period
         self.max_catch_up = max_catch_up
         self.spin_margin = spin_margin
+        # the busy-wait actually used: an envelope of recent sleep overshoots (jumps up at
+        # once, decays by MARGIN_DECAY per cycle), between MIN_MARGIN and spin_margin
+        self.margin = spin_margin
         self.unpaced_step = unpaced_step if unpaced_step is not None else period
         self.clock = clock
         self.sleep = sleep
@@ -78,8 +88,13 @@ class Pacer:
         period = self.period
         deadline = self.start + self.k * period
         remaining = deadline - self.clock()
-        if remaining > self.spin_margin:
-            self.sleep(remaining - self.spin_margin)
+        if remaining > self.margin:
+            wake = deadline - self.margin
+            self.sleep(remaining - self.margin)
+            overshoot = self.clock() - wake
+            self.margin = min(
+                max(MIN_MARGIN, 1.25 * overshoot, self.margin * MARGIN_DECAY), self.spin_margin
+            )
         while self.clock() < deadline:
             pass
         late = self.clock() - deadline

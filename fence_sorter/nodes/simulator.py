@@ -135,7 +135,8 @@ class SimulatorNode(FenceSorterNode):
         ParamSpec(
             "spin_margin",
             0.0004,
-            "Busy-wait this long before each deadline instead of sleeping [s]",
+            "Largest busy-wait before each deadline [s]; below it the wait follows the recent "
+            "oversleep of time.sleep (at least 50 us)",
             read_only=True,
             min_value=0.0,
             max_value=0.005,

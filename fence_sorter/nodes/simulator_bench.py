@@ -18,8 +18,6 @@ import os
 import threading
 import time
 
-from fence_sorter.testing import run_domain_id
-
 SPACING = 1.5  # s between parcels at 1 m/s: 2400 parcels/h
 KEYS = (
     "cycles",
@@ -47,7 +45,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sim", type=float, default=60.0, help="sim time to run [s]")
     ap.add_argument("-p", action="append", default=[], help="extra node parameter k:=v")
     a = ap.parse_args(argv)
-    os.environ.setdefault("ROS_DOMAIN_ID", str(run_domain_id()))
+    # a domain of its own (the test runs use 100-199), localhost only
+    os.environ.setdefault("ROS_DOMAIN_ID", str(229))
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
     import rclpy

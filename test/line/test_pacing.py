@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from fence_sorter.line.pacing import LatenessHistogram, Pacer
+from fence_sorter.line.pacing import MIN_MARGIN, LatenessHistogram, Pacer
 
 
 class FakeClock:
@@ -14,6 +14,7 @@ class FakeClock:
 
     def __init__(self) -> None:
         self.now = 100.0
+        self.oversleep = 0.0  # added to every sleep (a loaded machine wakes late)
         self.sleeps: list[float] = []
 
     def __call__(self) -> float:
@@ -22,7 +23,7 @@ class FakeClock:
 
     def sleep(self, dt: float) -> None:
         self.sleeps.append(dt)
-        self.now += dt
+        self.now += dt + self.oversleep
 
 
 def pacer(clock: FakeClock, **kw) -> Pacer:
@@ -90,3 +91,19 @@ def test_histogram_percentiles():
     assert h.percentile(50) == pytest.approx(0.5e-3, abs=2e-5)  # one 10 us bin
     assert h.percentile(99) == pytest.approx(0.99e-3, abs=2e-5)
     assert h.percentile(100) == 0.5 and h.max == 0.5
+
+
+def test_busy_wait_follows_the_sleep_overshoot():
+    clock = FakeClock()
+    p = pacer(clock, spin_margin=4e-4)
+    for _ in range(5000):  # exact sleeps: the margin decays to its floor
+        p.wait()
+    assert p.margin == pytest.approx(MIN_MARGIN)
+    clock.oversleep = 1.2e-4  # sleeps now wake 0.12 ms late
+    tick = p.wait()
+    assert p.margin == pytest.approx(1.25 * 1.2e-4, rel=0.05)
+    assert tick.lateness < 1.2e-4  # this one still woke late, after the margin it had
+    assert p.wait().lateness == pytest.approx(0.0, abs=1e-5)  # the next is on time
+    clock.oversleep = 5e-3  # a long preemption: the margin stops at its cap
+    p.wait()
+    assert p.margin == 4e-4
