@@ -241,6 +241,16 @@ class SimulatorNode(FenceSorterNode):
         self._stop = threading.Event()
         self._saved_switch: float | None = None
         self._thread = threading.Thread(target=self._loop, name="simulator-loop", daemon=True)
+        log = self.get_logger()
+        for warning in loaded.warnings:
+            log.warning(f"scene {loaded.name}: {warning}")
+        cfg = self.line_config
+        fence = "flexible" if cfg.fence is not None else "stiff"
+        log.info(
+            f"line: scene {loaded.name} ({fence} fence R_z = {cfg.length:g} m, belt "
+            f"{cfg.conveyor.belt_speed:g} m/s, s = {cfg.conveyor.width:g} m); rtf {self.rtf:g}, "
+            f"{p['physics_rate']:g} Hz loop, {p['publish_rate']:g} Hz publication"
+        )
 
     # -- callbacks: hand off only --------------------------------------------------------------
     def _on_parcel(self, msg: Parcel) -> None:
