@@ -86,6 +86,18 @@ def _error(message: str) -> int:
     return EXIT_BAD_ARGS
 
 
+def _suite_section(out: Path) -> str:
+    """The node-suite section ``fence-sorter bench-suite`` keeps in the same file (between its
+    markers): carried over, since this command regenerates everything else."""
+    from fence_sorter.verification.bench_suite import BEGIN, END
+
+    old = out.read_text(encoding="utf-8") if out.is_file() else ""
+    if BEGIN not in old or END not in old or old.index(BEGIN) > old.index(END):
+        return ""
+    start, stop = old.index(BEGIN), old.index(END) + len(END)
+    return "\n" + old[start:stop] + "\n"
+
+
 def run(args: argparse.Namespace) -> int:
     from fence_sorter.verification import bench as B
 
@@ -159,15 +171,3 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 if __name__ == "__main__":
     raise SystemExit(main())
-
-
-def _suite_section(out: Path) -> str:
-    """The node-suite section ``fence-sorter bench-suite`` keeps in the same file (between its
-    markers): carried over, since this command regenerates everything else."""
-    from fence_sorter.verification.bench_suite import BEGIN, END
-
-    old = out.read_text(encoding="utf-8") if out.is_file() else ""
-    if BEGIN not in old or END not in old or old.index(BEGIN) > old.index(END):
-        return ""
-    start, stop = old.index(BEGIN), old.index(END) + len(END)
-    return "\n" + old[start:stop] + "\n"
