@@ -11,6 +11,7 @@ audit (the load's energy never rises above the work its power sources did on it)
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass, field
@@ -165,13 +166,10 @@ class SortingModel:
         self.belt = sc.conveyor.belt_speed
         self.flexible = sc.fence is not None
         if self.flexible:
-            fem = build_fence(sc.fence)
-            basis = modal_basis(fem, count=sc.fence_modes)
+            fem, self.omega, self.zeta, self.phi, self.rigid_modal = _fence_modes(
+                sc.fence, sc.fence_modes
+            )
             self.fem = fem
-            self.omega = np.ascontiguousarray(basis.omega, dtype=float)
-            self.zeta = np.ascontiguousarray(basis.zeta, dtype=float)
-            self.phi = np.ascontiguousarray(basis.phi, dtype=float)
-            self.rigid_modal = np.ascontiguousarray(self.phi.T @ fem.rigid_inertia)
             self.n_el = int(sc.fence.elements)
             dl = fem.dl
         else:
@@ -230,6 +228,23 @@ class SortingModel:
 
     def kinetic_energy(self, y: np.ndarray) -> float:
         return 0.5 * self.mass * (y[3] ** 2 + y[4] ** 2) + 0.5 * self.inertia * y[5] ** 2
+
+
+@functools.lru_cache(maxsize=16)
+def _fence_modes(fence: FenceParams, count: int | None):
+    """FEM and modal basis of a fence (shared by every model of the same fence: the line and
+    the controller build one model per stroke, and the eigen-solve costs 0.5-3 ms). The arrays
+    are shared, so nothing may write to them."""
+    fem = build_fence(fence)
+    basis = modal_basis(fem, count=count)
+    phi = np.ascontiguousarray(basis.phi, dtype=float)
+    return (
+        fem,
+        np.ascontiguousarray(basis.omega, dtype=float),
+        np.ascontiguousarray(basis.zeta, dtype=float),
+        phi,
+        np.ascontiguousarray(phi.T @ fem.rigid_inertia),
+    )
 
 
 def simulate(sc: Scenario, model: SortingModel | None = None) -> SimulationResult:

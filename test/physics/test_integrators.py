@@ -212,3 +212,23 @@ def test_schemes_stay_second_order_under_coupled_belt_slip(method):
     ends = [end(dt) for dt in (2e-3, 1e-3, 5e-4)]
     order = math.log2(np.abs(ends[0] - ends[1]).max() / np.abs(ends[1] - ends[2]).max())
     assert 1.8 < order < 2.3, order
+
+
+def test_wall_time_limit_counts_stepping_not_the_pauses_between_chunks():
+    """A soft-real-time caller pauses between chunks; solver.max_wall_time must only count the
+    time spent stepping (else a real-time stroke longer than the limit would be cut off)."""
+    import time as _time
+
+    from fence_sorter.physics.integrators import Integrator
+    from fence_sorter.physics.simulate import Observer
+
+    sc = replace(SMOOTH, solver=replace(SMOOTH.solver, max_wall_time=0.3))
+    model = SortingModel(sc)
+    integ = Integrator(model)
+    stepper = integ.stepping(Observer(model))
+    t = 0.0
+    while integ.advance(stepper, t):
+        _time.sleep(0.1)  # 6 chunks: 0.6 s of pauses in all, twice the limit
+        t += 0.1
+    assert integ.outcome[1] is None, integ.outcome[1]
+    assert integ.cur.t == pytest.approx(0.6)
