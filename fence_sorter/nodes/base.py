@@ -171,6 +171,9 @@ def run_node(node_class: type[FenceSorterNode], args: Sequence[str] | None = Non
     except ParameterException as exc:
         print(f"{node_class.NODE_NAME}: invalid parameter: {exc}", file=sys.stderr)
         return 1
+    except Exception:  # RCLError: a signal shut the context down during construction or spin
+        if rclpy.ok():
+            raise
     finally:
         if node is not None:
             node.destroy_node()

@@ -289,8 +289,11 @@ class SimulatorNode(FenceSorterNode):
         try:
             self._run_loop()
         except Exception as exc:  # report, then end the process through the executor
-            if self._stop.is_set() or not self.context.ok():
-                return  # Ctrl-C/SIGTERM shut the context down under a publish: a clean stop
+            # Ctrl-C/SIGTERM shutting the context down under a publish is a clean stop; the
+            # main thread may still be on its way to set _stop, so give it a moment
+            shutting_down = "context is invalid" in str(exc) or not self.context.ok()
+            if shutting_down or self._stop.wait(0.5) or not self.context.ok():
+                return
             self.loop_error = f"{type(exc).__name__}: {exc}"
             if not self._stop.is_set():
                 self.get_logger().fatal(f"pacing loop failed: {self.loop_error}")
