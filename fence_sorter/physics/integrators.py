@@ -297,9 +297,9 @@ class Integrator:
     def _locate(self, h: float, on_belt: bool, slot: int, kind: int, g0: float, g1: float):
         """Shorten the step to end just past the sign change of ``slot``'s event function.
 
-        Regula falsi until an onset step ends within ``EVENT_TOL`` m of D = 0 (so w_n is read
-        at the onset) or a release / slide-off bracket is below 1e-7 of the step. The located
-        trial is left in ``self.trial``; returns the step taken.
+        Regula falsi (Illinois) until an onset step ends within ``EVENT_TOL`` m of D = 0 (so
+        w_n is read at the onset) or a release / slide-off bracket is below 1e-7 of the step.
+        The located trial is left in ``self.trial``; returns the step taken.
         """
         a, sch = self.cur, self.scheme
         onset = kind == K.EVENT_ONSET
@@ -313,10 +313,14 @@ class Integrator:
         # the next step then crosses it with a bracket of ~1e-7 of a step
         keep_before = kind == K.EVENT_SLIDE_OFF
         before = None
+        # Illinois variant: the end kept twice in a row has its value halved in the secant, so
+        # the bracket shrinks from both sides (plain regula falsi stalls on a curved event
+        # function: 60 trial steps for one slide-off or onset)
+        f_lo, f_hi, last = g_lo, g_hi, 0
         for _ in range(60):
             if hi - lo <= 1e-7 * h or (onset and g_hi <= EVENT_TOL):
                 break
-            h_loc = lo + (hi - lo) * (g_lo / (g_lo - g_hi))
+            h_loc = lo + (hi - lo) * (f_lo / (f_lo - f_hi))
             h_loc = min(max(h_loc, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
             st = sch.step(h_loc, a, self.loc, jump, on_belt, False)
             if st == K.STEP_REJECTED:
@@ -328,11 +332,17 @@ class Integrator:
             if math.isnan(g):
                 break
             if (g > 0.0) != sign0:
-                hi, g_hi = h_loc, g
+                hi, g_hi, f_hi = h_loc, g, g
+                if last == 1:
+                    f_lo *= 0.5
+                last = 1
                 best = h_loc
                 self.trial.copy_from(self.loc)
             else:
-                lo, g_lo = h_loc, g
+                lo, g_lo, f_lo = h_loc, g, g
+                if last == -1:
+                    f_hi *= 0.5
+                last = -1
                 if keep_before:
                     before = h_loc
                     self.before.copy_from(self.loc)

@@ -517,11 +517,11 @@ def evaluate(
         if -px * sa + py * ca > reach:
             continue
         r = math.hypot(px, py)
-        if r > length:
-            s_arc = r
-        else:
-            ux, uy, tx, ty, _, _ = surface(P, r, alpha, rate, w, wdot, nodes)
-            s_arc = r + (px - ux) * tx + (py - uy) * ty
+        # arc position: the corner projected on the fence near radius r (beyond the tip: on
+        # the tip's tangent, so s is continuous where a corner slides off the tip, which the
+        # slide-off event R_z - s needs)
+        ux, uy, tx, ty, _, _ = surface(P, min(r, length), alpha, rate, w, wdot, nodes)
+        s_arc = min(r, length) + (px - ux) * tx + (py - uy) * ty
         if s_arc > length:
             out[k, C_S] = s_arc  # beyond the tip: the slide-off event function is R_z - s
             continue
