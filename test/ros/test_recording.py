@@ -206,16 +206,16 @@ def test_run_bag_has_every_topic_and_consistent_counts(recorded_run):
     assert counts["/parcels"] == 3 == summary["parcel_messages"]
     assert counts["/sort_outcomes"] == 3 == summary["outcome_messages"]
     assert counts["/fence_commands"] == summary["command_messages"]
-    # one snapshot publishes /clock, /fence_state and /joint_states together
-    assert counts["/clock"] == counts["/fence_state"] == counts["/joint_states"] > 100
-    recorder = {
-        kv.key: kv.value
-        for m in contents.by_topic("/diagnostics")
-        for st in m.msg.status
-        if st.name == "fence_sorter/recorder"
-        for kv in st.values
-    }
-    assert recorder["received"] == recorder["written"]  # no drop between callback and disk
+    # one snapshot publishes /clock, /fence_state and /joint_states together (reliable, reliable,
+    # best effort)
+    assert counts["/clock"] == counts["/joint_states"] > 100
+    assert counts["/clock"] >= counts["/fence_state"] >= 0.99 * counts["/clock"]
+    # the recorder's own account at close: everything received was written
+    log = (bag.parent / "logs" / "recorder.log").read_text()
+    closing = [line for line in log.splitlines() if "closed:" in line]
+    assert closing, log[-2000:]
+    written, received = closing[-1].split("closed: ")[1].split(" received")[0].split(" of ")
+    assert int(written) == int(received) == sum(counts.values())
 
 
 def test_analysis_of_the_run_matches_the_live_outcomes(recorded_run, tmp_path):
