@@ -28,16 +28,11 @@ def run_domain_id() -> int:
 def ros_env(
     domain_id: int, log_dir: Path, extra: Mapping[str, str] | None = None
 ) -> dict[str, str]:
-    """Return os.environ plus the isolation settings for a child process."""
-    env = dict(os.environ)
-    env["ROS_DOMAIN_ID"] = str(domain_id)
-    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-    env["ROS_LOG_DIR"] = str(log_dir)
-    env["PYTHONUNBUFFERED"] = "1"
-    env.pop("RMW_IMPLEMENTATION", None)
-    if extra:
-        env.update(extra)
-    return env
+    """Return os.environ plus the isolation settings for a child process (the same as
+    ``fence-sorter run`` gives its nodes: :func:`fence_sorter.runner.processes.node_env`)."""
+    from fence_sorter.runner.processes import node_env
+
+    return node_env(domain_id, log_dir, extra)
 
 
 def venv_executable(name: str) -> str:
