@@ -3,7 +3,8 @@ as separate processes on an isolated ROS domain; stops when every parcel has its
 Ctrl-C, then prints a summary.
 
 Exit codes: 0 a clean run, 1 a node failed or the run timed out, 2 bad input (one line naming
-the option and its range), 130 interrupted. ``--rrd`` is not available yet (issue 6): exit 2.
+the option and its range), 130 interrupted. ``--rrd FILE``: the simulator saves a Rerun recording
+of the run (logged live in a child process, fence_sorter.visualisation.rerun_live).
 """
 
 from __future__ import annotations
@@ -29,7 +30,11 @@ def register(subparsers) -> None:
         "--rtf", type=float, default=1.0, help="real-time factor (0: as fast as it can)"
     )
     parser.add_argument("--bag", metavar="DIR", help="record the run (rosbag2 MCAP) into DIR")
-    parser.add_argument("--rrd", metavar="FILE", help="Rerun recording (not yet available)")
+    parser.add_argument(
+        "--rrd",
+        metavar="FILE",
+        help="save a Rerun recording of the run (the simulator logs it live; view: rerun FILE)",
+    )
     parser.add_argument(
         "--stream", default="default", help="stream config (YAML) or CSV manifest, or a name"
     )
@@ -64,18 +69,13 @@ def run(args: argparse.Namespace) -> int:
     from fence_sorter.runner.job import BadInput, RunOptions, run_job
     from fence_sorter.runner.summary import format_summary
 
-    if args.rrd:
-        print(
-            "fence-sorter: error: --rrd: Rerun recording is not yet available (issue 6)",
-            file=sys.stderr,
-        )
-        return 2
     opts = RunOptions(
         scene=args.scene,
         parcels=args.parcels,
         duration=args.duration,
         rtf=args.rtf,
         bag=args.bag,
+        rrd=args.rrd,
         stream=args.stream,
         seed=args.seed,
         timeout=args.timeout,

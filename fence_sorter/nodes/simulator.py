@@ -181,6 +181,28 @@ class SimulatorNode(FenceSorterNode):
             "Run one short stroke before starting so the compiled kernel is loaded",
             read_only=True,
         ),
+        ParamSpec(
+            "rrd_path",
+            "",
+            "Save a Rerun recording (.rrd) of the run here (logged in a child process from the "
+            "snapshots published at publish_rate); empty: none",
+            read_only=True,
+        ),
+        ParamSpec(
+            "rrd_url",
+            "",
+            "Also stream to a Rerun viewer listening at this gRPC url (e.g. "
+            "rerun+http://127.0.0.1:9876/proxy); empty: none",
+            read_only=True,
+        ),
+        ParamSpec(
+            "rrd_scan_line_x",
+            -3.0,
+            "x0 of the scan line drawn in the Rerun view [m] (drawing only)",
+            read_only=True,
+            min_value=-100.0,
+            max_value=100.0,
+        ),
     )
 
     def __init__(self, **kwargs: object) -> None:
@@ -221,6 +243,7 @@ class SimulatorNode(FenceSorterNode):
         self._markers = convert.MarkerBuilder(
             self.line_config.conveyor.width, belt_x, self.frame_id
         )
+        self.rerun = _start_rerun(p, self.line_config.conveyor.width, belt_x, self.rtf)
         self._clock_msg, self._fence_msg = Clock(), FenceState()
         self._joint_msg, self._load_msg = JointState(), LoadState()
 
@@ -278,6 +301,9 @@ class SimulatorNode(FenceSorterNode):
         self._stop.set()
         if self._thread.is_alive():
             self._thread.join(timeout=5.0)
+        if self.rerun is not None:  # the child logs what it holds, then the file is closed
+            rerun, self.rerun = self.rerun, None
+            rerun.close()
         if self._saved_switch is not None:
             sys.setswitchinterval(self._saved_switch)
             gc.unfreeze()
@@ -418,6 +444,9 @@ class SimulatorNode(FenceSorterNode):
                 self.pub_outcomes.publish(convert.outcome_to_msg(e, self.frame_id))
                 self.outcome_counts[e.code.name] += 1
                 text = f"parcel {e.parcel_id}: {e.code.name} at t = {e.t:.3f} s: {e.reason}"
+                if self.rerun is not None:
+                    ok = e.code in (OutcomeCode.SORTED, OutcomeCode.NOT_DIVERTED)
+                    self.rerun.event(e.t, text, ok)
                 if e.code in (OutcomeCode.SORTED, OutcomeCode.NOT_DIVERTED):
                     log.info(text)
                 else:
@@ -444,6 +473,8 @@ class SimulatorNode(FenceSorterNode):
         load = self._load_msg
         for p in snap.parcels:
             self.pub_loads.publish(convert.fill_load_state(load, p, t, fid))
+        if self.rerun is not None:
+            self.rerun.offer(snap)  # packed and piped, never blocks (paced runs)
 
     # -- diagnostics -----------------------------------------------------------------------------
     def heartbeat_status(self) -> DiagnosticStatus:
@@ -484,6 +515,9 @@ class SimulatorNode(FenceSorterNode):
             "commands_rejected": str(sum(rejected.values())),
             "overlap_warnings": str(counts.get("overlap_warnings", 0)),
         }
+        if self.rerun is not None:
+            values["rerun_frames_sent"] = str(self.rerun.sent)
+            values["rerun_frames_dropped"] = str(self.rerun.dropped)
         values.update({k: str(v) for k, v in counts.items() if k != "overlap_warnings"})
         values.update({f"bad_parcels.{k}": str(v) for k, v in sorted(bad.items())})
         values.update({f"commands_rejected.{k}": str(v) for k, v in sorted(rejected.items())})
@@ -509,6 +543,21 @@ class SimulatorNode(FenceSorterNode):
         if "real_time_factor" in values and hasattr(self, "_thread"):
             self.rtf = float(values["real_time_factor"])  # the loop restarts its grid
         return None
+
+
+def _start_rerun(p: dict, belt_width: float, belt_x: tuple[float, float], rtf: float):
+    """The Rerun child process when rrd_path or rrd_url is set (fence_sorter.visualisation):
+    the loop hands it each published snapshot without blocking; unpaced runs wait for it."""
+    path, url = str(p["rrd_path"]), str(p["rrd_url"])
+    if not path and not url:
+        return None
+    from fence_sorter.visualisation.rerun_live import RerunProcess
+    from fence_sorter.visualisation.rerun_log import SceneGeometry
+
+    # chute as convert.MarkerBuilder draws it
+    chute = (0.75, belt_width + 0.3, 1.5, 0.6)
+    scene = SceneGeometry(belt_width, belt_x, chute, float(p["rrd_scan_line_x"]))
+    return RerunProcess(scene, path or None, url or None, lossless=rtf == 0.0)
 
 
 def _warm_up(config: LineConfig, scenario) -> None:

@@ -50,6 +50,7 @@ class RunOptions:
     duration: float | None = None
     rtf: float = 1.0
     bag: str | None = None
+    rrd: str | None = None
     stream: str = DEFAULT_STREAM
     seed: int | None = None
     timeout: float | None = None
@@ -96,6 +97,10 @@ def prepare(opts: RunOptions) -> Plan:
         raise BadInput(f"--rtf must be in [0, 100] (0: unpaced), got {opts.rtf}")
     if opts.seed is not None and opts.seed < 0:
         raise BadInput(f"--seed must be in [0, inf), got {opts.seed}")
+    if opts.rrd is not None:
+        rrd = Path(opts.rrd)
+        if rrd.suffix != ".rrd" or not rrd.resolve().parent.is_dir():
+            raise BadInput(f"--rrd must be a .rrd file in an existing directory, got {opts.rrd}")
     try:
         scene_path = resolve_scene(opts.scene).resolve()
         base = load_scene(scene_path).scenario
@@ -211,7 +216,13 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None]) -> RunResult:
             "simulator",
             node_command(
                 "simulator",
-                _ros_args("simulator", plan, opts, [scene, f"real_time_factor:={opts.rtf}"]),
+                _ros_args(
+                    "simulator",
+                    plan,
+                    opts,
+                    [scene, f"real_time_factor:={opts.rtf}"]
+                    + ([f"rrd_path:={Path(opts.rrd).resolve()}"] if opts.rrd else []),
+                ),
             ),
         )
         _wait_for(monitor, group, "simulator", 60.0)

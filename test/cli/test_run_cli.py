@@ -16,7 +16,8 @@ from fence_sorter.testing import run_cli
         (["--rtf", "-1"], "--rtf must be in [0, 100] (0: unpaced), got -1.0"),
         (["--scene", "nope"], "scene nope: no such file or shipped scene"),
         (["--stream", "nope"], "stream nope: file not found"),
-        (["--rrd", "x.rrd"], "--rrd: Rerun recording is not yet available (issue 6)"),
+        (["--rrd", "x.txt"], "--rrd must be a .rrd file in an existing directory, got x.txt"),
+        (["--rrd", "/nonexistent/x.rrd"], "--rrd must be a .rrd file in an existing directory"),
         (
             ["--param", "controller.a_ndop=1"],
             "--param 'controller.a_ndop=1' must be NODE:KEY=VALUE",
