@@ -1,6 +1,7 @@
 # fence_sorter: the two commands of the README.
 #   make run   set up (idempotent) + the node suite on the default scene (impact_flexible) with
 #              a short stream (12 parcels of config/streams/default.yaml), recorded to bags/
+#              as a rosbag2 bag and a Rerun .rrd
 #   make test  set up (idempotent) + ruff + pytest
 SHELL := /bin/bash
 .SHELLFLAGS := -euo pipefail -c
@@ -15,7 +16,8 @@ bootstrap:
 	bash scripts/bootstrap.sh
 
 run: bootstrap
-	$(ENV) && fence-sorter run --parcels 12 --bag bags/run-$$(date -u +%Y%m%dT%H%M%SZ)
+	$(ENV) && stamp=$$(date -u +%Y%m%dT%H%M%SZ) \
+		&& fence-sorter run --parcels 12 --bag bags/run-$$stamp --rrd bags/run-$$stamp.rrd
 
 check: bootstrap
 	$(ENV) && fence-sorter check
