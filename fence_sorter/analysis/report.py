@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from fence_sorter.analysis.run import TABLE_COLUMNS, load_run, parcel_table, stream_summary
+from fence_sorter.jsonsafe import json_safe
 from fence_sorter.recording.bagread import BagIssue, read_bag
 
 ANALYSIS_TOPICS = (
@@ -28,7 +29,7 @@ class AnalysisReport:
     files: dict[str, str] = field(default_factory=dict)  # what was written: name -> path
 
     def to_json(self) -> dict:
-        return _clean(
+        return json_safe(
             {
                 "bag": self.bag,
                 "summary": self.summary,
@@ -42,16 +43,6 @@ class AnalysisReport:
                 "files": self.files,
             }
         )
-
-
-def _clean(value):
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, dict):
-        return {str(k): _clean(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_clean(v) for v in value]
-    return value
 
 
 def analyze_bag(bag: Path | str, out_dir: Path | str | None = None, plots: bool = True):

@@ -11,8 +11,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
+
+from fence_sorter.jsonsafe import json_safe
 
 
 def register(subparsers) -> None:
@@ -55,16 +56,6 @@ def register(subparsers) -> None:
     parser.set_defaults(func=run)
 
 
-def _clean(value):
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, dict):
-        return {str(k): _clean(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_clean(v) for v in value]
-    return value
-
-
 def run(args: argparse.Namespace) -> int:
     from fence_sorter.runner.job import BadInput, RunOptions, run_job
     from fence_sorter.runner.summary import format_summary
@@ -90,7 +81,9 @@ def run(args: argparse.Namespace) -> int:
         return 2
     if args.json:
         print(
-            json.dumps(_clean({**result.summary, "exit": result.code, "message": result.message}))
+            json.dumps(
+                json_safe({**result.summary, "exit": result.code, "message": result.message})
+            )
         )
     else:
         print(format_summary(result.summary))

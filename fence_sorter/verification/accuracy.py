@@ -54,6 +54,7 @@ from pathlib import Path
 import numpy as np
 from scipy.interpolate import CubicHermiteSpline
 
+from fence_sorter.jsonsafe import json_safe
 from fence_sorter.physics.params import OUR_METHODS, SCIPY_METHODS
 from fence_sorter.physics.simulate import Scenario, SimulationResult, SortingModel, simulate
 from fence_sorter.verification import machine
@@ -964,16 +965,6 @@ def findings(sr: SceneResult) -> list[str]:
     return out
 
 
-def _clean(v):
-    if isinstance(v, float):
-        return v if math.isfinite(v) else None
-    if isinstance(v, dict):
-        return {k: _clean(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_clean(x) for x in v]
-    return v
-
-
 def results_dict(campaign: Campaign) -> dict:
     """Everything the report shows, as plain JSON data (``results.json``)."""
     scenes = []
@@ -995,7 +986,7 @@ def results_dict(campaign: Campaign) -> dict:
                 "points": [dict(asdict(p), rtf=p.rtf) for p in sr.points],
             }
         )
-    return _clean(
+    return json_safe(
         {
             "command": campaign.command,
             "started": campaign.started,
