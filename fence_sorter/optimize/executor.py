@@ -1,0 +1,52 @@
+"""The executor the optimiser evaluates the twin on: local processes, or a Dask cluster.
+
+Both are ``concurrent.futures.Executor``s; the optimiser only calls ``submit`` and
+``Future.result``, so the code path is the same.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import multiprocessing
+import os
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+from fence_sorter.physics.params import ParameterError
+
+
+@contextmanager
+def make_executor(
+    scheduler: str | None = None, workers: int | None = None
+) -> Iterator[concurrent.futures.Executor]:
+    """A process pool of ``workers`` (default: the CPU count) processes, or, with a scheduler
+    address ("tcp://host:8786"), the executor of a dask.distributed Client connected to it.
+    The pool or the client is shut down on exit."""
+    if workers is not None and (isinstance(workers, bool) or not 1 <= int(workers) <= 1024):
+        raise ParameterError(f"workers must be in [1, 1024], got {workers!r}")
+    if scheduler is None:
+        # fork: the workers inherit the imported, JIT-loaded physics (spawn would re-import)
+        ctx = multiprocessing.get_context("fork")
+        pool = concurrent.futures.ProcessPoolExecutor(workers or os.cpu_count() or 1, ctx)
+        try:
+            yield pool
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
+        return
+    if not isinstance(scheduler, str) or "://" not in scheduler:
+        raise ParameterError(
+            f"scheduler must be a Dask scheduler address such as tcp://127.0.0.1:8786, "
+            f"got {scheduler!r}"
+        )
+    try:
+        from dask.distributed import Client
+    except ImportError as exc:  # pragma: no cover - dask is a listed requirement
+        raise ParameterError(f"scheduler needs dask[distributed] installed: {exc}") from None
+    try:
+        client = Client(scheduler, timeout="10s")
+    except OSError as exc:
+        raise ParameterError(f"scheduler {scheduler}: cannot connect ({exc})") from None
+    try:
+        yield client.get_executor()
+    finally:
+        client.close()
