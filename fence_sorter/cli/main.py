@@ -29,6 +29,7 @@ SUBCOMMAND_MODULES: tuple[str, ...] = (
     "analyze",
     "rrd",
     "bench_suite",
+    "optimize",
 )
 
 

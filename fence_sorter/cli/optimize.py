@@ -1,0 +1,234 @@
+"""``fence-sorter optimize``: the capacity optimum W_t (1) over X = [R_s, v, t1, R_z].
+
+Exit codes: 0 an answer (an optimum, or ``"feasible": false`` with the constraint no point met),
+2 bad arguments (one line naming the option and its allowed range). ``--sweep NAME`` hands over
+to :mod:`fence_sorter.optimize.sweep` (the data behind Figs. 3-10).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+
+EXIT_OK = 0
+EXIT_BAD_INPUT = 2
+
+
+def _constraints(text: str) -> tuple[int, ...]:
+    try:
+        return tuple(int(c) for c in text.replace(" ", "").split(",") if c)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"--constraints must be a comma-separated list of numbers from 7-12, got {text!r}"
+        ) from None
+
+
+def _bound(text: str) -> tuple[str, float, float]:
+    try:
+        name, rest = text.split("=", 1)
+        lo, hi = (float(x) for x in rest.split(":"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"--bound must be NAME=LOW:HIGH (NAME one of R_s, v, t1, R_z), got {text!r}"
+        ) from None
+    return name.strip(), lo, hi
+
+
+def _fix(text: str) -> tuple[str, float]:
+    try:
+        name, value = text.split("=", 1)
+        return name.strip(), float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"--fix must be NAME=VALUE (NAME one of R_s, v, t1, R_z), got {text!r}"
+        ) from None
+
+
+def register(subparsers) -> None:
+    from fence_sorter.optimize.problem import OptimizeSpec
+
+    d = OptimizeSpec(case="positioned", alpha_k=0.7)
+    p = subparsers.add_parser(
+        "optimize",
+        help="maximise the sorting capacity W_t over X = [R_s, v, t1, R_z] (sections 3-4)",
+        description=(
+            "Maximise the sorting capacity W_t (1) over X = [R_s, v, t1, R_z] within the ranges "
+            "(3)-(6) subject to the selected constraints (7)-(12), evaluated on the twin "
+            "(docs/optimize.md). Prints the optimum X, W_t [pcs/h], Delta_c, the active "
+            "constraints and every margin; 'feasible: false' with the constraint no point met."
+        ),
+    )
+    p.add_argument("--case", choices=("arbitrary", "positioned"), help="section 4.1 or 4.2")
+    p.add_argument("--alpha-k", type=float, metavar="DEG", help="fence deflection alpha_k [deg]")
+    p.add_argument("--w-dop", type=float, default=d.w_dop, help="(10) limit [m/s] (%(default)s)")
+    p.add_argument(
+        "--a-ndop", type=float, default=d.a_ndop, help="(11) limit [m/s^2] (%(default)s)"
+    )
+    p.add_argument(
+        "--exit-speed-limit",
+        type=float,
+        default=d.exit_speed_limit,
+        help="(12) limit ydot_dop [m/s] (%(default)s)",
+    )
+    p.add_argument(
+        "--constraints",
+        type=_constraints,
+        default=None,
+        metavar="LIST",
+        help="constraints that count, e.g. 7,8,11 (default 7,8,9,10 arbitrary; 7,8,11 positioned)",
+    )
+    p.add_argument("--mu1", type=float, default=d.mu1, help="load-belt friction (%(default)s)")
+    p.add_argument("--mu2", type=float, default=d.mu2, help="load-fence friction (%(default)s)")
+    p.add_argument("--load-length", type=float, default=d.load_length, help="A [m] (%(default)s)")
+    p.add_argument("--load-width", type=float, default=d.load_width, help="B [m] (%(default)s)")
+    p.add_argument(
+        "--gap", type=float, default=d.gap, help="Delta of (2), least gap [m] (%(default)s)"
+    )
+    p.add_argument(
+        "--fix",
+        type=_fix,
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="hold a variable fixed, e.g. R_s=0 (repeatable)",
+    )
+    p.add_argument(
+        "--bound",
+        type=_bound,
+        action="append",
+        default=[],
+        metavar="NAME=LOW:HIGH",
+        help="override one of the ranges (3)-(6), e.g. v=0.2:2.0 (repeatable)",
+    )
+    p.add_argument("--fence", choices=("stiff", "flexible"), default=d.fence)
+    p.add_argument("--seed", type=int, default=d.seed)
+    p.add_argument(
+        "--budget", type=int, default=d.budget, help="max twin evaluations (%(default)s)"
+    )
+    p.add_argument("--workers", type=int, default=None, help="processes (default: CPU count)")
+    p.add_argument(
+        "--scheduler", default=None, metavar="ADDRESS", help="Dask scheduler, e.g. tcp://h:8786"
+    )
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    # sweeps of Figs. 3-10 (fence_sorter.optimize.sweep)
+    p.add_argument("--sweep", default=None, metavar="NAME", help="a figure sweep, e.g. fig6")
+    p.add_argument("--out", default="docs/paper", help="sweep output directory (%(default)s)")
+    p.add_argument(
+        "--resume",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="continue a sweep from its saved results (default: yes)",
+    )
+    p.set_defaults(func=run)
+
+
+def error(message: str) -> int:
+    print(f"fence-sorter optimize: error: {message}", file=sys.stderr)
+    return EXIT_BAD_INPUT
+
+
+def spec_from_args(args: argparse.Namespace):
+    """The validated OptimizeSpec of the command line (ParameterError names the option)."""
+    from fence_sorter.optimize.problem import OptimizeSpec
+    from fence_sorter.physics.params import ParameterError
+
+    if args.case is None:
+        raise ParameterError("--case is required: one of arbitrary, positioned")
+    if args.alpha_k is None:
+        raise ParameterError("--alpha-k is required: the fence deflection in (0, 89] deg")
+    if not (math.isfinite(args.alpha_k) and 0.0 < args.alpha_k <= 89.0):
+        raise ParameterError(f"--alpha-k must be in (0, 89] deg, got {args.alpha_k!r}")
+    constraints = args.constraints
+    if constraints is None:
+        constraints = (7, 8, 9, 10) if args.case == "arbitrary" else (7, 8, 11)
+    spec = OptimizeSpec(
+        case=args.case,
+        alpha_k=math.radians(args.alpha_k),
+        w_dop=args.w_dop,
+        a_ndop=args.a_ndop,
+        exit_speed_limit=args.exit_speed_limit,
+        constraints=tuple(constraints),
+        mu1=args.mu1,
+        mu2=args.mu2,
+        load_length=args.load_length,
+        load_width=args.load_width,
+        fixed=tuple(args.fix),
+        bounds=tuple(args.bound),
+        fence=args.fence,
+        seed=args.seed,
+        budget=args.budget,
+        gap=args.gap,
+    )
+    try:
+        return spec.validate()
+    except ParameterError as exc:
+        # name the option as typed: load_length -> --load-length
+        msg = str(exc)
+        for field in ("exit_speed_limit", "load_length", "load_width", "w_dop", "a_ndop"):
+            if msg.startswith(field):
+                msg = "--" + field.replace("_", "-") + msg[len(field) :]
+                break
+        else:
+            if msg.split(" ", 1)[0] in ("mu1", "mu2", "gap", "seed", "budget", "constraints"):
+                msg = "--" + msg
+            elif msg.startswith("fixed"):
+                msg = "--fix " + msg
+            elif msg.startswith("bounds"):
+                msg = "--bound " + msg
+        raise ParameterError(msg) from None
+
+
+def summary(d: dict) -> str:
+    """Readable lines of a result dict (OptimumResult.to_dict())."""
+    spec = d["spec"]
+    head = (
+        f"case {spec['case']}, alpha_k {spec['alpha_k_deg']:g} deg, constraints "
+        f"{','.join(str(c) for c in spec['constraints'])}, fence {spec['fence']}"
+    )
+    tail = f"{d['evaluations']} twin evaluations, {d['wall_time']:.1f} s"
+    if not d["feasible"]:
+        return f"{head}\n{d['infeasible']}\n{tail}"
+    x = d["X"]
+    lines = [
+        head,
+        f"W_t = {d['W_t']:.0f} pcs/h, Delta_c = {d['Delta_c']:.3f} m",
+        f"R_s = {x['R_s']:.3f} m, v = {x['v']:.3f} m/s, t1 = {x['t1']:.3f} s, "
+        f"R_z = {x['R_z']:.3f} m",
+        "active constraints: " + (", ".join(f"({c})" for c in d["active"]) or "none"),
+        "margins: "
+        + ", ".join(f"({c}) {m:.3g}" for c, m in d["margins"].items() if m is not None),
+    ]
+    if d.get("at_bounds"):
+        lines.append(
+            "at range bounds: " + ", ".join(f"{n} {s}" for n, s in d["at_bounds"].items())
+        )
+    lines.append(tail)
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    from fence_sorter.physics.params import ParameterError
+
+    if args.sweep is not None:
+        from fence_sorter.optimize import sweep
+
+        return int(sweep.main(args) or 0)
+    from fence_sorter.optimize.executor import make_executor
+    from fence_sorter.optimize.solve import optimize
+
+    try:
+        spec = spec_from_args(args)
+        if args.workers is not None and not 1 <= args.workers <= 1024:
+            raise ParameterError(f"--workers must be in [1, 1024], got {args.workers}")
+        with make_executor(args.scheduler, args.workers) as executor:
+            result = optimize(spec, executor)
+    except ParameterError as exc:
+        return error(str(exc))
+    d = result.to_dict()
+    if args.json:
+        print(json.dumps(d))
+    else:
+        print(summary(d))
+    return EXIT_OK
