@@ -1,12 +1,14 @@
 """The controller's stroke planner: (R_s, t1) per load, best capacity W_t (1) first.
 
 Candidates (R_s, t1) from the ranges (3) and (5) are ordered once by W_t (1) (t_z ascending,
-then the gentler stroke first). For a load, the candidates its timing admits (the load front
-must still be upstream of R_s when the command is out, the fence must be free) are tried in
-W_t order for half the evaluation budget, then on an even spread over the rest (feasibility is
-not monotone along the order), stopping at the first feasible one: the answer is always an
-evaluated, feasible stroke, or a reason naming the violated constraint. Evaluations are
-cached per quantised load class.
+then the gentler stroke first); a configured decision table (optima of the sweep
+``decision-table``, fence_sorter.optimize.decision) puts the stroke of the load's class first.
+For a load, the candidates its timing admits (the load front must still be upstream of R_s
+when the command is out, the fence must be free) are tried in W_t order for half the
+evaluation budget, then on an even spread over the rest (feasibility is not monotone along the
+order), stopping at the first feasible one: the answer is always an evaluated, feasible
+stroke, or a reason naming the violated constraint. Evaluations are cached per quantised load
+class.
 """
 
 from __future__ import annotations
@@ -58,6 +60,9 @@ class PlannerConfig:
     quantum_yaw: float = math.radians(5.0)  # [rad]
     quantum_mu: float = 0.05
     min_exit_speed: float = 0.3  # (8) counts only if C_s crosses y0 = s at least this fast [m/s]
+    # starting strokes per load class (config/decision_table.yaml, fence_sorter.optimize.decision);
+    # empty: none, the planner works as without it
+    decision_table: str = ""
 
     FLOAT_KEYS = {
         "alpha_k_deg": (1.0, 89.0, "deg"),
@@ -121,6 +126,13 @@ class PlannerConfig:
             prof["active"] = list(data["active_constraints"])
         if "fence_model" in data:
             kw["fence_model"] = str(data["fence_model"])
+        if "decision_table" in data:
+            value = data["decision_table"]
+            if not isinstance(value, str):
+                raise ParameterError(
+                    f"{prefix}.decision_table must be a file path (empty: none), got {value!r}"
+                )
+            kw["decision_table"] = value
         if "max_evaluations" in data:
             value = data["max_evaluations"]
             if isinstance(value, bool) or not isinstance(value, int):
@@ -194,6 +206,13 @@ class Planner:
         self.record: dict[tuple[float, float], list[int]] = {}
         # per load class: the stroke chosen for it (the hint for its neighbours)
         self.chosen: dict[tuple, tuple[float, float]] = {}
+        self.table = None
+        if config.decision_table:
+            from fence_sorter.optimize.decision import DecisionTable
+
+            self.table = DecisionTable.load(config.decision_table).check(
+                config.alpha_k, self.v, "controller.decision_table"
+            )
 
     # -- load classes ----------------------------------------------------------------------
     def quantise(self, req: LoadRequest) -> tuple[tuple, ParcelParams, float, float]:
@@ -302,6 +321,25 @@ class Planner:
             out.append((r_s, t1))
         return out
 
+    def _admits(self, req: LoadRequest, now: float, cand: tuple[float, float]) -> bool:
+        """The timing and (7) test of :meth:`admissible` for one candidate."""
+        c = self.config
+        r_s, t1 = cand
+        earliest = max(now + c.start_margin, self.busy_until + c.busy_margin)
+        if req.scan_time + (r_s - req.scan_position_x) / self.v < earliest:
+            return False
+        extent = footprint_length(req.parcel)
+        return not (7 in c.profile.active and margin_working_time(extent, r_s, self.v, t1) > 0.0)
+
+    def table_candidate(self, req: LoadRequest, now: float) -> tuple[float, float] | None:
+        """The decision table's stroke for the load's class, if a table is configured and
+        the load's timing admits it (the planner then tries it first)."""
+        if self.table is None:
+            return None
+        p = req.parcel
+        cand = self.table.lookup(footprint_length(p), p.lateral_gap, p.yaw)
+        return cand if cand is not None and self._admits(req, now, cand) else None
+
     def hint(self, key: tuple) -> tuple[float, float] | None:
         """The stroke chosen for the nearest load class planned so far (L1 over the bins)."""
         if key in self.chosen:
@@ -324,8 +362,10 @@ class Planner:
     ) -> Plan:
         """Plan one load at sim time ``now``; with ``commit`` a feasible stroke books the fence.
 
-        Order: the stroke chosen for the nearest load class first (``use_hint``; similar loads
-        need similar strokes, so this is mostly the only evaluation), then W_t order with the
+        Order: with a decision table, its stroke for the load's class first (unless the class
+        has a chosen stroke already); the stroke chosen for the nearest load class
+        (``use_hint``; similar loads need similar strokes, so this is mostly the only
+        evaluation), then W_t order with the
         candidates that failed for most load classes seen so far behind the others
         (:meth:`hopeless`); the warm-up (no hint, a larger budget) teaches the planner both.
         """
@@ -337,6 +377,12 @@ class Planner:
         if hint is not None and hint in cands:
             cands.remove(hint)
             cands.insert(0, hint)
+        # the decision table's stroke first, unless this very class has a stroke of its own
+        first = self.table_candidate(req, now) if key not in self.chosen else None
+        if first is not None:
+            if first in cands:
+                cands.remove(first)
+            cands.insert(0, first)
         plan = Plan(req.parcel_id, False, None, math.nan, math.nan, "", admissible=len(cands))
         if not cands:
             plan.reason = self._no_candidate_reason(req, now)

@@ -1,0 +1,807 @@
+"""The paper's optimisation sweeps (Figs. 3-10, section 4): CSV rows, resume, PNG plots.
+
+Each sweep is a list of points (one optimum (1) each, under the constraints the figure names);
+a point's result is appended to ``<out>/<run>.csv`` as one row and flushed, keyed by a hash of
+the point's inputs, so an interrupted sweep continues where it stopped (points already in the
+CSV are skipped). Points go through a ``concurrent.futures`` executor, one serial optimisation
+per point (on 2 cores, parallel over points beats parallel inside one optimisation: see
+docs/paper/README.md). Then ``<out>/<name>.png`` in the style of the paper's figure.
+
+``fence-sorter optimize --sweep NAME`` calls :func:`main`; NAME is one of :data:`SWEEPS`
+(``fig3`` ... ``fig10``, ``decision-table``), several separated by commas, or ``all``.
+``decision-table`` also writes the controller's starting candidates (config/decision_table.yaml,
+:mod:`fence_sorter.optimize.decision`).
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import math
+import os
+import sys
+import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from concurrent.futures import Executor, Future, as_completed
+from dataclasses import dataclass, field
+from pathlib import Path
+
+EXIT_OK = 0
+EXIT_FAILED = 1
+EXIT_BAD_INPUT = 2
+EXIT_INTERRUPTED = 130
+
+G = 9.81
+
+
+class SweepError(RuntimeError):
+    """Some points of a sweep raised (the others were saved; a rerun retries them)."""
+
+
+def free_fall_speed(height: float) -> float:
+    """Impact speed of a free fall from ``height`` [m], to 0.1 m/s as the paper rounds it
+    (w_dop = 2.4 m/s for 0.3 m, section 3)."""
+    return round(math.sqrt(2.0 * G * height), 1)
+
+
+#: alpha_k of Figs. 3, 6, 7 [deg] (section 4.2: 20..60 in steps of 5)
+ALPHAS_DEG = tuple(float(a) for a in range(20, 61, 5))
+#: w_dop levels of Figs. 3 and 5: free falls from 0.1, 0.2, 0.3 (the paper's), 0.5 m
+W_DOP_LEVELS = tuple(free_fall_speed(h) for h in (0.1, 0.2, 0.3, 0.5))
+#: a_Ndop levels of Figs. 6-10 [m/s^2]: 15 (the paper's "small", ~1.5 g) ... 300 (~30 g)
+A_NDOP_LEVELS = (15.0, 50.0, 150.0, 300.0)
+#: load lengths A of Figs. 5, 8-10 [m] (the paper names 0.1 and 1.2)
+LENGTHS = (0.1, 0.3, 0.5, 0.7, 0.9, 1.2)
+
+# -- CSV schema ---------------------------------------------------------------------------------
+#: the inputs of one point (one optimisation), scalar columns of the CSV; SI but alpha_k in deg
+INPUT_COLUMNS: dict[str, type] = {
+    "case": str,  # arbitrary | positioned
+    "alpha_k_deg": float,
+    "w_dop": float,
+    "a_ndop": float,
+    "exit_speed_limit": float,
+    "constraints": str,  # "7 8 11"
+    "mu1": float,
+    "mu2": float,
+    "load_length": float,
+    "load_width": float,
+    "fixed": str,  # "R_s=0 R_z=1.4" (empty: none)
+    "bounds": str,  # "R_s=-0.4:1 t1=0.2:1.5" (empty: the ranges (3)-(6))
+    "budget": int,  # 0: the optimiser's default
+}
+#: the outcome of one point
+RESULT_COLUMNS: dict[str, type] = {
+    "feasible": bool,
+    "R_s": float,
+    "v": float,
+    "t1": float,
+    "R_z": float,
+    "W_t": float,
+    "Delta_c": float,
+    "Delta": float,  # required distance between loads, Delta_c - A_max (Fig. 3f)
+    "t_z": float,
+    "active": str,
+    "m7": float,
+    "m8": float,
+    "m9": float,
+    "m10": float,
+    "m11": float,
+    "m12": float,
+    "impact_speed": float,  # w_n of the optimum (margin of (10) + w_dop) [m/s]
+    "accel": float,  # a_N (margin of (11) + a_Ndop) [m/s^2]
+    "exit_speed": float,  # ydot (margin of (12) + ydot_dop) [m/s]
+    "infeasible": str,
+    "evaluations": int,
+    "wall_time": float,
+}
+COLUMNS: dict[str, type] = {"key": str, **INPUT_COLUMNS, **RESULT_COLUMNS}
+
+DEFAULT_INPUTS: dict = {
+    "case": "positioned",
+    "alpha_k_deg": 40.0,
+    "w_dop": 2.4,
+    "a_ndop": 300.0,
+    "exit_speed_limit": 2.5,
+    "constraints": "7 8 9 10",
+    "mu1": 0.65,
+    "mu2": 0.35,
+    "load_length": 0.7,
+    "load_width": 0.1,
+    "fixed": "",
+    "bounds": "",
+    "budget": 0,
+}
+
+
+def point(**kw) -> dict:
+    """The inputs of one point: the defaults (paper section 3 values) updated by ``kw``."""
+    unknown = set(kw) - set(INPUT_COLUMNS)
+    if unknown:
+        raise KeyError(f"unknown point input(s) {sorted(unknown)}; allowed: {list(INPUT_COLUMNS)}")
+    out = dict(DEFAULT_INPUTS)
+    out.update(kw)
+    return {k: INPUT_COLUMNS[k](v) for k, v in out.items()}
+
+
+def point_key(inputs: Mapping) -> str:
+    """A stable key of a point's inputs (12 hex digits of the SHA-1 of their JSON)."""
+    canon = {k: _fmt(INPUT_COLUMNS[k], inputs[k]) for k in INPUT_COLUMNS}
+    blob = json.dumps(canon, sort_keys=True).encode()
+    return hashlib.sha1(blob).hexdigest()[:12]
+
+
+def _fmt(kind: type, value) -> str:
+    if kind is bool:
+        return "1" if value else "0"
+    if kind is float:
+        value = float(value)
+        return "nan" if math.isnan(value) else repr(value)
+    return str(value)
+
+
+def _parse(kind: type, text: str):
+    if kind is bool:
+        if text not in ("0", "1"):
+            raise ValueError(f"not a bool: {text!r}")
+        return text == "1"
+    if kind is float:
+        return float(text)
+    if kind is int:
+        return int(text)
+    return text
+
+
+def format_row(row: Mapping) -> list[str]:
+    """A row as CSV cells (floats by repr, so they read back exactly)."""
+    return [_fmt(kind, row[name]) for name, kind in COLUMNS.items()]
+
+
+def parse_row(cells: Sequence[str]) -> dict:
+    """CSV cells back to a row (ValueError on a malformed row)."""
+    if len(cells) != len(COLUMNS):
+        raise ValueError(f"{len(cells)} cells, expected {len(COLUMNS)}")
+    return {name: _parse(kind, c) for (name, kind), c in zip(COLUMNS.items(), cells, strict=True)}
+
+
+def read_rows(path: Path, *, repair: bool = False) -> list[dict]:
+    """The rows of a sweep CSV. Malformed rows (a line cut by an interrupt, a hand edit) are
+    dropped; with ``repair`` the file is rewritten without them (so appends stay aligned)."""
+    path = Path(path)
+    if not path.exists():
+        return []
+    text = path.read_text()
+    lines = text.splitlines(keepends=True)
+    good_lines: list[str] = []
+    rows: list[dict] = []
+    bad = 0
+    for i, line in enumerate(lines):
+        if not line.endswith("\n"):  # cut mid-write
+            bad += 1
+            continue
+        if i == 0:
+            if line.rstrip("\r\n").split(",") != list(COLUMNS):
+                raise ValueError(
+                    f"{path}: header differs from this version's columns; move the file away "
+                    "to recompute the sweep"
+                )
+            good_lines.append(line)
+            continue
+        try:
+            (cells,) = list(csv.reader([line]))
+            rows.append(parse_row(cells))
+            good_lines.append(line)
+        except ValueError:
+            bad += 1
+    if repair and bad:
+        path.write_text("".join(good_lines))
+    return rows
+
+
+class RowWriter:
+    """Appends rows to a sweep CSV, one flushed (and fsynced) line per row."""
+
+    def __init__(self, path: Path):
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        new = not self.path.exists() or self.path.stat().st_size == 0
+        self._f = self.path.open("a", newline="")
+        self._w = csv.writer(self._f, lineterminator="\n")
+        if new:
+            self._w.writerow(list(COLUMNS))
+            self._flush()
+
+    def _flush(self) -> None:
+        self._f.flush()
+        os.fsync(self._f.fileno())
+
+    def write(self, row: Mapping) -> None:
+        self._w.writerow(format_row(row))
+        self._flush()
+
+    def close(self) -> None:
+        self._f.close()
+
+    def __enter__(self) -> RowWriter:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+# -- one point ----------------------------------------------------------------------------------
+def _pairs(text: str) -> list[tuple[str, str]]:
+    out = []
+    for item in text.split():
+        name, _, value = item.partition("=")
+        out.append((name, value))
+    return out
+
+
+def make_spec(inputs: Mapping):
+    """The optimiser's OptimizeSpec of a point (degrees -> radians here)."""
+    from fence_sorter.optimize.problem import OptimizeSpec
+
+    kw: dict = {
+        "case": inputs["case"],
+        "alpha_k": math.radians(inputs["alpha_k_deg"]),
+        "w_dop": inputs["w_dop"],
+        "a_ndop": inputs["a_ndop"],
+        "exit_speed_limit": inputs["exit_speed_limit"],
+        "constraints": tuple(int(c) for c in inputs["constraints"].split()),
+        "mu1": inputs["mu1"],
+        "mu2": inputs["mu2"],
+        "load_length": inputs["load_length"],
+        "load_width": inputs["load_width"],
+    }
+    if inputs["fixed"]:
+        kw["fixed"] = tuple((n, float(v)) for n, v in _pairs(inputs["fixed"]))
+    if inputs["bounds"]:
+        kw["bounds"] = tuple(
+            (n, float(v.split(":")[0]), float(v.split(":")[1]))
+            for n, v in _pairs(inputs["bounds"])
+        )
+    if inputs["budget"]:
+        kw["budget"] = int(inputs["budget"])
+    return OptimizeSpec(**kw).validate()
+
+
+def result_row(inputs: Mapping, res) -> dict:
+    """The CSV row of a point from its OptimumResult (``res.to_dict()`` or the object)."""
+    d = res if isinstance(res, Mapping) else res.to_dict()
+    x = d.get("X") or {}
+    margins = {int(k): v for k, v in (d.get("margins") or {}).items()}
+
+    def num(v) -> float:
+        return math.nan if v is None else float(v)
+
+    def lim(c: int, limit: float) -> float:
+        m = margins.get(c)
+        return math.nan if m is None else num(m) + limit
+
+    r_s, v, t1 = num(x.get("R_s")), num(x.get("v")), num(x.get("t1"))
+    delta_c = num(d.get("Delta_c"))
+    # A_max of (2): the limiting load (arbitrary: also the 0.1 m minimal object)
+    a_max = max(inputs["load_length"], 0.1 if inputs["case"] == "arbitrary" else 0.0)
+    t_z = 2.0 * t1 + abs(r_s) / v if v > 0 else math.nan
+    infeasible = d.get("infeasible") or ""
+    if not isinstance(infeasible, str):
+        infeasible = "; ".join(str(s) for s in infeasible)
+    row = {
+        "feasible": bool(d.get("feasible")),
+        "R_s": r_s,
+        "v": v,
+        "t1": t1,
+        "R_z": num(x.get("R_z")),
+        "W_t": num(d.get("W_t")),
+        "Delta_c": delta_c,
+        "Delta": delta_c - a_max,
+        "t_z": t_z,
+        "active": " ".join(str(c) for c in (d.get("active") or ())),
+        **{f"m{c}": num(margins.get(c)) for c in range(7, 13)},
+        "impact_speed": lim(10, inputs["w_dop"]),
+        "accel": lim(11, inputs["a_ndop"]),
+        "exit_speed": lim(12, inputs["exit_speed_limit"]),
+        "infeasible": infeasible.replace("\n", " "),
+        "evaluations": int(d.get("evaluations") or 0),
+        "wall_time": num(d.get("wall_time")),
+    }
+    return row
+
+
+def solve_point(inputs: Mapping) -> dict:
+    """One optimum (serial optimiser: the sweep parallelises over points); the result columns."""
+    from fence_sorter.optimize import solve
+
+    spec = make_spec(inputs)
+    d = solve.optimize(spec, executor=None).to_dict()
+    if d.get("feasible") and hasattr(solve, "evaluate_point"):
+        # the figures of the constraints the profile leaves out (Fig. 6f: exit speed without
+        # (12)): one more twin run of the optimum, worst over the loads of the case
+        full = solve.evaluate_point(spec, d["X"])["margins"]
+        d["margins"] = {**{int(c): m for c, m in full.items()}, **d["margins"]}
+    return result_row(inputs, d)
+
+
+# -- sweep definitions --------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Panel:
+    column: str
+    label: str
+    scale: float = 1.0  # plotted value = column * scale
+
+
+@dataclass(frozen=True)
+class SweepDef:
+    """One figure: the points of its run and how to plot them."""
+
+    name: str
+    figure: str
+    title: str
+    run: str  # the CSV (run) that holds its points: fig9 plots fig8's run
+    points: tuple[dict, ...]
+    x: str  # column on the abscissa
+    x_label: str
+    series: str  # one curve per value of this column
+    series_label: str
+    panels: tuple[Panel, ...]
+    solve: Callable[[Mapping], dict] = field(default=solve_point, compare=False)
+    note: str = ""
+
+
+P_T1 = Panel("t1", "t1 [s]")
+P_WT = Panel("W_t", "W_t [pcs/h]")
+P_RS = Panel("R_s", "R_s [m]")
+P_V = Panel("v", "v [m/s]")
+P_RZ = Panel("R_z", "R_z [m]")
+P_DELTA = Panel("Delta", "required distance Delta [m]")
+P_EXIT = Panel("exit_speed", "exit speed ydot [m/s]")
+P_ACC = Panel("accel", "a_N [m/s^2]")
+
+C_ARB = "7 8 9 10"
+C_POS = "7 8 11"
+C_POS12 = "7 8 11 12"
+
+
+def _fig3() -> tuple[dict, ...]:
+    return tuple(
+        point(case="arbitrary", alpha_k_deg=a, w_dop=w, constraints=C_ARB)
+        for w in W_DOP_LEVELS
+        for a in ALPHAS_DEG
+    )
+
+
+def _fig4() -> tuple[dict, ...]:
+    return tuple(
+        point(
+            case="arbitrary",
+            alpha_k_deg=40.0,
+            w_dop=2.4,
+            constraints=C_ARB,
+            mu1=m1,
+            mu2=m2,
+            fixed="R_s=0.0 R_z=1.4",
+        )
+        for m2 in (0.2, 0.35, 0.5)
+        for m1 in (0.35, 0.5, 0.65, 0.8)
+    )
+
+
+def _fig5() -> tuple[dict, ...]:
+    return tuple(
+        point(case="arbitrary", alpha_k_deg=40.0, w_dop=w, constraints=C_ARB, load_length=a)
+        for w in W_DOP_LEVELS[1:]
+        for a in LENGTHS
+    )
+
+
+def _fig6(constraints: str) -> tuple[dict, ...]:
+    return tuple(
+        point(case="positioned", alpha_k_deg=a, a_ndop=an, constraints=constraints)
+        for an in A_NDOP_LEVELS
+        for a in ALPHAS_DEG
+    )
+
+
+def _fig8(constraints: str) -> tuple[dict, ...]:
+    return tuple(
+        point(
+            case="positioned", alpha_k_deg=40.0, a_ndop=an, constraints=constraints, load_length=a
+        )
+        for an in A_NDOP_LEVELS
+        for a in LENGTHS
+    )
+
+
+def _decision_points() -> tuple[dict, ...]:
+    from fence_sorter.optimize.decision import decision_points
+
+    return decision_points()
+
+
+def _defs() -> dict[str, SweepDef]:
+    alpha = ("alpha_k_deg", "alpha_k [deg]")
+    defs = [
+        SweepDef(
+            "fig3",
+            "Fig. 3",
+            "arbitrary placement, (7)-(10): parameters vs alpha_k and w_dop",
+            "fig3",
+            _fig3(),
+            *alpha,
+            "w_dop",
+            "w_dop [m/s]",
+            (P_T1, P_WT, P_RS, P_V, P_RZ, P_DELTA),
+        ),
+        SweepDef(
+            "fig4",
+            "Fig. 4",
+            "arbitrary placement, (7)-(10), alpha_k 40 deg, R_s 0, R_z 1.4 m: vs mu1, mu2",
+            "fig4",
+            _fig4(),
+            "mu1",
+            "mu1 (belt)",
+            "mu2",
+            "mu2 (fence)",
+            (P_T1, P_WT, P_V),
+        ),
+        SweepDef(
+            "fig5",
+            "Fig. 5",
+            "arbitrary placement, (7)-(10), alpha_k 40 deg, B 0.1 m: vs load length A and w_dop",
+            "fig5",
+            _fig5(),
+            "load_length",
+            "load length A [m]",
+            "w_dop",
+            "w_dop [m/s]",
+            (P_WT, P_RS, P_RZ),
+        ),
+        SweepDef(
+            "fig6",
+            "Fig. 6",
+            "positioned, (7), (8), (11): parameters vs alpha_k and a_Ndop",
+            "fig6",
+            _fig6(C_POS),
+            *alpha,
+            "a_ndop",
+            "a_Ndop [m/s^2]",
+            (P_T1, P_WT, P_RS, P_V, P_RZ, P_EXIT),
+        ),
+        SweepDef(
+            "fig7",
+            "Fig. 7",
+            "positioned, (7), (8), (11) and (12): vs alpha_k and a_Ndop",
+            "fig7",
+            _fig6(C_POS12),
+            *alpha,
+            "a_ndop",
+            "a_Ndop [m/s^2]",
+            (P_T1, P_WT, P_ACC),
+        ),
+        SweepDef(
+            "fig8",
+            "Fig. 8",
+            "positioned, (7), (8), (11), alpha_k 40 deg, B 0.1 m: vs load length A and a_Ndop",
+            "fig8",
+            _fig8(C_POS),
+            "load_length",
+            "load length A [m]",
+            "a_ndop",
+            "a_Ndop [m/s^2]",
+            (P_T1, P_WT, P_RS),
+        ),
+        SweepDef(
+            "fig9",
+            "Fig. 9",
+            "exit speed towards the chute of the Fig. 8 optima (worst centre of gravity)",
+            "fig8",
+            _fig8(C_POS),
+            "load_length",
+            "load length A [m]",
+            "a_ndop",
+            "a_Ndop [m/s^2]",
+            (P_EXIT,),
+        ),
+        SweepDef(
+            "fig10",
+            "Fig. 10",
+            "positioned, (7), (8), (11) and (12), alpha_k 40 deg: vs load length A and a_Ndop",
+            "fig10",
+            _fig8(C_POS12),
+            "load_length",
+            "load length A [m]",
+            "a_ndop",
+            "a_Ndop [m/s^2]",
+            (P_T1, P_WT, P_V),
+        ),
+    ]
+    return {d.name: d for d in defs}
+
+
+#: names accepted by --sweep (decision-table: the controller's starting candidates)
+SWEEPS: tuple[str, ...] = (*(f"fig{i}" for i in range(3, 11)), "decision-table")
+
+
+def get_sweep(name: str) -> SweepDef:
+    """The definition of sweep ``name`` (KeyError naming the allowed names)."""
+    if name == "decision-table":
+        return SweepDef(
+            "decision-table",
+            "controller",
+            "controller's starting candidates: R_s, t1 per load class at the configured "
+            "alpha_k and belt speed",
+            "decision-table",
+            _decision_points(),
+            "load_length",
+            "load length A [m]",
+            "case",
+            "placement",
+            (P_T1, P_RS, P_WT),
+        )
+    defs = _defs()
+    if name not in defs:
+        raise KeyError(f"unknown sweep {name!r}; allowed: {', '.join(SWEEPS)}, all")
+    return defs[name]
+
+
+# -- running ------------------------------------------------------------------------------------
+def _progress(total: int, initial: int, desc: str, enabled: bool):
+    if not enabled:
+        return None
+    try:
+        from tqdm import tqdm
+    except ImportError:  # plain lines instead of a bar
+        return _LineProgress(total, initial, desc)
+    return tqdm(total=total, initial=initial, desc=desc, unit="optimum", file=sys.stderr)
+
+
+class _LineProgress:
+    def __init__(self, total: int, initial: int, desc: str):
+        self.n, self.total, self.desc = initial, total, desc
+
+    def update(self, k: int = 1) -> None:
+        self.n += k
+        print(f"{self.desc}: {self.n}/{self.total}", file=sys.stderr, flush=True)
+
+    def close(self) -> None:
+        pass
+
+
+def _order(sweep: SweepDef, rows: Iterable[dict]) -> list[dict]:
+    """Rows of the sweep's points in point order (the last row of a key wins)."""
+    by_key = {r["key"]: r for r in rows}
+    out = []
+    for inputs in sweep.points:
+        r = by_key.get(point_key(inputs))
+        if r is not None:
+            out.append(r)
+    return out
+
+
+def run_sweep(
+    name: str | SweepDef,
+    out_dir: str | Path,
+    executor: Executor,
+    resume: bool = True,
+    progress: bool = True,
+    *,
+    max_points: int | None = None,
+) -> list[dict]:
+    """Run the points of sweep ``name`` not yet in ``<out_dir>/<run>.csv`` through
+    ``executor`` (one serial optimisation per point), appending each result as it lands.
+
+    ``resume=False`` starts the CSV afresh. ``max_points`` stops after that many new points
+    (a sweep done in chunks). Returns the rows of all the sweep's points found, in point order.
+    """
+    return run_sweeps([name], out_dir, executor, resume, progress, max_points=max_points)[0]
+
+
+def run_sweeps(
+    names: Sequence[str | SweepDef],
+    out_dir: str | Path,
+    executor: Executor,
+    resume: bool = True,
+    progress: bool = True,
+    *,
+    max_points: int | None = None,
+) -> list[list[dict]]:
+    """:func:`run_sweep` for several sweeps at once: all their open points are submitted
+    together (no idle worker between two sweeps); sweeps sharing a run share its CSV."""
+    sweeps = [get_sweep(n) if isinstance(n, str) else n for n in names]
+    out_dir = Path(out_dir)
+    runs: dict[str, list[tuple[str, dict, SweepDef]]] = {}
+    n_total = 0
+    for sweep in sweeps:
+        if sweep.run in runs:
+            continue
+        path = out_dir / f"{sweep.run}.csv"
+        if not resume and path.exists():
+            path.unlink()
+        done = {r["key"] for r in read_rows(path, repair=True)}
+        todo: dict[str, tuple[str, dict, SweepDef]] = {}
+        for inputs in sweep.points:
+            key = point_key(inputs)
+            if key not in done:
+                todo.setdefault(key, (key, inputs, sweep))
+        n_total += len({point_key(p) for p in sweep.points})
+        runs[sweep.run] = list(todo.values())
+    jobs = [(run, job) for run, todo in runs.items() for job in todo]
+    n_open = len(jobs)
+    if max_points is not None:
+        jobs = jobs[:max_points]
+    bar = _progress(n_total, n_total - n_open, ",".join(runs), progress)
+    writers = {run: RowWriter(out_dir / f"{run}.csv") for run in runs}
+    futures: dict[Future, tuple[str, str, dict]] = {}
+    written: set[Future] = set()
+    failed: list[str] = []
+
+    def write(fut: Future) -> None:
+        run, key, inputs = futures[fut]
+        writers[run].write({"key": key, **inputs, **fut.result()})
+        written.add(fut)
+        if bar is not None:
+            bar.update(1)
+
+    try:
+        for run, (key, inputs, sweep) in jobs:
+            futures[executor.submit(sweep.solve, inputs)] = (run, key, inputs)
+        for fut in as_completed(futures):
+            if fut.exception() is not None:
+                run, key, inputs = futures[fut]
+                failed.append(
+                    f"{run} point {key}: {type(fut.exception()).__name__}: {fut.exception()}"
+                )
+                print(f"fence-sorter: {failed[-1]}", file=sys.stderr)
+                continue
+            write(fut)
+    finally:
+        # interrupted or failed: keep every finished point, drop the rest
+        for fut in futures:
+            if fut not in written and fut.done() and not fut.cancelled():
+                if fut.exception() is None:
+                    write(fut)
+            else:
+                fut.cancel()
+        for w in writers.values():
+            w.close()
+        if bar is not None:
+            bar.close()
+    if failed:
+        raise SweepError(f"{len(failed)} point(s) failed (the others are saved): {failed[0]}")
+    return [_order(s, read_rows(out_dir / f"{s.run}.csv")) for s in sweeps]
+
+
+# -- plots --------------------------------------------------------------------------------------
+def plot_sweep(sweep: SweepDef, rows: Sequence[dict], path: str | Path) -> Path:
+    """The figure's panels (one curve per series value; infeasible optima left out)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = len(sweep.panels)
+    ncols = 3 if n > 4 else n
+    nrows = math.ceil(n / ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(4.2 * ncols, 3.4 * nrows), squeeze=False)
+    levels = sorted({r[sweep.series] for r in rows}, key=lambda s: (str(type(s)), s))
+    letters = "abcdefgh"
+    for i, panel in enumerate(sweep.panels):
+        ax = axes[i // ncols][i % ncols]
+        for lev in levels:
+            pts = sorted((r[sweep.x], r) for r in rows if r[sweep.series] == lev)
+            xs = [x for x, _ in pts]
+            ys = [r[panel.column] * panel.scale if r["feasible"] else math.nan for _, r in pts]
+            ax.plot(
+                xs,
+                ys,
+                marker="o",
+                ms=3.5,
+                label=f"{lev:g}" if isinstance(lev, float) else str(lev),
+            )
+            bad = [x for x, r in pts if not r["feasible"]]
+            if bad:
+                ax.plot(bad, [0.0] * len(bad), "x", color="grey")
+        ax.set_xlabel(sweep.x_label)
+        ax.set_ylabel(panel.label)
+        ax.set_title(f"{letters[i]})", loc="left", fontsize=10)
+        ax.grid(True, alpha=0.3)
+    for j in range(n, nrows * ncols):
+        axes[j // ncols][j % ncols].axis("off")
+    axes[0][0].legend(title=sweep.series_label, fontsize=8, title_fontsize=8)
+    fig.suptitle(f"{sweep.figure}: {sweep.title}", fontsize=10)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+# -- command line -------------------------------------------------------------------------------
+def parse_names(text: str) -> list[str]:
+    """``fig6``, ``fig6,fig7`` or ``all`` -> sweep names (KeyError naming the allowed ones)."""
+    names = list(SWEEPS[:-1]) if text == "all" else [t.strip() for t in text.split(",")]
+    for n in names:
+        if n not in SWEEPS:
+            raise KeyError(f"unknown sweep {n!r}; allowed: {', '.join(SWEEPS)}, all")
+    return names
+
+
+def main(args) -> int:
+    """``fence-sorter optimize --sweep NAME``: run (or resume) the sweeps, write CSV + PNG.
+
+    Uses ``args.sweep``, ``args.out`` (docs/paper), ``args.resume`` (True), ``args.workers``,
+    ``args.scheduler`` and, when present, ``args.table`` (config/decision_table.yaml),
+    ``args.max_points``. Exit 0 done, 1 a point failed, 2 bad input, 130 interrupted.
+    """
+    try:
+        names = parse_names(str(args.sweep))
+    except KeyError as exc:
+        print(f"fence-sorter: error: --sweep: {exc.args[0]}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    out = Path(getattr(args, "out", None) or "docs/paper")
+    resume = bool(getattr(args, "resume", True))
+    max_points = getattr(args, "max_points", None)
+    table_path = Path(getattr(args, "table", None) or "config/decision_table.yaml")
+    try:
+        sweeps = [get_sweep(n) for n in names]
+    except Exception as exc:  # e.g. the decision table's config cannot be read
+        print(f"fence-sorter: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    from fence_sorter.optimize.executor import make_executor
+
+    wall0 = time.perf_counter()
+    status = EXIT_OK
+    try:
+        with make_executor(
+            scheduler=getattr(args, "scheduler", None), workers=getattr(args, "workers", None)
+        ) as executor:
+            run_sweeps(sweeps, out, executor, resume=resume, max_points=max_points)
+    except KeyboardInterrupt:
+        print(
+            "fence-sorter: interrupted; finished points are in the CSV, rerun to resume",
+            file=sys.stderr,
+        )
+        return EXIT_INTERRUPTED
+    except Exception as exc:
+        print(f"fence-sorter: sweep failed: {type(exc).__name__}: {exc}", file=sys.stderr)
+        status = EXIT_FAILED
+    for sweep in sweeps:
+        rows = _order(sweep, read_rows(out / f"{sweep.run}.csv"))
+        if not rows:
+            continue
+        png = plot_sweep(sweep, rows, out / f"{sweep.name}.png")
+        n_ok = sum(r["feasible"] for r in rows)
+        print(
+            f"{sweep.name}: {len(rows)}/{len(sweep.points)} points ({n_ok} feasible) in "
+            f"{out / (sweep.run + '.csv')}, plot {png}"
+        )
+        if sweep.name == "decision-table" and len(rows) == len(sweep.points):
+            from fence_sorter.optimize.decision import build_table, write_table
+
+            table = build_table(rows, source=str(out / f"{sweep.run}.csv"))
+            write_table(table, table_path)
+            print(f"decision table: {len(table['classes'])} load classes -> {table_path}")
+    print(f"wall time {time.perf_counter() - wall0:.1f} s", file=sys.stderr)
+    return status
+
+
+__all__ = [
+    "SWEEPS",
+    "SweepError",
+    "SweepDef",
+    "get_sweep",
+    "main",
+    "make_spec",
+    "parse_names",
+    "plot_sweep",
+    "point",
+    "point_key",
+    "read_rows",
+    "result_row",
+    "run_sweep",
+    "run_sweeps",
+    "solve_point",
+]
