@@ -18,7 +18,9 @@ during another parcel's stroke is reported as :class:`OverlapWarning`.
 
 from __future__ import annotations
 
+import bisect
 import math
+import time
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -122,16 +124,28 @@ class LineConfig:
 
 
 class _Tap:
-    """Observer wrapper keeping the last two accepted points for snapshots at the line time."""
+    """Observer wrapper keeping the accepted points a snapshot at the line time may need.
 
-    __slots__ = ("obs", "prev", "cur", "t_sorted", "width")
+    The solve may run ahead of the line clock (:meth:`SortingLine.prefetch`), so the points
+    from the last one at or before the line time onwards are kept (:meth:`trim` drops older
+    ones) and :meth:`at` interpolates between the two around the time asked for.
+    """
+
+    __slots__ = ("obs", "ts", "points", "t_sorted", "width")
 
     def __init__(self, obs: Observer, width: float):
         self.obs = obs
-        self.prev = None
-        self.cur = None
+        self.ts: list[float] = []
+        self.points: list[tuple[np.ndarray, np.ndarray]] = []
         self.t_sorted: float | None = None  # C_s crossing y0 = s (interpolated) [s]
         self.width = width
+
+    @property
+    def cur(self):
+        """The last accepted point (t, y, extra), or None before the first."""
+        if not self.ts:
+            return None
+        return (self.ts[-1], *self.points[-1])
 
     def __call__(self, st, on_belt: bool):
         out = self.obs(st, on_belt)
@@ -155,22 +169,35 @@ class _Tap:
                 py,
             ]
         )
-        self.prev, self.cur = self.cur, (st.t, st.y.copy(), extra)
+        prev = (self.ts[-1], self.points[-1][0]) if self.ts else None
+        self.ts.append(st.t)
+        self.points.append((st.y.copy(), extra))
         if self.obs.sorted and self.t_sorted is None:
-            t0, y0 = (self.prev[0], self.prev[1][1]) if self.prev is not None else (st.t, 0.0)
+            t0, y0 = (prev[0], prev[1][1]) if prev is not None else (st.t, 0.0)
             y1 = st.y[1]
             frac = (self.width - y0) / (y1 - y0) if y1 > y0 else 1.0
             self.t_sorted = t0 + min(max(frac, 0.0), 1.0) * (st.t - t0)
         return out
 
+    def trim(self, t: float) -> None:
+        """Forget the points before the last one at or before local time ``t``."""
+        i = bisect.bisect_right(self.ts, t) - 1
+        if i > 0:
+            del self.ts[:i]
+            del self.points[:i]
+
     def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """State vector and extras linearly interpolated at local time ``t`` (clamped)."""
-        t1, y1, e1 = self.cur
-        if self.prev is None or t >= t1:
+        ts, pts = self.ts, self.points
+        i = bisect.bisect_right(ts, t)
+        if i >= len(ts):
+            return pts[-1]
+        if i == 0:
+            return pts[0]
+        t0, t1 = ts[i - 1], ts[i]
+        (y0, e0), (y1, e1) = pts[i - 1], pts[i]
+        if t1 <= t0:
             return y1, e1
-        t0, y0, e0 = self.prev
-        if t <= t0 or t1 <= t0:
-            return y0, e0
         w = (t - t0) / (t1 - t0)
         return y0 + w * (y1 - y0), e0 + w * (e1 - e0)
 
@@ -188,8 +215,12 @@ class _Stroke:
         self.tap = _Tap(self.observer, sc.conveyor.width)
         self.stepper = self.integ.stepping(self.tap)
         next(self.stepper, None)  # the initial point (t = 0) and the first step
-        self.alive = self.integ.outcome is None
+        self.finished = False  # the solve has ended (maybe ahead of the line time)
+        self.alive = True  # the solve covers the line time (False once past its end)
         self.failed: str | None = None
+        if self.integ.outcome is not None:
+            self._ended()
+            self.advance(0.0)
         self.failure_reported = False
         self.steps = 1
         self.warned: set[int] = set()
@@ -199,13 +230,43 @@ class _Stroke:
         return 2.0 * self.sc.drive.t1
 
     def advance(self, t_local: float) -> None:
-        if self.alive and not self.integ.advance(self.stepper, t_local):
+        """Step the solve to cover local time ``t_local`` (it may already be ahead); the stroke
+        stops being ``alive`` once ``t_local`` reaches the end of a finished solve."""
+        if not self.alive:
+            return
+        if not self.finished and not self.integ.advance(self.stepper, t_local):
+            self._ended()
+        if self.finished and t_local >= self.integ.outcome[0] - 1e-12:
             self.alive = False
             self.failed = self.integ.outcome[1]
+        self.tap.trim(t_local)
+
+    def prefetch(self, t_local: float, wall_deadline: float, clock) -> None:
+        """Step the solve ahead towards local time ``t_local`` while ``clock()`` is before
+        ``wall_deadline`` (one step at a time). Not past the sort crossing: the line reports
+        SORTED with the figures of the solve up to there."""
+        integ = self.integ
+        while (
+            not self.finished
+            and self.tap.t_sorted is None
+            and integ.cur.t < t_local - 1e-12
+            and clock() < wall_deadline
+        ):
+            if next(self.stepper, None) is None:
+                self._ended()
+
+    def _ended(self) -> None:
+        """The solve has ended; a diverged solve's last point (the observer saw it before the
+        diagnosis) is dropped so no snapshot ever interpolates towards it."""
+        self.finished = True
+        if self.integ.outcome[1] is not None and len(self.tap.ts) > 1:
+            self.tap.ts.pop()
+            self.tap.points.pop()
 
     def close(self) -> None:
         self.stepper.close()
         self.alive = False
+        self.finished = True
 
     def result(self) -> SimulationResult:
         """The observer's reduction so far (same figures :func:`simulate` reports)."""
@@ -238,6 +299,7 @@ class _Parcel:
         # rear corner's x relative to C_s while riding (the yaw does not change on the belt)
         self.rear_offset = min(c[0] for c in world_corners(body, 0.0, 0.0, spec.yaw))
         self.r_s = math.nan  # R_s of the planned stroke [m]
+        self.prepared: _Stroke | None = None  # the planned stroke, built ahead (prefetch)
 
     def front_at(self, t: float) -> float:
         """Kinematic front position (scan formula) at time t."""
@@ -392,6 +454,24 @@ class SortingLine:
         events, self.events = self.events, []
         return events
 
+    def prefetch(self, horizon: float, wall_deadline: float, clock=time.perf_counter) -> None:
+        """Use spare wall time: step the running solves ahead of the line time by up to
+        ``horizon`` of sim time, then build the next planned stroke's model, while ``clock()``
+        is before ``wall_deadline``. The line time and its events do not move; later
+        :meth:`advance` calls find the work done (soft real time: a costly stretch of an event,
+        an impact, is spread over the cycles before it is due)."""
+        for s in self.strokes:
+            if s.alive:
+                s.prefetch(self.t + horizon - s.t_start, wall_deadline, clock)
+        if self.strokes or clock() >= wall_deadline:
+            return
+        waiting = [
+            p for p in self._planned() if p.stroke is None and p.prepared is None and not p.passed
+        ]
+        if waiting:
+            p = min(waiting, key=lambda q: q.t_start)
+            p.prepared = _Stroke(p, p.t_start, self._stroke_scenario(p))
+
     def _next_event(self) -> tuple[float, int, _Parcel | None]:
         """Earliest of: a planned stroke start (0), a point of no return (1), a line end (2)."""
         best = (math.inf, 3, None)
@@ -452,22 +532,30 @@ class SortingLine:
             if p.stroke is s:
                 p.stroke = None  # no parcel <-> stroke cycle left for the GC
 
-    def _start_stroke(self, p: _Parcel) -> None:
+    def _stroke_scenario(self, p: _Parcel) -> Scenario:
         cmd = p.command
-        r_s = p.r_s  # the commanded R_s exactly (START_AT_TIME: the front at start_time)
-        sc = Scenario(
+        return Scenario(
             conveyor=self._conveyor(p.spec),
             parcel=_physics(p.spec),
-            drive=DriveParams(alpha_k=cmd.alpha_k, t1=cmd.t1, r_s=r_s),
+            # the commanded R_s exactly (START_AT_TIME: the front at start_time)
+            drive=DriveParams(alpha_k=cmd.alpha_k, t1=cmd.t1, r_s=p.r_s),
             contact=self._contact(p.spec),
             solver=self.config.solver,
             fence=self.config.fence,
             fence_length=self.config.fence_length,
             fence_modes=self.config.fence_modes,
         )
-        p.stroke = _Stroke(p, self.t, sc)
+
+    def _start_stroke(self, p: _Parcel) -> None:
+        cmd = p.command
+        stroke, p.prepared = p.prepared, None
+        if stroke is None:
+            stroke = _Stroke(p, self.t, self._stroke_scenario(p))
+        # the solve runs in local time: a stroke built ahead (prefetch) starts now all the same
+        stroke.t_start = self.t
+        p.stroke = stroke
         self.strokes.append(p.stroke)
-        self.events.append(StrokeStarted(self.t, p.spec.parcel_id, r_s, cmd.t1, cmd.alpha_k))
+        self.events.append(StrokeStarted(self.t, p.spec.parcel_id, p.r_s, cmd.t1, cmd.alpha_k))
         self._settle(p.stroke, self.t)
 
     def _no_return(self, p: _Parcel) -> None:
@@ -514,6 +602,9 @@ class SortingLine:
                 y_max=float(res.y_max),
                 time_in_working_space=max(t_ws, 0.0),
             )
+        if p.prepared is not None:  # built ahead, never started
+            p.prepared.close()
+            p.prepared = None
         p.outcome = Outcome(p.spec.parcel_id, t, code, reason, **fig)
         self.done_ids.add(p.spec.parcel_id)
         self.events.append(p.outcome)

@@ -142,6 +142,25 @@ class SimulatorNode(FenceSorterNode):
             max_value=0.005,
         ),
         ParamSpec(
+            "lookahead",
+            0.05,
+            "Sim time the running solves may be stepped ahead of the line clock in each paced "
+            "cycle's spare wall time [s], so the costly stretch of an impact is spread over "
+            "the cycles before it is due; 0: off (each cycle does all of its physics)",
+            read_only=True,
+            min_value=0.0,
+            max_value=1.0,
+        ),
+        ParamSpec(
+            "prefetch_reserve",
+            0.0002,
+            "Wall time left free before the next cycle's busy-wait when stepping ahead [s] (one "
+            "solver step may overrun the budget by its own cost)",
+            read_only=True,
+            min_value=0.0,
+            max_value=0.01,
+        ),
+        ParamSpec(
             "line_end_x",
             3.0,
             "x0 where parcels leave the line (rear passing it) [m]",
@@ -226,6 +245,8 @@ class SimulatorNode(FenceSorterNode):
         self.marker_every = max(1, round(float(p["physics_rate"]) / rate)) if rate > 0.0 else 0
         self.max_catch_up = float(p["max_catch_up"])
         self.spin_margin = float(p["spin_margin"])
+        self.lookahead = float(p["lookahead"])
+        self.prefetch_reserve = float(p["prefetch_reserve"])
         self.rt_priority = int(p["realtime_priority"])
 
         self._inbox: queue.SimpleQueue = queue.SimpleQueue()
@@ -384,6 +405,14 @@ class SimulatorNode(FenceSorterNode):
                 next_gc = k + self.publish_every
                 if gen == 2:
                     next_full_gc = k + round(FULL_GC_PERIOD / period)
+            if rtf > 0.0 and self.lookahead > 0.0:
+                # spare time: step the running solves ahead (the wait below still starts its
+                # busy-wait on time; one solver step may overrun by its own cost)
+                line.prefetch(
+                    self.lookahead * rtf,
+                    pacer.next_deadline - self.spin_margin - self.prefetch_reserve,
+                    clock,
+                )
             with self._lock:
                 if rtf > 0.0:
                     self.work.add(done - wake)
