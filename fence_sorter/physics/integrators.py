@@ -23,6 +23,11 @@ halved; a step this small that still fails straddles a switch and is taken and c
 
 Divergence (NaN, runaway speed, deep penetration, step below min_dt, wall-time limit) stops the
 solve with a diagnosis; nothing past it is returned as data.
+
+The loop here is the Python one (``solver.engine = python``; the soft-real-time line steps it as
+a generator). ``kernel.solve`` is the same loop compiled, which :func:`simulate.simulate` runs by
+default for ``adaptive`` and ``trapezoidal`` (``engine.py``); a change to one must be made to
+the other (test/physics/test_engine.py compares them).
 """
 
 from __future__ import annotations

@@ -254,6 +254,10 @@ def simulate(sc: Scenario, model: SortingModel | None = None) -> SimulationResul
         from .baselines import run_solve_ivp
 
         return run_solve_ivp(model)
+    from .engine import run_compiled, uses_compiled
+
+    if uses_compiled(sc):
+        return run_compiled(model)
     from .integrators import Integrator
 
     wall0 = time.perf_counter()

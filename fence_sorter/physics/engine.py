@@ -1,0 +1,363 @@
+"""The compiled solve (``solver.engine = compiled``): one sorting event in one Numba loop.
+
+``kernel.solve`` runs the control loop of :class:`integrators.Integrator` (adaptive step-size
+control with Milne's device, event location by Illinois regula falsi, drive breakpoints, step
+halving and the divergence checks) together with the reductions of :class:`simulate.Observer`
+(energy audit, peak N with its parabola, impacts with N_stiff, stages E1-E4, recorded series)
+on flat arrays, so an accepted step costs no Python at all. Same algorithm, same answers: the
+Python loop stays (``solver.engine = python``, and the soft-real-time line steps it as a
+generator) and test/physics/test_engine.py checks the two agree to round-off.
+
+This module builds the arrays, calls ``kernel.solve`` in chunks of step attempts (between them it
+checks ``solver.max_wall_time``, which compiled code cannot read, and grows the output buffers),
+and turns the figures into the :class:`SimulationResult` the Python loop would have produced
+(through ``Observer.result``, so every text is the same). ``generalized_alpha`` has no compiled
+loop and always runs the Python one.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from . import kernel as K
+from .contacts import (
+    FLUSH_ANGLE,
+    STAGE_E1,
+    STAGE_E2,
+    STAGE_E3,
+    STAGE_E4,
+    STAGE_ON_BELT,
+    STAGE_SORTED,
+)
+
+COMPILED_METHODS = ("adaptive", "trapezoidal")
+STAGE_NAMES = (STAGE_ON_BELT, STAGE_E1, STAGE_E2, STAGE_E3, STAGE_E4, STAGE_SORTED)
+CHUNK = 512  # step attempts between two wall-time checks (~5-50 ms of solving)
+
+
+def uses_compiled(sc) -> bool:
+    """Whether :func:`simulate.simulate` runs this scenario with the compiled loop."""
+    return sc.solver.engine == "compiled" and sc.solver.method in COMPILED_METHODS
+
+
+def _propagator_cache(model):
+    """The exact modal maps by step size, kept on the model like ``Integrator``'s
+    ``Propagators`` (repeated solves of one model reuse them)."""
+    cache = getattr(model, "engine_propagators", None)
+    if cache is None:
+        m, n = model.n_modes, K.N_PROP_CACHE
+        cache = (
+            np.full(n, math.nan),
+            np.zeros((n, m, 2, 2)),
+            np.zeros((n, m, 2)),
+            np.zeros((n, m, 2)),
+            np.zeros(1, dtype=np.int64),
+        )
+        model.engine_propagators = cache
+    return cache
+
+
+class CompiledSolve:
+    """The arrays of one compiled solve and its chunked driver."""
+
+    def __init__(self, model):
+        self.model = model
+        sc = model.sc
+        sv = sc.solver
+        adaptive = sv.method == "adaptive"
+        h_nom = sv.dt_max if adaptive else sv.dt
+        t_cycle = 2.0 * sc.drive.t1
+        self.t_end = t_end = sv.t_end if sv.t_end > 0 else t_cycle + sv.settle_time
+        breaks = sorted({b for b in (sc.drive.t1, t_cycle) if 0.0 < b < t_end})
+        breaks.append(t_end)
+        self.breaks = np.array(breaks, dtype=float)
+        body = model.body
+        v_ref = max(model.belt, 0.1)
+        cfg = np.zeros(K.N_CFG)
+        cfg[K.G_H_NOM] = h_nom
+        cfg[K.G_T_END] = t_end
+        cfg[K.G_DT] = sv.dt
+        cfg[K.G_MIN_DT] = sv.min_dt
+        cfg[K.G_TOL] = sv.tolerance
+        cfg[K.G_MAX_ITER] = sv.max_iterations
+        cfg[K.G_ATOL] = sv.atol
+        cfg[K.G_RTOL] = sv.rtol
+        cfg[K.G_V_REF] = v_ref
+        cfg[K.G_OM_REF] = v_ref / min(body.length_a, body.width_b)
+        cfg[K.G_WIDTH] = sc.conveyor.width
+        cfg[K.G_ADAPTIVE] = float(adaptive)
+        cfg[K.G_STOP_SORTED] = float(sv.stop_when_sorted)
+        cfg[K.G_RECORD] = float(bool(sc.record))
+        cfg[K.G_BP] = sc.contact.b_p
+        cfg[K.G_KP] = sc.contact.k_p
+        cfg[K.G_DEEP] = model.deep
+        cfg[K.G_SPEED_LIMIT] = model.speed_limit
+        cfg[K.G_VMIN] = sc.contact.v_min
+        cfg[K.G_PHIDOT_MIN] = sc.contact.phidot_min
+        cfg[K.G_UP] = 2.0**0.25
+        cfg[K.G_DOWN] = 2.0**-0.25
+        cfg[K.G_FLUSH] = FLUSH_ANGLE
+        self.cfg = cfg
+        ctl = np.zeros(K.N_CTL, dtype=np.int64)
+        ctl[K.I_CUR], ctl[K.I_TRIAL] = 0, 1
+        ctl[K.I_ON_BELT] = 1
+        ctl[K.I_FIRST] = 1
+        ctl[K.I_MASK] = ctl[K.I_STAGE] = -1
+        ctl[K.I_LAST_MASK0] = ctl[K.I_LAST_MASK1] = -1
+        self.ctl = ctl
+        fc = np.zeros(K.N_FC)
+        fc[K.F_EXIT_SPEED] = fc[K.F_IMPACT_SPEED] = math.nan
+        fc[K.F_Y_MAX] = -math.inf
+        fc[K.F_FLOW] = fc[K.F_E0] = math.nan
+        self.fc = fc
+        n, m = model.n_state, model.n_modes
+        s = K.N_STATES
+        self.T = np.zeros(s)
+        self.Y = np.zeros((s, n))
+        self.Y[0] = model.initial_state()
+        self.LAM = np.zeros((s, 3))
+        self.OUT = np.zeros((s, K.N_SLOTS, K.N_COLS))
+        self.RES = np.zeros((s, K.N_RES))
+        self.MODAL = np.zeros((s, m))
+        self.ACC = np.zeros((s, 3 + m))
+        n_el = model.n_el
+        self.w = np.zeros(max(2 * n_el, 2))
+        self.wdot = np.zeros(max(2 * n_el, 2))
+        self.nodes = np.zeros((n_el + 1, 2))
+        self.prev = np.zeros(K.N_SLOTS)
+        self.PK, self.PA, self.PG0, self.PG1, n_props = _propagator_cache(model)
+        self._n_props = n_props
+        ctl[K.I_N_PROPS] = n_props[0]
+        self.IMP = np.zeros((8, 3))
+        self.STG = np.zeros((16, 2))
+        # a row per accepted point when anything is recorded (one row otherwise: none is written)
+        rows = int(1.5 * t_end / h_nom) + 64 if sc.record else 1
+        self.REC = np.zeros((min(rows, 1 << 16), K.N_REC_COLS))
+        self.busy = 0.0
+        self.diagnosis: str | None = None
+
+    @property
+    def done(self) -> bool:
+        return bool(self.ctl[K.I_DONE]) or self.diagnosis is not None
+
+    @property
+    def t(self) -> float:
+        return float(self.T[self.ctl[K.I_CUR]])
+
+    def _grow(self) -> None:
+        for name in ("IMP", "STG", "REC"):
+            arr = getattr(self, name)
+            used = self.ctl[{"IMP": K.I_N_IMPACTS, "STG": K.I_N_STAGES, "REC": K.I_N_REC}[name]]
+            if used >= arr.shape[0]:
+                bigger = np.zeros((2 * arr.shape[0], arr.shape[1]))
+                bigger[:used] = arr[:used]
+                setattr(self, name, bigger)
+
+    def advance(self, t_target: float = math.inf) -> bool:
+        """Solve until the accepted time reaches ``t_target`` (or the end); False once the
+        solve has ended. ``solver.max_wall_time`` bounds the time spent in here, summed over
+        calls (as ``Integrator.advance``)."""
+        md = self.model
+        limit = md.sc.solver.max_wall_time
+        while not self.done:
+            t0 = time.perf_counter()
+            status = K.solve(
+                md.P, md.corners, md.normals, md.phi, md.rigid_modal, md.omega, md.zeta,
+                self.cfg, self.breaks, self.ctl, self.fc, self.T, self.Y, self.LAM, self.OUT,
+                self.RES, self.MODAL, self.ACC, self.w, self.wdot, self.nodes, self.prev,
+                self.PK, self.PA, self.PG0, self.PG1, self.IMP, self.STG, self.REC, CHUNK,
+                float(t_target),
+            )  # fmt: skip
+            self._n_props[0] = self.ctl[K.I_N_PROPS]
+            self.busy += time.perf_counter() - t0
+            if status == K.SOLVE_GROW:
+                self._grow()
+            elif status == K.SOLVE_REACHED:
+                return True
+            if not self.done and self.busy > limit:
+                self.diagnosis = f"wall-time limit {limit:g} s reached at t = {self.t:.4f} s"
+        return False
+
+    def outcome(self) -> tuple[float, str | None, int, int]:
+        """(t, diagnosis, steps, rejected) as ``Integrator.outcome``."""
+        ctl = self.ctl
+        return (
+            self.t,
+            self.diagnosis or self._diagnosis(),
+            int(ctl[K.I_STEPS]),
+            int(ctl[K.I_REJECTED]),
+        )
+
+    def _diagnosis(self) -> str | None:
+        """The text of ``Integrator`` for the loop's DIAG_* code."""
+        code = int(self.ctl[K.I_DIAG])
+        md, sv = self.model, self.model.sc.solver
+        t, v = self.fc[K.F_DIAG_T], self.fc[K.F_DIAG_V]
+        if code == K.DIAG_NONE:
+            return None
+        if code == K.DIAG_MIN_DT:
+            return (
+                f"step size fell below solver.min_dt={sv.min_dt:g} s at t = {t:.6f} s: "
+                "the contact iteration does not converge (contact too stiff for the step?)"
+            )
+        if code == K.DIAG_NONFINITE:
+            return f"non-finite state at t = {t:.6f} s"
+        if code == K.DIAG_DEEP:
+            return (
+                f"deep penetration D = {v:.4g} m > {md.deep:.4g} m "
+                f"at t = {t:.6f} s: the solve diverged or the load passed through the fence"
+            )
+        return (
+            f"load speed {v:.4g} m/s exceeds {md.speed_limit:.4g} "
+            f"m/s at t = {t:.6f} s: runaway energy, the solve diverged"
+        )
+
+    def fill(self, obs) -> None:
+        """Copy the loop's reductions into a ``simulate.Observer`` (for ``Observer.result``)."""
+        ctl, fc = self.ctl, self.fc
+        obs.sorted = bool(ctl[K.I_SORTED])
+        obs.touched = bool(ctl[K.I_TOUCHED])
+        obs.had_fence = bool(ctl[K.I_HAD_FENCE])
+        obs.exit_speed = float(fc[K.F_EXIT_SPEED])
+        obs.impact_speed = float(fc[K.F_IMPACT_SPEED])
+        obs.impacts = [
+            (float(t), float(w), float(p)) for t, w, p in self.IMP[: ctl[K.I_N_IMPACTS]]
+        ]
+        obs.peak_n = float(fc[K.F_PEAK_N])
+        obs.peak_tip = float(fc[K.F_PEAK_TIP])
+        obs.max_depth = float(fc[K.F_MAX_DEPTH])
+        obs.y_max = float(fc[K.F_Y_MAX])
+        stages = [(STAGE_NAMES[int(c)], float(t)) for t, c in self.STG[: ctl[K.I_N_STAGES]]]
+        obs.stages = stages
+        obs.stage = stages[-1][0] if stages else None
+        a = obs.audit
+        a.max_residual, a.min_residual = float(fc[K.F_MAX_RES]), float(fc[K.F_MIN_RES])
+        a.flow, a.e0 = float(fc[K.F_FLOW]), float(fc[K.F_E0])
+        a.t_max, a.t_min = float(fc[K.F_T_MAX]), float(fc[K.F_T_MIN])
+        a.max_rise = float(fc[K.F_MAX_RISE])
+        a.t_rise = (float(fc[K.F_T_RISE0]), float(fc[K.F_T_RISE1]))
+        a.run_min, a.t_run_min = float(fc[K.F_RUN_MIN]), float(fc[K.F_T_RUN_MIN])
+        obs.rec = self.series(obs.want)
+
+    def series(self, want) -> dict[str, list]:
+        """The recorded series, keyed as ``Observer._record`` keys them."""
+        rec = self.REC[: self.ctl[K.I_N_REC]]
+        out: dict[str, object] = {}
+        if "trajectory" in want:
+            out["t"] = rec[:, K.REC_T].copy()
+            for k, key in enumerate(("x", "y", "phi", "vx", "vy", "phidot")):
+                out[key] = rec[:, K.REC_Y + k].copy()
+        if "fence" in want:
+            out["t_fence"] = rec[:, K.REC_T].copy()
+            out["alpha_w"] = rec[:, K.REC_ALPHA].copy()
+            out["tip_deflection"] = rec[:, K.REC_TIP_W].copy()
+        if "forces" in want:
+            out["t_forces"] = rec[:, K.REC_T].copy()
+            out["normal_force"] = rec[:, K.REC_FENCE_N].copy()
+            out["deformation"] = rec[:, K.REC_MAX_D].copy()
+        if "stages" in want:
+            out["t_stage"] = rec[:, K.REC_T].copy()
+            out["stage"] = np.asarray([STAGE_NAMES[int(c)] for c in rec[:, K.REC_STAGE]])
+        return out
+
+
+def run_compiled(model):
+    """:func:`simulate.simulate` with the compiled loop: the same ``SimulationResult``."""
+    from .simulate import Observer
+
+    wall0 = time.perf_counter()
+    solve = CompiledSolve(model)
+    solve.advance()
+    t, diagnosis, steps, rejected = solve.outcome()
+    obs = Observer(model)
+    solve.fill(obs)
+    ctl = solve.ctl
+    return obs.result(
+        t,
+        diagnosis,
+        steps,
+        rejected,
+        time.perf_counter() - wall0,
+        int(ctl[K.I_FORCED]),
+        int(ctl[K.I_EVENTS]),
+    )
+
+
+BENCH_SCENES = ("impact_flexible", "slide_flexible", "positioned_stiff", "arbitrary_stiff")
+
+
+def compare_engines(scenes=BENCH_SCENES, repeats: int = 7) -> list[dict]:
+    """Wall time per event of each scene (as ``fence-sorter bench`` times it: ``simulate`` on a
+    freshly built model), python and compiled loop interleaved, medians of ``repeats``."""
+    import dataclasses as dc
+    import gc
+    import statistics
+
+    from fence_sorter.scene import load_scene
+
+    from .simulate import SortingModel, simulate
+
+    rows = []
+    for name in scenes:
+        sc = load_scene(name).scenario
+        runs = {
+            e: dc.replace(sc, solver=dc.replace(sc.solver, engine=e))
+            for e in ("python", "compiled")
+        }
+        walls: dict[str, list[float]] = {e: [] for e in runs}
+        results = {e: simulate(s) for e, s in runs.items()}  # warm-up (loads the JIT cache)
+        for _ in range(repeats):
+            for e, s in runs.items():
+                gc.collect()
+                t0 = time.perf_counter()
+                results[e] = simulate(s, SortingModel(s))
+                walls[e].append(time.perf_counter() - t0)
+        med = {e: statistics.median(w) for e, w in walls.items()}
+        sim = results["compiled"].sim_time
+        rows.append(
+            {
+                "scene": name,
+                "sim_time": sim,
+                "steps": results["compiled"].steps,
+                "python_ms": 1e3 * med["python"],
+                "compiled_ms": 1e3 * med["compiled"],
+                "python_rtf": sim / med["python"],
+                "compiled_rtf": sim / med["compiled"],
+                "speedup": med["python"] / med["compiled"],
+                "same_peak": results["python"].peak_contact_force
+                == results["compiled"].peak_contact_force,
+            }
+        )
+    return rows
+
+
+def main(argv=None) -> int:
+    """``python -m fence_sorter.physics.engine [--repeats N] [scene ...]``: the side-by-side
+    timing of the two loops."""
+    import argparse
+
+    ap = argparse.ArgumentParser(description=main.__doc__)
+    ap.add_argument("scenes", nargs="*", default=list(BENCH_SCENES))
+    ap.add_argument("--repeats", type=int, default=7)
+    args = ap.parse_args(argv)
+    if args.repeats < 1:
+        ap.error(f"--repeats must be >= 1, got {args.repeats}")
+    print(f"median of {args.repeats}, model build included, python and compiled interleaved")
+    print(
+        f"{'scene':18s} {'sim [s]':>8s} {'steps':>6s} {'python [ms]':>12s} "
+        f"{'compiled [ms]':>14s} {'python RTF':>11s} {'compiled RTF':>13s} {'speed-up':>9s}"
+    )
+    for r in compare_engines(args.scenes, args.repeats):
+        print(
+            f"{r['scene']:18s} {r['sim_time']:8.3f} {r['steps']:6d} {r['python_ms']:12.2f} "
+            f"{r['compiled_ms']:14.2f} {r['python_rtf']:10.1f}x {r['compiled_rtf']:12.1f}x "
+            f"{r['speedup']:8.2f}x" + ("" if r["same_peak"] else "  (peak N differs!)")
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
