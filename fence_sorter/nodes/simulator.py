@@ -187,9 +187,10 @@ class SimulatorNode(FenceSorterNode):
         ),
         ParamSpec(
             "realtime_priority",
-            0,
-            "SCHED_FIFO priority of the pacing thread (1-99; needs CAP_SYS_NICE or an rtprio "
-            "limit, otherwise a warning); 0: normal scheduling",
+            50,
+            "SCHED_FIFO priority of the pacing thread, the process's other threads one below "
+            "(1-99; needs CAP_SYS_NICE or an rtprio limit, otherwise a warning and normal "
+            "scheduling); 0: normal scheduling",
             read_only=True,
             min_value=0,
             max_value=99,
@@ -347,15 +348,34 @@ class SimulatorNode(FenceSorterNode):
                 self.context.try_shutdown()
 
     def _set_priority(self) -> None:
-        """SCHED_FIFO for this (the pacing) thread if asked for: on a loaded machine normal
-        scheduling lets other processes' time slices delay a wake-up by milliseconds."""
-        if self.rt_priority <= 0:
-            return
+        """SCHED_FIFO for this (the pacing) thread, and one level below for the process's other
+        threads (rclpy executor, DDS), as ros2_control does for its update loop: under normal
+        scheduling another process's time slice delays a wake-up by milliseconds, and an
+        ordinary thread preempted while it holds the GIL or a DDS lock would stall the pacing
+        thread all the same (priority inversion). Falls back to normal scheduling with a
+        warning where the process may not (no CAP_SYS_NICE or rtprio limit)."""
+        if self.rt_priority <= 0 or self.rtf <= 0.0:
+            return  # unpaced, the loop never sleeps: at SCHED_FIFO it would hold a core
         try:
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self.rt_priority))
-            self.get_logger().info(f"pacing thread: SCHED_FIFO priority {self.rt_priority}")
         except (OSError, AttributeError) as exc:
             self.get_logger().warning(f"realtime_priority not applied ({exc}); normal scheduling")
+            return
+        others = 0
+        me = threading.get_native_id()
+        below = os.sched_param(max(1, self.rt_priority - 1))
+        for tid in os.listdir("/proc/self/task"):
+            if int(tid) == me:
+                continue
+            try:
+                os.sched_setscheduler(int(tid), os.SCHED_FIFO, below)
+                others += 1
+            except OSError:  # a thread that just ended, or not permitted: leave it
+                pass
+        self.get_logger().info(
+            f"pacing thread: SCHED_FIFO priority {self.rt_priority}; {others} other threads at "
+            f"{below.sched_priority}"
+        )
 
     def _run_loop(self) -> None:
         self._set_priority()
@@ -421,6 +441,8 @@ class SimulatorNode(FenceSorterNode):
                 if done > deadline + period:
                     self.misses += 1
             if self.rtf != pacer.rtf:  # changed at run time: a new grid from here
+                if self.rtf == 0.0 and os.sched_getscheduler(0) == os.SCHED_FIFO:
+                    os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
                 pacer.restart(self.rtf, line.t)
                 next_pub = next_marker = next_gc = next_full_gc = 0
 
