@@ -22,9 +22,8 @@ from rclpy.parameter import Parameter
 from rclpy.time import Time
 
 from fence_sorter.capacity.planner import LoadRequest, Plan, Planner, PlannerConfig
-from fence_sorter.nodes.base import FenceSorterNode, ParamSpec
+from fence_sorter.nodes.base import FenceSorterNode, ParamSpec, run_node
 from fence_sorter.nodes.qos import RELIABLE_QOS
-from fence_sorter.nodes.resilient import run_resilient
 from fence_sorter.physics.params import ParameterError, ParcelParams
 
 DEFAULT_SCENE = "impact_flexible"
@@ -313,7 +312,6 @@ class ControllerNode(FenceSorterNode):
         values = self.stats.values()
         values["cache_entries"] = str(len(self.planner.cache))
         values["listening"] = str(self._sub is not None).lower()
-        values["take_errors"] = str(getattr(self, "take_errors", 0))
         values["real_time_factor_seen"] = f"{self.rtf.value:.3f}"
         status.values.extend(KeyValue(key=k, value=v) for k, v in values.items())
         return status
@@ -382,7 +380,7 @@ def handle_parcel(node: ControllerNode, msg):
 
 def main(args: Sequence[str] | None = None) -> int:
     """Run the controller node until Ctrl-C or SIGTERM."""
-    return run_resilient(ControllerNode, args)
+    return run_node(ControllerNode, args)
 
 
 if __name__ == "__main__":

@@ -14,9 +14,8 @@ from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rclpy.exceptions import ParameterException
 from rclpy.time import Time
 
-from fence_sorter.nodes.base import FenceSorterNode, ParamSpec
+from fence_sorter.nodes.base import FenceSorterNode, ParamSpec, run_node
 from fence_sorter.nodes.qos import RELIABLE_QOS
-from fence_sorter.nodes.resilient import run_resilient
 from fence_sorter.physics.params import ParameterError
 from fence_sorter.stream import ParcelSpec, load_stream
 
@@ -154,7 +153,6 @@ class ScannerNode(FenceSorterNode):
                 "parcels_published": str(self.next_index),
                 "done": str(done).lower(),
                 "last_arrival_s": f"{last:.3f}",
-                "take_errors": str(getattr(self, "take_errors", 0)),
             }.items()
         )
         return status
@@ -162,7 +160,7 @@ class ScannerNode(FenceSorterNode):
 
 def main(args: Sequence[str] | None = None) -> int:
     """Run the scanner node until Ctrl-C or SIGTERM."""
-    return run_resilient(ScannerNode, args)
+    return run_node(ScannerNode, args)
 
 
 if __name__ == "__main__":

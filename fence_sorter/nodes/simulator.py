@@ -28,7 +28,7 @@ from collections.abc import Sequence
 import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
@@ -49,7 +49,7 @@ from fence_sorter.line import (
 )
 from fence_sorter.line.pacing import LatenessHistogram, Pacer
 from fence_sorter.nodes import convert
-from fence_sorter.nodes.base import FenceSorterNode, ParamSpec
+from fence_sorter.nodes.base import FenceSorterNode, ParamSpec, spin_node
 from fence_sorter.nodes.qos import RELIABLE_QOS, SENSOR_QOS
 from fence_sorter.scene import load_scene
 from fence_sorter_msgs.msg import FenceCommand, FenceState, LoadState, Parcel, SortOutcome
@@ -653,9 +653,7 @@ def main(args: Sequence[str] | None = None) -> int:
     try:
         node = SimulatorNode()
         node.start()
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        executor.spin()
+        spin_node(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except ParameterException as exc:
