@@ -221,7 +221,14 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None]) -> RunResult:
                     plan,
                     opts,
                     [scene, f"real_time_factor:={opts.rtf}"]
-                    + ([f"rrd_path:={Path(opts.rrd).resolve()}"] if opts.rrd else []),
+                    + (
+                        [
+                            f"rrd_path:={Path(opts.rrd).resolve()}",
+                            f"rrd_scan_line_x:={SCAN_LINE_X}",
+                        ]
+                        if opts.rrd
+                        else []
+                    ),
                 ),
             ),
         )
