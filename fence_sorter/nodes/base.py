@@ -149,10 +149,14 @@ class FenceSorterNode(Node):
             ],
         )
 
+    def heartbeat_stamp(self):
+        """Stamp of the heartbeat: the node's clock (sim time with use_sim_time)."""
+        return self.get_clock().now().to_msg()
+
     def publish_heartbeat(self) -> None:
         """Publish one DiagnosticArray with this node's status on /diagnostics."""
         msg = DiagnosticArray()
-        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.stamp = self.heartbeat_stamp()
         msg.status = [self.heartbeat_status()]
         self._diagnostics_pub.publish(msg)
 

@@ -528,6 +528,13 @@ class SimulatorNode(FenceSorterNode):
             self.rerun.offer(snap)  # packed and piped, never blocks (paced runs)
 
     # -- diagnostics -----------------------------------------------------------------------------
+    def heartbeat_stamp(self):
+        """Sim time, as every other stamp of this node and the /diagnostics of the nodes that
+        follow its /clock (one time base on the topic: bag tools order it by this stamp)."""
+        with self._lock:
+            t = self.sim_time
+        return convert.fill_clock(Clock(), t).clock
+
     def heartbeat_status(self) -> DiagnosticStatus:
         status = super().heartbeat_status()
         now = time.perf_counter()
