@@ -22,5 +22,6 @@ def domain_id() -> int:
 
 @pytest.fixture
 def env(domain_id: int, tmp_path: Path) -> dict[str, str]:
-    """Environment for child processes: this run's domain, localhost discovery, own logs."""
-    return ros_env(domain_id, tmp_path / "ros_log")
+    """Environment for child processes: this run's domain, localhost discovery, own logs, and
+    an own ROS_HOME (a recorder with no output_dir writes its bag there, not to ~/.ros)."""
+    return ros_env(domain_id, tmp_path / "ros_log", {"ROS_HOME": str(tmp_path / "ros_home")})
