@@ -20,19 +20,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from fence_sorter.codes import OutcomeCode, Stage, code_name
 from fence_sorter.recording.bagread import BagContents
 
 NAN = math.nan
-OUTCOME_NAMES = {
-    0: "SORTED",
-    1: "NOT_DIVERTED",
-    2: "NO_FEASIBLE_COMMAND",
-    3: "NO_COMMAND",
-    4: "MISSED",
-    5: "REJECTED",
-    6: "SOLVER_FAILURE",
-}
-STAGE_SORTED = 5
 #: LoadState stages while the fence works on the parcel (E1 .. E4)
 WORKED_STAGES = (1, 2, 3, 4)
 DEFAULT_BELT_WIDTH = 0.7  # [m] impact_flexible, used only when the bag has no /markers
@@ -126,7 +117,7 @@ def load_run(bag: BagContents) -> RecordedRun:
         d = _fields(m.msg, OUTCOME_FIELDS)
         d["t"] = stamp_s(m.msg.header.stamp)
         d["sorted"] = bool(d["sorted"])
-        d["reason_name"] = OUTCOME_NAMES.get(int(d["reason_code"]), f"CODE_{d['reason_code']}")
+        d["reason_name"] = code_name(OutcomeCode, d["reason_code"])
         outcomes[int(d["parcel_id"])] = d
 
     rows: dict[int, list] = {}
@@ -241,7 +232,7 @@ def sampled_figures(run: RecordedRun, pid: int) -> dict:
             a = np.hypot(np.diff(s.vx)[ok], np.diff(s.vy)[ok]) / dt[ok]
             out["peak_accel"] = float(np.max(a)) if a.size else NAN
     cross = crossing(s, run.belt_width, run.publish_period)
-    sorted_ = bool(np.any(s.stage == STAGE_SORTED)) or cross is not None
+    sorted_ = bool(np.any(s.stage == Stage.SORTED)) or cross is not None
     out["sorted"] = sorted_
     if cross is not None:
         out["exit_speed_y"] = cross[1]

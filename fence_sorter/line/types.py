@@ -10,42 +10,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from enum import IntEnum
 
 import numpy as np
 
+from fence_sorter.codes import OutcomeCode, Stage, StartMode
+
 NAN = math.nan
-
-
-class OutcomeCode(IntEnum):
-    """SortOutcome.reason_code values."""
-
-    SORTED = 0
-    NOT_DIVERTED = 1
-    NO_FEASIBLE_COMMAND = 2
-    NO_COMMAND = 3
-    MISSED = 4
-    REJECTED = 5
-    SOLVER_FAILURE = 6
-
-
-class Stage(IntEnum):
-    """LoadState.stage values."""
-
-    ON_BELT = 0
-    E1 = 1
-    E2 = 2
-    E3 = 3
-    E4 = 4
-    SORTED = 5
-    PASSED = 6
-
-
-class StartMode(IntEnum):
-    """FenceCommand.start_mode values."""
-
-    AT_RS = 0  # start the working motion when the parcel front reaches r_s
-    AT_TIME = 1  # start the working motion at start_time
 
 
 @dataclass(frozen=True)

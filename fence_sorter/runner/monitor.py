@@ -7,15 +7,7 @@ import os
 import time
 from dataclasses import dataclass, field
 
-REASON_NAMES = {
-    0: "SORTED",
-    1: "NOT_DIVERTED",
-    2: "NO_FEASIBLE_COMMAND",
-    3: "NO_COMMAND",
-    4: "MISSED",
-    5: "REJECTED",
-    6: "SOLVER_FAILURE",
-}
+from fence_sorter.codes import OutcomeCode, code_name
 
 
 def stamp_sec(stamp) -> float:
@@ -123,7 +115,7 @@ class Monitor:
                 "sorted": bool(msg.sorted),
                 "reason": msg.reason,
                 "reason_code": int(msg.reason_code),
-                "reason_name": REASON_NAMES.get(int(msg.reason_code), str(msg.reason_code)),
+                "reason_name": code_name(OutcomeCode, msg.reason_code),
                 "time": stamp_sec(msg.header.stamp),
                 "peak_normal_force": msg.peak_normal_force,
                 "peak_normal_force_stiff": msg.peak_normal_force_stiff,

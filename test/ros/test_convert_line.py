@@ -60,3 +60,22 @@ def test_state_messages_from_a_snapshot():
     fence = next(m for m in markers if m.ns == "fence")
     assert len(fence.points) == 11 and fence.points[-1].y == pytest.approx(snap.fence.node_y[-1])
     assert [m.text for m in markers if m.ns == "parcel_ids"] == ["1"]
+
+
+def test_code_enums_match_the_generated_message_constants():
+    """fence_sorter.codes is the one Python copy of the messages' integer codes."""
+    from fence_sorter.codes import OutcomeCode, Stage, StartMode, code_name
+    from fence_sorter_msgs.msg import FenceCommand, LoadState, SortOutcome
+
+    for code in OutcomeCode:
+        assert getattr(SortOutcome, code.name) == code
+    for stage in Stage:
+        assert getattr(LoadState, f"STAGE_{stage.name}") == stage
+    for mode in StartMode:
+        assert getattr(FenceCommand, f"START_{mode.name}") == mode
+    # every constant of the messages has its enum member
+    n_out = [
+        k for k in dir(SortOutcome) if k.isupper() and isinstance(getattr(SortOutcome, k), int)
+    ]
+    assert len(n_out) == len(OutcomeCode)
+    assert code_name(OutcomeCode, 0) == "SORTED" and code_name(OutcomeCode, 99) == "CODE_99"

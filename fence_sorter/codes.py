@@ -1,0 +1,48 @@
+"""The integer codes of the sorter's messages as enums (fence_sorter_msgs: SortOutcome,
+LoadState, FenceCommand), in one light module: the line, the node layer, the run's monitor and
+the bag analysis all name codes from here (test/ros/test_convert_line.py checks them against
+the generated message constants)."""
+
+from __future__ import annotations
+
+from enum import IntEnum
+
+
+class OutcomeCode(IntEnum):
+    """SortOutcome.reason_code values."""
+
+    SORTED = 0
+    NOT_DIVERTED = 1
+    NO_FEASIBLE_COMMAND = 2
+    NO_COMMAND = 3
+    MISSED = 4
+    REJECTED = 5
+    SOLVER_FAILURE = 6
+
+
+class Stage(IntEnum):
+    """LoadState.stage values."""
+
+    ON_BELT = 0
+    E1 = 1
+    E2 = 2
+    E3 = 3
+    E4 = 4
+    SORTED = 5
+    PASSED = 6
+
+
+class StartMode(IntEnum):
+    """FenceCommand.start_mode values."""
+
+    AT_RS = 0  # start the working motion when the parcel front reaches r_s
+    AT_TIME = 1  # start the working motion at start_time
+
+
+def code_name(enum: type[IntEnum], value: int) -> str:
+    """Name of ``value`` in ``enum``; ``CODE_<n>`` for a value the enum does not know (a bag or
+    peer from another version)."""
+    try:
+        return enum(int(value)).name
+    except ValueError:
+        return f"CODE_{int(value)}"
