@@ -36,6 +36,7 @@ from .contacts import (
 
 COMPILED_METHODS = ("adaptive", "trapezoidal")
 STAGE_NAMES = (STAGE_ON_BELT, STAGE_E1, STAGE_E2, STAGE_E3, STAGE_E4, STAGE_SORTED)
+_STAGE_ARRAY = np.array(STAGE_NAMES)
 CHUNK = 512  # step attempts between two wall-time checks (~5-50 ms of solving)
 
 
@@ -280,7 +281,10 @@ class CompiledSolve:
             out["deformation"] = rec[:, K.REC_MAX_D].copy()
         if "stages" in want:
             out["t_stage"] = rec[:, K.REC_T].copy()
-            out["stage"] = np.asarray([STAGE_NAMES[int(c)] for c in rec[:, K.REC_STAGE]])
+            codes = rec[:, K.REC_STAGE].astype(np.intp)
+            # the dtype np.asarray gives the Python loop's list of names: the longest present
+            width = max((len(STAGE_NAMES[c]) for c in np.unique(codes)), default=1)
+            out["stage"] = _STAGE_ARRAY[codes].astype(f"<U{width}")
         return out
 
 

@@ -203,10 +203,14 @@ def _element(P, s):
 @njit(cache=True)
 def surface(P, s, alpha, rate, w, wdot, nodes):
     """(U_x, U_y, t_x, t_y, v_x, v_y): fence point at arc s, unit tangent, material velocity."""
+    return _surface(P, s, alpha, math.cos(alpha), math.sin(alpha), rate, w, wdot, nodes)
+
+
+@njit(cache=True)
+def _surface(P, s, alpha, ca, sa, rate, w, wdot, nodes):
+    """``surface`` with cos and sin of the fence angle alpha given (``evaluate`` has them)."""
     if P[P_FLEX] == 0.0:
-        c = math.cos(alpha)
-        si = math.sin(alpha)
-        return s * c, s * si, c, si, -rate * s * si, rate * s * c
+        return s * ca, s * sa, ca, sa, -rate * s * sa, rate * s * ca
     i, d = _element(P, s)
     inv_dl = 1.0 / P[P_DL]
     if i > 0:
@@ -219,8 +223,8 @@ def surface(P, s, alpha, rate, w, wdot, nodes):
     ux = nodes[i, 0] + d * math.cos(ang_n)
     uy = nodes[i, 1] + d * math.sin(ang_n)
     ang = alpha + th_s
-    vx = -rate * uy - wd_s * math.sin(alpha)
-    vy = rate * ux + wd_s * math.cos(alpha)
+    vx = -rate * uy - wd_s * sa
+    vy = rate * ux + wd_s * ca
     return ux, uy, math.cos(ang), math.sin(ang), vx, vy
 
 
@@ -506,31 +510,29 @@ def evaluate(
     sa = math.sin(alpha)
     reach = res[R_MAX_W] + P[P_MARGIN]
     lam_x, lam_y = lam[0], lam[1]
-    cxs = np.empty(4)
-    cys = np.empty(4)
-    for k in range(4):
-        cxs[k] = x + c * corners[k, 0] - s * corners[k, 1]
-        cys[k] = yy + s * corners[k, 0] + c * corners[k, 1]
+    # corner k of the load: (x + c a_k - s b_k, y + s a_k + c b_k), recomputed where used (the
+    # same arithmetic; no array allocated per evaluation)
     tip_x = tip_y = ttx = tty = vtx = vty = 0.0
     if use_tip:
-        tip_x, tip_y, ttx, tty, vtx, vty = surface(P, length, alpha, rate, w, wdot, nodes)
+        tip_x, tip_y, ttx, tty, vtx, vty = _surface(P, length, alpha, ca, sa, rate, w, wdot, nodes)
     ntx, nty = -tty, ttx
     for k in range(4):
-        px, py = cxs[k], cys[k]
+        px = x + c * corners[k, 0] - s * corners[k, 1]
+        py = yy + s * corners[k, 0] + c * corners[k, 1]
         if -px * sa + py * ca > reach:
             continue
         r = math.hypot(px, py)
         # arc position: the corner projected on the fence near radius r (beyond the tip: on
         # the tip's tangent, so s is continuous where a corner slides off the tip, which the
         # slide-off event R_z - s needs)
-        ux, uy, tx, ty, _, _ = surface(P, min(r, length), alpha, rate, w, wdot, nodes)
+        ux, uy, tx, ty, _, _ = _surface(P, min(r, length), alpha, ca, sa, rate, w, wdot, nodes)
         s_arc = min(r, length) + (px - ux) * tx + (py - uy) * ty
         if s_arc > length:
             out[k, C_S] = s_arc  # beyond the tip: the slide-off event function is R_z - s
             continue
         if s_arc < 0.0:
             continue
-        ux, uy, tx, ty, vux, vuy = surface(P, s_arc, alpha, rate, w, wdot, nodes)
+        ux, uy, tx, ty, vux, vuy = _surface(P, s_arc, alpha, ca, sa, rate, w, wdot, nodes)
         nx, ny = -ty, tx
         d = (ux - px) * nx + (uy - py) * ny
         vpx = vx - om * (py - yy)
@@ -587,7 +589,9 @@ def evaluate(
         for k in range(4):
             nbx, nby = normals[k, 0], normals[k, 1]
             mx, my = c * nbx - s * nby, s * nbx + c * nby
-            inside = (cxs[k] - tip_x) * mx + (cys[k] - tip_y) * my
+            px = x + c * corners[k, 0] - s * corners[k, 1]
+            py = yy + s * corners[k, 0] + c * corners[k, 1]
+            inside = (px - tip_x) * mx + (py - tip_y) * my
             if inside <= 0.0:
                 exit_face = -1
                 break
@@ -635,7 +639,8 @@ def evaluate(
             )
     if P[P_USE_BORDER] != 0.0:
         for k in range(4):
-            px, py = cxs[k], cys[k]
+            px = x + c * corners[k, 0] - s * corners[k, 1]
+            py = yy + s * corners[k, 0] + c * corners[k, 1]
             if py >= 0.0:
                 continue
             vpx = vx - om * (py - yy)
@@ -747,7 +752,21 @@ def trapezoidal_step(
     y1[1] = y0[1] + hh * (y0[4] + vn1)
     y1[2] = y0[2] + hh * (y0[5] + vn2)
     y1[3], y1[4], y1[5] = vn0, vn1, vn2
-    base = np.empty((m, 2))
+    n = 6 + 2 * m
+    # one workspace instead of eight arrays per step: the modal base (2 m), then the Anderson
+    # history df, dg (2 n each, zeroed: 0 * dg enters the update before it is filled) and the
+    # vectors wts, g_new, f_prev, g_prev, f_cur (n each)
+    work = np.empty(2 * m + 9 * n)
+    base = work[: 2 * m].reshape((m, 2))
+    df = work[2 * m : 2 * m + 2 * n].reshape((2, n))
+    dg = work[2 * m + 2 * n : 2 * m + 4 * n].reshape((2, n))
+    df[:, :] = 0.0
+    dg[:, :] = 0.0
+    wts = work[2 * m + 4 * n : 2 * m + 5 * n]
+    g_new = work[2 * m + 5 * n : 2 * m + 6 * n]
+    f_prev = work[2 * m + 6 * n : 2 * m + 7 * n]
+    g_prev = work[2 * m + 7 * n : 2 * m + 8 * n]
+    f_cur = work[2 * m + 8 * n : 2 * m + 9 * n]
     phi_scale = 0.0
     for j in range(m):
         fm = modal0[j] - rigid_modal[j] * jump
@@ -771,21 +790,14 @@ def trapezoidal_step(
     # Anderson acceleration (depth 2) of the fixed point x = G(x) on (q, v, eta, etadot): the
     # contact couples the load to the fence's modal deflection so tightly that the plain
     # iteration contracts slowly (often > 10 iterations per step on a flexible fence)
-    n = 6 + 2 * m
-    wts = np.empty(n)
     for k in range(3):
         wts[k] = 1.0
         wts[3 + k] = h
     for j in range(m):
         wts[6 + j] = phi_scale
         wts[6 + m + j] = h * phi_scale
-    g_new = np.empty(n)
-    # depth-2 history: columns 0 (latest) and 1 of the differences of f and G between iterates
-    df = np.zeros((2, n))
-    dg = np.zeros((2, n))
-    f_prev = np.empty(n)
-    g_prev = np.empty(n)
-    f_cur = np.empty(n)
+    # depth-2 history: rows 0 (latest) and 1 of df, dg: the differences of f and G between
+    # iterates
     depth = 0
     accelerate = True
     fn_old = 0.0
