@@ -84,7 +84,9 @@ def _propagator_cache(model):
 class CompiledSolve:
     """The arrays of one compiled solve and its chunked driver."""
 
-    def __init__(self, model):
+    def __init__(self, model, trace: int = 0):
+        """``trace`` > 0: keep every observed point, ``trace`` at a time, for a Python observer
+        (:meth:`run_ahead`, :meth:`load`)."""
         self.model = model
         sc = model.sc
         sv = sc.solver
@@ -157,6 +159,7 @@ class CompiledSolve:
         # a row per accepted point when anything is recorded (one row otherwise: none is written)
         rows = int(1.5 * t_end / h_nom) + 64 if sc.record else 1
         self.REC = np.zeros((min(rows, 1 << 16), K.N_REC_COLS))
+        self.TR = np.zeros((trace, K.trace_width(n, m)))
         self.busy = 0.0
         self.diagnosis: str | None = None
 
@@ -177,30 +180,70 @@ class CompiledSolve:
                 bigger[:used] = arr[:used]
                 setattr(self, name, bigger)
 
+    def _call(self, t_target: float) -> int:
+        """One call of ``kernel.solve`` (at most CHUNK step attempts); grows a full buffer."""
+        md = self.model
+        status = K.solve(
+            md.P, md.corners, md.normals, md.phi, md.rigid_modal, md.omega, md.zeta, self.cfg,
+            self.breaks, self.ctl, self.fc, self.T, self.Y, self.LAM, self.OUT, self.RES,
+            self.MODAL, self.ACC, self.w, self.wdot, self.nodes, self.prev, self.PK, self.PA,
+            self.PG0, self.PG1, self.IMP, self.STG, self.REC, self.TR, CHUNK, float(t_target),
+        )  # fmt: skip
+        self._n_props[0] = self.ctl[K.I_N_PROPS]
+        if status == K.SOLVE_GROW:
+            self._grow()
+        return status
+
     def advance(self, t_target: float = math.inf) -> bool:
         """Solve until the accepted time reaches ``t_target`` (or the end); False once the
         solve has ended. ``solver.max_wall_time`` bounds the time spent in here, summed over
         calls (as ``Integrator.advance``)."""
-        md = self.model
-        limit = md.sc.solver.max_wall_time
+        limit = self.model.sc.solver.max_wall_time
         while not self.done:
             t0 = time.perf_counter()
-            status = K.solve(
-                md.P, md.corners, md.normals, md.phi, md.rigid_modal, md.omega, md.zeta,
-                self.cfg, self.breaks, self.ctl, self.fc, self.T, self.Y, self.LAM, self.OUT,
-                self.RES, self.MODAL, self.ACC, self.w, self.wdot, self.nodes, self.prev,
-                self.PK, self.PA, self.PG0, self.PG1, self.IMP, self.STG, self.REC, CHUNK,
-                float(t_target),
-            )  # fmt: skip
-            self._n_props[0] = self.ctl[K.I_N_PROPS]
+            status = self._call(t_target)
             self.busy += time.perf_counter() - t0
-            if status == K.SOLVE_GROW:
-                self._grow()
-            elif status == K.SOLVE_REACHED:
+            if status == K.SOLVE_REACHED:
                 return True
             if not self.done and self.busy > limit:
                 self.diagnosis = f"wall-time limit {limit:g} s reached at t = {self.t:.4f} s"
         return False
+
+    def run_ahead(self) -> int:
+        """Solve on until the trace is full, the solve has ended or CHUNK attempts were made;
+        the number of traced points (see :meth:`load`). The caller checks the wall time."""
+        while not self.done:
+            if self._call(math.inf) != K.SOLVE_GROW:
+                break
+        return int(self.ctl[K.I_N_TRACE])
+
+    @property
+    def diverged_last(self) -> bool:
+        """The solve ended on a divergence found at its last accepted (and traced) point."""
+        return int(self.ctl[K.I_DIAG]) in (K.DIAG_NONFINITE, K.DIAG_DEEP, K.DIAG_SPEED)
+
+    def load(self, k: int, st) -> bool:
+        """Trace row k into an ``integrators.State``; the on_belt flag it was observed with."""
+        row = self.TR[k]
+        n, m = self.model.n_state, self.model.n_modes
+        st.t = float(row[K.TR_T])
+        i = K.TR_Y
+        st.y[:] = row[i : i + n]
+        i += n
+        st.lam[:] = row[i : i + 3]
+        i += 3
+        size = K.N_SLOTS * K.N_COLS
+        st.out[:] = row[i : i + size].reshape(K.N_SLOTS, K.N_COLS)
+        i += size
+        st.res[:] = row[i : i + K.N_RES]
+        i += K.N_RES
+        st.modal[:] = row[i : i + m]
+        i += m
+        st.acc[:] = row[i : i + 3 + m]
+        return row[K.TR_ON_BELT] != 0.0
+
+    def clear_trace(self) -> None:
+        self.ctl[K.I_N_TRACE] = 0
 
     def outcome(self) -> tuple[float, str | None, int, int]:
         """(t, diagnosis, steps, rejected) as ``Integrator.outcome``."""

@@ -39,9 +39,11 @@ import numpy as np
 
 from . import kernel as K
 from .contacts import STAGE_SORTED, classify
+from .engine import CompiledSolve, uses_compiled
 
 EVENT_TOL = 1e-10  # a located onset's step ends with 0 < D <= EVENT_TOL [m]
 EVENT_SORT = 3  # C_s crossing the sorting line y0 = s (belt friction ends there)
+TRACE = 16  # accepted points the compiled loop runs ahead of a stepping observer
 
 
 class Propagators:
@@ -279,6 +281,8 @@ class Integrator:
         self.cur, self.trial, self.loc = State(n, m), State(n, m), State(n, m)
         self.before = State(n, m)
         self.width = sc.conveyor.width
+        # solver.engine = compiled: kernel.solve takes the steps, this loop only replays them
+        self.compiled = uses_compiled(sc)
         self.forced = 0
         self.events = 0
         self.outcome: tuple[float, str | None, int, int] | None = None
@@ -376,7 +380,52 @@ class Integrator:
 
     def stepping(self, observer):
         """Generator form of :meth:`run`: yields the accepted time after every step, and leaves
-        ``(t, diagnosis, steps, rejected)`` in :attr:`outcome` when the solve ends."""
+        ``(t, diagnosis, steps, rejected)`` in :attr:`outcome` when the solve ends.
+
+        With ``solver.engine = compiled`` the steps are taken by ``kernel.solve`` (the same
+        loop compiled), ``TRACE`` accepted points at a time, and each is handed to ``observer``
+        and yielded in turn (:attr:`cur` is the point handed over): the same points, figures and
+        outcome as the Python loop.
+        """
+        if self.compiled:
+            return self._replay(observer)
+        return self._stepping(observer)
+
+    def _replay(self, observer):
+        """:meth:`stepping` on the compiled loop."""
+        solve = CompiledSolve(self.model, trace=TRACE)
+        limit = self.sv.max_wall_time
+        a = self.cur
+        initial = True  # the initial point is observed, not yielded (as in the Python loop)
+        diagnosis = None
+        busy, resumed = 0.0, time.perf_counter()
+        while True:
+            rows = solve.run_ahead()
+            ctl = solve.ctl
+            self.forced, self.events = int(ctl[K.I_FORCED]), int(ctl[K.I_EVENTS])
+            last_diverged = solve.done and solve.diverged_last
+            for k in range(rows):
+                observer(a, solve.load(k, a))
+                if initial:
+                    initial = False
+                    continue
+                if last_diverged and k == rows - 1:
+                    break  # the diverged point: observed, not yielded (nothing past it is data)
+                busy += time.perf_counter() - resumed
+                yield a.t
+                resumed = time.perf_counter()
+            solve.clear_trace()
+            if solve.done:
+                diagnosis = solve.outcome()[1]
+                break
+            if busy + time.perf_counter() - resumed > limit:
+                diagnosis = f"wall-time limit {limit:g} s reached at t = {a.t:.4f} s"
+                break
+        ctl = solve.ctl
+        self.outcome = (a.t, diagnosis, int(ctl[K.I_STEPS]), int(ctl[K.I_REJECTED]))
+
+    def _stepping(self, observer):
+        """:meth:`stepping` on this (Python) loop."""
         md, sv, sch = self.model, self.sv, self.scheme
         a, b = self.cur, self.trial
         on_belt = True

@@ -1486,7 +1486,8 @@ I_N_IMPACTS = 21
 I_N_STAGES = 22
 I_N_REC = 23
 I_N_PROPS = 24  # entries of the propagator cache in use
-N_CTL = 25
+I_N_TRACE = 25  # rows of the trace in use
+N_CTL = 26
 
 # float control ``fc``
 F_H = 0
@@ -1533,6 +1534,7 @@ SOLVE_DONE = 0
 SOLVE_PAUSED = 1  # attempt budget used up (the caller checks the wall-time limit)
 SOLVE_GROW = 2  # an output buffer is full
 SOLVE_REACHED = 3  # the accepted time reached t_target
+SOLVE_TRACED = 4  # the trace is full (the caller replays and empties it)
 
 # stages (contacts.STAGE_*, in this order) and the recorded row
 STAGE_CODE_ON_BELT = 0
@@ -1550,6 +1552,16 @@ REC_MAX_D = 10
 REC_STAGE = 11
 N_REC_COLS = 12
 N_PROP_CACHE = 256
+# a trace row: an accepted point as the Python observer sees it (``integrators.State``) and the
+# on_belt flag it was observed with: [t, on_belt, y, lam, out (row-major), res, modal, acc]
+TR_T = 0
+TR_ON_BELT = 1
+TR_Y = 2
+
+
+def trace_width(n_state, m):
+    """Columns of a trace row for a model with n_state states and m modes."""
+    return 2 + n_state + 3 + N_SLOTS * N_COLS + N_RES + m + 3 + m
 
 
 @njit(cache=True)
@@ -1871,6 +1883,37 @@ def _observe(P, normals, cfg, ctl, fc, T, Y, LAM, OUT, RES, IMP, STG, REC, i, on
 
 
 @njit(cache=True)
+def _trace(ctl, TR, T, Y, LAM, OUT, RES, MODAL, ACC, i, on_belt):
+    """Append state row i and the on_belt flag it is observed with to the trace (if kept)."""
+    if TR.shape[0] == 0:
+        return
+    row = TR[ctl[I_N_TRACE]]
+    ctl[I_N_TRACE] += 1
+    row[TR_T] = T[i]
+    row[TR_ON_BELT] = 1.0 if on_belt else 0.0
+    k = TR_Y
+    for v in Y[i]:
+        row[k] = v
+        k += 1
+    for v in LAM[i]:
+        row[k] = v
+        k += 1
+    for r in range(N_SLOTS):
+        for c in range(N_COLS):
+            row[k] = OUT[i, r, c]
+            k += 1
+    for v in RES[i]:
+        row[k] = v
+        k += 1
+    for v in MODAL[i]:
+        row[k] = v
+        k += 1
+    for v in ACC[i]:
+        row[k] = v
+        k += 1
+
+
+@njit(cache=True)
 def _diverged(P, cfg, fc, t, y, res):
     """``Integrator._diverged``: a DIAG_* code (value and time left in fc)."""
     total = 0.0
@@ -1892,13 +1935,15 @@ def _diverged(P, cfg, fc, t, y, res):
 @njit(cache=True)
 def solve(
     P, corners, normals, phi, rigid_modal, omega, zeta, cfg, breaks, ctl, fc, T, Y, LAM, OUT, RES,
-    MODAL, ACC, w, wdot, nodes, prev, PK, PA, PG0, PG1, IMP, STG, REC, max_attempts, t_target,
+    MODAL, ACC, w, wdot, nodes, prev, PK, PA, PG0, PG1, IMP, STG, REC, TR, max_attempts,
+    t_target,
 ):  # fmt: skip
     """Run the solve loop (``Integrator.stepping`` with ``Observer``) from where ``ctl``/``fc``
     left it: until it ends (SOLVE_DONE, the diagnosis in ctl[I_DIAG]), ``max_attempts`` step
-    attempts (SOLVE_PAUSED), an output buffer (IMP, STG, REC) without a free row (SOLVE_GROW) or
-    the accepted time reaching ``t_target`` (SOLVE_REACHED). Row 0 of Y holds the initial state
-    on the first call."""
+    attempts (SOLVE_PAUSED), an output buffer (IMP, STG, REC) without a free row (SOLVE_GROW),
+    the accepted time reaching ``t_target`` (SOLVE_REACHED) or a full trace (SOLVE_TRACED: ``TR``
+    with rows keeps every observed point for a Python observer, ``integrators.Integrator``; no
+    rows, no trace). Row 0 of Y holds the initial state on the first call."""
     adaptive = cfg[G_ADAPTIVE] != 0.0
     h_nom = cfg[G_H_NOM]
     min_dt = cfg[G_MIN_DT]
@@ -1928,6 +1973,7 @@ def solve(
             ACC[a, 3 + j] = (
                 MODAL[a, j] - omega[j] ** 2 * y[6 + j] - 2.0 * zeta[j] * omega[j] * y[6 + m + j]
             )
+        _trace(ctl, TR, T, Y, LAM, OUT, RES, MODAL, ACC, a, True)
         stop, on_belt = _observe(
             P, normals, cfg, ctl, fc, T, Y, LAM, OUT, RES, IMP, STG, REC, a, True
         )
@@ -1953,6 +1999,8 @@ def solve(
             or ctl[I_N_REC] >= REC.shape[0]
         ):
             return SOLVE_GROW
+        if TR.shape[0] > 0 and ctl[I_N_TRACE] >= TR.shape[0]:
+            return SOLVE_TRACED
         attempts += 1
         on_belt = ctl[I_ON_BELT] != 0
         nb = ctl[I_NEXT_BREAK]
@@ -2028,6 +2076,7 @@ def solve(
         ctl[I_TRIAL] = a
         a = b
         ctl[I_STEPS] += 1
+        _trace(ctl, TR, T, Y, LAM, OUT, RES, MODAL, ACC, a, on_belt)
         stop, on_belt = _observe(
             P, normals, cfg, ctl, fc, T, Y, LAM, OUT, RES, IMP, STG, REC, a, on_belt
         )

@@ -3,9 +3,10 @@
 :class:`SortingModel` packs the parts a scenario needs into the compiled kernel's arrays (no FEM
 for a stiff fence, no border contact for a load that cannot reach it, only the modes kept by
 ``fence.modes``, no time series nobody asked for). :func:`simulate` integrates it with
-``solver.method``: our schemes (``integrators``: adaptive, trapezoidal, generalized_alpha) or a
-SciPy ``solve_ivp`` baseline on the same right-hand side (``baselines``: scipy:RK45, ...), and
-reduces the run to a :class:`SimulationResult`: peaks, impact speed, N_stiff, stages, an energy
+``solver.method``: our schemes (``integrators``: adaptive, trapezoidal, generalized_alpha; the
+first two by default in one compiled loop, ``engine``, ``solver.engine = python`` for the Python
+one) or a SciPy ``solve_ivp`` baseline on the same right-hand side (``baselines``: scipy:RK45,
+...), and reduces the run to a :class:`SimulationResult`: peaks, impact speed, N_stiff, stages, an energy
 audit (the load's energy never rises above the work its power sources did on it).
 """
 
