@@ -160,6 +160,13 @@ class CompiledSolve:
         rows = int(1.5 * t_end / h_nom) + 64 if sc.record else 1
         self.REC = np.zeros((min(rows, 1 << 16), K.N_REC_COLS))
         self.TR = np.zeros((trace, K.trace_width(n, m)))
+        # the modal basis of a flexible fence is read-only (cached per fence): writable copies
+        # keep one signature of kernel.solve for stiff and flexible models (one compiled
+        # specialisation to load from Numba's cache per process, ~0.3 s, instead of two)
+        self.modes = tuple(
+            a if a.flags.writeable else a.copy()
+            for a in (model.phi, model.rigid_modal, model.omega, model.zeta)
+        )
         self.busy = 0.0
         self.diagnosis: str | None = None
 
@@ -184,7 +191,7 @@ class CompiledSolve:
         """One call of ``kernel.solve`` (at most CHUNK step attempts); grows a full buffer."""
         md = self.model
         status = K.solve(
-            md.P, md.corners, md.normals, md.phi, md.rigid_modal, md.omega, md.zeta, self.cfg,
+            md.P, md.corners, md.normals, *self.modes, self.cfg,
             self.breaks, self.ctl, self.fc, self.T, self.Y, self.LAM, self.OUT, self.RES,
             self.MODAL, self.ACC, self.w, self.wdot, self.nodes, self.prev, self.PK, self.PA,
             self.PG0, self.PG1, self.IMP, self.STG, self.REC, self.TR, CHUNK, float(t_target),
