@@ -46,6 +46,23 @@ def _fix(text: str) -> tuple[str, float]:
         ) from None
 
 
+def _steps(text: str) -> dict[str, float]:
+    out = {}
+    for item in text.split(","):
+        name, _, value = item.partition("=")
+        try:
+            step = float(value)
+        except ValueError:
+            step = math.nan
+        if name.strip() not in ("R_s", "v", "t1", "R_z") or not (0.0 < step <= 10.0):
+            raise argparse.ArgumentTypeError(
+                f"--grid-steps must be NAME=STEP,... with NAME one of R_s, v, t1, R_z and STEP "
+                f"in (0, 10], got {item!r}"
+            )
+        out[name.strip()] = step
+    return out
+
+
 def register(subparsers) -> None:
     from fence_sorter.optimize.problem import OptimizeSpec
 
@@ -112,6 +129,19 @@ def register(subparsers) -> None:
         "--scheduler", default=None, metavar="ADDRESS", help="Dask scheduler, e.g. tcp://h:8786"
     )
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument(
+        "--grid",
+        action="store_true",
+        help="instead of the optimiser, the exact best point of a regular grid (the yardstick "
+        "of docs/optimize.md)",
+    )
+    p.add_argument(
+        "--grid-steps",
+        type=_steps,
+        default=None,
+        metavar="NAME=STEP,...",
+        help="grid steps (default R_s=0.05,v=0.1,t1=0.05,R_z=0.025)",
+    )
     # sweeps of Figs. 3-10 (fence_sorter.optimize.sweep)
     p.add_argument("--sweep", default=None, metavar="NAME", help="a figure sweep, e.g. fig6")
     p.add_argument("--out", default="docs/paper", help="sweep output directory (%(default)s)")
@@ -216,13 +246,15 @@ def run(args: argparse.Namespace) -> int:
 
         return int(sweep.main(args) or 0)
     from fence_sorter.optimize.executor import make_executor
-    from fence_sorter.optimize.solve import optimize
+    from fence_sorter.optimize.solve import grid_search, optimize
 
     try:
         spec = spec_from_args(args)
         if args.workers is not None and not 1 <= args.workers <= 1024:
             raise ParameterError(f"--workers must be in [1, 1024], got {args.workers}")
         with make_executor(args.scheduler, args.workers) as executor:
+            if args.grid:
+                return _print_grid(grid_search(spec, args.grid_steps, executor), spec, args)
             result = optimize(spec, executor)
     except ParameterError as exc:
         return error(str(exc))
@@ -231,4 +263,39 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(d))
     else:
         print(summary(d))
+    return EXIT_OK
+
+
+def _print_grid(g: dict, spec, args) -> int:
+    from fence_sorter.jsonsafe import json_safe
+
+    best = g["best"]
+    d = {
+        "feasible": best is not None,
+        "X": best["X"] if best else {},
+        "W_t": best["W_t"] if best else math.nan,
+        "Delta_c": best["Delta_c"] if best else math.nan,
+        "margins": {c: best["margins"].get(c, math.nan) for c in spec.constraints} if best else {},
+        "grid_points": g["grid_points"],
+        "steps": g["steps"],
+        "evaluations": g["evaluations"],
+        "wall_time": g["wall_time"],
+        "spec": spec.to_dict(),
+    }
+    if args.json:
+        print(json.dumps(json_safe(d)))
+        return EXIT_OK
+    steps = ", ".join(f"{n} {s:g}" for n, s in g["steps"].items())
+    print(
+        f"grid of {g['grid_points']} points (steps {steps}), {g['evaluations']} simulated, "
+        f"{g['wall_time']:.1f} s"
+    )
+    if best is None:
+        print("no feasible grid point")
+    else:
+        x = best["X"]
+        print(
+            f"best W_t = {best['W_t']:.0f} pcs/h at R_s = {x['R_s']:.3f} m, v = {x['v']:.3f} m/s, "
+            f"t1 = {x['t1']:.3f} s, R_z = {x['R_z']:.3f} m"
+        )
     return EXIT_OK

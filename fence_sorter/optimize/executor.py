@@ -25,7 +25,9 @@ def make_executor(
     if workers is not None and (isinstance(workers, bool) or not 1 <= int(workers) <= 1024):
         raise ParameterError(f"workers must be in [1, 1024], got {workers!r}")
     if scheduler is None:
-        # fork: the workers inherit the imported, JIT-loaded physics (spawn would re-import)
+        # fork: the workers inherit the imported, JIT-compiled physics (spawn would re-import
+        # and each worker would compile the kernel anew when Numba's cache is stale)
+        _warm_up()
         ctx = multiprocessing.get_context("fork")
         pool = concurrent.futures.ProcessPoolExecutor(workers or os.cpu_count() or 1, ctx)
         try:
@@ -50,3 +52,14 @@ def make_executor(
         yield client.get_executor()
     finally:
         client.close()
+
+
+def _warm_up() -> None:
+    """Compile (or load) the kernel and read the scenes in this process before forking."""
+    import math
+
+    from fence_sorter.optimize.problem import OptimizeSpec
+    from fence_sorter.optimize.solve import evaluate_point
+
+    spec = OptimizeSpec(case="positioned", alpha_k=math.radians(40.0), constraints=(8,))
+    evaluate_point(spec, {"R_s": 0.7, "v": 2.0, "t1": 0.5, "R_z": 1.2})

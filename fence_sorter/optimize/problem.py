@@ -70,7 +70,7 @@ class OptimizeSpec:
     bounds: tuple[tuple[str, float, float], ...] = ()  # overrides of ranges (3)-(6)
     fence: str = "stiff"  # "stiff" | "flexible"
     seed: int = 0
-    budget: int = 2000  # max twin evaluations (points X simulated)
+    budget: int = 4000  # max twin evaluations (points X simulated)
     gap: float = 0.0  # Delta of (2): least distance between loads [m]
 
     # -- validation ------------------------------------------------------------------------

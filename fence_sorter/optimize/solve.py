@@ -144,13 +144,15 @@ class OptimumResult:
     X: dict[str, float]  # R_s [m], v [m/s], t1 [s], R_z [m]
     W_t: float  # (1) [pcs/h]
     Delta_c: float  # (2) [m]
-    active: list[int]  # constraints with margin within ACTIVE_TOL of 0
+    active: list[int]  # margin within ACTIVE_TOL of 0, or violated by a W_t-raising step
     margins: dict[int, float]
     infeasible: str | None
     evaluations: int  # twin evaluations (points simulated)
     wall_time: float  # [s]
     spec: dict
     at_bounds: dict[str, str] = field(default_factory=dict)  # variable -> "low" | "high"
+    # constraints violated a small step away in each direction that raises W_t ("R_s-": [8])
+    blocking: dict[str, list[int]] = field(default_factory=dict)
     points: int = 0  # points scored (twin evaluations + closed-form rejections by (7))
     history: list[dict] = field(default_factory=list)  # best W_t per generation
 
@@ -164,6 +166,7 @@ class OptimumResult:
                 "active": list(self.active),
                 "margins": {int(k): v for k, v in sorted(self.margins.items())},
                 "at_bounds": dict(self.at_bounds),
+                "blocking": dict(self.blocking),
                 "infeasible": self.infeasible,
                 "evaluations": self.evaluations,
                 "points": self.points,
@@ -344,38 +347,57 @@ def _pow2(n: int) -> bool:
 
 
 def _refine(spec, ev: _Evaluator, ranges, free, full) -> None:
-    """Compass search from the best feasible point: poll, in parallel, each single-variable
-    step that raises W_t (1) (alone and combined with a step of R_z, which W_t ignores but the
-    constraints do not); move to the best feasible poll point, else halve the steps."""
+    """Compass search from the best feasible point: poll, in parallel, every move of the
+    3^k - 1 pattern {-1, 0, 1}^k x step (k free variables; R_z included: W_t ignores it, the
+    constraints do not) that raises W_t (1); move to the best feasible poll point, else halve
+    the step. Moves of several variables at once follow a constraint boundary that is oblique
+    to the axes."""
     best = ev.best_feasible()
     if best is None:
         return
     step = REFINE_STEP
-    w_vars = [n for n in free if n != "R_z"]
     while step >= REFINE_MIN_STEP and ev.evaluations < spec.budget:
-        x0 = best["X"]
-        polls = []
-        for n in w_vars:
-            lo, hi = ranges[n]
-            for sign in (-1.0, 1.0):
-                X = dict(x0)
-                X[n] = min(hi, max(lo, x0[n] + sign * step * (hi - lo)))
-                if closed_form(spec, X)[0] <= best["W_t"] * (1 + 1e-9):
-                    continue
-                polls.append(X)
-                if "R_z" in free:
-                    lo_z, hi_z = ranges["R_z"]
-                    for sz in (-1.0, 1.0):
-                        Z = dict(X)
-                        Z["R_z"] = min(hi_z, max(lo_z, x0["R_z"] + sz * step * (hi_z - lo_z)))
-                        polls.append(Z)
+        polls = _polls(spec, best, ranges, free, step)
         if not polls:
             break
         res = [r for r in ev.batch(polls) if r["feasible"] and r["W_t"] > best["W_t"]]
         if res:
-            best = max(res, key=lambda r: r["W_t"])
+            best = max(res, key=lambda r: (r["W_t"], ev._slack(r)))
         else:
             step *= 0.5
+
+
+def _polls(spec, best, ranges, free, step) -> list[dict[str, float]]:
+    """The moves around ``best`` by ``step`` (a fraction of each range) that raise W_t (1)."""
+    x0 = best["X"]
+    out = []
+    for signs in itertools.product((-1.0, 0.0, 1.0), repeat=len(free)):
+        if not any(signs):
+            continue
+        X = dict(x0)
+        for n, s in zip(free, signs, strict=True):
+            lo, hi = ranges[n]
+            X[n] = min(hi, max(lo, x0[n] + s * step * (hi - lo)))
+        if X != x0 and closed_form(spec, X)[0] > best["W_t"] * (1.0 + 1e-9):
+            out.append(X)
+    return out
+
+
+def _blocking(spec, ev: _Evaluator, best, ranges, free) -> dict[str, list[int]]:
+    """Constraints violated one finest step (REFINE_MIN_STEP) away from ``best`` in each
+    single-variable direction that raises W_t (1): what stops the capacity from growing.
+    This is how (8) shows up: a sorted load's margin of (8) is 0 by construction."""
+    x0 = best["X"]
+    probes = {}
+    for n in free:
+        lo, hi = ranges[n]
+        for s in (-1.0, 1.0):
+            X = dict(x0)
+            X[n] = min(hi, max(lo, x0[n] + s * REFINE_MIN_STEP * (hi - lo)))
+            if X != x0 and closed_form(spec, X)[0] > best["W_t"] * (1.0 + 1e-9):
+                probes[f"{n}{'+' if s > 0 else '-'}"] = X
+    results = ev.batch(list(probes.values()))
+    return {k: list(r["violated"]) for k, r in zip(probes, results, strict=True)}
 
 
 def _closed_form_infeasible(spec, ranges, fixed) -> str | None:
@@ -406,16 +428,39 @@ def _infeasible_reason(spec: OptimizeSpec, ev: _Evaluator) -> str:
     never = []
     for c in spec.constraints:
         ms = [r["margins"].get(c, math.nan) for r in sims]
-        ok = [m for m in ms if m <= 0.0 or (c == 12 and math.isnan(m))]
-        if not ok:
-            finite = [m for m in ms if math.isfinite(m)]
-            low = f"{min(finite):.3g}" if finite else "n/a"
-            never.append(f"{CONSTRAINT_TEXT[c]} not met (smallest margin {low})")
+        if not any(_met(c, m) for m in ms):
+            never.append(f"{CONSTRAINT_TEXT[c]} not met (smallest margin {_low(ms)})")
     n = len(sims)
     if never:
         return f"infeasible: at {n} simulated points: " + "; ".join(never)
+    # each constraint is met somewhere: name those that fail wherever all the others hold
+    blockers = []
+    for c in spec.constraints:
+        others = [
+            r
+            for r in sims
+            if all(_met(o, r["margins"].get(o, math.nan)) for o in spec.constraints if o != c)
+        ]
+        if others:
+            ms = [r["margins"].get(c, math.nan) for r in others]
+            rest = ", ".join(f"({o})" for o in spec.constraints if o != c)
+            blockers.append(
+                f"{CONSTRAINT_TEXT[c]} not met at any of the {len(others)} points that meet "
+                f"{rest} (smallest margin there {_low(ms)})"
+            )
+    if blockers:
+        return "infeasible: " + "; ".join(blockers)
     cons = ", ".join(f"({c})" for c in spec.constraints)
-    return f"infeasible: each of {cons} is met somewhere, but not together at any of {n} points"
+    return f"infeasible: each of {cons} is met somewhere, but no two together at any of {n} points"
+
+
+def _met(c: int, m: float) -> bool:
+    return m <= 0.0 or (c == 12 and math.isnan(m))
+
+
+def _low(ms) -> str:
+    finite = [m for m in ms if math.isfinite(m)]
+    return f"{min(finite):.3g}" if finite else "n/a"
 
 
 def _result(spec, ev: _Evaluator, best, t0, history, why) -> OptimumResult:
@@ -438,14 +483,18 @@ def _result(spec, ev: _Evaluator, best, t0, history, why) -> OptimumResult:
             infeasible=why or _infeasible_reason(spec, ev),
             **common,
         )
+    ranges = spec.ranges()
+    blocking = _blocking(spec, ev, best, ranges, spec.free_variables())
+    common["evaluations"] = ev.evaluations
+    common["points"] = len(ev.cache)
     margins = {c: best["margins"].get(c, math.nan) for c in spec.constraints}
-    active = []
+    active = sorted({c for cs in blocking.values() for c in cs})
     for c, m in margins.items():
         if c == 8:
             continue  # a sorted load's (8) margin is 0 by construction (the run stops there)
         if math.isfinite(m) and -ACTIVE_TOL * _scale(spec, c) <= m <= 0.0:
             active.append(c)
-    ranges = spec.ranges()
+    active = sorted(set(active))
     at_bounds = {}
     for n in spec.free_variables():
         lo, hi = ranges[n]
@@ -463,26 +512,81 @@ def _result(spec, ev: _Evaluator, best, t0, history, why) -> OptimumResult:
         margins=margins,
         infeasible=None,
         at_bounds=at_bounds,
+        blocking=blocking,
         **common,
     )
 
 
-def grid_search(
-    spec: OptimizeSpec, n: int | dict[str, int], executor=None
-) -> tuple[dict | None, list[dict]]:
-    """Best feasible point on a regular grid of the free variables (n points per variable, or
-    a count per variable); (best or None, every evaluation). The yardstick of the optimiser."""
-    spec.validate()
+#: default grid steps of :func:`grid_search` [m, m/s, s, m]
+GRID_STEPS = {"R_s": 0.05, "v": 0.1, "t1": 0.05, "R_z": 0.025}
+
+
+def grid_axes(spec: OptimizeSpec, steps: dict[str, float] | None = None) -> dict[str, np.ndarray]:
+    """The grid of each free variable: its range in steps of ``steps`` (both ends included)."""
+    steps = {**GRID_STEPS, **(steps or {})}
     ranges = spec.ranges()
+    axes = {}
+    for n in spec.free_variables():
+        lo, hi = ranges[n]
+        k = max(1, round((hi - lo) / steps[n]))
+        axes[n] = np.linspace(lo, hi, k + 1) if hi > lo else np.array([lo])
+    return axes
+
+
+def grid_search(
+    spec: OptimizeSpec,
+    steps: dict[str, float] | None = None,
+    executor: concurrent.futures.Executor | None = None,
+    batch: int = 256,
+) -> dict:
+    """The best feasible point of a regular grid, exactly: W_t (1) is closed-form, so the grid
+    points are visited in descending W_t order (in batches, on ``executor``) and the search
+    stops after the batch holding the first feasible point; every point not simulated has a
+    W_t no higher. Returns {"best": evaluation or None, "grid_points", "evaluations",
+    "points", "wall_time", "steps"}. The yardstick of the optimiser (docs/optimize.md)."""
+    spec.validate()
+    t0 = time.perf_counter()
+    axes = grid_axes(spec, steps)
     fixed = spec.fixed_values()
-    free = spec.free_variables()
-    counts = {v: (n[v] if isinstance(n, dict) else n) for v in free}
-    axes = [np.linspace(*ranges[v], counts[v]) for v in free]
-    points = []
-    for combo in itertools.product(*axes):
-        X = dict(fixed)
-        X.update({v: float(x) for v, x in zip(free, combo, strict=True)})
-        points.append(X)
+    # W_t (1) does not depend on R_z: order the (R_s, v, t1) triples, expand each with every R_z
+    wvars = ("R_s", "v", "t1")
+    grids = [axes[n] if n in axes else np.array([fixed[n]]) for n in wvars]
+    r_s, v, t1 = (m.ravel() for m in np.meshgrid(*grids, indexing="ij"))
+    r_z = axes["R_z"] if "R_z" in axes else np.array([fixed["R_z"]])
+    size = r_s.size * r_z.size
+    a = spec.a_max()
+    vt_z = v * (2.0 * t1 + np.abs(r_s) / v)
+    delta_c = np.where(vt_z > a + spec.gap, vt_z, a + spec.gap)
+    w_t = 3600.0 * v / delta_c
+    keep = np.ones(r_s.size, bool)
+    if 7 in spec.constraints:
+        keep = (a - r_s) / v - t1 <= 0.0
+    order = np.flatnonzero(keep)[np.argsort(-w_t[keep], kind="stable")]
     ev = _Evaluator(spec, executor)
-    results = ev.batch(points)
-    return ev.best_feasible(), results
+    best = None
+    pending: list[dict[str, float]] = []
+
+    def flush() -> dict | None:
+        feas = [r for r in ev.batch(pending) if r["feasible"]]
+        pending.clear()
+        return max(feas, key=lambda r: r["W_t"]) if feas else None
+
+    for j in order:
+        for z in r_z:
+            pending.append(
+                {"R_s": float(r_s[j]), "v": float(v[j]), "t1": float(t1[j]), "R_z": float(z)}
+            )
+        if len(pending) >= batch:
+            best = flush()
+            if best is not None:
+                break
+    if best is None and pending:
+        best = flush()
+    return {
+        "best": best,
+        "grid_points": int(size),
+        "evaluations": ev.evaluations,
+        "points": len(ev.cache),
+        "wall_time": time.perf_counter() - t0,
+        "steps": {n: float(axes[n][1] - axes[n][0]) if len(axes[n]) > 1 else 0.0 for n in axes},
+    }
