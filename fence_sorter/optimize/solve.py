@@ -360,6 +360,9 @@ def _refine(spec, ev: _Evaluator, ranges, free, full) -> None:
         polls = _polls(spec, best, ranges, free, step)
         if not polls:
             break
+        # best W_t first, within what is left of the budget
+        polls.sort(key=lambda X: -closed_form(spec, X)[0])
+        polls = polls[: max(1, spec.budget - ev.evaluations)]
         res = [r for r in ev.batch(polls) if r["feasible"] and r["W_t"] > best["W_t"]]
         if res:
             best = max(res, key=lambda r: (r["W_t"], ev._slack(r)))
