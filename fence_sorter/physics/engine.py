@@ -398,8 +398,8 @@ def compare_engines(scenes=BENCH_SCENES, repeats: int = 7) -> list[dict]:
         rows.append(
             {
                 "scene": name,
-                "sim_time": sim,
-                "steps": results["compiled"].steps,
+                "sim_time": float(sim),
+                "steps": int(results["compiled"].steps),
                 "python_ms": 1e3 * med["python"],
                 "compiled_ms": 1e3 * med["compiled"],
                 "python_rtf": sim / med["python"],
@@ -407,8 +407,9 @@ def compare_engines(scenes=BENCH_SCENES, repeats: int = 7) -> list[dict]:
                 "speedup": med["python"] / med["compiled"],
                 "python_cpu_ms": 1e3 * cpu["python"],
                 "compiled_cpu_ms": 1e3 * cpu["compiled"],
-                "same_peak": results["python"].peak_contact_force
-                == results["compiled"].peak_contact_force,
+                "same_peak": bool(
+                    results["python"].peak_contact_force == results["compiled"].peak_contact_force
+                ),
             }
         )
     return rows

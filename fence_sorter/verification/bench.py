@@ -29,6 +29,8 @@ memory of one event). Per scene:
 - **Compiled kernel**: the same script in two fresh processes, with and without
   ``NUMBA_DISABLE_JIT=1``, on a shortened ``impact_flexible``; and the first call with a cold
   Numba cache (compilation).
+- **Solve loop**: the default ``solver.engine = compiled`` against ``python`` on each scene,
+  interleaved (``physics.engine.compare_engines``).
 
 Functions return plain dataclasses; :func:`render_markdown` turns a :class:`BenchReport` into
 ``docs/benchmarks.md``.
@@ -735,6 +737,8 @@ class BenchReport:
     process_max_rss_kib: int
     total_wall: float
     targets: list[TargetCheck] = field(default_factory=list)
+    # solver.engine python against compiled per scene (physics.engine.compare_engines)
+    engines: list[dict] = field(default_factory=list)
 
 
 def bench_scene(
@@ -1000,6 +1004,10 @@ def run_bench(
     results = []
     for name in scenes:
         results.append(bench_scene(name, repeats, methods, ladder, cap, log))
+    from fence_sorter.physics.engine import compare_engines
+
+    log("solve loop: solver.engine python against compiled")
+    engines = compare_engines(scenes, repeats)
     jit = jit_comparison(
         max(2, repeats if quick else JIT_REPEATS),
         1 if quick else NOJIT_REPEATS,
@@ -1026,6 +1034,7 @@ def run_bench(
         jit=jit,
         process_max_rss_kib=peak_rss_kib(),
         total_wall=time.perf_counter() - t0,
+        engines=engines,
     )
     report.targets = evaluate_targets(results)
     return report
@@ -1568,6 +1577,49 @@ def render_markdown(rep: BenchReport) -> str:
             f"{_ms(j.warm_cache_first_call)} ms (cold compilation not measured in this run)."
         )
     add("")
+
+    if rep.engines:
+        add("## Solve loop: compiled against Python")
+        add("")
+        add(
+            "The default `solver.engine = compiled` runs the whole adaptive loop (step-size "
+            "control, event location, the observer's reductions) in one Numba function "
+            "(`kernel.solve`); `solver.engine = python` runs the same loop in Python "
+            "(`integrators.Integrator`) around the same compiled one-step kernel. Per scene, "
+            f"{rep.options['repeats']} calls of each, interleaved, model build included "
+            "(medians); both give the same answer (test/physics/test_engine.py)."
+        )
+        add("")
+        L += _table(
+            (
+                "scene",
+                "steps",
+                "python wall [ms]",
+                "compiled wall [ms]",
+                "python RTF",
+                "compiled RTF",
+                "speed-up",
+                "python CPU [ms]",
+                "compiled CPU [ms]",
+                "same peak N",
+            ),
+            [
+                (
+                    e["scene"],
+                    str(e["steps"]),
+                    f"{e['python_ms']:.2f}",
+                    f"{e['compiled_ms']:.2f}",
+                    f"{e['python_rtf']:.1f}",
+                    f"{e['compiled_rtf']:.1f}",
+                    f"{e['speedup']:.2f}x",
+                    f"{e['python_cpu_ms']:.2f}",
+                    f"{e['compiled_cpu_ms']:.2f}",
+                    "yes" if e["same_peak"] else "NO",
+                )
+                for e in rep.engines
+            ],
+        )
+        add("")
 
     add("## Discussion")
     add("")
