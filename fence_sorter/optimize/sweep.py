@@ -404,13 +404,31 @@ def _fig6(constraints: str) -> tuple[dict, ...]:
     )
 
 
-def _fig8(constraints: str) -> tuple[dict, ...]:
+def _fig8(constraints: str, fixed: str = "") -> tuple[dict, ...]:
     return tuple(
         point(
-            case="positioned", alpha_k_deg=40.0, a_ndop=an, constraints=constraints, load_length=a
+            case="positioned",
+            alpha_k_deg=40.0,
+            a_ndop=an,
+            constraints=constraints,
+            load_length=a,
+            fixed=fixed,
         )
         for an in A_NDOP_LEVELS
         for a in LENGTHS
+    )
+
+
+#: the extra sweeps' fence: the 1.2 m of section 4.3 (R_z does not enter W_t (1), so with it
+#: free the optimiser may shorten the fence until (12) holds at any stroke speed)
+FIXED_RZ = "R_z=1.2"
+
+
+def _fig7_fixed_rz() -> tuple[dict, ...]:
+    return tuple(
+        point(case="positioned", alpha_k_deg=a, a_ndop=an, constraints=C_POS12, fixed=FIXED_RZ)
+        for an in A_NDOP_LEVELS[1:]
+        for a in ALPHAS_DEG
     )
 
 
@@ -517,11 +535,39 @@ def _defs() -> dict[str, SweepDef]:
             (P_T1, P_WT, P_V),
         ),
     ]
+    defs += [
+        SweepDef(
+            "fig7-fixed-rz",
+            "Fig. 7 (R_z = 1.2 m)",
+            "as Fig. 7 with the fence length held at 1.2 m (section 4.3)",
+            "fig7-fixed-rz",
+            _fig7_fixed_rz(),
+            *alpha,
+            "a_ndop",
+            "a_Ndop [m/s^2]",
+            (P_T1, P_WT, P_ACC, P_RS, P_V, P_EXIT),
+        ),
+        SweepDef(
+            "fig10-fixed-rz",
+            "Fig. 10 (R_z = 1.2 m)",
+            "as Fig. 10 with the fence length held at 1.2 m (section 4.3)",
+            "fig10-fixed-rz",
+            _fig8(C_POS12, FIXED_RZ),
+            "load_length",
+            "load length A [m]",
+            "a_ndop",
+            "a_Ndop [m/s^2]",
+            (P_T1, P_WT, P_V, P_ACC, P_RS, P_EXIT),
+        ),
+    ]
     return {d.name: d for d in defs}
 
 
-#: names accepted by --sweep (decision-table: the controller's starting candidates)
-SWEEPS: tuple[str, ...] = (*(f"fig{i}" for i in range(3, 11)), "decision-table")
+#: the paper's figures (``--sweep all``)
+PAPER_SWEEPS: tuple[str, ...] = tuple(f"fig{i}" for i in range(3, 11))
+#: names accepted by --sweep: the paper's figures, two variants with the fence length fixed,
+#: and the controller's starting candidates
+SWEEPS: tuple[str, ...] = (*PAPER_SWEEPS, "fig7-fixed-rz", "fig10-fixed-rz", "decision-table")
 
 
 def get_sweep(name: str) -> SweepDef:
@@ -702,7 +748,9 @@ def plot_sweep(sweep: SweepDef, rows: Sequence[dict], path: str | Path) -> Path:
             )
             bad = [x for x, r in pts if not r["feasible"]]
             if bad:
-                ax.plot(bad, [0.0] * len(bad), "x", color="grey")
+                ax.plot(bad, [0.0] * len(bad), "x", color="grey", label="_infeasible")
+        if any(not r["feasible"] for r in rows):
+            ax.plot([], [], "x", color="grey", label="no feasible X")
         ax.set_xlabel(sweep.x_label)
         ax.set_ylabel(panel.label)
         ax.set_title(f"{letters[i]})", loc="left", fontsize=10)
@@ -722,7 +770,7 @@ def plot_sweep(sweep: SweepDef, rows: Sequence[dict], path: str | Path) -> Path:
 # -- command line -------------------------------------------------------------------------------
 def parse_names(text: str) -> list[str]:
     """``fig6``, ``fig6,fig7`` or ``all`` -> sweep names (KeyError naming the allowed ones)."""
-    names = list(SWEEPS[:-1]) if text == "all" else [t.strip() for t in text.split(",")]
+    names = list(PAPER_SWEEPS) if text == "all" else [t.strip() for t in text.split(",")]
     for n in names:
         if n not in SWEEPS:
             raise KeyError(f"unknown sweep {n!r}; allowed: {', '.join(SWEEPS)}, all")
