@@ -6,8 +6,8 @@ for a stiff fence, no border contact for a load that cannot reach it, only the m
 ``solver.method``: our schemes (``integrators``: adaptive, trapezoidal, generalized_alpha; the
 first two by default in one compiled loop, ``engine``, ``solver.engine = python`` for the Python
 one) or a SciPy ``solve_ivp`` baseline on the same right-hand side (``baselines``: scipy:RK45,
-...), and reduces the run to a :class:`SimulationResult`: peaks, impact speed, N_stiff, stages, an energy
-audit (the load's energy never rises above the work its power sources did on it).
+...), and reduces the run to a :class:`SimulationResult`: peaks, impact speed, N_stiff, stages,
+an energy audit (the load's energy never rises above the work its power sources did on it).
 """
 
 from __future__ import annotations
@@ -359,7 +359,9 @@ class Observer:
             w_n = float(st.out[slots, K.C_DDOT].max())
             if math.isnan(self.impact_speed):
                 self.impact_speed = w_n
-            peak = K.stiff_impact_peak(md.mass, w_n, md.sc.contact.b_p, md.sc.contact.k_p, 4000)[0]
+            peak = K.stiff_impact_peak_force(
+                md.mass, w_n, md.sc.contact.b_p, md.sc.contact.k_p, 4000
+            )
             self.impacts.append((t, w_n, peak))
         self.had_fence = fence_on
         n = res[K.R_FENCE_N]

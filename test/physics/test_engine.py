@@ -230,3 +230,15 @@ def test_stepping_generator_replays_the_compiled_loop(scene: str, sets: list[str
     np.testing.assert_array_equal(y_cc, y_py)
     assert_same_solve(py, cc)
     assert_same_solve(simulate(sc), cc)  # and the same as the one-call compiled solve
+
+
+@pytest.mark.parametrize("b_p", [0.0, 3.3e5, 3.3e6])
+@pytest.mark.parametrize("mass", [0.1, 5.0, 60.0])
+def test_impact_peak_stops_past_the_deepest_compression_with_the_same_peak(mass, b_p) -> None:
+    """The observers' N_stiff (``stiff_impact_peak_force``) stops once the load moves back out
+    and the force falls (law (16): dN/dt < 0 while D' < 0 and N > 0): the same peak, exactly,
+    as integrating the whole impact to separation."""
+    for speed in (1e-10, 1.5e-6, 0.1, 2.44, 20.0):
+        for k_p in (1.72e9, 1.72e12):
+            full = K.stiff_impact_peak(mass, speed, b_p, k_p, 4000)
+            assert K.stiff_impact_peak_force(mass, speed, b_p, k_p, 4000) == full[0] > 0.0
