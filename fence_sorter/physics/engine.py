@@ -313,27 +313,30 @@ class CompiledSolve:
         a.run_min, a.t_run_min = float(fc[K.F_RUN_MIN]), float(fc[K.F_T_RUN_MIN])
         obs.rec = self.series(obs.want)
 
-    def series(self, want) -> dict[str, list]:
-        """The recorded series, keyed as ``Observer._record`` keys them."""
-        rec = self.REC[: self.ctl[K.I_N_REC]]
-        out: dict[str, object] = {}
+    def series(self, want) -> dict[str, np.ndarray]:
+        """The recorded series, keyed as ``Observer._record`` keys them (each its own array)."""
+        if not want:
+            return {}
+        cols = np.ascontiguousarray(self.REC[: self.ctl[K.I_N_REC]].T)  # one row per column
+        out: dict[str, np.ndarray] = {}
         if "trajectory" in want:
-            out["t"] = rec[:, K.REC_T].copy()
+            out["t"] = cols[K.REC_T].copy()
             for k, key in enumerate(("x", "y", "phi", "vx", "vy", "phidot")):
-                out[key] = rec[:, K.REC_Y + k].copy()
+                out[key] = cols[K.REC_Y + k]
         if "fence" in want:
-            out["t_fence"] = rec[:, K.REC_T].copy()
-            out["alpha_w"] = rec[:, K.REC_ALPHA].copy()
-            out["tip_deflection"] = rec[:, K.REC_TIP_W].copy()
+            out["t_fence"] = cols[K.REC_T].copy()
+            out["alpha_w"] = cols[K.REC_ALPHA]
+            out["tip_deflection"] = cols[K.REC_TIP_W]
         if "forces" in want:
-            out["t_forces"] = rec[:, K.REC_T].copy()
-            out["normal_force"] = rec[:, K.REC_FENCE_N].copy()
-            out["deformation"] = rec[:, K.REC_MAX_D].copy()
+            out["t_forces"] = cols[K.REC_T].copy()
+            out["normal_force"] = cols[K.REC_FENCE_N]
+            out["deformation"] = cols[K.REC_MAX_D]
         if "stages" in want:
-            out["t_stage"] = rec[:, K.REC_T].copy()
-            codes = rec[:, K.REC_STAGE].astype(np.intp)
+            out["t_stage"] = cols[K.REC_T].copy()
+            codes = cols[K.REC_STAGE].astype(np.intp)
             # the dtype np.asarray gives the Python loop's list of names: the longest present
-            width = max((len(STAGE_NAMES[c]) for c in np.unique(codes)), default=1)
+            present = np.flatnonzero(np.bincount(codes, minlength=len(STAGE_NAMES)))
+            width = max((len(STAGE_NAMES[c]) for c in present), default=1)
             out["stage"] = _STAGE_ARRAY[codes].astype(f"<U{width}")
         return out
 
