@@ -151,6 +151,19 @@ def register(subparsers) -> None:
         default=True,
         help="continue a sweep from its saved results (default: yes)",
     )
+    p.add_argument(
+        "--max-points",
+        type=int,
+        default=None,
+        metavar="N",
+        help="stop a sweep after N new points (resume later)",
+    )
+    p.add_argument(
+        "--table",
+        default=None,
+        metavar="PATH",
+        help="decision table written by --sweep decision-table (config/decision_table.yaml)",
+    )
     p.set_defaults(func=run)
 
 
@@ -242,6 +255,8 @@ def run(args: argparse.Namespace) -> int:
     from fence_sorter.physics.params import ParameterError
 
     if args.sweep is not None:
+        if args.max_points is not None and args.max_points < 1:
+            return error(f"--max-points must be in [1, inf), got {args.max_points}")
         from fence_sorter.optimize import sweep
 
         return int(sweep.main(args) or 0)
