@@ -777,6 +777,28 @@ def parse_names(text: str) -> list[str]:
     return names
 
 
+def finish(sweep: SweepDef, out: Path, table_path: Path) -> list[str]:
+    """Plot a sweep from its CSV (and, for ``decision-table`` with every point done, write
+    the controller's table); the lines to print."""
+    rows = _order(sweep, read_rows(out / f"{sweep.run}.csv"))
+    if not rows:
+        return []
+    png = plot_sweep(sweep, rows, out / f"{sweep.name}.png")
+    n_ok = sum(r["feasible"] for r in rows)
+    lines = [
+        f"{sweep.name}: {len(rows)}/{len(sweep.points)} points ({n_ok} feasible) in "
+        f"{out / (sweep.run + '.csv')}, plot {png}"
+    ]
+    if sweep.name == "decision-table" and len(rows) == len(sweep.points):
+        from fence_sorter.optimize.decision import build_table, write_table
+
+        table = build_table(rows, source=str(out / f"{sweep.run}.csv"))
+        write_table(table, table_path)
+        n_classes = len(table["decision_table"]["classes"])
+        lines.append(f"decision table: {n_classes} load classes -> {table_path}")
+    return lines
+
+
 def main(args) -> int:
     """``fence-sorter optimize --sweep NAME``: run (or resume) the sweeps, write CSV + PNG.
 
@@ -817,21 +839,8 @@ def main(args) -> int:
         print(f"fence-sorter: sweep failed: {type(exc).__name__}: {exc}", file=sys.stderr)
         status = EXIT_FAILED
     for sweep in sweeps:
-        rows = _order(sweep, read_rows(out / f"{sweep.run}.csv"))
-        if not rows:
-            continue
-        png = plot_sweep(sweep, rows, out / f"{sweep.name}.png")
-        n_ok = sum(r["feasible"] for r in rows)
-        print(
-            f"{sweep.name}: {len(rows)}/{len(sweep.points)} points ({n_ok} feasible) in "
-            f"{out / (sweep.run + '.csv')}, plot {png}"
-        )
-        if sweep.name == "decision-table" and len(rows) == len(sweep.points):
-            from fence_sorter.optimize.decision import build_table, write_table
-
-            table = build_table(rows, source=str(out / f"{sweep.run}.csv"))
-            write_table(table, table_path)
-            print(f"decision table: {len(table['classes'])} load classes -> {table_path}")
+        for line in finish(sweep, out, table_path):
+            print(line)
     print(f"wall time {time.perf_counter() - wall0:.1f} s", file=sys.stderr)
     return status
 
@@ -840,6 +849,7 @@ __all__ = [
     "SWEEPS",
     "SweepError",
     "SweepDef",
+    "finish",
     "get_sweep",
     "main",
     "make_spec",

@@ -218,6 +218,20 @@ def test_plot_has_the_panels(tmp_path) -> None:
 
 
 # -- decision table ----------------------------------------------------------------------------
+def test_finishing_the_decision_sweep_writes_the_table(tmp_path) -> None:
+    rows, entries = _decision_rows(tmp_path, 2.0)
+    fake = sw.SweepDef(
+        "decision-table", "controller", "", "decision-fake", tuple(sw.point(case=r["case"],
+        load_length=r["load_length"], fixed=r["fixed"], constraints=r["constraints"])
+        for r in rows), "load_length", "A", "case", "placement", (sw.P_T1,),
+    )  # fmt: skip
+    lines = sw.finish(fake, tmp_path, tmp_path / "table.yaml")
+    assert lines[-1].endswith("4 load classes -> " + str(tmp_path / "table.yaml"))
+    table = DecisionTable.load(tmp_path / "table.yaml")
+    assert table.belt_speed == 2.0 and len(table.entries) == 4
+    assert (tmp_path / "decision-table.png").exists()
+
+
 def _decision_rows(tmp_path, v: float):
     """A small fake decision sweep CSV: positioned and arbitrary loads of 0.4 and 0.7 m."""
     entries = {
