@@ -719,6 +719,53 @@ def run_sweeps(
     return [_order(s, read_rows(out_dir / f"{s.run}.csv")) for s in sweeps]
 
 
+# -- consistency -------------------------------------------------------------------------------
+#: (tight, loose) sweeps with the same points but one constraint more in ``tight`` ((12))
+NESTED_RUNS = (("fig7", "fig6"), ("fig10", "fig8"))
+#: sweeps whose series is a limit of (10) or (11): a larger value is a looser problem
+LIMIT_SERIES = ("fig3", "fig5", "fig6", "fig7", "fig8", "fig10")
+
+
+def nesting_violations(
+    rows_of: Callable[[str], Sequence[dict]], tol: float = 0.005
+) -> tuple[int, list[str]]:
+    """Check the optima against the nesting of their problems: a looser limit (w_dop,
+    a_Ndop) or one constraint less widens the feasible set, so its optimum W_t (1) cannot be
+    lower. ``rows_of(name)`` gives a sweep's rows; returns (pairs checked, the pairs where the
+    tighter problem's W_t exceeds the looser one's by more than ``tol``, relative)."""
+
+    def w(r) -> float:
+        return r["W_t"] if r["feasible"] else 0.0
+
+    pairs, bad = 0, []
+
+    def check(tag: str, tight: dict, loose: dict) -> None:
+        nonlocal pairs
+        pairs += 1
+        if w(tight) > w(loose) * (1.0 + tol):
+            bad.append(f"{tag}: tighter {w(tight):.0f} > looser {w(loose):.0f} pcs/h")
+
+    for tight, loose in NESTED_RUNS:
+        sd = get_sweep(tight)
+        other = {(r[sd.x], r[sd.series]): r for r in rows_of(loose)}
+        for r in rows_of(tight):
+            k = (r[sd.x], r[sd.series])
+            if k in other:
+                check(f"{tight} vs {loose} at {sd.x} {k[0]:g}, {sd.series} {k[1]:g}", r, other[k])
+    for name in LIMIT_SERIES:
+        sd = get_sweep(name)
+        rs = rows_of(name)
+        for xv in sorted({r[sd.x] for r in rs}):
+            col = sorted((r for r in rs if r[sd.x] == xv), key=lambda r: r[sd.series])
+            for a, b in zip(col, col[1:], strict=False):
+                check(
+                    f"{name} at {sd.x} {xv:g}: {sd.series} {a[sd.series]:g} vs {b[sd.series]:g}",
+                    a,
+                    b,
+                )
+    return pairs, bad
+
+
 # -- plots --------------------------------------------------------------------------------------
 def plot_sweep(sweep: SweepDef, rows: Sequence[dict], path: str | Path) -> Path:
     """The figure's panels (one curve per series value; infeasible optima left out)."""
@@ -775,6 +822,10 @@ def parse_names(text: str) -> list[str]:
         if n not in SWEEPS:
             raise KeyError(f"unknown sweep {n!r}; allowed: {', '.join(SWEEPS)}, all")
     return names
+
+
+def _csv(out: Path, name: str) -> Path:
+    return out / f"{get_sweep(name).run}.csv"
 
 
 def finish(sweep: SweepDef, out: Path, table_path: Path) -> list[str]:
@@ -841,6 +892,11 @@ def main(args) -> int:
     for sweep in sweeps:
         for line in finish(sweep, out, table_path):
             print(line)
+    pairs, bad = nesting_violations(lambda n: _order(get_sweep(n), read_rows(_csv(out, n))))
+    if pairs:
+        print(f"nesting check: {len(bad)} of {pairs} nested pairs of optima out of order")
+        for line in bad:
+            print(f"  {line}")
     print(f"wall time {time.perf_counter() - wall0:.1f} s", file=sys.stderr)
     return status
 
@@ -853,6 +909,7 @@ __all__ = [
     "get_sweep",
     "main",
     "make_spec",
+    "nesting_violations",
     "parse_names",
     "plot_sweep",
     "point",

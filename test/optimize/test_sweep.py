@@ -204,6 +204,26 @@ def test_definitions_follow_the_paper() -> None:
     assert sw.parse_names("all") == [f"fig{i}" for i in range(3, 11)]
 
 
+def test_nesting_check_flags_a_tighter_problem_with_a_higher_optimum() -> None:
+    def rows_of(name):
+        out = []
+        for inputs in sw.get_sweep(name).points:
+            row = stand_in(inputs)  # W_t grows with a_Ndop (t1 ~ a_Ndop^-1/2)
+            if name == "fig7" and inputs["alpha_k_deg"] == 30.0 and inputs["a_ndop"] == 150.0:
+                row["W_t"] *= 1.2  # with (12) on top, 20 % above the optimum without it
+            out.append({**inputs, **row})
+        return out
+
+    pairs, bad = sw.nesting_violations(rows_of)
+    assert pairs == 36 + 24 + 9 * 3 + 6 * 2 + 2 * (9 * 3) + 2 * (6 * 3)  # 189
+    # the raised point beats fig6's at the same inputs (not yet fig7's own a_Ndop 300 one)
+    assert bad == [
+        "fig7 vs fig6 at alpha_k_deg 30, a_ndop 150: tighter "
+        f"{rows_of('fig7')[2 * 9 + 2]['W_t']:.0f} > looser "
+        f"{rows_of('fig6')[2 * 9 + 2]['W_t']:.0f} pcs/h",
+    ]
+
+
 def test_bad_sweep_name_exits_2_naming_the_allowed_names(capsys) -> None:
     args = argparse.Namespace(sweep="fig2", out=None, resume=True, workers=None, scheduler=None)
     assert sw.main(args) == 2
