@@ -252,10 +252,73 @@ class DecisionTable:
         return (rows[-1][2], rows[-1][3])
 
 
+def compare_planner(
+    table: str | Path = "config/decision_table.yaml",
+    scene: str = CONTROLLER_SCENE,
+    stream: str = "config/streams/default.yaml",
+    count: int = 200,
+    seed: int = 11,
+    budget: int = 30,
+) -> dict[str, dict[str, float]]:
+    """The planner with and without ``table`` on the divert loads of ``count`` parcels of
+    ``stream``: each load planned alone from a cold planner (no cache, no hints, no timing
+    pressure). Per variant: loads, feasible, mean and median twin evaluations to the first
+    feasible stroke, mean W_t (1), loads with a table entry, loads that kept the table's stroke."""
+    import statistics
+
+    from fence_sorter.capacity.planner import LoadRequest, Planner, PlannerConfig
+    from fence_sorter.scene import load_scene
+    from fence_sorter.stream import load_stream
+
+    base = load_scene(scene).scenario
+    loads = [
+        s
+        for s in load_stream(stream, base.conveyor.belt_speed, count=count, seed=seed)
+        if s.divert
+    ]
+    out = {}
+    for label, cfg in (
+        ("without", PlannerConfig()),
+        ("with", PlannerConfig(decision_table=str(table))),
+    ):
+        planner = Planner(base, cfg)
+        evals, w_t, feasible, entries, kept = [], [], 0, 0, 0
+        for s in loads:
+            planner.cache.clear()
+            planner.chosen.clear()
+            planner.record.clear()
+            req = LoadRequest(s.parcel_id, s.to_parcel_params(), 0.0, -3.0)
+            cand = planner.table_candidate(req, 0.0)
+            plan = planner.plan(req, 0.0, commit=False, budget=budget, use_hint=False)
+            evals.append(plan.evaluations)
+            if plan.feasible:
+                feasible += 1
+                w_t.append(plan.evaluation.capacity_pcs_h)
+            if cand is not None:
+                entries += 1
+                kept += plan.feasible and (plan.evaluation.r_s, plan.evaluation.t1) == cand
+        out[label] = {
+            "loads": len(loads),
+            "feasible": feasible,
+            "evaluations_mean": statistics.mean(evals),
+            "evaluations_median": statistics.median(evals),
+            "W_t_mean": statistics.mean(w_t) if w_t else math.nan,
+            "table_entries": entries,
+            "table_stroke_kept": kept,
+        }
+    return out
+
+
+if __name__ == "__main__":  # python -m fence_sorter.optimize.decision
+    for name, figures in compare_planner().items():
+        print(name, " ".join(f"{k}={v:.4g}" for k, v in figures.items()))
+
+
 __all__ = [
     "ControllerSettings",
     "DecisionTable",
     "build_table",
+    "compare_planner",
     "controller_settings",
     "decision_points",
     "write_table",
