@@ -216,6 +216,7 @@ class _Stroke:
         self.stepper = self.integ.stepping(self.tap)
         next(self.stepper, None)  # the initial point (t = 0) and the first step
         self.finished = False  # the solve has ended (maybe ahead of the line time)
+        self.step_cost = 0.0  # wall time of the costliest recent stepper call [s] (prefetch)
         self.alive = True  # the solve covers the line time (False once past its end)
         self.failed: str | None = None
         if self.integ.outcome is not None:
@@ -242,18 +243,25 @@ class _Stroke:
         self.tap.trim(t_local)
 
     def prefetch(self, t_local: float, wall_deadline: float, clock) -> None:
-        """Step the solve ahead towards local time ``t_local`` while ``clock()`` is before
-        ``wall_deadline`` (one step at a time). Not past the sort crossing: the line reports
-        SORTED with the figures of the solve up to there."""
+        """Step the solve ahead towards local time ``t_local`` while the costliest recent call
+        of its stepper still fits before ``wall_deadline`` on ``clock()``. Not past the sort
+        crossing: the line reports SORTED with the figures of the solve up to there."""
         integ = self.integ
+        now = clock()
+        # a next() may run a compiled chunk of several steps: go on only while the costliest
+        # recent one still fits before the deadline (the estimate decays 1 % per call and per
+        # prefetch, so one slow chunk does not stop the stepping ahead for good)
+        self.step_cost *= 0.99
         while (
             not self.finished
             and self.tap.t_sorted is None
             and integ.cur.t < t_local - 1e-12
-            and clock() < wall_deadline
+            and now + self.step_cost < wall_deadline
         ):
             if next(self.stepper, None) is None:
                 self._ended()
+            then, now = now, clock()
+            self.step_cost = max(now - then, 0.99 * self.step_cost)
 
     def _ended(self) -> None:
         """The solve has ended; a diverged solve's last point (the observer saw it before the
@@ -335,6 +343,7 @@ class SortingLine:
         self.parcels: dict[int, _Parcel] = {}
         self.done_ids: set[int] = set()  # parcels that had their outcome (ids stay taken)
         self.strokes: list[_Stroke] = []
+        self._build_cost = 0.0  # wall time of the costliest recent stroke build [s] (prefetch)
         self.events: list[LineEvent] = []
         self.fem = build_fence(config.fence) if config.fence is not None else None
         self._rest_s = (
@@ -463,7 +472,9 @@ class SortingLine:
         for s in self.strokes:
             if s.alive:
                 s.prefetch(self.t + horizon - s.t_start, wall_deadline, clock)
-        if self.strokes or clock() >= wall_deadline:
+        now = clock()
+        self._build_cost *= 0.999  # one slow build (e.g. loading the JIT) is forgotten in ~5 s
+        if self.strokes or now + self._build_cost >= wall_deadline:
             return
         waiting = [
             p for p in self._planned() if p.stroke is None and p.prepared is None and not p.passed
@@ -471,6 +482,8 @@ class SortingLine:
         if waiting:
             p = min(waiting, key=lambda q: q.t_start)
             p.prepared = _Stroke(p, p.t_start, self._stroke_scenario(p))
+            # the costliest recent build (decays 1 % per build): only built where it fits
+            self._build_cost = max(clock() - now, 0.99 * self._build_cost)
 
     def _next_event(self) -> tuple[float, int, _Parcel | None]:
         """Earliest of: a planned stroke start (0), a point of no return (1), a line end (2)."""

@@ -22,7 +22,7 @@ import signal
 import sys
 import threading
 import time
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Sequence
 
 import rclpy
@@ -251,6 +251,7 @@ class SimulatorNode(FenceSorterNode):
         self.rt_priority = int(p["realtime_priority"])
 
         self._inbox: queue.SimpleQueue = queue.SimpleQueue()
+        self._outbox: deque = deque()  # state messages of the last snapshot still to send
         self._held: list[tuple[float, StrokeCommand]] = []  # commands for unknown parcels
         self.create_subscription(Parcel, "/parcels", self._on_parcel, RELIABLE_QOS)
         self.create_subscription(FenceCommand, "/fence_commands", self._on_command, RELIABLE_QOS)
@@ -393,7 +394,8 @@ class SimulatorNode(FenceSorterNode):
         )
         next_pub = next_marker = 0  # cycle index of the next publication (k may skip)
         next_gc = next_full_gc = 0
-        self._publish(line.snapshot())
+        self._queue_states(line.snapshot())
+        self._send(len(self._outbox))
         while not self._stop.is_set():
             rtf = pacer.rtf
             tick = pacer.wait()
@@ -409,12 +411,20 @@ class SimulatorNode(FenceSorterNode):
             self._handle(line.advance(t_target))
             if k >= next_pub:
                 next_pub = (k // self.publish_every + 1) * self.publish_every
-                self._publish(line.snapshot())
+                self._queue_states(line.snapshot())
+                # paced: /clock now, the other state messages of this snapshot one or two per
+                # cycle over the publish period (each stamped with the snapshot's sim time), so
+                # no cycle carries the whole publication; unpaced: all at once
+                self._send(1 if rtf > 0.0 else len(self._outbox))
             elif self.marker_every and k >= next_marker:
                 # markers in a cycle of their own (paced), so their cost does not add up with
                 # the states' in one cycle
                 next_marker = (k // self.marker_every + 1) * self.marker_every
                 self.pub_markers.publish(self._markers.build(line.snapshot()))
+                self._send(len(self._outbox) - max(next_pub - k - 1, 1))
+            elif self._outbox:
+                left = max(next_pub - k, 1)  # cycles until the next snapshot is queued
+                self._send(-(-len(self._outbox) // left))
             if rtf == 0.0 and self.marker_every and k >= next_marker:
                 next_marker = (k // self.marker_every + 1) * self.marker_every
                 self.pub_markers.publish(self._markers.build(line.snapshot()))
@@ -515,17 +525,42 @@ class SimulatorNode(FenceSorterNode):
             elif isinstance(e, StrokeStarted):
                 self.counts["strokes"] += 1
 
-    def _publish(self, snap) -> None:
-        t, fid = snap.t, self.frame_id
-        # one message object per topic, filled in place: publish() serialises it at once
-        self.pub_clock.publish(convert.fill_clock(self._clock_msg, t))
-        self.pub_fence.publish(convert.fill_fence_state(self._fence_msg, snap.fence, t, fid))
-        self.pub_joint.publish(convert.fill_joint_state(self._joint_msg, snap.fence, t))
-        load = self._load_msg
-        for p in snap.parcels:
-            self.pub_loads.publish(convert.fill_load_state(load, p, t, fid))
+    def _queue_states(self, snap) -> None:
+        """Queue the state messages of one snapshot (/clock first); what is left of the
+        previous one is sent first."""
+        self._send(len(self._outbox))
+        box = self._outbox
+        box.append((self._send_clock, snap, None))
+        box.append((self._send_fence, snap, None))
+        box.append((self._send_joint, snap, None))
+        box.extend((self._send_load, snap, p) for p in snap.parcels)
         if self.rerun is not None:
-            self.rerun.offer(snap)  # packed and piped, never blocks (paced runs)
+            box.append((self._send_rerun, snap, None))
+
+    def _send(self, n: int) -> None:
+        """Publish the next ``n`` queued state messages."""
+        box = self._outbox
+        for _ in range(min(n, len(box))):
+            send, snap, item = box.popleft()
+            send(snap, item)
+
+    # one message object per topic, filled in place: publish() serialises it at once
+    def _send_clock(self, snap, _) -> None:
+        self.pub_clock.publish(convert.fill_clock(self._clock_msg, snap.t))
+
+    def _send_fence(self, snap, _) -> None:
+        msg = convert.fill_fence_state(self._fence_msg, snap.fence, snap.t, self.frame_id)
+        self.pub_fence.publish(msg)
+
+    def _send_joint(self, snap, _) -> None:
+        self.pub_joint.publish(convert.fill_joint_state(self._joint_msg, snap.fence, snap.t))
+
+    def _send_load(self, snap, parcel) -> None:
+        msg = convert.fill_load_state(self._load_msg, parcel, snap.t, self.frame_id)
+        self.pub_loads.publish(msg)
+
+    def _send_rerun(self, snap, _) -> None:
+        self.rerun.offer(snap)  # packed and piped, never blocks (paced runs)
 
     # -- diagnostics -----------------------------------------------------------------------------
     def heartbeat_stamp(self):
