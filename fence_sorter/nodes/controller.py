@@ -166,6 +166,13 @@ PLANNER_PARAMETERS = (
     ParamSpec("fence_model", "stiff", "Fence the planner simulates: stiff | scene", True),
     ParamSpec("max_evaluations", 6, "Twin evaluations per parcel (cached free)", True, 1, 1000),
     ParamSpec(
+        "decision_table",
+        "",
+        "Starting strokes per load class, tried first (config/decision_table.yaml, made by "
+        "fence-sorter optimize --sweep decision-table); empty: none",
+        True,
+    ),
+    ParamSpec(
         "start_margin",
         0.1,
         "Command out this long before the front is at R_s [s]",
@@ -264,6 +271,12 @@ class ControllerNode(FenceSorterNode):
         self.get_logger().info(
             f"controller ready: scene {scene}, {len(self.planner.candidate_list)} candidates, "
             f"fence model {self.config.fence_model}, {len(self.planner.cache)} cached evaluations"
+            + (
+                f", decision table {self.config.decision_table} "
+                f"({len(self.planner.table.entries)} classes)"
+                if self.planner.table is not None
+                else ""
+            )
         )
 
     def _warm_up(self, p: dict) -> None:
