@@ -1210,6 +1210,19 @@ def rhs(
 
 
 @njit(cache=True)
+def _impact_rk4(b, k_p, mass, h, d, v):
+    """One RK4 step of m D'' = -N(D, D') (law (16), rigid wall) from (D, D'); returns the new
+    D, D' and N there."""
+    k1d, k1v = v, -_law(b, k_p, d, v) / mass
+    k2d, k2v = v + 0.5 * h * k1v, -_law(b, k_p, d + 0.5 * h * k1d, v + 0.5 * h * k1v) / mass
+    k3d, k3v = v + 0.5 * h * k2v, -_law(b, k_p, d + 0.5 * h * k2d, v + 0.5 * h * k2v) / mass
+    k4d, k4v = v + h * k3v, -_law(b, k_p, d + h * k3d, v + h * k3v) / mass
+    d_new = d + h / 6.0 * (k1d + 2.0 * k2d + 2.0 * k3d + k4d)
+    v_new = v + h / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
+    return d_new, v_new, _law(b, k_p, d_new, v_new)
+
+
+@njit(cache=True)
 def stiff_impact_peak(mass, approach_speed, b_p, k_p, steps):
     """Peak force, max deformation, duration and restitution of law (16) against a rigid wall.
 
@@ -1227,13 +1240,7 @@ def stiff_impact_peak(mass, approach_speed, b_p, k_p, steps):
     peak = 0.0
     dm = 0.0
     for _ in range(100 * steps):
-        k1d, k1v = v, -_law(b, k_p, d, v) / mass
-        k2d, k2v = v + 0.5 * h * k1v, -_law(b, k_p, d + 0.5 * h * k1d, v + 0.5 * h * k1v) / mass
-        k3d, k3v = v + 0.5 * h * k2v, -_law(b, k_p, d + 0.5 * h * k2d, v + 0.5 * h * k2v) / mass
-        k4d, k4v = v + h * k3v, -_law(b, k_p, d + h * k3d, v + h * k3v) / mass
-        d_new = d + h / 6.0 * (k1d + 2.0 * k2d + 2.0 * k3d + k4d)
-        v_new = v + h / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
-        f = _law(b, k_p, d_new, v_new)
+        d_new, v_new, f = _impact_rk4(b, k_p, mass, h, d, v)
         if f > peak:
             peak = f
         if d_new > dm:
@@ -1262,13 +1269,7 @@ def stiff_impact_peak_force(mass, approach_speed, b_p, k_p, steps):
     d, v = 0.0, approach_speed
     peak = 0.0
     for _ in range(100 * steps):
-        k1d, k1v = v, -_law(b, k_p, d, v) / mass
-        k2d, k2v = v + 0.5 * h * k1v, -_law(b, k_p, d + 0.5 * h * k1d, v + 0.5 * h * k1v) / mass
-        k3d, k3v = v + 0.5 * h * k2v, -_law(b, k_p, d + 0.5 * h * k2d, v + 0.5 * h * k2v) / mass
-        k4d, k4v = v + h * k3v, -_law(b, k_p, d + h * k3d, v + h * k3v) / mass
-        d_new = d + h / 6.0 * (k1d + 2.0 * k2d + 2.0 * k3d + k4d)
-        v_new = v + h / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
-        f = _law(b, k_p, d_new, v_new)
+        d_new, v_new, f = _impact_rk4(b, k_p, mass, h, d, v)
         if f > peak:
             peak = f
         if d_new <= 0.0 or (f <= 0.0 and v_new < 0.0) or (v_new < 0.0 and f < peak):

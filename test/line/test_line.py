@@ -38,6 +38,17 @@ def make_line(**overrides) -> SortingLine:
     return SortingLine(LineConfig.from_scenario(sc))
 
 
+def diverging_line() -> SortingLine:
+    """Stability case diverging_trapezoidal: the contact iteration cannot converge at any step."""
+    overrides = {
+        "solver.method": "trapezoidal",
+        "contact.k_p": 1e16,
+        "solver.dt": 5e-3,
+        "solver.min_dt": 1e-3,
+    }
+    return make_line(**overrides)
+
+
 def heavy(pid: int, **kw) -> ParcelSpec:
     """The scene's load, scanned at x0 = -1 m at t = 0 unless told otherwise."""
     base = dict(
@@ -239,14 +250,7 @@ def test_duplicate_id_is_rejected_even_after_the_outcome():
 
 def test_diverging_solve_is_a_solver_failure_with_no_state_past_it():
     # stability case diverging_trapezoidal: the contact iteration cannot converge at any step
-    line = make_line(
-        **{
-            "solver.method": "trapezoidal",
-            "contact.k_p": 1e16,
-            "solver.dt": 5e-3,
-            "solver.min_dt": 1e-3,
-        }
-    )
+    line = diverging_line()
     line.add_parcel(heavy(1))
     line.add_parcel(heavy(2, divert=False, scan_position_x=-4.0))
     assert line.command(stroke(1)).accepted
@@ -446,14 +450,7 @@ def test_prefetch_respects_its_wall_deadline():
 
 
 def test_prefetched_diverging_solve_is_reported_at_its_time_with_no_state_past_it():
-    line = make_line(
-        **{
-            "solver.method": "trapezoidal",
-            "contact.k_p": 1e16,
-            "solver.dt": 5e-3,
-            "solver.min_dt": 1e-3,
-        }
-    )
+    line = diverging_line()
     line.add_parcel(heavy(1))
     assert line.command(stroke(1)).accepted
     snaps = []
