@@ -270,22 +270,6 @@ def simulate(sc: Scenario, model: SortingModel | None = None) -> SimulationResul
     )
 
 
-def _parabola_peak(t0: float, n0: float, t1: float, n1: float, t2: float, n2: float) -> float:
-    """Vertex value of the parabola through three points with n1 >= n0, n2 (else n1)."""
-    d0, d2 = t0 - t1, t2 - t1
-    if d0 >= 0.0 or d2 <= 0.0:
-        return n1
-    # n(t1 + d) = n1 + b d + c d^2 through (d0, n0) and (d2, n2)
-    c = ((n0 - n1) / d0 - (n2 - n1) / d2) / (d0 - d2)
-    b = (n0 - n1) / d0 - c * d0
-    if c >= 0.0:
-        return n1
-    d = -b / (2.0 * c)
-    if not d0 <= d <= d2:
-        return n1
-    return n1 + b * d + c * d * d
-
-
 class Observer:
     """Reduces the accepted points of a run to a :class:`SimulationResult` (any method).
 
@@ -377,7 +361,7 @@ class Observer:
         masks[0], masks[1] = masks[1], mask
         if smooth and n2 > n1 and n2 >= n and n1 > 0.0:
             t0, t1 = self.last_t[1], self.last_t[2]
-            peak = _parabola_peak(t0, n1, t1, n2, t, n)
+            peak = K.parabola_peak(t0, n1, t1, n2, t, n)
             if peak > self.peak_n:
                 self.peak_n = peak
         self.last_n[1], self.last_n[2] = n2, n
