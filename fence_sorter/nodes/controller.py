@@ -325,6 +325,9 @@ class ControllerNode(FenceSorterNode):
         values = self.stats.values()
         values["cache_entries"] = str(len(self.planner.cache))
         values["listening"] = str(self._sub is not None).lower()
+        # matched /parcels publishers: a parcel published before its scanner is matched with
+        # this subscription is lost to it (volatile QoS), whatever "listening" says
+        values["parcel_publishers"] = str(self._sub.get_publisher_count() if self._sub else 0)
         values["real_time_factor_seen"] = f"{self.rtf.value:.3f}"
         status.values.extend(KeyValue(key=k, value=v) for k, v in values.items())
         return status
