@@ -28,6 +28,20 @@ def register(subparsers) -> None:
     parser.add_argument("--out", default=DEFAULT_OUT, help="markdown file (section replaced)")
     parser.add_argument("--duration", type=float, default=60.0, help="paced stream length [s]")
     parser.add_argument("--unpaced-parcels", type=int, default=40, help="parcels, unpaced run")
+    parser.add_argument(
+        "--param",
+        dest="params",
+        action="append",
+        default=[],
+        metavar="NODE:KEY=VALUE",
+        help="node parameter override for both runs, e.g. simulator:physics_rate=500 "
+        "(repeatable; the report lists them)",
+    )
+    parser.add_argument(
+        "--rrd",
+        action="store_true",
+        help="the paced run also saves a Rerun recording (measures the logging overhead)",
+    )
     parser.add_argument("--no-write", action="store_true", help="print only")
     parser.set_defaults(func=run)
 
@@ -47,7 +61,19 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_write and not out.parent.is_dir():
         print(f"fence-sorter: error: --out {out}: no such directory", file=sys.stderr)
         return 2
-    fig = run_bench(args.duration, args.unpaced_parcels, say=lambda s: print(s, file=sys.stderr))
+    from fence_sorter.runner.job import BadInput
+
+    try:
+        fig = run_bench(
+            args.duration,
+            args.unpaced_parcels,
+            say=lambda s: print(s, file=sys.stderr),
+            params=args.params,
+            rrd=args.rrd,
+        )
+    except BadInput as exc:
+        print(f"fence-sorter: error: {exc}", file=sys.stderr)
+        return 2
     command = "fence-sorter bench-suite " + " ".join(
         shlex.quote(a) for a in sys.argv[2:] if a != "--no-write"
     )

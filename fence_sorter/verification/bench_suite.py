@@ -15,7 +15,9 @@ from __future__ import annotations
 
 import math
 import os
+import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 from fence_sorter.runner.job import RunOptions, run_job
@@ -89,11 +91,22 @@ def unpaced_rtf(records) -> float:
     return d_sim / d_wall if d_wall > 0 else math.nan
 
 
-def run_bench(duration: float = 60.0, unpaced_parcels: int = 40, say=print) -> dict:
-    """Both runs; returns the figures (and the raw summaries)."""
+def run_bench(
+    duration: float = 60.0,
+    unpaced_parcels: int = 40,
+    say=print,
+    params: Sequence[str] = (),
+    rrd: bool = False,
+) -> dict:
+    """Both runs; returns the figures (and the raw summaries). ``params`` (NODE:KEY=VALUE)
+    apply to both runs; ``rrd`` makes the paced run save a Rerun recording (deleted after)."""
     load0 = os.getloadavg()
     wall0 = time.time()
-    paced = run_job(RunOptions(duration=duration, rtf=1.0), say=say)
+    with tempfile.TemporaryDirectory(prefix="bench_suite_") as tmp:
+        rrd_file = str(Path(tmp) / "paced.rrd") if rrd else None
+        paced = run_job(
+            RunOptions(duration=duration, rtf=1.0, params=list(params), rrd=rrd_file), say=say
+        )
     s = paced.summary
     sim, ctl = s["simulator"], s["controller"]
     cycles = _num(sim, "cycles")
@@ -128,8 +141,10 @@ def run_bench(duration: float = 60.0, unpaced_parcels: int = 40, say=print) -> d
         "paced_wall_s": s["wall_time_s"],
         "duration": duration,
         "unpaced_parcels": unpaced_parcels,
+        "params": list(params),
+        "rrd": rrd,
     }
-    unpaced = run_job(RunOptions(parcels=unpaced_parcels, rtf=0.0), say=say)
+    unpaced = run_job(RunOptions(parcels=unpaced_parcels, rtf=0.0, params=list(params)), say=say)
     fig.update(
         {
             "unpaced_exit": unpaced.code,
@@ -158,6 +173,7 @@ def _ok(value: float, limit: float, above: bool = False) -> str:
 def render(fig: dict, command: str, machine: dict, revision: str) -> str:
     """The markdown section (between the markers)."""
     f = fig
+    extra = "".join(f" --param {p}" for p in f.get("params", ()))
     la = ", ".join(f"{x:.2f}" for x in f["load_before"])
     lb = ", ".join(f"{x:.2f}" for x in f["load_after"])
     rows = [
@@ -218,7 +234,8 @@ def render(fig: dict, command: str, machine: dict, revision: str) -> str:
         f"{machine.get('cores', os.cpu_count())} cores, shared: load average {la} before, "
         f"{lb} after (1, 5, 15 min).",
         "",
-        f"Paced run: `fence-sorter run --duration {f['duration']:g} --rtf 1` (default scene "
+        f"Paced run: `fence-sorter run --duration {f['duration']:g} --rtf 1{extra}"
+        f"{' --rrd FILE' if f.get('rrd') else ''}` (default scene "
         "impact_flexible, "
         f"default stream at 2400 pcs/h): {f['parcels']} parcels, {f['sorted_divert']} of "
         f"{f['divert']} to divert sorted, outcomes {f['by_reason']}; achieved RTF "
@@ -238,7 +255,7 @@ def render(fig: dict, command: str, machine: dict, revision: str) -> str:
         lines.append(f"| {topic} | " + ", ".join(f"{k} {v}" for k, v in c.items()) + " |")
     lines += [
         "",
-        f"Unpaced run: `fence-sorter run --parcels {f['unpaced_parcels']} --rtf 0`: "
+        f"Unpaced run: `fence-sorter run --parcels {f['unpaced_parcels']} --rtf 0{extra}`: "
         f"{f['unpaced_sim_s']:.1f} s of sim "
         f"time at {f['unpaced_rtf']:.1f}x real time (sim over wall time between the simulator's "
         f"first and last heartbeat, /clock, states and markers published); "

@@ -12,6 +12,7 @@ from fence_sorter.testing import run_cli
         (("rrd", "/nonexistent"), "/nonexistent: no such bag"),
         (("replay", "bags/example_4_parcels", "--rate", "0"), "--rate must be in (0, inf)"),
         (("bench-suite", "--duration", "-5", "--no-write"), "--duration must be in (0, inf)"),
+        (("bench-suite", "--param", "physics_rate=500", "--no-write"), "must be NODE:KEY=VALUE"),
     ],
 )
 def test_bad_input_exits_2_naming_it(args, named):
