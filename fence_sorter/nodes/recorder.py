@@ -11,7 +11,11 @@ per topic are on /diagnostics.
 The bag is ``output_dir`` itself when it does not exist or is empty (``fence-sorter run --bag
 DIR``); otherwise a new ``output_dir/run_<UTC time>`` (never overwrites a bag). Bag timestamps
 are this node's clock at reception (system time; sim time with ``use_sim_time:=true``, as
-``ros2 bag record --use-sim-time``).
+``ros2 bag record --use-sim-time``; ``fence-sorter run`` records on sim time, the clock of every
+header stamp of the suite), except that on a topic whose messages start with a Header a
+message is never logged after one stamped later
+(:class:`~fence_sorter.recording.logtime.StampOrder`), so log time and header stamp agree on the
+order of every topic (what ``rerun mcap check --full`` checks).
 """
 
 from __future__ import annotations
@@ -104,6 +108,7 @@ class _Topic:
     name: str
     msgtype: str
     handle: int
+    header: bool = False  # messages start with a std_msgs/Header
     received: int = 0
     written: int = 0
 
@@ -144,6 +149,7 @@ class RecorderNode(FenceSorterNode):
 
     def __init__(self, **kwargs: object) -> None:
         super().__init__(**kwargs)
+        from fence_sorter.recording.logtime import StampOrder, starts_with_header
         from fence_sorter.recording.writer import SegmentedBagWriter
 
         p = {spec.name: self.get_parameter(spec.name).value for spec in self.PARAMETERS}
@@ -155,6 +161,7 @@ class RecorderNode(FenceSorterNode):
             max_segment_duration=float(p["max_segment_duration"]),
             custom_data={"recorder": "fence_sorter", "node": self.get_fully_qualified_name()},
         ).open()
+        self.stamp_order = StampOrder()
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
         self._queued_max = 0
         self._lock = threading.Lock()
@@ -168,7 +175,9 @@ class RecorderNode(FenceSorterNode):
                 )
             msgtype, reliable = TOPIC_TYPES[name]
             handle = self.writer.add_topic(name, msgtype, [bag_qos(reliable)])
-            topic = _Topic(name, msgtype, handle)
+            topic = _Topic(
+                name, msgtype, handle, starts_with_header(self.writer.typestore, msgtype)
+            )
             self.topics.append(topic)
             self.create_subscription(
                 message_class(msgtype),
@@ -197,7 +206,7 @@ class RecorderNode(FenceSorterNode):
 
     # -- writer thread ------------------------------------------------------------------------
     def _write_loop(self) -> None:
-        q, writer = self._queue, self.writer
+        q, writer, log_time = self._queue, self.writer, self.stamp_order.log_time
         while True:
             try:
                 item = q.get(timeout=0.1)
@@ -210,6 +219,8 @@ class RecorderNode(FenceSorterNode):
             if size > self._queued_max:
                 self._queued_max = size
             topic, t_ns, data = item
+            if topic.header:
+                t_ns = log_time(topic.name, t_ns, data)
             if self._guard(writer.write, topic.handle, t_ns, data):
                 topic.written += 1
         # closed by this thread: a storage may be bound to the thread that opened it (sqlite3)
@@ -268,6 +279,7 @@ class RecorderNode(FenceSorterNode):
             "queued": str(self._queue.qsize()),
             "queued_max": str(self._queued_max),
             "bytes_written": str(self.writer.bytes_written),
+            "log_times_moved_to_stamp_order": str(self.stamp_order.adjusted),
             "write_rate_msgs_s": f"{written / elapsed:.1f}",
         }
         for t in self.topics:

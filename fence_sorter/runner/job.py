@@ -206,7 +206,12 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None]) -> RunResult:
                 "recorder",
                 node_command(
                     "recorder",
-                    _ros_args("recorder", plan, opts, [f"output_dir:={Path(opts.bag).resolve()}"]),
+                    _ros_args(
+                        "recorder",
+                        plan,
+                        opts,
+                        [f"output_dir:={Path(opts.bag).resolve()}", "use_sim_time:=true"],
+                    ),
                 ),
             )
         _wait_for(monitor, group, "controller", 120.0)

@@ -272,9 +272,9 @@ def test_rerun_accepts_the_bag(tmp_path, typestore):
         pytest.skip("rerun-sdk not installed")
     bag = tmp_path / "bag"
     write_suite(bag, typestore, per_topic=2)
-    for f in sorted(bag.glob("*.mcap")):
+    for f, full in [(f, full) for f in sorted(bag.glob("*.mcap")) for full in ([], ["--full"])]:
         out = subprocess.run(
-            [sys.executable, "-m", "rerun", "mcap", "check", str(f)],
+            [sys.executable, "-m", "rerun", "mcap", "check", *full, str(f)],
             capture_output=True,
             text=True,
             timeout=120,

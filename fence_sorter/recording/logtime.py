@@ -1,0 +1,106 @@
+"""Bag log times that agree with the header stamps on every topic (no ROS).
+
+A rosbag2 log time is the recorder's clock when the message arrived. On a topic with several
+publishers (``/diagnostics``: every node) one message can arrive after another that was stamped
+later (its node had not processed the newest ``/clock`` yet, or was busy), so ordering the topic
+by log time and by ``header.stamp`` disagree. Rerun's ``rerun mcap check --full`` reports that
+as a row-order conflict: it lex-sorts each topic's rows by ``message_log_time``,
+``message_publish_time`` and ``ros2_timestamp`` (the header stamp) and requires every one of them
+to come out non-decreasing.
+
+:class:`StampOrder` keeps, per topic whose messages begin with a ``std_msgs/Header``, the
+(stamp, log time) pairs written so far and gives a new message the reception time clamped into
+``[lo, hi]``: ``lo`` the log time of the latest message stamped no later, ``hi`` that of the
+earliest message stamped later. Log time is then a non-decreasing function of the stamp on every
+topic. A message whose stamp is not older than any before it (every single-publisher topic)
+keeps its reception time exactly; an out-of-order one is logged at the log time of the first
+message stamped after it (earlier than its reception by the size of the race).
+"""
+
+from __future__ import annotations
+
+import struct
+from bisect import bisect_right
+from dataclasses import dataclass, field
+
+from rosbags.typesys.store import Typestore
+
+HEADER_TYPE = "std_msgs/msg/Header"
+#: (stamp, log time) pairs kept per topic; a message stamped before all of them (more than this
+#: many messages late) is logged at the oldest kept pair's log time
+DEFAULT_WINDOW = 4096
+_LE = struct.Struct("<iI")
+_BE = struct.Struct(">iI")
+
+
+def starts_with_header(typestore: Typestore, msgtype: str) -> bool:
+    """Whether ``msgtype``'s first field is a ``std_msgs/Header`` (its stamp is what Rerun reads
+    as ``ros2_timestamp``)."""
+    try:
+        _, fields = typestore.fielddefs[msgtype]
+    except KeyError:
+        return False
+    if not fields:
+        return False
+    _, (_, ref) = fields[0]
+    return ref == HEADER_TYPE
+
+
+def header_stamp_ns(data: bytes | memoryview) -> int | None:
+    """``header.stamp`` [ns] of a CDR message that starts with a Header (XCDR1, either byte
+    order); None for another encapsulation or a message too short to hold a stamp."""
+    if len(data) < 12 or data[0] != 0:
+        return None
+    if data[1] == 1:
+        sec, nanosec = _LE.unpack_from(data, 4)
+    elif data[1] == 0:
+        sec, nanosec = _BE.unpack_from(data, 4)
+    else:
+        return None
+    return sec * 1_000_000_000 + nanosec
+
+
+@dataclass
+class _Pairs:
+    stamps: list[int] = field(default_factory=list)  # sorted
+    logs: list[int] = field(default_factory=list)  # non-decreasing, as the stamps
+
+
+@dataclass
+class StampOrder:
+    """Log times per topic that never disagree with the header stamps (see the module doc).
+
+    ``window`` (stamp, log time) pairs are kept per topic. Not thread-safe: the writer thread
+    owns it.
+    """
+
+    window: int = DEFAULT_WINDOW
+    _topics: dict[object, _Pairs] = field(default_factory=dict)
+    adjusted: int = 0  # messages logged before their reception time (out of stamp order)
+
+    def __post_init__(self) -> None:
+        if self.window < 1:
+            raise ValueError(f"StampOrder: window must be >= 1, got {self.window}")
+
+    def log_time(self, topic: object, received_ns: int, data: bytes | memoryview) -> int:
+        """Log time [ns] of a message of ``topic`` (a topic whose type starts with a Header)
+        received at ``received_ns``; the message is remembered."""
+        stamp = header_stamp_ns(data)
+        if stamp is None:
+            return received_ns
+        pairs = self._topics.setdefault(topic, _Pairs())
+        stamps, logs = pairs.stamps, pairs.logs
+        if not stamps or stamp >= stamps[-1]:  # in order: the common case
+            t = max(received_ns, logs[-1]) if logs else received_ns
+            stamps.append(stamp)
+            logs.append(t)
+        else:
+            i = bisect_right(stamps, stamp)  # stamps[:i] <= stamp < stamps[i:]
+            t = min(max(received_ns, logs[i - 1]) if i else received_ns, logs[i])
+            if t < received_ns:
+                self.adjusted += 1
+            stamps.insert(i, stamp)
+            logs.insert(i, t)
+        if len(stamps) > 2 * self.window:
+            del stamps[: -self.window], logs[: -self.window]
+        return t
