@@ -29,7 +29,7 @@ def register(subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from fence_sorter.recording.bagread import BagReadError, read_bag
-    from fence_sorter.visualisation.rerun_log import log_bag, open_recording
+    from fence_sorter.visualisation.rerun_log import log_bag, open_recording, scene_from_bag
 
     bag = Path(args.bag)
     out = Path(args.out) if args.out else bag.resolve().with_suffix(".rrd")
@@ -44,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
     if not out.parent.is_dir():
         print(f"fence-sorter rrd: error: --out {out}: no directory {out.parent}", file=sys.stderr)
         return 2
-    rec = open_recording(out, spawn=args.spawn)
+    rec = open_recording(out, spawn=args.spawn, scene=scene_from_bag(contents))
     logger = log_bag(contents, rec)
     logger.close()
     print(f"wrote {out} ({logger.frames} frames, {out.stat().st_size / 1e6:.2f} MB)")

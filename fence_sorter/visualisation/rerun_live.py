@@ -214,8 +214,9 @@ def child_main(argv: list[str] | None = None) -> int:
         tuple(args.chute) if args.chute else None,
         args.scan_line_x,
     )
-    rec = open_recording(args.out, spawn=args.spawn, url=args.url)
-    logger = RerunLogger(rec, scene)
+    rec = open_recording(args.out, spawn=args.spawn, url=args.url, scene=scene)
+    # a viewer: the scene in batches of 5 frames (0.1 s at 50 Hz); a file alone: 25
+    logger = RerunLogger(rec, scene, scene_every=5 if args.spawn or args.url else 25)
     rr = logger.rr
     sys.stdout.write("ready\n")
     sys.stdout.flush()

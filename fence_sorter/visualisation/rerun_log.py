@@ -8,10 +8,13 @@ bag (:func:`log_bag`, ``fence-sorter rrd``). Entity paths:
 
 - ``world/conveyor/belt``, ``world/conveyor/borders``, ``world/chute``, ``world/scan_line``
   (static), ``world/fence``, ``world/parcels``, ``world/contact_forces``;
+- ``top/...``: the same in 2D for the top view (parcels as their rotated footprints), in view
+  coordinates ``(x, -y)`` (a 2D view draws y downwards; so y0, towards the chute, points up);
 - ``plots/contact/<id>/N`` and ``.../N_stiff`` [N], ``plots/fence/tip_deflection`` [m],
   ``plots/fence/alpha_w`` [rad], ``plots/speed/<id>`` [m/s].
 
-Frame "sorter" (REP-103, z up): x0 along the belt, y0 across it towards the chute.
+Frame "sorter" (REP-103, z up): x0 along the belt, y0 across it towards the chute. The default
+blueprint opens on the top view with the time series beside it (the 3D view in a tab behind).
 """
 
 from __future__ import annotations
@@ -19,13 +22,14 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 APP_ID = "fence_sorter"
 TIMELINE = "sim_time"
+TOP = "top"  # root of the 2D top-view entities
 FENCE_Z = 0.05  # height the fence polyline is drawn at [m]
 FORCE_SCALE = 1.0 / 1000.0  # contact arrow length per newton [m/N]
 DIVERT_COLOR = (230, 150, 50)
@@ -79,13 +83,36 @@ def _rr():
     return rr
 
 
-def blueprint():
-    """Default layout: the 3D scene on the left, force / fence / speed series on the right."""
+def top_view_bounds(scene: SceneGeometry, margin: float = 0.3) -> tuple[tuple, tuple]:
+    """(x range, y range) of the top view [m, view coordinates]: belt, chute and scan line."""
+    x0, x1 = scene.belt_x
+    y_max = scene.belt_width
+    if scene.chute is not None:
+        cx, cy, sx, sy = scene.chute
+        x0, x1 = min(x0, cx - 0.5 * sx), max(x1, cx + 0.5 * sx)
+        y_max = max(y_max, cy + 0.5 * sy)
+    if scene.scan_line_x is not None:
+        x0, x1 = min(x0, scene.scan_line_x), max(x1, scene.scan_line_x)
+    return (x0 - margin, x1 + margin), (-y_max - margin, margin)
+
+
+def blueprint(scene: SceneGeometry | None = None):
+    """Default layout: the top view (2D, framed on the belt and chute when ``scene`` is given)
+    on the left with the 3D scene in a tab behind it, force / fence / speed series on the
+    right."""
     import rerun.blueprint as rrb
 
+    bounds = None
+    if scene is not None:
+        x_range, y_range = top_view_bounds(scene)
+        bounds = rrb.VisualBounds2D(x_range=x_range, y_range=y_range)
     return rrb.Blueprint(
         rrb.Horizontal(
-            rrb.Spatial3DView(name="sorter", origin="world"),
+            rrb.Tabs(
+                rrb.Spatial2DView(name="top view", origin=TOP, visual_bounds=bounds),
+                rrb.Spatial3DView(name="sorter 3D", origin="world"),
+                active_tab=0,
+            ),
             rrb.Vertical(
                 rrb.TimeSeriesView(name="contact force N, N_stiff [N]", origin="plots/contact"),
                 rrb.TimeSeriesView(name="fence tip deflection [m], alpha_w [rad]",
@@ -103,9 +130,11 @@ def open_recording(
     spawn: bool = False,
     url: str | None = None,
     recording_id=None,
+    scene: SceneGeometry | None = None,
 ):
     """A RecordingStream saving to ``path`` (.rrd), and/or streaming to a viewer: a spawned one
-    (``spawn``) or one listening at ``url`` (gRPC, e.g. rerun+http://127.0.0.1:9876/proxy)."""
+    (``spawn``) or one listening at ``url`` (gRPC, e.g. rerun+http://127.0.0.1:9876/proxy),
+    with :func:`blueprint` (``scene`` frames the top view) as the default layout."""
     rr = _rr()
     rec = rr.RecordingStream(APP_ID, recording_id=recording_id)
     if spawn:
@@ -116,26 +145,34 @@ def open_recording(
     if spawn or url:
         sinks.append(rr.GrpcSink(url) if url else rr.GrpcSink())
     if sinks:
-        rec.set_sinks(*sinks, default_blueprint=blueprint())
+        rec.set_sinks(*sinks, default_blueprint=blueprint(scene))
     return rec
 
 
 class RerunLogger:
     """Logs the scene once and then one frame per call of :meth:`log_frame`.
 
-    The time series are buffered and sent as columns every ``series_every`` frames (and on
-    :meth:`flush`/:meth:`close`): one call per series instead of one per sample, which is most
-    of the cost of a frame.
+    Frames are buffered and sent as columns (one ``send_columns`` per entity): the scene
+    (fence, parcels, force arrows, in 3D and in the top view) every ``scene_every`` frames, the
+    time series every ``series_every`` frames, and everything on :meth:`flush`/:meth:`close`.
+    One call per entity and batch instead of one per frame is most of the saving; a live
+    viewer sees the scene up to ``scene_every`` frames late (the live child uses 5 with a
+    viewer, 0.1 s at 50 Hz; smaller batches make a larger .rrd: each chunk costs about 1.5 kB).
+    Styles that do not change (radii, draw order, fill) are logged once, static.
     """
 
-    def __init__(self, rec, scene: SceneGeometry, series_every: int = 25) -> None:
+    def __init__(
+        self, rec, scene: SceneGeometry, series_every: int = 25, scene_every: int = 25
+    ) -> None:
         self.rr = _rr()
         self.rec = rec
         self.scene = scene
         self.frames = 0
         self.series_every = max(int(series_every), 1)
+        self.scene_every = max(int(scene_every), 1)
         self._series_ids: set[int] = set()
         self._series: dict[str, tuple[list[float], list[float]]] = {}
+        self._frames = _SceneColumns()
         self._log_static()
 
     def _scalar(self, entity: str, t: float, value: float) -> None:
@@ -144,7 +181,8 @@ class RerunLogger:
         vs.append(value)
 
     def flush(self) -> None:
-        """Send the buffered time series."""
+        """Send the buffered frames and time series."""
+        self._flush_scene()
         rr = self.rr
         for entity, (ts, vs) in self._series.items():
             if ts:
@@ -155,6 +193,53 @@ class RerunLogger:
                 )
                 ts.clear()
                 vs.clear()
+
+    def _flush_scene(self) -> None:
+        rr, send, b = self.rr, self.rec.send_columns, self._frames
+        if b.fence_t:
+            index = [rr.TimeColumn(TIMELINE, duration=b.fence_t)]
+            ones = [1] * len(b.fence_t)
+            send("world/fence", index, rr.LineStrips3D.columns(strips=b.fence3d).partition(ones))
+            send(f"{TOP}/fence", index, rr.LineStrips2D.columns(strips=b.fence2d).partition(ones))
+        if b.t:
+            index = [rr.TimeColumn(TIMELINE, duration=b.t)]
+            n = b.parcels
+            colors = np.array(b.colors, dtype=np.uint8).reshape(-1, 3)
+            send(
+                "world/parcels",
+                index,
+                rr.Boxes3D.columns(
+                    centers=np.array(b.centers).reshape(-1, 3),
+                    half_sizes=np.array(b.half_sizes).reshape(-1, 3),
+                    quaternions=np.array(b.quats).reshape(-1, 4),
+                    colors=colors,
+                    labels=b.labels,
+                ).partition(n),
+            )
+            strips = np.concatenate(b.footprints) if b.footprints else np.zeros((0, 5, 2))
+            send(
+                f"{TOP}/parcels",
+                index,
+                rr.LineStrips2D.columns(strips=strips, colors=colors, labels=b.labels).partition(
+                    n
+                ),
+            )
+            origins = np.array(b.origins).reshape(-1, 3)
+            vectors = np.array(b.vectors).reshape(-1, 3)
+            send(
+                "world/contact_forces",
+                index,
+                rr.Arrows3D.columns(origins=origins, vectors=vectors).partition(b.arrows),
+            )
+            flip = np.array([1.0, -1.0])
+            send(
+                f"{TOP}/contact_forces",
+                index,
+                rr.Arrows2D.columns(
+                    origins=origins[:, :2] * flip, vectors=vectors[:, :2] * flip
+                ).partition(b.arrows),
+            )
+        self._frames = _SceneColumns()
 
     def _log_static(self) -> None:
         rr, rec, sc = self.rr, self.rec, self.scene
@@ -193,35 +278,98 @@ class RerunLogger:
                                 radii=0.006, labels=["scan line"]),
                 static=True,
             )  # fmt: skip
+        self._log_static_top()
+        self._log_static_styles()
         rec.log(
             "plots/fence/tip_deflection", rr.SeriesLines(names="tip deflection [m]"), static=True
         )
         rec.log("plots/fence/alpha_w", rr.SeriesLines(names="alpha_w [rad]"), static=True)
 
-    def log_frame(self, t: float, fence: FenceFrame | None, parcels: list[ParcelFrame]) -> None:
-        """Everything that moves, at sim time ``t`` [s]."""
+    def _log_static_top(self) -> None:
+        """The static scene of the top view (view coordinates (x, -y), drawn under the rest)."""
+        rr, rec, sc = self.rr, self.rec, self.scene
+        x0, x1 = sc.belt_x
+        s = sc.belt_width
+        rec.log(
+            f"{TOP}/conveyor/belt",
+            rr.Boxes2D(centers=[(0.5 * (x0 + x1), -0.5 * s)], sizes=[(x1 - x0, s)],
+                       colors=[(70, 70, 70)], draw_order=0.0),
+            static=True,
+        )  # fmt: skip
+        rec.log(
+            f"{TOP}/conveyor/borders",
+            rr.LineStrips2D([[(x0, 0.0), (x1, 0.0)], [(x0, -s), (x1, -s)]],
+                            colors=[(220, 220, 60)], radii=0.01, draw_order=1.0),
+            static=True,
+        )  # fmt: skip
+        if sc.chute is not None:
+            cx, cy, sx, sy = sc.chute
+            rec.log(
+                f"{TOP}/chute",
+                rr.Boxes2D(centers=[(cx, -cy)], sizes=[(sx, sy)], colors=[(50, 100, 200)],
+                           labels=["chute"], draw_order=0.5),
+                static=True,
+            )  # fmt: skip
+        if sc.scan_line_x is not None:
+            x = sc.scan_line_x
+            rec.log(
+                f"{TOP}/scan_line",
+                rr.LineStrips2D([[(x, 0.0), (x, -s)]], colors=[(255, 60, 60)], radii=0.01,
+                                labels=["scan line"], draw_order=2.0),
+                static=True,
+            )  # fmt: skip
+
+    def _log_static_styles(self) -> None:
+        """What does not change from frame to frame of the moving entities (static: it holds
+        for every frame sent as columns)."""
         rr, rec = self.rr, self.rec
-        rec.set_time(TIMELINE, duration=float(t))
+        fence_color = [(230, 80, 30)]
+        force_color = [(255, 0, 255)]
+        styles = {
+            "world/fence": rr.LineStrips3D.from_fields(colors=fence_color, radii=0.01),
+            "world/parcels": rr.Boxes3D.from_fields(fill_mode="solid", show_labels=True),
+            "world/contact_forces": rr.Arrows3D.from_fields(colors=force_color, radii=0.008),
+            f"{TOP}/fence": rr.LineStrips2D.from_fields(
+                colors=fence_color, radii=0.015, draw_order=4.0
+            ),
+            f"{TOP}/parcels": rr.LineStrips2D.from_fields(
+                radii=0.012, show_labels=True, draw_order=3.0
+            ),
+            f"{TOP}/contact_forces": rr.Arrows2D.from_fields(
+                colors=force_color, radii=0.012, draw_order=5.0
+            ),
+        }
+        for entity, style in styles.items():
+            rec.log(entity, style, static=True)
+
+    def log_frame(self, t: float, fence: FenceFrame | None, parcels: list[ParcelFrame]) -> None:
+        """Everything that moves, at sim time ``t`` [s] (buffered, see the class doc)."""
+        rr, rec, b = self.rr, self.rec, self._frames
+        t = float(t)
         if fence is not None:
-            pts = np.column_stack(
-                (fence.node_x, fence.node_y, np.full(len(fence.node_x), FENCE_Z))
-            )
-            rec.log("world/fence", rr.LineStrips3D([pts], colors=[(230, 80, 30)], radii=0.01))
+            node_x, node_y = np.asarray(fence.node_x), np.asarray(fence.node_y)
+            b.fence_t.append(t)
+            b.fence3d.append(np.column_stack((node_x, node_y, np.full(node_x.size, FENCE_Z))))
+            b.fence2d.append(np.column_stack((node_x, -node_y)))
             self._scalar("plots/fence/tip_deflection", t, float(fence.tip_deflection))
             self._scalar("plots/fence/alpha_w", t, float(fence.alpha))
-        centers, sizes, quats, labels, colors = [], [], [], [], []
-        origins, vectors = [], []
+        b.t.append(t)
+        b.parcels.append(len(parcels))
+        arrows = 0
         for p in parcels:
-            centers.append((p.center_x, p.center_y, 0.5 * p.height))
-            sizes.append((p.length_a, p.width_b, p.height))
-            quats.append((0.0, 0.0, math.sin(0.5 * p.yaw), math.cos(0.5 * p.yaw)))
-            labels.append(str(p.parcel_id))
-            colors.append(SORTED_COLOR if p.stage == 5 else (DIVERT_COLOR if p.divert
-                                                              else PASS_COLOR))  # fmt: skip
+            b.centers.append((p.center_x, p.center_y, 0.5 * p.height))
+            b.half_sizes.append((0.5 * p.length_a, 0.5 * p.width_b, 0.5 * p.height))
+            b.quats.append((0.0, 0.0, math.sin(0.5 * p.yaw), math.cos(0.5 * p.yaw)))
+            b.labels.append(str(p.parcel_id))
+            b.colors.append(SORTED_COLOR if p.stage == 5 else (DIVERT_COLOR if p.divert
+                                                                else PASS_COLOR))  # fmt: skip
             if p.n > 0.0 and math.isfinite(p.contact_x) and fence is not None:
                 normal = _fence_normal(fence, p.contact_x, p.contact_y, p.center_x, p.center_y)
-                origins.append((p.contact_x, p.contact_y, FENCE_Z))
-                vectors.append((normal[0] * p.n * FORCE_SCALE, normal[1] * p.n * FORCE_SCALE, 0))
+                b.origins.append((p.contact_x, p.contact_y, FENCE_Z))
+                b.vectors.append(
+                    (normal[0] * p.n * FORCE_SCALE, normal[1] * p.n * FORCE_SCALE, 0.0)
+                )
+                arrows += 1
             pid = p.parcel_id
             if pid not in self._series_ids:
                 self._series_ids.add(pid)
@@ -236,21 +384,57 @@ class RerunLogger:
                 self._scalar(f"plots/contact/{pid}/N", t, float(p.n))
                 self._scalar(f"plots/contact/{pid}/N_stiff", t, float(p.n_stiff))
             self._scalar(f"plots/speed/{pid}", t, math.hypot(p.vx, p.vy))
-        rec.log(
-            "world/parcels",
-            rr.Boxes3D(centers=centers, sizes=sizes, quaternions=quats, labels=labels,
-                       colors=colors, fill_mode="solid", show_labels=True),
-        )  # fmt: skip
-        arrows = rr.Arrows3D(origins=origins, vectors=vectors, colors=[(255, 0, 255)], radii=0.008)
-        rec.log("world/contact_forces", arrows)
+        if parcels:
+            b.footprints.append(_footprints(parcels))
+        b.arrows.append(arrows)
         self.frames += 1
         if self.frames % self.series_every == 0:
             self.flush()
+        elif self.frames % self.scene_every == 0:
+            self._flush_scene()
 
     def close(self) -> None:
         self.flush()
         self.rec.flush()
         self.rec.disconnect()
+
+
+@dataclass
+class _SceneColumns:
+    """Frames buffered for :meth:`RerunLogger._flush_scene` (per frame: counts; per parcel
+    and per arrow: values)."""
+
+    t: list[float] = field(default_factory=list)
+    fence_t: list[float] = field(default_factory=list)
+    fence3d: list[np.ndarray] = field(default_factory=list)
+    fence2d: list[np.ndarray] = field(default_factory=list)
+    parcels: list[int] = field(default_factory=list)
+    centers: list[tuple] = field(default_factory=list)
+    half_sizes: list[tuple] = field(default_factory=list)
+    quats: list[tuple] = field(default_factory=list)
+    labels: list[str] = field(default_factory=list)
+    colors: list[tuple] = field(default_factory=list)
+    footprints: list[np.ndarray] = field(default_factory=list)
+    arrows: list[int] = field(default_factory=list)
+    origins: list[tuple] = field(default_factory=list)
+    vectors: list[tuple] = field(default_factory=list)
+
+
+_CORNERS = np.array([(0.5, 0.5), (-0.5, 0.5), (-0.5, -0.5), (0.5, -0.5), (0.5, 0.5)])
+
+
+def _footprints(parcels: list[ParcelFrame]) -> np.ndarray:
+    """Closed outlines of the parcels' rotated footprints in top-view coordinates (x, -y),
+    shape (parcels, 5, 2)."""
+    if not parcels:
+        return np.zeros((0, 5, 2))
+    p = np.array([(q.center_x, q.center_y, q.length_a, q.width_b, q.yaw) for q in parcels])
+    c, s = np.cos(p[:, 4])[:, None], np.sin(p[:, 4])[:, None]
+    u = _CORNERS[None, :, 0] * p[:, 2, None]  # along the parcel's length a
+    v = _CORNERS[None, :, 1] * p[:, 3, None]  # along its width b
+    x = p[:, 0, None] + c * u - s * v
+    y = p[:, 1, None] + s * u + c * v
+    return np.stack((x, -y), axis=-1)
 
 
 def _fence_normal(fence: FenceFrame, x: float, y: float, cx: float, cy: float):
@@ -353,7 +537,7 @@ def bag_frames(contents) -> Iterable[tuple[float, FenceFrame | None, list[Parcel
 
 def log_bag(contents, rec) -> RerunLogger:
     """Log a recorded run (read with :func:`fence_sorter.recording.bagread.read_bag`)."""
-    logger = RerunLogger(rec, scene_from_bag(contents), series_every=1000)
+    logger = RerunLogger(rec, scene_from_bag(contents), series_every=1000, scene_every=1000)
     rr = logger.rr
     for m in contents.by_topic("/sort_outcomes"):
         o = m.msg

@@ -130,6 +130,58 @@ def rrd_rows(path: Path) -> tuple[Counter, Counter]:
     return rows, static
 
 
+TOP_MOVING = ("/top/fence", "/top/parcels", "/top/contact_forces")
+
+
+def blueprint_views(path: Path) -> dict[str, tuple[str, dict | None]]:
+    """The default blueprint stored in an .rrd: view name -> (kind, 2D visual bounds)."""
+    from rerun.chunk import RrdReader
+
+    reader = RrdReader(path)
+    (store,) = reader.blueprints()
+    views: dict[str, dict] = {}
+    for chunk in reader.stream(store=store):
+        batch = chunk.to_record_batch()
+        key = chunk.entity_path.split("/")[2] if chunk.entity_path.startswith("/view/") else None
+        if key is None:
+            continue
+        for column in batch.schema.names:
+            if column.startswith(("ViewBlueprint:", "VisualBounds2D:")):
+                views.setdefault(key, {})[column] = batch.column(column).to_pylist()[0]
+    out = {}
+    for v in views.values():
+        if "ViewBlueprint:display_name" in v:
+            bounds = v.get("VisualBounds2D:range")
+            out[v["ViewBlueprint:display_name"][0]] = (
+                v["ViewBlueprint:class_identifier"][0],
+                v["ViewBlueprint:space_origin"][0],
+                bounds[0] if bounds else None,
+            )
+    return out
+
+
+def test_top_view_footprints_are_the_rotated_boxes():
+    from fence_sorter.visualisation.rerun_log import ParcelFrame, _footprints
+
+    def parcel(yaw):
+        return ParcelFrame(1, 0, 0, yaw, 0, 0, 1.0, 0.5, 0.4, 0.3, 0.2)
+
+    flat, turned = _footprints([parcel(0.0), parcel(math.pi / 2)])
+    for fp in (flat, turned):
+        assert np.allclose(fp[0], fp[-1])  # closed
+        x, y = fp[:, 0], fp[:, 1]
+        area = 0.5 * abs(np.dot(x[:-1], y[1:]) - np.dot(x[1:], y[:-1]))
+        assert area == pytest.approx(0.4 * 0.3)  # a x b
+        assert np.allclose(fp[:-1].mean(axis=0), (1.0, -0.5))  # centre, y negated (view)
+    assert np.ptp(flat[:, 0]) == pytest.approx(0.4) and np.ptp(flat[:, 1]) == pytest.approx(0.3)
+    assert np.ptp(turned[:, 0]) == pytest.approx(0.3)  # a quarter turn swaps the extents
+    yaw = 0.3  # yaw counter-clockwise in the sorter frame: clockwise with y negated
+    (fp,) = _footprints([parcel(yaw)])
+    edge = fp[1] - fp[0]  # from the (+a/2, +b/2) corner to (-a/2, +b/2): along -a
+    assert math.atan2(-edge[1], -edge[0]) == pytest.approx(-yaw)
+    assert _footprints([]).shape == (0, 5, 2)
+
+
 def test_rrd_from_the_example_bag(example, tmp_path):
     out = tmp_path / "run.rrd"
     res = run_cli("rrd", str(example), "--out", str(out))
@@ -147,6 +199,19 @@ def test_rrd_from_the_example_bag(example, tmp_path):
                    "/plots/fence/tip_deflection", "/plots/fence/alpha_w"):  # fmt: skip
         assert rows[entity] == frames, entity
     assert {"/world/conveyor/belt", "/world/chute", "/world/scan_line"} <= set(static)
+    for entity in TOP_MOVING:  # the top view's 2D entities, one row per frame as the 3D ones
+        assert rows[entity] == frames, entity
+    assert {"/top/conveyor/belt", "/top/conveyor/borders", "/top/chute", "/top/scan_line"} <= set(
+        static
+    )
+    views = blueprint_views(out)
+    kinds = sorted(kind for kind, _, _ in views.values())
+    assert kinds == ["2D", "3D", "TimeSeries", "TimeSeries", "TimeSeries"], views
+    kind, origin, bounds = views["top view"]
+    assert (kind, origin) == ("2D", "top")
+    # framed on the bag's scene: belt x -3 .. 3 m, chute up to y0 = 1.3 m (view y = -1.3)
+    (x0, x1), (y0, y1) = bounds["x_range"], bounds["y_range"]
+    assert x0 < -3.0 and x1 > 3.0 and y0 < -1.3 and 0.0 < y1
     per_parcel = Counter(m.msg.parcel_id for m in contents.by_topic("/load_states"))
     for pid, n in per_parcel.items():
         assert rows[f"/plots/speed/{pid}"] == n
@@ -183,9 +248,11 @@ def test_logger_from_line_snapshots(tmp_path):
     logger.close()
     rows, static = rrd_rows(out)
     assert rows["/world/fence"] == rows["/world/parcels"] == frames
+    assert all(rows[e] == frames for e in TOP_MOVING)
     assert rows["/plots/speed/8"] == frames  # parcel 8 stays on the belt the whole time
     assert 0 < rows["/plots/contact/7/N"] < frames  # only while the fence works on it
     assert "/world/chute" not in static and "/world/scan_line" in static
+    assert "/top/chute" not in static and "/top/scan_line" in static
 
 
 def test_rerun_child_process_logs_what_the_loop_offers(tmp_path):
@@ -215,5 +282,7 @@ def test_rerun_child_process_logs_what_the_loop_offers(tmp_path):
     assert proc.sent == 1040 and proc.dropped == 0
     rows, static = rrd_rows(out)
     assert rows["/world/parcels"] == rows["/plots/speed/5"] == 1039
+    assert all(rows[e] == 1039 for e in TOP_MOVING)
+    assert blueprint_views(out)["top view"][:2] == ("2D", "top")
     assert rows["/events/outcomes"] == 1
     assert "/world/chute" in static

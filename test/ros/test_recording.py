@@ -390,6 +390,9 @@ def test_live_rrd_of_the_run_has_every_published_frame(recorded_run):
     sim = summary["simulator"]
     assert int(sim["rerun_frames_dropped"]) == 0
     assert rows["/world/fence"] == rows["/world/parcels"] >= clocks
+    # the top view: the same frames in 2D, and the blueprint that opens on it
+    assert rows["/top/fence"] == rows["/top/parcels"] == rows["/world/parcels"]
+    assert len(RrdReader(rrd).blueprints()) == 1
     # the simulator's first snapshots may go out before the recorder has matched /clock
     # (discovery takes a second or more on a loaded machine): from the first recorded /clock
     # on, every published frame is in both (a few may follow the recorder's last one)
