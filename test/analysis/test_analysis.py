@@ -182,6 +182,23 @@ def test_top_view_footprints_are_the_rotated_boxes():
     assert _footprints([]).shape == (0, 5, 2)
 
 
+def test_rerun_full_check_accepts_the_example_bag(example):
+    """The committed bag as Rerun's MCAP loader sees it: every topic ok, header stamps
+    (ros2_timestamp) decoded and in the same order as the log times."""
+    import os
+
+    for segment in sorted(example.glob("*.mcap")):
+        out = subprocess.run(
+            [sys.executable, "-m", "rerun", "mcap", "check", "--full", str(segment)],
+            capture_output=True, text=True, timeout=120,
+            env={**os.environ, "RERUN_ANALYTICS_ENABLED": "false"},
+        )  # fmt: skip
+        assert out.returncode == 0, out.stderr
+        assert "ros2_timestamp" in out.stdout
+        table = [x for x in out.stdout.splitlines() if x.startswith(("ok", "PROBLEM"))]
+        assert table and all(x.startswith("ok") for x in table), out.stdout
+
+
 def test_rrd_from_the_example_bag(example, tmp_path):
     out = tmp_path / "run.rrd"
     res = run_cli("rrd", str(example), "--out", str(out))
