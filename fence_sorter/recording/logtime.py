@@ -14,7 +14,10 @@ to come out non-decreasing.
 earliest message stamped later. Log time is then a non-decreasing function of the stamp on every
 topic. A message whose stamp is not older than any before it (every single-publisher topic)
 keeps its reception time exactly; an out-of-order one is logged at the log time of the first
-message stamped after it (earlier than its reception by the size of the race).
+message stamped after it (earlier than its reception by the size of the race). Only messages
+stamped within ``tolerance`` of their reception take part: a stamp on another clock (a
+sim-time node recorded by a recorder on system time) keeps its reception time and moves no
+other message, so a misconfigured clock costs the check, never the timing of the bag.
 """
 
 from __future__ import annotations
@@ -29,6 +32,8 @@ HEADER_TYPE = "std_msgs/msg/Header"
 #: (stamp, log time) pairs kept per topic; a message stamped before all of them (more than this
 #: many messages late) is logged at the oldest kept pair's log time
 DEFAULT_WINDOW = 4096
+#: a stamp further than this from the reception time is on another clock [ns]
+DEFAULT_TOLERANCE_NS = 1_000_000_000
 _LE = struct.Struct("<iI")
 _BE = struct.Struct(">iI")
 
@@ -70,23 +75,26 @@ class _Pairs:
 class StampOrder:
     """Log times per topic that never disagree with the header stamps (see the module doc).
 
-    ``window`` (stamp, log time) pairs are kept per topic. Not thread-safe: the writer thread
-    owns it.
+    ``window`` (stamp, log time) pairs are kept per topic; stamps more than ``tolerance_ns``
+    from their reception time are left alone. Not thread-safe: the writer thread owns it.
     """
 
     window: int = DEFAULT_WINDOW
+    tolerance_ns: int = DEFAULT_TOLERANCE_NS
     _topics: dict[object, _Pairs] = field(default_factory=dict)
     adjusted: int = 0  # messages logged before their reception time (out of stamp order)
 
     def __post_init__(self) -> None:
         if self.window < 1:
             raise ValueError(f"StampOrder: window must be >= 1, got {self.window}")
+        if self.tolerance_ns < 0:
+            raise ValueError(f"StampOrder: tolerance_ns must be >= 0, got {self.tolerance_ns}")
 
     def log_time(self, topic: object, received_ns: int, data: bytes | memoryview) -> int:
         """Log time [ns] of a message of ``topic`` (a topic whose type starts with a Header)
         received at ``received_ns``; the message is remembered."""
         stamp = header_stamp_ns(data)
-        if stamp is None:
+        if stamp is None or abs(stamp - received_ns) > self.tolerance_ns:
             return received_ns
         pairs = self._topics.setdefault(topic, _Pairs())
         stamps, logs = pairs.stamps, pairs.logs

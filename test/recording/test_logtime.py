@@ -103,6 +103,22 @@ def test_out_of_order_stamps_get_log_times_in_stamp_order(typestore):
     assert order.log_time("/other", 1, diagnostics(typestore, 10**12, "b")) == 1
 
 
+def test_a_stamp_on_another_clock_keeps_its_reception_time(typestore):
+    """A recorder on system time with sim-time publishers: the recorder's own heartbeats are
+    stamped ~1.8e18 ns, the others ~10 s. Nothing collapses onto the first heartbeat."""
+    order = StampOrder()
+    wall = 1_795_000_000 * 10**9
+    for k in range(20):
+        received = wall + k * 500 * MS
+        own = diagnostics(typestore, received - MS, "recorder")
+        sim = diagnostics(typestore, 10**10 + k * 500 * MS, "controller")
+        assert order.log_time("/diagnostics", received, own) == received
+        assert order.log_time("/diagnostics", received + MS, sim) == received + MS
+    assert order.adjusted == 0
+    with pytest.raises(ValueError, match="tolerance_ns must be >= 0"):
+        StampOrder(tolerance_ns=-1)
+
+
 def test_window_is_bounded(typestore):
     order = StampOrder(window=10)
     for k in range(100):
