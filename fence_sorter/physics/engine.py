@@ -151,6 +151,7 @@ class CompiledSolve:
         self.wdot = np.zeros(max(2 * n_el, 2))
         self.nodes = np.zeros((n_el + 1, 2))
         self.prev = np.zeros(K.N_SLOTS)
+        self.work = np.zeros(K.trapezoidal_work_size(m))
         self.PK, self.PA, self.PG0, self.PG1, n_props = _propagator_cache(model)
         self._n_props = n_props
         ctl[K.I_N_PROPS] = n_props[0]
@@ -193,8 +194,9 @@ class CompiledSolve:
         status = K.solve(
             md.P, md.corners, md.normals, *self.modes, self.cfg,
             self.breaks, self.ctl, self.fc, self.T, self.Y, self.LAM, self.OUT, self.RES,
-            self.MODAL, self.ACC, self.w, self.wdot, self.nodes, self.prev, self.PK, self.PA,
-            self.PG0, self.PG1, self.IMP, self.STG, self.REC, self.TR, CHUNK, float(t_target),
+            self.MODAL, self.ACC, self.w, self.wdot, self.nodes, self.prev, self.work, self.PK,
+            self.PA, self.PG0, self.PG1, self.IMP, self.STG, self.REC, self.TR, CHUNK,
+            float(t_target),
         )  # fmt: skip
         self._n_props[0] = self.ctl[K.I_N_PROPS]
         if status == K.SOLVE_GROW:

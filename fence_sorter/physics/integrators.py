@@ -123,6 +123,7 @@ class Scheme:
         self.nodes = np.zeros((n + 1, 2))
         self.prev = np.zeros(K.N_SLOTS)
         self.ya = np.zeros(model.n_state)
+        self.work = np.zeros(K.trapezoidal_work_size(model.n_modes))
 
     def initialize(self, st: State, on_belt: bool) -> None:
         """Forces at the initial state; belt wrench by Karnopp; consistent accelerations."""
@@ -235,6 +236,7 @@ class Scheme:
                 self.wdot,
                 self.nodes,
                 self.prev,
+                self.work,
             )
             if status != K.STEP_REJECTED:
                 b.acc[0] = (b.res[0] + b.lam[0]) / md.mass

@@ -16,6 +16,13 @@ speed targets (75x real time) need the force evaluation in the 1-10 us range, wh
 compiled kernel reaches (docs/benchmarks.md measures the same code with and without the JIT).
 Setting NUMBA_DISABLE_JIT=1 runs exactly this code as plain Python.
 
+Compiled without Numba's reference counting (``_nrt=False``, as Numba compiles its own hot
+helpers): every array here is allocated by the caller, and with NRT each call of a kernel
+function and each view (``Y[a]``, ``out[slot]``) paid an atomic incref/decref per array, 139,000
+per positioned_stiff event, half its run time (perf; counted with gdb on NRT_incref/decref).
+The two functions that allocate (``modal_propagators``, ``generalized_alpha_step``) say
+``_nrt=True`` explicitly: a callee otherwise inherits the flag of whoever compiles it first.
+
 The time-stepping schemes built on it (trapezoidal, generalized-alpha) are ``*_step`` functions
 here. The control loop (events, step size, stages, recording) exists twice: :func:`solve` at the
 end of this module runs it compiled (``solver.engine = compiled``, the default, driven by
@@ -131,7 +138,7 @@ def pack(
 
 
 # -- drive --------------------------------------------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def drive(P, t):
     """alpha_w, rate, acceleration of the sinusoidal-velocity drive (see ``drive.py``)."""
     t1 = P[P_T1]
@@ -147,7 +154,7 @@ def drive(P, t):
 
 
 # -- fence geometry -----------------------------------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def fence_shape(P, phi, eta, etadot, alpha, w, wdot, nodes):
     """Nodal deflections w = Phi eta, their rates, and the chord chain node positions (27)-(29)."""
     n = int(P[P_NEL])
@@ -176,7 +183,7 @@ def fence_shape(P, phi, eta, etadot, alpha, w, wdot, nodes):
         nodes[k + 1, 1] = dl * cy
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _hermite(w_a, th_a, w_b, th_b, d, inv_dl):
     slope = (w_b - w_a) * inv_dl
     p3 = (3.0 * slope - 2.0 * th_a - th_b) * inv_dl
@@ -184,7 +191,7 @@ def _hermite(w_a, th_a, w_b, th_b, d, inv_dl):
     return w_a + d * (th_a + d * (p3 + d * p4)), th_a + d * (2.0 * p3 + 3.0 * d * p4)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _element(P, s):
     """Element index and offset d_N of arc s (21)-(22), clamped onto the fence."""
     n = int(P[P_NEL])
@@ -200,13 +207,13 @@ def _element(P, s):
     return i, d
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def surface(P, s, alpha, rate, w, wdot, nodes):
     """(U_x, U_y, t_x, t_y, v_x, v_y): fence point at arc s, unit tangent, material velocity."""
     return _surface(P, s, alpha, math.cos(alpha), math.sin(alpha), rate, w, wdot, nodes)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _surface(P, s, alpha, ca, sa, rate, w, wdot, nodes):
     """``surface`` with cos and sin of the fence angle alpha given (``evaluate`` has them)."""
     if P[P_FLEX] == 0.0:
@@ -228,7 +235,7 @@ def _surface(P, s, alpha, ca, sa, rate, w, wdot, nodes):
     return ux, uy, math.cos(ang), math.sin(ang), vx, vy
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _modal_share(P, phi, s, alpha, fx, fy, modal):
     """Add the modal share of a force (fx, fy) on the fence at arc s, split by (20)."""
     transverse = -fx * math.sin(alpha) + fy * math.cos(alpha)
@@ -243,7 +250,7 @@ def _modal_share(P, phi, s, alpha, fx, fy, modal):
 
 
 # -- friction -----------------------------------------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _fence_friction(n, slide, applied_t, mu, v_min):
     """Fence / border friction (37): Karnopp with threshold v_min."""
     limit = mu * n
@@ -254,7 +261,7 @@ def _fence_friction(n, slide, applied_t, mu, v_min):
     return -math.copysign(limit, applied_t)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _clip_force(f_cap, ax, ay):
     """The friction force that cancels the applied force (ax, ay), at most f_cap long."""
     p = math.hypot(ax, ay)
@@ -263,7 +270,7 @@ def _clip_force(f_cap, ax, ay):
     return -f_cap * ax / p, -f_cap * ay / p
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def stick_wrench(P, ax, ay, am):
     """Karnopp's stick branch of (34)-(36): cancel the applied wrench (ax, ay, am) inside the
     same elliptic limit surface (F/F_max)^2 + (T/T_max)^2 <= 1 the slip branch lies on; an
@@ -289,7 +296,7 @@ def stick_wrench(P, ax, ay, am):
     return -k * ax, -k * ay, -k * am
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def karnopp_belt(P, ux, uy, spin, ax, ay, am):
     """Belt friction (34)-(36) in the explicit Karnopp form on the elliptic limit surface.
 
@@ -323,7 +330,7 @@ def karnopp_belt(P, ux, uy, spin, ax, ay, am):
     return fx, fy, tz
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def implicit_belt(P, u0, u1, u2, w0, w1, w2, lam):
     """Belt wrench lambda with u = u* + W lambda and the elliptic law at the end velocity u.
 
@@ -347,27 +354,32 @@ def implicit_belt(P, u0, u1, u2, w0, w1, w2, lam):
         return True
     a0, a1, a2 = fm2 * u0 * u0, fm2 * u1 * u1, tm2 * u2 * u2
     c0, c1, c2 = w0 * fm2, w1 * fm2, w2 * tm2
+    # the multiplier sigma >= 0 is the root of q(sigma) = sum a_i / (sigma + c_i)^2 = 1 (q(0) is
+    # the stick test's q > 1 here). Newton on the secular equation 1 / sqrt(q(sigma)) = 1 (More
+    # and Sorensen's form: 1 / sqrt(q) is concave and increasing, exactly linear for one term),
+    # so the iterates climb monotonically onto the root from sigma = 0 in a few steps (Newton on
+    # q itself crept up by a factor ~1.5 per iteration: 17-25 iterations on the bench scenes)
     sigma = 0.0
     for _ in range(100):
-        psi = -1.0
-        dpsi = 0.0
+        q = 0.0
+        s3 = 0.0
         if a0 > 0.0:
-            den = sigma + c0
-            psi += a0 / (den * den)
-            dpsi -= 2.0 * a0 / (den * den * den)
+            r = 1.0 / (sigma + c0)
+            q += a0 * r * r
+            s3 += a0 * r * r * r
         if a1 > 0.0:
-            den = sigma + c1
-            psi += a1 / (den * den)
-            dpsi -= 2.0 * a1 / (den * den * den)
+            r = 1.0 / (sigma + c1)
+            q += a1 * r * r
+            s3 += a1 * r * r * r
         if a2 > 0.0:
-            den = sigma + c2
-            psi += a2 / (den * den)
-            dpsi -= 2.0 * a2 / (den * den * den)
-        if psi <= 1e-14 or dpsi == 0.0:
+            r = 1.0 / (sigma + c2)
+            q += a2 * r * r
+            s3 += a2 * r * r * r
+        if q <= 1.0 + 1e-14 or s3 == 0.0:
             break
-        step = -psi / dpsi
+        step = q * (math.sqrt(q) - 1.0) / s3
         sigma += step
-        if step <= 1e-15 * max(sigma, 1e-300):
+        if step <= 1e-15 * sigma:
             break
     if sigma > 0.0:
         lam[0] = -fm2 * (u0 * sigma / (sigma + c0)) / sigma
@@ -379,7 +391,7 @@ def implicit_belt(P, u0, u1, u2, w0, w1, w2, lam):
 
 
 # -- contacts -----------------------------------------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _add(
     P,
     phi,
@@ -455,7 +467,7 @@ def _add(
     row[C_VSY] = vsy
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def evaluate(
     P,
     corners,
@@ -687,13 +699,18 @@ STEP_REJECTED = 1  # iteration did not converge (or a non-finite trial): halve a
 STEP_FORCED = 2  # not converged but taken (the caller asked: a tiny step over a switch)
 
 
-@njit(cache=True)
+def trapezoidal_work_size(m: int) -> int:
+    """Length of the workspace ``trapezoidal_step`` needs for m modes."""
+    return 2 * m + 9 * (6 + 2 * m)
+
+
+@njit(cache=True, _nrt=False)
 def _friction_prev(out, prev):
     for k in range(N_SLOTS):
         prev[k] = out[k, C_FT] if out[k, C_ACTIVE] != 0.0 else math.nan
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def trapezoidal_step(
     P,
     corners,
@@ -722,6 +739,7 @@ def trapezoidal_step(
     wdot,
     nodes,
     prev,
+    work,
 ):
     """One step of the trapezoidal rule, implicit in the contact forces and belt friction.
 
@@ -756,7 +774,6 @@ def trapezoidal_step(
     # one workspace instead of eight arrays per step: the modal base (2 m), then the Anderson
     # history df, dg (2 n each, zeroed: 0 * dg enters the update before it is filled) and the
     # vectors wts, g_new, f_prev, g_prev, f_cur (n each)
-    work = np.empty(2 * m + 9 * n)
     base = work[: 2 * m].reshape((m, 2))
     df = work[2 * m : 2 * m + 2 * n].reshape((2, n))
     dg = work[2 * m + 2 * n : 2 * m + 4 * n].reshape((2, n))
@@ -923,7 +940,7 @@ def trapezoidal_step(
     return STEP_OK if converged else STEP_FORCED
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _unring_stick(P, phi, out0, out, res, modal, x, y):
     """Replace the end friction of contacts that stick at both step ends by the step mean."""
     mu2 = P[P_MU2]
@@ -948,7 +965,7 @@ def _unring_stick(P, phi, out0, out, res, modal, x, y):
         out[k, C_FT] += d
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def generalized_alpha_step(
     P,
     corners,
@@ -1143,7 +1160,7 @@ def generalized_alpha_step(
 
 
 # -- right-hand side for ODE solvers (scipy.integrate baselines) --------------------------------
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def rhs(
     P,
     corners,
@@ -1209,7 +1226,10 @@ def rhs(
         dy[6 + m + j] = modal[j] - omega[j] * omega[j] * e - 2.0 * zeta[j] * omega[j] * ed
 
 
-@njit(cache=True)
+N_STIFF_STEPS = 800  # RK4 steps per elastic contact time of the N_stiff solve (error < 2e-7)
+
+
+@njit(cache=True, _nrt=False)
 def _impact_rk4(b, k_p, mass, h, d, v):
     """One RK4 step of m D'' = -N(D, D') (law (16), rigid wall) from (D, D'); returns the new
     D, D' and N there."""
@@ -1222,13 +1242,25 @@ def _impact_rk4(b, k_p, mass, h, d, v):
     return d_new, v_new, _law(b, k_p, d_new, v_new)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
+def _vertex(left, peak, right):
+    """The largest force of an impact from its largest RK4 point and the points either side
+    (equal steps): the vertex of the parabola through them (the discrete maximum alone is off
+    by O(h^2), the vertex by O(h^3))."""
+    curvature = left - 2.0 * peak + right
+    if right >= 0.0 and curvature < 0.0:
+        return peak - (right - left) ** 2 / (8.0 * curvature)
+    return peak
+
+
+@njit(cache=True, _nrt=False)
 def stiff_impact_peak(mass, approach_speed, b_p, k_p, steps):
     """Peak force, max deformation, duration and restitution of law (16) against a rigid wall.
 
     Classical RK4 on m D'' = -N(D, D') with ``steps`` steps over the elastic contact time
-    estimate 2.5074 D_max / w_n, continued until separation; used on the hot path (one call
-    per impact), checked against the DOP853 reference in ``contact.stiff_impact``.
+    estimate 2.5074 D_max / w_n, continued until separation, the peak refined by ``_vertex``;
+    used on the hot path (one call per impact) with N_STIFF_STEPS, checked against the DOP853
+    reference in ``contact.stiff_impact`` (test_contact_friction).
     """
     if approach_speed <= 0.0:
         return 0.0, 0.0, 0.0, 1.0
@@ -1238,23 +1270,29 @@ def stiff_impact_peak(mass, approach_speed, b_p, k_p, steps):
     d, v = 0.0, approach_speed
     t = 0.0
     peak = 0.0
+    f_prev = 0.0
+    left = 0.0
+    right = -1.0
     dm = 0.0
     for _ in range(100 * steps):
         d_new, v_new, f = _impact_rk4(b, k_p, mass, h, d, v)
         if f > peak:
-            peak = f
+            peak, left, right = f, f_prev, -1.0
+        elif right < 0.0:
+            right = f
+        f_prev = f
         if d_new > dm:
             dm = d_new
         if d_new <= 0.0 or (f <= 0.0 and v_new < 0.0):
             # separation inside the step: interpolate the time linearly on D
             frac = d / (d - d_new) if d_new <= 0.0 and d > d_new else 1.0
-            return peak, dm, t + frac * h, -v_new / approach_speed
+            return _vertex(left, peak, right), dm, t + frac * h, -v_new / approach_speed
         d, v = d_new, v_new
         t += h
-    return peak, dm, t, -v / approach_speed
+    return _vertex(left, peak, right), dm, t, -v / approach_speed
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def stiff_impact_peak_force(mass, approach_speed, b_p, k_p, steps):
     """The peak force of :func:`stiff_impact_peak` (the same RK4 steps, the same value),
     stopped at the first step past the deepest compression whose force is below the peak: with
@@ -1268,17 +1306,23 @@ def stiff_impact_peak_force(mass, approach_speed, b_p, k_p, steps):
     h = 2.5074 * d_max / approach_speed / steps
     d, v = 0.0, approach_speed
     peak = 0.0
+    f_prev = 0.0
+    left = 0.0
+    right = -1.0
     for _ in range(100 * steps):
         d_new, v_new, f = _impact_rk4(b, k_p, mass, h, d, v)
         if f > peak:
-            peak = f
+            peak, left, right = f, f_prev, -1.0
+        elif right < 0.0:
+            right = f
+        f_prev = f
         if d_new <= 0.0 or (f <= 0.0 and v_new < 0.0) or (v_new < 0.0 and f < peak):
-            return peak
+            return _vertex(left, peak, right)
         d, v = d_new, v_new
-    return peak
+    return _vertex(left, peak, right)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _law(b, k, d, v):
     if d <= 0.0:
         return 0.0
@@ -1287,7 +1331,7 @@ def _law(b, k, d, v):
 
 
 # -- exact modal propagation --------------------------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _mm4(a, b, out):
     for i in range(4):
         for j in range(4):
@@ -1297,7 +1341,7 @@ def _mm4(a, b, out):
             out[i, j] = acc
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _expm4(a, result, term, tmp):
     """result = exp(a) of a 4x4 matrix: scaling and squaring with an 18-term Taylor series
     (allocation-free: this runs for every mode at every new step size)."""
@@ -1335,7 +1379,7 @@ def _expm4(a, result, term, tmp):
                 result[i, j] = tmp[i, j]
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def modal_propagators(omega, zeta, h, a_out, g0_out, g1_out):
     """Exact one-step maps of the damped modes eta'' + 2 zeta omega eta' + omega^2 eta = f(t)
     for f linear over the step (Van Loan's augmented matrix exponential):
@@ -1358,7 +1402,7 @@ def modal_propagators(omega, zeta, h, a_out, g0_out, g1_out):
             g1_out[j, r] = e[r, 3] / h
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def milne_error(y0, acc0, y1, prev_v, prev_a, r, h, atol, rtol, v_ref, om_ref):
     """Scaled local error of a trapezoidal step y0 -> y1 on the load's state: Milne's device
     (see ``integrators._local_error``), corrector minus variable-step AB2 (r > 0) or Euler
@@ -1387,7 +1431,7 @@ EVENT_RELEASE = 1  # the law (16) unclipped: the force falls to zero (or the cli
 EVENT_SLIDE_OFF = 2  # R_z - s: a pushing corner slides past the fence tip
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def event_value(P, out, slot, kind):
     """The event function of ``kind`` for ``slot`` at a point (nan where it is not defined)."""
     if kind == EVENT_SLIDE_OFF:
@@ -1398,7 +1442,7 @@ def event_value(P, out, slot, kind):
     return out[slot, C_D] if kind == EVENT_ONSET else out[slot, C_NRAW]
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def first_event(P, out_a, out_b):
     """The fence slot whose event function changes sign first between two points, or -1.
 
@@ -1430,7 +1474,7 @@ def first_event(P, out_a, out_b):
     return best, kind_best, ga_best, gb_best
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def time_to_contact(out):
     """Shortest time until a separated fence candidate closes its gap at its present closing
     speed, min over slots of -D / Ddot (D < 0, Ddot > 0); inf if none approaches. An adaptive
@@ -1595,7 +1639,7 @@ def trace_width(n_state, m):
     return 2 + n_state + 3 + N_SLOTS * N_COLS + N_RES + m + 3 + m
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _remainder(x, y):
     """IEEE remainder of x by y > 0 (CPython's ``math.remainder``, exact like it)."""
     absx = abs(x)
@@ -1610,7 +1654,7 @@ def _remainder(x, y):
     return math.copysign(1.0, x) * r
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def classify_code(out, normals, phi, touched, flush):
     """``contacts.classify`` on the stage codes STAGE_CODE_*."""
     n_corners = 0
@@ -1645,7 +1689,7 @@ def classify_code(out, normals, phi, touched, flush):
     return STAGE_CODE_E1
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def parabola_peak(t0, n0, t1, n1, t2, n2):
     """Vertex value of the parabola through three points with n1 >= n0, n2 (else n1)."""
     d0, d2 = t0 - t1, t2 - t1
@@ -1661,18 +1705,26 @@ def parabola_peak(t0, n0, t1, n1, t2, n2):
     return n1 + b * d + c * d * d
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
+def _copy_row(A, dst, src):
+    for k in range(A.shape[1]):
+        A[dst, k] = A[src, k]
+
+
+@njit(cache=True, _nrt=False)
 def _copy_state(T, Y, LAM, OUT, RES, MODAL, ACC, dst, src):
     T[dst] = T[src]
-    Y[dst, :] = Y[src, :]
-    LAM[dst, :] = LAM[src, :]
-    OUT[dst, :, :] = OUT[src, :, :]
-    RES[dst, :] = RES[src, :]
-    MODAL[dst, :] = MODAL[src, :]
-    ACC[dst, :] = ACC[src, :]
+    _copy_row(Y, dst, src)
+    _copy_row(LAM, dst, src)
+    for r in range(N_SLOTS):
+        for c in range(N_COLS):
+            OUT[dst, r, c] = OUT[src, r, c]
+    _copy_row(RES, dst, src)
+    _copy_row(MODAL, dst, src)
+    _copy_row(ACC, dst, src)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _propagator_slot(omega, zeta, h, ctl, PK, PA, PG0, PG1):
     """Row of the exact modal maps for step h in the cache (computed on a miss; the cache is
     emptied when full, like ``integrators.Propagators``)."""
@@ -1690,31 +1742,31 @@ def _propagator_slot(omega, zeta, h, ctl, PK, PA, PG0, PG1):
     return n
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _jump_at(P, t):
     if abs(t - 2.0 * P[P_T1]) <= 1e-12:
         return -0.5 * P[P_ALPHA_K] * (math.pi / P[P_T1]) ** 2
     return 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _snap(h_nom, h):
     """``Integrator._snap``: round a step down onto the ladder dt_max 2^(-k/4)."""
     k = math.ceil(4.0 * math.log2(h_nom / h) - 1e-9)
     return h_nom * 2.0 ** (-k / 4.0)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _trap(
     P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT, RES, MODAL, ACC,
-    w, wdot, nodes, prev, PK, PA, PG0, PG1, h, a, b, jump, on_belt, force,
+    w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h, a, b, jump, on_belt, force,
 ):  # fmt: skip
     """``Scheme.step`` of the trapezoidal scheme from state row a into row b."""
     k = _propagator_slot(omega, zeta, h, ctl, PK, PA, PG0, PG1)
     status = trapezoidal_step(
         P, corners, normals, phi, rigid_modal, (PA[k], PG0[k], PG1[k]), h, T[a], Y[a], RES[a],
         LAM[a], MODAL[a], OUT[a], jump, on_belt, cfg[G_TOL], int(cfg[G_MAX_ITER]), force, Y[b],
-        LAM[b], OUT[b], RES[b], MODAL[b], w, wdot, nodes, prev,
+        LAM[b], OUT[b], RES[b], MODAL[b], w, wdot, nodes, prev, work,
     )  # fmt: skip
     if status != STEP_REJECTED:
         ACC[b, 0] = (RES[b, 0] + LAM[b, 0]) / P[P_MASS]
@@ -1724,10 +1776,10 @@ def _trap(
     return status
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _locate(
     P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT, RES, MODAL, ACC,
-    w, wdot, nodes, prev, PK, PA, PG0, PG1, h, on_belt, slot, kind, g0, g1,
+    w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h, on_belt, slot, kind, g0, g1,
 ):  # fmt: skip
     """``Integrator._locate``: Illinois regula falsi onto the event; the located trial is left
     in the trial row; returns the step taken."""
@@ -1751,8 +1803,8 @@ def _locate(
         h_loc = min(max(h_loc, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
         st = _trap(
             P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT, RES,
-            MODAL, ACC, w, wdot, nodes, prev, PK, PA, PG0, PG1, h_loc, a, S_LOC, jump, on_belt,
-            False,
+            MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h_loc, a, S_LOC, jump,
+            on_belt, False,
         )  # fmt: skip
         if st == STEP_REJECTED:
             break
@@ -1786,7 +1838,7 @@ def _locate(
     return best if have_best else h
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _audit(fc, t, r):
     """``simulate.EnergyAudit.update``."""
     if not math.isfinite(r):
@@ -1810,7 +1862,7 @@ def _audit(fc, t, r):
         fc[F_T_RISE1] = t
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _observe(P, normals, cfg, ctl, fc, T, Y, LAM, OUT, RES, IMP, STG, REC, i, on_belt):
     """``simulate.Observer.__call__`` at state row i; returns (stop, on_belt)."""
     t = T[i]
@@ -1854,7 +1906,7 @@ def _observe(P, normals, cfg, ctl, fc, T, Y, LAM, OUT, RES, IMP, STG, REC, i, on
                     w_n = v
         if math.isnan(fc[F_IMPACT_SPEED]):
             fc[F_IMPACT_SPEED] = w_n
-        peak = stiff_impact_peak_force(mass, w_n, cfg[G_BP], cfg[G_KP], 4000)
+        peak = stiff_impact_peak_force(mass, w_n, cfg[G_BP], cfg[G_KP], N_STIFF_STEPS)
         n_imp = ctl[I_N_IMPACTS]
         IMP[n_imp, 0] = t
         IMP[n_imp, 1] = w_n
@@ -1913,7 +1965,7 @@ def _observe(P, normals, cfg, ctl, fc, T, Y, LAM, OUT, RES, IMP, STG, REC, i, on
     return sorted_ and cfg[G_STOP_SORTED] != 0.0, on_belt and not sorted_
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _trace(ctl, TR, T, Y, LAM, OUT, RES, MODAL, ACC, i, on_belt):
     """Append state row i and the on_belt flag it is observed with to the trace (if kept)."""
     if TR.shape[0] == 0:
@@ -1944,7 +1996,7 @@ def _trace(ctl, TR, T, Y, LAM, OUT, RES, MODAL, ACC, i, on_belt):
         k += 1
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _diverged(P, cfg, fc, t, y, res):
     """``Integrator._diverged``: a DIAG_* code (value and time left in fc)."""
     total = 0.0
@@ -1963,10 +2015,10 @@ def _diverged(P, cfg, fc, t, y, res):
     return DIAG_NONE
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def solve(
     P, corners, normals, phi, rigid_modal, omega, zeta, cfg, breaks, ctl, fc, T, Y, LAM, OUT, RES,
-    MODAL, ACC, w, wdot, nodes, prev, PK, PA, PG0, PG1, IMP, STG, REC, TR, max_attempts,
+    MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, IMP, STG, REC, TR, max_attempts,
     t_target,
 ):  # fmt: skip
     """Run the solve loop (``Integrator.stepping`` with ``Observer``) from where ``ctl``/``fc``
@@ -2047,8 +2099,8 @@ def solve(
             tiny = h_try <= 1e-3 * h_nom
         status = _trap(
             P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT, RES,
-            MODAL, ACC, w, wdot, nodes, prev, PK, PA, PG0, PG1, h_try, a, b, _jump_at(P, T[a]),
-            on_belt, tiny,
+            MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h_try, a, b,
+            _jump_at(P, T[a]), on_belt, tiny,
         )  # fmt: skip
         if status == STEP_REJECTED:
             ctl[I_REJECTED] += 1
@@ -2071,8 +2123,8 @@ def solve(
         if (slot >= 0 or kind == EVENT_SORT) and h_try > 1e-9:
             h_taken = _locate(
                 P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT,
-                RES, MODAL, ACC, w, wdot, nodes, prev, PK, PA, PG0, PG1, h_try, on_belt, slot,
-                kind, g0, g1,
+                RES, MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h_try, on_belt,
+                slot, kind, g0, g1,
             )  # fmt: skip
             located = True
         if adaptive:

@@ -344,7 +344,7 @@ class Observer:
             if math.isnan(self.impact_speed):
                 self.impact_speed = w_n
             peak = K.stiff_impact_peak_force(
-                md.mass, w_n, md.sc.contact.b_p, md.sc.contact.k_p, 4000
+                md.mass, w_n, md.sc.contact.b_p, md.sc.contact.k_p, K.N_STIFF_STEPS
             )
             self.impacts.append((t, w_n, peak))
         self.had_fence = fence_on
