@@ -496,13 +496,26 @@ def evaluate(
     side of the jump at 2 t1). Fills ``out``, ``res`` and ``modal`` (the fence's generalized
     force including the drive's inertial load -Phi^T M_fa r alpha_ddot).
     """
+    alpha, rate, accel = drive(P, t)
+    accel += accel_jump
+    _evaluate(
+        P, corners, normals, phi, rigid_modal, alpha, rate, accel, math.cos(alpha),
+        math.sin(alpha), y, lam, weight, prev, out, res, modal, w, wdot, nodes,
+    )  # fmt: skip
+
+
+@njit(cache=True, _nrt=False)
+def _evaluate(
+    P, corners, normals, phi, rigid_modal, alpha, rate, accel, ca, sa, y, lam, weight, prev, out,
+    res, modal, w, wdot, nodes,
+):  # fmt: skip
+    """:func:`evaluate` with the drive state (alpha, rate, accel) and cos, sin of alpha given:
+    a step's iteration evaluates every iterate at the same time, so it computes them once."""
     out[:, :] = 0.0
     res[:] = 0.0
     modal[:] = 0.0
     x, yy, ph, vx, vy, om = y[0], y[1], y[2], y[3], y[4], y[5]
     m = modal.shape[0]
-    alpha, rate, accel = drive(P, t)
-    accel += accel_jump
     res[R_ALPHA], res[R_RATE], res[R_ACCEL] = alpha, rate, accel
     flex = P[P_FLEX] != 0.0
     if flex:
@@ -518,8 +531,6 @@ def evaluate(
     use_tip = P[P_USE_TIP] != 0.0
     c = math.cos(ph)
     s = math.sin(ph)
-    ca = math.cos(alpha)
-    sa = math.sin(alpha)
     reach = res[R_MAX_W] + P[P_MARGIN]
     lam_x, lam_y = lam[0], lam[1]
     # corner k of the load: (x + c a_k - s b_k, y + s a_k + c b_k), recomputed where used (the
@@ -533,18 +544,25 @@ def evaluate(
         py = yy + s * corners[k, 0] + c * corners[k, 1]
         if -px * sa + py * ca > reach:
             continue
-        r = math.hypot(px, py)
-        # arc position: the corner projected on the fence near radius r (beyond the tip: on
-        # the tip's tangent, so s is continuous where a corner slides off the tip, which the
-        # slide-off event R_z - s needs)
-        ux, uy, tx, ty, _, _ = _surface(P, min(r, length), alpha, ca, sa, rate, w, wdot, nodes)
-        s_arc = min(r, length) + (px - ux) * tx + (py - uy) * ty
+        if flex:
+            r = math.hypot(px, py)
+            # arc position: the corner projected on the fence near radius r (beyond the tip:
+            # on the tip's tangent, so s is continuous where a corner slides off the tip, which
+            # the slide-off event R_z - s needs)
+            ux, uy, tx, ty, _, _ = _surface(P, min(r, length), alpha, ca, sa, rate, w, wdot, nodes)
+            s_arc = min(r, length) + (px - ux) * tx + (py - uy) * ty
+        else:
+            s_arc = px * ca + py * sa  # the same projection on the straight rigid fence
         if s_arc > length:
             out[k, C_S] = s_arc  # beyond the tip: the slide-off event function is R_z - s
             continue
         if s_arc < 0.0:
             continue
-        ux, uy, tx, ty, vux, vuy = _surface(P, s_arc, alpha, ca, sa, rate, w, wdot, nodes)
+        if flex:
+            ux, uy, tx, ty, vux, vuy = _surface(P, s_arc, alpha, ca, sa, rate, w, wdot, nodes)
+        else:  # _surface of the rigid fence, inline
+            ux, uy, tx, ty = s_arc * ca, s_arc * sa, ca, sa
+            vux, vuy = -rate * s_arc * sa, rate * s_arc * ca
         nx, ny = -ty, tx
         d = (ux - px) * nx + (uy - py) * ny
         vpx = vx - om * (py - yy)
@@ -798,6 +816,9 @@ def trapezoidal_step(
             for j in range(m):
                 if abs(phi[i, j]) > phi_scale:
                     phi_scale = abs(phi[i, j])
+    alpha1, rate1, accel1 = drive(P, t1)
+    ca1 = math.cos(alpha1)
+    sa1 = math.sin(alpha1)
     for k in range(N_SLOTS):
         prev[k] = math.nan
     stuck = False
@@ -820,25 +841,10 @@ def trapezoidal_step(
     fn_old = 0.0
     for _ in range(max_iter):
         iterations += 1
-        evaluate(
-            P,
-            corners,
-            normals,
-            phi,
-            rigid_modal,
-            t1,
-            0.0,
-            y1,
-            lam0,
-            hh,
-            prev,
-            out,
-            res,
-            modal1,
-            w,
-            wdot,
-            nodes,
-        )
+        _evaluate(
+            P, corners, normals, phi, rigid_modal, alpha1, rate1, accel1, ca1, sa1, y1, lam0, hh,
+            prev, out, res, modal1, w, wdot, nodes,
+        )  # fmt: skip
         _friction_prev(out, prev)
         if not (
             math.isfinite(res[R_FX]) and math.isfinite(res[R_FY]) and math.isfinite(res[R_MZ])
@@ -914,25 +920,10 @@ def trapezoidal_step(
         depth = min(depth + 1, 2)
     if not converged and not force:
         return STEP_REJECTED
-    evaluate(
-        P,
-        corners,
-        normals,
-        phi,
-        rigid_modal,
-        t1,
-        0.0,
-        y1,
-        lam0,
-        hh,
-        prev,
-        out,
-        res,
-        modal1,
-        w,
-        wdot,
-        nodes,
-    )
+    _evaluate(
+        P, corners, normals, phi, rigid_modal, alpha1, rate1, accel1, ca1, sa1, y1, lam0, hh,
+        prev, out, res, modal1, w, wdot, nodes,
+    )  # fmt: skip
     _unring_stick(P, phi, out0, out, res, modal1, y1[0], y1[1])
     if stuck:
         lam1[0], lam1[1], lam1[2] = stick_wrench(P, res[R_FX], res[R_FY], res[R_MZ])
