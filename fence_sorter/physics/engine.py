@@ -151,7 +151,7 @@ class CompiledSolve:
         self.wdot = np.zeros(max(2 * n_el, 2))
         self.nodes = np.zeros((n_el + 1, 2))
         self.prev = np.zeros(K.N_SLOTS)
-        self.work = np.zeros(K.trapezoidal_work_size(m))
+        self.work = np.zeros(K.trapezoidal_work_shape(m))
         self.PK, self.PA, self.PG0, self.PG1, n_props = _propagator_cache(model)
         self._n_props = n_props
         ctl[K.I_N_PROPS] = n_props[0]

@@ -123,7 +123,7 @@ class Scheme:
         self.nodes = np.zeros((n + 1, 2))
         self.prev = np.zeros(K.N_SLOTS)
         self.ya = np.zeros(model.n_state)
-        self.work = np.zeros(K.trapezoidal_work_size(model.n_modes))
+        self.work = np.zeros(K.trapezoidal_work_shape(model.n_modes))
 
     def initialize(self, st: State, on_belt: bool) -> None:
         """Forces at the initial state; belt wrench by Karnopp; consistent accelerations."""

@@ -717,9 +717,9 @@ STEP_REJECTED = 1  # iteration did not converge (or a non-finite trial): halve a
 STEP_FORCED = 2  # not converged but taken (the caller asked: a tiny step over a switch)
 
 
-def trapezoidal_work_size(m: int) -> int:
-    """Length of the workspace ``trapezoidal_step`` needs for m modes."""
-    return 2 * m + 9 * (6 + 2 * m)
+def trapezoidal_work_shape(m: int) -> tuple[int, int]:
+    """Shape of the workspace ``trapezoidal_step`` needs for m modes."""
+    return (11, 6 + 2 * m)
 
 
 @njit(cache=True, _nrt=False)
@@ -789,28 +789,30 @@ def trapezoidal_step(
     y1[2] = y0[2] + hh * (y0[5] + vn2)
     y1[3], y1[4], y1[5] = vn0, vn1, vn2
     n = 6 + 2 * m
-    # one workspace instead of eight arrays per step: the modal base (2 m), then the Anderson
-    # history df, dg (2 n each, zeroed: 0 * dg enters the update before it is filled) and the
-    # vectors wts, g_new, f_prev, g_prev, f_cur (n each)
-    base = work[: 2 * m].reshape((m, 2))
-    df = work[2 * m : 2 * m + 2 * n].reshape((2, n))
-    dg = work[2 * m + 2 * n : 2 * m + 4 * n].reshape((2, n))
+    # one workspace (rows of n) instead of eight arrays per step: the modal base (rows 0-1,
+    # first m), the Anderson history df, dg (rows 2-3, 4-5, zeroed: 0 * dg enters the update
+    # before it is filled) and the vectors wts, g_new, f_prev, g_prev, f_cur (rows 6-10);
+    # row views, no reshape (Numba's reshape is a library call)
+    base0 = work[0]
+    base1 = work[1]
+    df = work[2:4]
+    dg = work[4:6]
     df[:, :] = 0.0
     dg[:, :] = 0.0
-    wts = work[2 * m + 4 * n : 2 * m + 5 * n]
-    g_new = work[2 * m + 5 * n : 2 * m + 6 * n]
-    f_prev = work[2 * m + 6 * n : 2 * m + 7 * n]
-    g_prev = work[2 * m + 7 * n : 2 * m + 8 * n]
-    f_cur = work[2 * m + 8 * n : 2 * m + 9 * n]
+    wts = work[6]
+    g_new = work[7]
+    f_prev = work[8]
+    g_prev = work[9]
+    f_cur = work[10]
     phi_scale = 0.0
     for j in range(m):
         fm = modal0[j] - rigid_modal[j] * jump
         e0 = y0[6 + j]
         e1 = y0[6 + m + j]
-        base[j, 0] = a_mat[j, 0, 0] * e0 + a_mat[j, 0, 1] * e1 + g0[j, 0] * fm
-        base[j, 1] = a_mat[j, 1, 0] * e0 + a_mat[j, 1, 1] * e1 + g0[j, 1] * fm
-        y1[6 + j] = base[j, 0] + g1[j, 0] * fm
-        y1[6 + m + j] = base[j, 1] + g1[j, 1] * fm
+        base0[j] = a_mat[j, 0, 0] * e0 + a_mat[j, 0, 1] * e1 + g0[j, 0] * fm
+        base1[j] = a_mat[j, 1, 0] * e0 + a_mat[j, 1, 1] * e1 + g0[j, 1] * fm
+        y1[6 + j] = base0[j] + g1[j, 0] * fm
+        y1[6 + m + j] = base1[j] + g1[j, 1] * fm
     if m > 0:
         for i in range(phi.shape[0]):
             for j in range(m):
@@ -871,9 +873,9 @@ def trapezoidal_step(
         err = max(err, abs(q2 - y1[2]) + h * abs(vi2 - y1[5]))
         g_new[0], g_new[1], g_new[2], g_new[3], g_new[4], g_new[5] = q0, q1, q2, vi0, vi1, vi2
         for j in range(m):
-            z0 = base[j, 0] + g1[j, 0] * modal1[j]
+            z0 = base0[j] + g1[j, 0] * modal1[j]
             g_new[6 + j] = z0
-            g_new[6 + m + j] = base[j, 1] + g1[j, 1] * modal1[j]
+            g_new[6 + m + j] = base1[j] + g1[j, 1] * modal1[j]
             err = max(err, abs(z0 - y1[6 + j]) * phi_scale)
         if err <= tol:
             for k in range(n):
