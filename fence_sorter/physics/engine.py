@@ -36,7 +36,11 @@ from .contacts import (
 
 COMPILED_METHODS = ("adaptive", "trapezoidal")
 STAGE_NAMES = (STAGE_ON_BELT, STAGE_E1, STAGE_E2, STAGE_E3, STAGE_E4, STAGE_SORTED)
-_STAGE_ARRAY = np.array(STAGE_NAMES)
+_STAGE_LENGTHS = np.array([len(n) for n in STAGE_NAMES])
+# the names as arrays of each string width (a recorded series takes the width of its longest)
+_STAGE_BY_WIDTH = {
+    w: np.array(STAGE_NAMES, dtype=f"<U{w}") for w in range(1, 1 + max(map(len, STAGE_NAMES)))
+}
 CHUNK = 512  # step attempts between two wall-time checks (~5-50 ms of solving)
 
 
@@ -99,7 +103,9 @@ class CompiledSolve:
         self.breaks = np.array(breaks, dtype=float)
         body = model.body
         v_ref = max(model.belt, 0.1)
-        cfg = np.zeros(K.N_CFG)
+        # filled as a list, one array at the end (a numpy item assignment per field cost more
+        # than the rest of this constructor on a cold cache, as after the bench's gc.collect)
+        cfg = [0.0] * K.N_CFG
         cfg[K.G_H_NOM] = h_nom
         cfg[K.G_T_END] = t_end
         cfg[K.G_DT] = sv.dt
@@ -123,6 +129,7 @@ class CompiledSolve:
         cfg[K.G_UP] = 2.0**0.25
         cfg[K.G_DOWN] = 2.0**-0.25
         cfg[K.G_FLUSH] = FLUSH_ANGLE
+        cfg = np.array(cfg, dtype=float)
         self.cfg = cfg
         ctl = np.zeros(K.N_CTL, dtype=np.int64)
         ctl[K.I_CUR], ctl[K.I_TRIAL] = 0, 1
@@ -290,29 +297,27 @@ class CompiledSolve:
 
     def fill(self, obs) -> None:
         """Copy the loop's reductions into a ``simulate.Observer`` (for ``Observer.result``)."""
-        ctl, fc = self.ctl, self.fc
+        ctl, fc = self.ctl.tolist(), self.fc.tolist()  # Python numbers, read once each
         obs.sorted = bool(ctl[K.I_SORTED])
         obs.touched = bool(ctl[K.I_TOUCHED])
         obs.had_fence = bool(ctl[K.I_HAD_FENCE])
-        obs.exit_speed = float(fc[K.F_EXIT_SPEED])
-        obs.impact_speed = float(fc[K.F_IMPACT_SPEED])
-        obs.impacts = [
-            (float(t), float(w), float(p)) for t, w, p in self.IMP[: ctl[K.I_N_IMPACTS]]
-        ]
-        obs.peak_n = float(fc[K.F_PEAK_N])
-        obs.peak_tip = float(fc[K.F_PEAK_TIP])
-        obs.max_depth = float(fc[K.F_MAX_DEPTH])
-        obs.y_max = float(fc[K.F_Y_MAX])
-        stages = [(STAGE_NAMES[int(c)], float(t)) for t, c in self.STG[: ctl[K.I_N_STAGES]]]
+        obs.exit_speed = fc[K.F_EXIT_SPEED]
+        obs.impact_speed = fc[K.F_IMPACT_SPEED]
+        obs.impacts = [(t, w, p) for t, w, p in self.IMP[: ctl[K.I_N_IMPACTS]].tolist()]
+        obs.peak_n = fc[K.F_PEAK_N]
+        obs.peak_tip = fc[K.F_PEAK_TIP]
+        obs.max_depth = fc[K.F_MAX_DEPTH]
+        obs.y_max = fc[K.F_Y_MAX]
+        stages = [(STAGE_NAMES[int(c)], t) for t, c in self.STG[: ctl[K.I_N_STAGES]].tolist()]
         obs.stages = stages
         obs.stage = stages[-1][0] if stages else None
         a = obs.audit
-        a.max_residual, a.min_residual = float(fc[K.F_MAX_RES]), float(fc[K.F_MIN_RES])
-        a.flow, a.e0 = float(fc[K.F_FLOW]), float(fc[K.F_E0])
-        a.t_max, a.t_min = float(fc[K.F_T_MAX]), float(fc[K.F_T_MIN])
-        a.max_rise = float(fc[K.F_MAX_RISE])
-        a.t_rise = (float(fc[K.F_T_RISE0]), float(fc[K.F_T_RISE1]))
-        a.run_min, a.t_run_min = float(fc[K.F_RUN_MIN]), float(fc[K.F_T_RUN_MIN])
+        a.max_residual, a.min_residual = fc[K.F_MAX_RES], fc[K.F_MIN_RES]
+        a.flow, a.e0 = fc[K.F_FLOW], fc[K.F_E0]
+        a.t_max, a.t_min = fc[K.F_T_MAX], fc[K.F_T_MIN]
+        a.max_rise = fc[K.F_MAX_RISE]
+        a.t_rise = (fc[K.F_T_RISE0], fc[K.F_T_RISE1])
+        a.run_min, a.t_run_min = fc[K.F_RUN_MIN], fc[K.F_T_RUN_MIN]
         obs.rec = self.series(obs.want)
 
     def series(self, want) -> dict[str, np.ndarray]:
@@ -337,9 +342,8 @@ class CompiledSolve:
             out["t_stage"] = cols[K.REC_T].copy()
             codes = cols[K.REC_STAGE].astype(np.intp)
             # the dtype np.asarray gives the Python loop's list of names: the longest present
-            present = np.flatnonzero(np.bincount(codes, minlength=len(STAGE_NAMES)))
-            width = max((len(STAGE_NAMES[c]) for c in present), default=1)
-            out["stage"] = _STAGE_ARRAY[codes].astype(f"<U{width}")
+            width = int(_STAGE_LENGTHS[codes].max()) if len(codes) else 1
+            out["stage"] = _STAGE_BY_WIDTH[width][codes]
         return out
 
 
