@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -139,3 +139,42 @@ class LatenessHistogram:
         rank = max(math.ceil(q / 100.0 * self.n), 1)
         k = int(np.searchsorted(np.cumsum(self.counts), rank))
         return min((k + 1) * self.BIN, self.max) if k < self.BINS else self.max
+
+
+class CycleTrace:
+    """Per-cycle timing of a paced loop for diagnosing deadline misses: the deadline, the wake
+    and the wall time after each phase of the cycle, with flags saying what the cycle did.
+    Preallocated arrays (no allocation per cycle); when full, the oldest cycles are
+    overwritten. :meth:`save` writes an ``.npz`` with one array per column, in cycle order."""
+
+    #: wall times recorded per cycle: deadline, wake, then the end of each phase (physics
+    #: advanced and events handled; messages published; garbage collected; prefetch done)
+    COLUMNS = ("deadline", "wake", "advanced", "published", "collected", "end")
+    #: flag bits
+    STATES, MARKERS, EVENTS, GC_YOUNG, GC_FULL, MISS = 1, 2, 4, 8, 16, 32
+
+    def __init__(self, capacity: int = 600_000):
+        if capacity < 1:
+            raise ValueError("capacity must be >= 1")
+        self.times = np.zeros((capacity, len(self.COLUMNS)))
+        self.k = np.zeros(capacity, dtype=np.int64)
+        self.flags = np.zeros(capacity, dtype=np.int32)
+        self.n = 0  # cycles recorded (may exceed capacity)
+
+    def record(self, k: int, times: Sequence[float], flags: int) -> None:
+        i = self.n % len(self.k)
+        self.k[i] = k
+        self.times[i] = times
+        self.flags[i] = flags
+        self.n += 1
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The recorded cycles, oldest first, one array per column plus ``k`` and ``flags``."""
+        cap = len(self.k)
+        order = np.arange(self.n - cap, self.n) % cap if self.n > cap else np.arange(self.n)
+        out = {name: self.times[order, j] for j, name in enumerate(self.COLUMNS)}
+        out["k"], out["flags"] = self.k[order], self.flags[order]
+        return out
+
+    def save(self, path: str) -> None:
+        np.savez_compressed(path, **self.arrays())

@@ -47,7 +47,7 @@ from fence_sorter.line import (
     StrokeCommand,
     StrokeStarted,
 )
-from fence_sorter.line.pacing import LatenessHistogram, Pacer
+from fence_sorter.line.pacing import CycleTrace, LatenessHistogram, Pacer
 from fence_sorter.nodes import convert
 from fence_sorter.nodes.base import FenceSorterNode, ParamSpec, spin_node
 from fence_sorter.nodes.qos import RELIABLE_QOS, SENSOR_QOS
@@ -61,6 +61,15 @@ COMMAND_HOLD = 0.5
 GC_SLACK = 0.0006
 #: cycles' worth of wall time between full collections [s]
 FULL_GC_PERIOD = 10.0
+#: publications (snapshots, marker frames, event batches, log lines) the pacing loop may be
+#: ahead of the publisher thread before it waits for it
+PUBLISH_QUEUE = 64
+#: the publisher starts a message only if its estimated cost, times this, ends before the
+#: pacing thread's next wake-up
+PUBLISH_COST_SAFETY = 2.0
+#: ... unless it has waited this long for such a window: it goes at the start of the next sleep
+#: (a message costlier than any window is published late rather than never) [s]
+PUBLISH_MAX_DEFER = 0.01
 
 # /clock: reliable keep-last, compatible with rclpy/rclcpp's best-effort clock subscriptions
 # and with reliable ones (recorders).
@@ -202,6 +211,14 @@ class SimulatorNode(FenceSorterNode):
             read_only=True,
         ),
         ParamSpec(
+            "cycle_trace",
+            "",
+            "Write the paced loop's per-cycle timing (deadline, wake, end of each phase, what "
+            "the cycle did) to this .npz at shutdown, to diagnose deadline misses (last 600000 "
+            "cycles); empty: none",
+            read_only=True,
+        ),
+        ParamSpec(
             "rrd_path",
             "",
             "Save a Rerun recording (.rrd) of the run here (logged in a child process from the "
@@ -249,9 +266,12 @@ class SimulatorNode(FenceSorterNode):
         self.lookahead = float(p["lookahead"])
         self.prefetch_reserve = float(p["prefetch_reserve"])
         self.rt_priority = int(p["realtime_priority"])
+        self.trace_path = str(p["cycle_trace"])
+        self.trace = CycleTrace() if self.trace_path else None
 
         self._inbox: queue.SimpleQueue = queue.SimpleQueue()
-        self._outbox: deque = deque()  # state messages of the last snapshot still to send
+        # the pacing thread hands publications to the publisher thread: (kind, payload, due)
+        self._publications: deque = deque()
         self._held: list[tuple[float, StrokeCommand]] = []  # commands for unknown parcels
         self.create_subscription(Parcel, "/parcels", self._on_parcel, RELIABLE_QOS)
         self.create_subscription(FenceCommand, "/fence_commands", self._on_command, RELIABLE_QOS)
@@ -274,6 +294,7 @@ class SimulatorNode(FenceSorterNode):
         self._lock = threading.Lock()
         self.hist = LatenessHistogram()
         self.work = LatenessHistogram()  # cycle work time (wake to done) [s]
+        self.publish_lag = LatenessHistogram()  # snapshot due -> its messages published [s]
         self.cycles = 0
         self.misses = 0
         self.slips = 0
@@ -287,6 +308,17 @@ class SimulatorNode(FenceSorterNode):
         self._stop = threading.Event()
         self._saved_switch: float | None = None
         self._thread = threading.Thread(target=self._loop, name="simulator-loop", daemon=True)
+        # The publisher thread works only while the pacing thread sleeps (always when
+        # unpaced), and only on messages it expects to finish before the pacing thread wakes
+        # (_wake_at): Python threads share one interpreter lock with no priorities, so a
+        # publisher running beside the cycle's work would take the lock from it for up to the
+        # switch interval plus a whole rclpy publish() call (which does not release it).
+        self._ready = threading.Event()  # the pacing thread went to sleep (unpaced: posted)
+        self._wake_at = math.inf  # wall time the pacing thread wakes (perf_counter)
+        self._slept_at = -math.inf  # when it last went to sleep
+        self._publisher = threading.Thread(
+            target=self._publish_loop, name="simulator-publisher", daemon=True
+        )
         log = self.get_logger()
         for warning in loaded.warnings:
             log.warning(f"scene {loaded.name}: {warning}")
@@ -317,6 +349,7 @@ class SimulatorNode(FenceSorterNode):
         gc.collect()
         gc.freeze()
         gc.disable()
+        self._publisher.start()  # first: the pacing thread sets its priority below its own
         self._thread.start()
 
     def stop(self) -> None:
@@ -324,6 +357,18 @@ class SimulatorNode(FenceSorterNode):
         self._stop.set()
         if self._thread.is_alive():
             self._thread.join(timeout=5.0)
+        if self._publisher.is_alive():  # publishes what the loop handed over, then ends
+            self._wake_at = math.inf
+            self._publications.append((None, None, None))
+            self._ready.set()
+            self._publisher.join(timeout=5.0)
+        if self.trace is not None:
+            trace, self.trace = self.trace, None
+            try:
+                trace.save(self.trace_path)
+                self.get_logger().info(f"cycle trace: {trace.n} cycles in {self.trace_path}")
+            except OSError as exc:
+                self.get_logger().error(f"cycle_trace {self.trace_path}: not written: {exc}")
         if self.rerun is not None:  # the child logs what it holds, then the file is closed
             rerun, self.rerun = self.rerun, None
             rerun.close()
@@ -384,6 +429,16 @@ class SimulatorNode(FenceSorterNode):
         period, line = self.period, self.line
         # unpaced: a cycle is one publish period of sim time (a 1 ms cycle would spend its time
         # in Python overhead, not physics)
+        ready = self._ready
+
+        def sleep(seconds: float) -> None:  # the publisher thread works while this one sleeps
+            self._slept_at = now = clock()
+            self._wake_at = now + seconds
+            ready.set()  # (also for messages left over from the last sleep)
+            time.sleep(seconds)
+            if pacer.rtf > 0.0:
+                self._wake_at = -math.inf
+
         pacer = Pacer(
             period,
             self.rtf,
@@ -391,11 +446,14 @@ class SimulatorNode(FenceSorterNode):
             self.max_catch_up,
             self.spin_margin,
             unpaced_step=self.publish_every * period,
+            sleep=sleep,
         )
+        if self.rtf == 0.0:
+            self._wake_at = math.inf  # unpaced: the two threads share the interpreter as usual
         next_pub = next_marker = 0  # cycle index of the next publication (k may skip)
         next_gc = next_full_gc = 0
-        self._queue_states(line.snapshot())
-        self._send(len(self._outbox))
+        post = self._post
+        post(("states", line.snapshot(), None))
         while not self._stop.is_set():
             rtf = pacer.rtf
             tick = pacer.wait()
@@ -407,34 +465,34 @@ class SimulatorNode(FenceSorterNode):
                 with self._lock:
                     self.hist.add(tick.lateness)
                     self.slips = pacer.slips
+            else:
+                wake = None
+            flags = 0
             self._drain_inbox()
-            self._handle(line.advance(t_target))
+            events = line.advance(t_target)
+            if events:
+                flags |= CycleTrace.EVENTS
+                post(("events", events, None))
+            advanced = clock()
+            # publishing is the publisher thread's: the loop hands over a snapshot (a copy),
+            # so a slow publish or log write never delays the physics
             if k >= next_pub:
+                flags |= CycleTrace.STATES
                 next_pub = (k // self.publish_every + 1) * self.publish_every
-                self._queue_states(line.snapshot())
-                # paced: /clock now, the other state messages of this snapshot one or two per
-                # cycle over the publish period (each stamped with the snapshot's sim time), so
-                # no cycle carries the whole publication; unpaced: all at once
-                self._send(1 if rtf > 0.0 else len(self._outbox))
-            elif self.marker_every and k >= next_marker:
-                # markers in a cycle of their own (paced), so their cost does not add up with
-                # the states' in one cycle
+                post(("states", line.snapshot(), wake))
+            if self.marker_every and k >= next_marker:
+                flags |= CycleTrace.MARKERS
                 next_marker = (k // self.marker_every + 1) * self.marker_every
-                self.pub_markers.publish(self._markers.build(line.snapshot()))
-                self._send(len(self._outbox) - max(next_pub - k - 1, 1))
-            elif self._outbox:
-                left = max(next_pub - k, 1)  # cycles until the next snapshot is queued
-                self._send(-(-len(self._outbox) // left))
-            if rtf == 0.0 and self.marker_every and k >= next_marker:
-                next_marker = (k // self.marker_every + 1) * self.marker_every
-                self.pub_markers.publish(self._markers.build(line.snapshot()))
+                post(("markers", line.snapshot(), wake))
             done = clock()
             if k >= next_gc and pacer.next_deadline - done > GC_SLACK:
                 gen = 2 if k >= next_full_gc else 0
+                flags |= CycleTrace.GC_FULL if gen == 2 else CycleTrace.GC_YOUNG
                 gc.collect(gen)
                 next_gc = k + self.publish_every
                 if gen == 2:
                     next_full_gc = k + round(FULL_GC_PERIOD / period)
+            collected = clock()
             if rtf > 0.0 and self.lookahead > 0.0:
                 # spare time: step the running solves ahead (the wait below still starts its
                 # busy-wait on time; one solver step may overrun by its own cost)
@@ -450,6 +508,9 @@ class SimulatorNode(FenceSorterNode):
                 self.sim_time = line.t
                 if done > deadline + period:
                     self.misses += 1
+                    flags |= CycleTrace.MISS
+            if self.trace is not None and rtf > 0.0:
+                self.trace.record(k, (deadline, wake, advanced, done, collected, clock()), flags)
             if self.rtf != pacer.rtf:  # changed at run time: a new grid from here
                 if self.rtf == 0.0 and os.sched_getscheduler(0) == os.SCHED_FIFO:
                     os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
@@ -468,17 +529,17 @@ class SimulatorNode(FenceSorterNode):
                 break
             (parcels if kind == "parcel" else commands).append(msg)
         line = self.line
-        log = self.get_logger()
+        log = self._log  # written by the publisher thread
         for msg in parcels:
             self.counts["parcels_received"] += 1
             try:
                 line.add_parcel(convert.parcel_from_msg(msg), line.t)
             except InputError as exc:
                 self.bad_parcels[exc.key] += 1
-                log.warning(f"parcel {msg.parcel_id} rejected ({exc.key}): {exc}")
+                log("warning", f"parcel {msg.parcel_id} rejected ({exc.key}): {exc}")
             except (ValueError, OverflowError) as exc:
                 self.bad_parcels["invalid"] += 1
-                log.warning(f"parcel {msg.parcel_id} rejected (invalid): {exc}")
+                log("warning", f"parcel {msg.parcel_id} rejected (invalid): {exc}")
         held, self._held = self._held, []
         for msg in commands:
             self.counts["commands_received"] += 1
@@ -490,15 +551,17 @@ class SimulatorNode(FenceSorterNode):
             elif res.accepted:
                 self.counts[f"commands_{res.code}"] += 1
                 if res.code == "accepted":
-                    log.info(
+                    log(
+                        "info",
                         f"parcel {cmd.parcel_id}: stroke planned at t = "
-                        f"{res.start_time:.3f} s (t1 = {cmd.t1:g} s)"
+                        f"{res.start_time:.3f} s (t1 = {cmd.t1:g} s)",
                     )
             else:
                 self.rejected_commands[res.code] += 1
-                log.warning(f"command for parcel {cmd.parcel_id} rejected: {res.reason}")
+                log("warning", f"command for parcel {cmd.parcel_id} rejected: {res.reason}")
 
     def _handle(self, events: list) -> None:
+        """Publish and log the line's events (publisher thread)."""
         log = self.get_logger()
         for e in events:
             if isinstance(e, Outcome):
@@ -525,42 +588,124 @@ class SimulatorNode(FenceSorterNode):
             elif isinstance(e, StrokeStarted):
                 self.counts["strokes"] += 1
 
-    def _queue_states(self, snap) -> None:
-        """Queue the state messages of one snapshot (/clock first); what is left of the
-        previous one is sent first."""
-        self._send(len(self._outbox))
-        box = self._outbox
-        box.append((self._send_clock, snap, None))
-        box.append((self._send_fence, snap, None))
-        box.append((self._send_joint, snap, None))
-        box.extend((self._send_load, snap, p) for p in snap.parcels)
-        if self.rerun is not None:
-            box.append((self._send_rerun, snap, None))
+    def _log(self, level: str, text: str) -> None:
+        """Log from the pacing thread: the publisher thread writes it (a log call may block on
+        the console, the log file or /rosout)."""
+        self._post(("log", (level, text), None))
 
-    def _send(self, n: int) -> None:
-        """Publish the next ``n`` queued state messages."""
-        box = self._outbox
-        for _ in range(min(n, len(box))):
-            send, snap, item = box.popleft()
-            send(snap, item)
+    def _post(self, item: tuple) -> None:
+        """Hand a publication to the publisher thread (pacing thread). Waits (sleeping, which
+        lets the publisher run) only when ``PUBLISH_QUEUE`` publications are pending."""
+        box = self._publications
+        while len(box) >= PUBLISH_QUEUE and self._publisher.is_alive():
+            self._wake_at = time.perf_counter() + 1e-3
+            self._ready.set()
+            time.sleep(1e-3)
+            self._wake_at = -math.inf
+        box.append(item)
+        if self._wake_at == -math.inf:  # paced and awake: the publisher waits for the sleep
+            if time.perf_counter() - self._slept_at < PUBLISH_MAX_DEFER:
+                return
+            # overloaded: the loop has not slept for a while (it runs behind its deadlines);
+            # the publisher runs beside it until its next sleep rather than not at all
+            self._wake_at = math.inf
+        self._ready.set()
+
+    # -- the publisher thread --------------------------------------------------------------------
+    def _publish_loop(self) -> None:
+        """Publish what the pacing loop hands over, in order, until the stop sentinel: state
+        messages of a snapshot (/clock first), marker frames, events (outcomes, warnings) and
+        log lines. A message starts only while the pacing thread sleeps and only if its
+        running-mean cost (times ``PUBLISH_COST_SAFETY``) ends before that thread's wake-up;
+        otherwise it waits for the next sleep. Records the lag from a snapshot's due time to
+        its last message."""
+        clock = time.perf_counter
+        box, ready = self._publications, self._ready
+        pending: deque = deque()  # (cost key, function, argument, due) of taken publications
+        cost: dict[str, float] = {}  # running mean wall time per message kind [s]
+        deferred = math.inf  # when the first pending message was first put off
+        try:
+            while True:
+                ready.wait()
+                ready.clear()
+                while pending or box:
+                    if not pending:
+                        kind, payload, due = box.popleft()
+                        if kind is None:  # the stop sentinel
+                            return
+                        pending.extend(self._messages(kind, payload, due))
+                    key, fn, arg, due = pending[0]
+                    t0 = clock()
+                    if t0 + PUBLISH_COST_SAFETY * cost.get(key, 0.0) > self._wake_at and (
+                        t0 - deferred < PUBLISH_MAX_DEFER or t0 > self._wake_at
+                    ):
+                        deferred = min(deferred, t0)
+                        break  # not before the pacing thread wakes: at its next sleep
+                    fn(arg)
+                    pending.popleft()
+                    deferred = math.inf
+                    t1 = clock()
+                    cost[key] = 0.9 * cost.get(key, t1 - t0) + 0.1 * (t1 - t0)
+                    if due is not None:
+                        with self._lock:
+                            self.publish_lag.add(t1 - due)
+        except Exception as exc:  # report, then end the process through the executor
+            if "context is invalid" in str(exc) or not self.context.ok():
+                return
+            self.loop_error = f"publisher: {type(exc).__name__}: {exc}"
+            self.get_logger().fatal(self.loop_error)
+            self.context.try_shutdown()
+
+    def _messages(self, kind: str, payload, due: float | None) -> list[tuple]:
+        """One publication as messages: (cost key, function, argument, due or None)."""
+        if kind == "states":
+            snap = payload
+            msgs = [
+                ("clock", self._publish_clock, snap, None),
+                ("fence", self._publish_fence, snap, None),
+                ("joint", self._publish_joint, snap, None),
+            ]
+            msgs += [("load", self._publish_load, (snap, p), None) for p in snap.parcels]
+            if self.rerun is not None:
+                msgs.append(("rerun", self.rerun.offer, snap, None))  # packed, piped
+            last = msgs[-1]
+            msgs[-1] = (*last[:3], due)
+            return msgs
+        if kind == "markers":
+            return [("markers", self._publish_markers, payload, due)]
+        if kind == "events":
+            return [("events", self._handle, payload, None)]
+        return [("log", self._write_log, payload, None)]
+
+    def _write_log(self, item: tuple[str, str]) -> None:
+        level, text = item
+        log = self.get_logger()  # one call site per severity (rclpy requires it)
+        if level == "info":
+            log.info(text)
+        elif level == "warning":
+            log.warning(text)
+        else:
+            log.error(text)
 
     # one message object per topic, filled in place: publish() serialises it at once
-    def _send_clock(self, snap, _) -> None:
+    def _publish_clock(self, snap) -> None:
         self.pub_clock.publish(convert.fill_clock(self._clock_msg, snap.t))
 
-    def _send_fence(self, snap, _) -> None:
+    def _publish_fence(self, snap) -> None:
         msg = convert.fill_fence_state(self._fence_msg, snap.fence, snap.t, self.frame_id)
         self.pub_fence.publish(msg)
 
-    def _send_joint(self, snap, _) -> None:
+    def _publish_joint(self, snap) -> None:
         self.pub_joint.publish(convert.fill_joint_state(self._joint_msg, snap.fence, snap.t))
 
-    def _send_load(self, snap, parcel) -> None:
-        msg = convert.fill_load_state(self._load_msg, parcel, snap.t, self.frame_id)
-        self.pub_loads.publish(msg)
+    def _publish_load(self, item) -> None:
+        snap, parcel = item
+        self.pub_loads.publish(
+            convert.fill_load_state(self._load_msg, parcel, snap.t, self.frame_id)
+        )
 
-    def _send_rerun(self, snap, _) -> None:
-        self.rerun.offer(snap)  # packed and piped, never blocks (paced runs)
+    def _publish_markers(self, snap) -> None:
+        self.pub_markers.publish(self._markers.build(snap))
 
     # -- diagnostics -----------------------------------------------------------------------------
     def heartbeat_stamp(self):
@@ -579,6 +724,9 @@ class SimulatorNode(FenceSorterNode):
             lat_max = hist.max * 1e3
             w50, w99, w999 = (self.work.percentile(q) * 1e3 for q in (50.0, 99.0, 99.9))
             w_max = self.work.max * 1e3
+            lag = self.publish_lag
+            g50, g99, g999 = (lag.percentile(q) * 1e3 for q in (50.0, 99.0, 99.9))
+            g_max = lag.max * 1e3
             cycles, misses, slips, sim_t = self.cycles, self.misses, self.slips, self.sim_time
             counts = dict(self.counts)
             bad = dict(self.bad_parcels)
@@ -603,6 +751,11 @@ class SimulatorNode(FenceSorterNode):
             "cycle_work_p99_ms": f"{w99:.4f}",
             "cycle_work_p99_9_ms": f"{w999:.4f}",
             "cycle_work_max_ms": f"{w_max:.4f}",
+            # snapshot due (its cycle's wake) -> its last state message published, paced only
+            "publish_lag_p50_ms": f"{g50:.4f}",
+            "publish_lag_p99_ms": f"{g99:.4f}",
+            "publish_lag_p99_9_ms": f"{g999:.4f}",
+            "publish_lag_max_ms": f"{g_max:.4f}",
             "parcels_on_line": str(self.line.parcels_on_line),
             "bad_parcels": str(sum(bad.values())),
             "commands_rejected": str(sum(rejected.values())),

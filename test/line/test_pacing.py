@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from fence_sorter.line.pacing import MIN_MARGIN, LatenessHistogram, Pacer
@@ -107,3 +108,19 @@ def test_busy_wait_follows_the_sleep_overshoot():
     clock.oversleep = 5e-3  # a long preemption: the margin stops at its cap
     p.wait()
     assert p.margin == 4e-4
+
+
+def test_cycle_trace_keeps_the_last_cycles_in_order():
+    from fence_sorter.line.pacing import CycleTrace
+
+    trace = CycleTrace(capacity=4)
+    for k in range(1, 7):
+        times = [k + 0.1 * j for j in range(len(CycleTrace.COLUMNS))]
+        trace.record(k, times, CycleTrace.MISS if k % 2 else 0)
+    a = trace.arrays()
+    assert list(a["k"]) == [3, 4, 5, 6] and trace.n == 6
+    assert list(a["deadline"]) == [3.0, 4.0, 5.0, 6.0]
+    assert np.allclose(a["end"] - a["deadline"], 0.1 * (len(CycleTrace.COLUMNS) - 1))
+    assert list(a["flags"]) == [CycleTrace.MISS, 0, CycleTrace.MISS, 0]
+    with pytest.raises(ValueError, match="capacity"):
+        CycleTrace(capacity=0)

@@ -87,6 +87,7 @@ def test_simulator_sorts_reports_and_survives_bad_parcels(env, tmp_path: Path, p
     params = tmp_path / "sim.yaml"
     params.write_text(
         "simulator:\n  ros__parameters:\n    heartbeat_period: 0.3\n    physics_rate: 500.0\n"
+        f"    cycle_trace: {tmp_path / 'cycles.npz'}\n"
     )
     cmd = ["simulator", "--ros-args", "--params-file", str(params)]
     from fence_sorter.testing import venv_executable
@@ -169,6 +170,22 @@ def test_simulator_sorts_reports_and_survives_bad_parcels(env, tmp_path: Path, p
     assert proc.returncode == 0, stdout + stderr
     assert "Traceback" not in stdout + stderr
     assert "mass must be a finite number" in stderr + stdout  # logged with its reason
+    # the cycle trace written at shutdown: the 2 ms deadline grid, wakes at or after their
+    # deadlines, phases in order, and at least the cycles the last heartbeat counted
+    import numpy as np
+
+    trace = np.load(tmp_path / "cycles.npz")
+    dl = trace["deadline"]
+    assert len(dl) >= int(d["cycles"]) > 100
+    assert np.all(np.diff(trace["k"]) >= 1)
+    # one deadline per cycle (a late cycle skips the ones it overslept: larger steps)
+    steps = np.diff(dl)
+    assert np.all(steps > 2e-3 * (1 - 1e-6)) and np.mean(np.isclose(steps, 2e-3)) > 0.95
+    assert np.all(trace["wake"] >= dl)
+    phases = [trace[c] for c in ("wake", "advanced", "published", "collected", "end")]
+    assert all(np.all(b >= a) for a, b in zip(phases, phases[1:], strict=False))
+    states = (trace["flags"] & 1) > 0  # CycleTrace.STATES: every 10th cycle at 500/50 Hz
+    assert abs(states.mean() - 0.1) < 0.02
 
 
 def test_bad_scene_exits_2_with_one_line(env) -> None:
