@@ -18,9 +18,14 @@ import os
 import tempfile
 import time
 from collections.abc import Sequence
+from dataclasses import asdict
 from pathlib import Path
 
 from fence_sorter.runner.job import RunOptions, run_job
+from fence_sorter.verification.stall_probe import StallReport, run_probe
+
+#: length of each host stall probe around the paced run [s of busy time]
+PROBE_S = 10.0
 
 BEGIN, END = "<!-- suite:begin -->", "<!-- suite:end -->"
 TARGETS = {
@@ -102,11 +107,13 @@ def run_bench(
     apply to both runs; ``rrd`` makes the paced run save a Rerun recording (deleted after)."""
     load0 = os.getloadavg()
     wall0 = time.time()
+    probes = [run_probe(PROBE_S)]  # the host's own stalls, before and after the paced run
     with tempfile.TemporaryDirectory(prefix="bench_suite_") as tmp:
         rrd_file = str(Path(tmp) / "paced.rrd") if rrd else None
         paced = run_job(
             RunOptions(duration=duration, rtf=1.0, params=list(params), rrd=rrd_file), say=say
         )
+    probes.append(run_probe(PROBE_S))
     s = paced.summary
     sim, ctl = s["simulator"], s["controller"]
     cycles = _num(sim, "cycles")
@@ -126,6 +133,8 @@ def run_bench(
         "lateness_p99_9_ms": _num(sim, "cycle_lateness_p99_9_ms"),
         "lateness_max_ms": _num(sim, "cycle_lateness_max_ms"),
         "work_p99_ms": _num(sim, "cycle_work_p99_ms"),
+        "publish_lag_p99_ms": _num(sim, "publish_lag_p99_ms"),
+        "publish_lag_max_ms": _num(sim, "publish_lag_max_ms"),
         "paced_rtf": _num(sim, "real_time_factor_achieved"),
         "counts": counts,
         "lost_messages": lost(counts),
@@ -143,6 +152,7 @@ def run_bench(
         "unpaced_parcels": unpaced_parcels,
         "params": list(params),
         "rrd": rrd,
+        "probes": [asdict(p) for p in probes],
     }
     unpaced = run_job(RunOptions(parcels=unpaced_parcels, rtf=0.0, params=list(params)), say=say)
     fig.update(
@@ -265,12 +275,36 @@ def render(fig: dict, command: str, machine: dict, revision: str) -> str:
         "late commands are expected); exit "
         f"{f['unpaced_exit']} ({f['unpaced_message']}).",
         "",
+        _probe_line(f.get("probes", [])),
+        "",
         f"Other figures: cycle lateness p50 {f['lateness_p50_ms']:.3f} ms, max "
-        f"{f['lateness_max_ms']:.2f} ms; cycle work p99 {f['work_p99_ms']:.3f} ms. The machine "
-        "has 2 cores shared with other jobs; the lateness tail follows its load.",
+        f"{f['lateness_max_ms']:.2f} ms; cycle work p99 {f['work_p99_ms']:.3f} ms; publication "
+        f"lag (a snapshot's cycle to its last message out, publisher thread) p99 "
+        f"{f.get('publish_lag_p99_ms', math.nan):.3f} ms, max "
+        f"{f.get('publish_lag_max_ms', math.nan):.2f} ms. The machine has 2 cores shared with "
+        "other jobs; the lateness tail follows its load.",
         END,
     ]
     return "\n".join(lines)
+
+
+def _probe_line(probes: list[dict]) -> str:
+    """The host stall probes as one sentence (see :mod:`.stall_probe`)."""
+    if not probes:
+        return "Host stall probe: not run."
+    reps = [StallReport(**p) for p in probes]
+    parts = [
+        f"{r.gaps_over_1ms} gaps >= 1 ms ({r.gaps_over_2ms} >= 2 ms, longest "
+        f"{r.max_gap_ms:.2f} ms) in {r.duration:g} s"
+        for r in reps
+    ]
+    return (
+        f"Host stall probe ({reps[0].policy} busy loop, "
+        "`python -m fence_sorter.verification.stall_probe`, before and after the paced run): "
+        + "; ".join(parts)
+        + ". A gap is time the loop did not run at all (hypervisor or kernel), which no pacing "
+        "can hide: each gap >= 1 ms is a missed 1 kHz deadline whatever the simulator does."
+    )
 
 
 def write_section(path: Path, section: str) -> None:
