@@ -77,7 +77,7 @@ def generate_launch_description() -> LaunchDescription:
             package=PACKAGE,
             executable="recorder",
             name="recorder",
-            parameters=[{"output_dir": bag}],
+            parameters=[str(config / "recorder.yaml"), {"output_dir": bag, **sim_time}],
             condition=IfCondition(PythonExpression(["'", bag, "' != ''"])),
             output="screen",
         ),
