@@ -131,6 +131,23 @@ class LatenessHistogram:
         if value > self.max:
             self.max = value
 
+    def copy(self) -> LatenessHistogram:
+        """An independent copy (take it under the writer's lock, compute outside)."""
+        other = LatenessHistogram.__new__(LatenessHistogram)
+        other.counts, other.n, other.max = self.counts.copy(), self.n, self.max
+        return other
+
+    def percentiles(self, qs: Sequence[float]) -> list[float]:
+        """:meth:`percentile` of each q, with one cumulative sum."""
+        if self.n == 0:
+            return [math.nan for _ in qs]
+        cum = np.cumsum(self.counts)
+        out = []
+        for q in qs:
+            k = int(np.searchsorted(cum, max(math.ceil(q / 100.0 * self.n), 1)))
+            out.append(min((k + 1) * self.BIN, self.max) if k < self.BINS else self.max)
+        return out
+
     def percentile(self, q: float) -> float:
         """Upper edge of the bin holding the q-th percentile [s], capped at the max (NaN
         before any sample)."""

@@ -153,12 +153,16 @@ class FenceSorterNode(Node):
         """Stamp of the heartbeat: the node's clock (sim time with use_sim_time)."""
         return self.get_clock().now().to_msg()
 
-    def publish_heartbeat(self) -> None:
-        """Publish one DiagnosticArray with this node's status on /diagnostics."""
+    def heartbeat_message(self) -> DiagnosticArray:
+        """One DiagnosticArray with this node's status."""
         msg = DiagnosticArray()
         msg.header.stamp = self.heartbeat_stamp()
         msg.status = [self.heartbeat_status()]
-        self._diagnostics_pub.publish(msg)
+        return msg
+
+    def publish_heartbeat(self) -> None:
+        """Publish :meth:`heartbeat_message` on /diagnostics."""
+        self._diagnostics_pub.publish(self.heartbeat_message())
 
 
 #: more take failures than this in one run: something is really broken, stop

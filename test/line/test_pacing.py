@@ -124,3 +124,16 @@ def test_cycle_trace_keeps_the_last_cycles_in_order():
     assert list(a["flags"]) == [CycleTrace.MISS, 0, CycleTrace.MISS, 0]
     with pytest.raises(ValueError, match="capacity"):
         CycleTrace(capacity=0)
+
+
+def test_histogram_percentiles_in_one_pass_match_one_at_a_time():
+    rng = np.random.default_rng(3)
+    h = LatenessHistogram()
+    assert all(math.isnan(v) for v in h.percentiles((50.0, 99.0)))
+    for v in rng.exponential(2e-4, 5000):
+        h.add(float(v))
+    qs = (50.0, 90.0, 99.0, 99.9, 100.0)
+    assert h.percentiles(qs) == [h.percentile(q) for q in qs]
+    c = h.copy()
+    h.add(0.05)
+    assert c.n == h.n - 1 and c.max < 0.05 and c.percentiles(qs) != h.percentiles(qs)
