@@ -48,6 +48,7 @@ from fence_sorter.line import (
     StrokeCommand,
     StrokeStarted,
 )
+from fence_sorter.line.awake import start_spinners, stop_spinners
 from fence_sorter.line.pacing import CycleTrace, LatenessHistogram, Pacer
 from fence_sorter.nodes import convert
 from fence_sorter.nodes.base import FenceSorterNode, ParamSpec, spin_node
@@ -212,6 +213,14 @@ class SimulatorNode(FenceSorterNode):
             read_only=True,
         ),
         ParamSpec(
+            "keep_cpus_awake",
+            False,
+            "Paced runs: one SCHED_IDLE busy process per CPU keeps the CPUs from halting "
+            "between deadlines (on a VM whose guest idles with HLT, a sleeping loop otherwise "
+            "wakes when the host runs its vCPU again); they yield to any other work",
+            read_only=True,
+        ),
+        ParamSpec(
             "cycle_trace",
             "",
             "Write the paced loop's per-cycle timing (deadline, wake, end of each phase, what "
@@ -269,6 +278,8 @@ class SimulatorNode(FenceSorterNode):
         self.rt_priority = int(p["realtime_priority"])
         self.trace_path = str(p["cycle_trace"])
         self.trace = CycleTrace() if self.trace_path else None
+        self.keep_cpus_awake = bool(p["keep_cpus_awake"])
+        self._spinners: list = []
 
         self._inbox: queue.SimpleQueue = queue.SimpleQueue()
         # the pacing thread hands publications to the publisher thread: (kind, payload, due)
@@ -318,6 +329,7 @@ class SimulatorNode(FenceSorterNode):
         self._wake_at = math.inf  # wall time the pacing thread wakes (perf_counter)
         self._debug_enabled = self.get_logger().is_enabled_for(LoggingSeverity.DEBUG)
         self._slept_at = -math.inf  # when it last went to sleep
+        self._clock_published = self.line.t  # sim time of the last /clock message
         self._publisher = threading.Thread(
             target=self._publish_loop, name="simulator-publisher", daemon=True
         )
@@ -351,6 +363,11 @@ class SimulatorNode(FenceSorterNode):
         gc.collect()
         gc.freeze()
         gc.disable()
+        if self.keep_cpus_awake and self.rtf > 0.0:
+            self._spinners = start_spinners()
+            self.get_logger().info(
+                f"keep_cpus_awake: {len(self._spinners)} SCHED_IDLE spinner processes"
+            )
         self._publisher.start()  # first: the pacing thread sets its priority below its own
         self._thread.start()
 
@@ -364,6 +381,8 @@ class SimulatorNode(FenceSorterNode):
             self._publications.append((None, None, None))
             self._ready.set()
             self._publisher.join(timeout=5.0)
+        spinners, self._spinners = self._spinners, []
+        stop_spinners(spinners)
         if self.trace is not None:
             trace, self.trace = self.trace, None
             try:
@@ -709,6 +728,7 @@ class SimulatorNode(FenceSorterNode):
     # one message object per topic, filled in place: publish() serialises it at once
     def _publish_clock(self, snap) -> None:
         self.pub_clock.publish(convert.fill_clock(self._clock_msg, snap.t))
+        self._clock_published = snap.t
 
     def _publish_fence(self, snap) -> None:
         msg = convert.fill_fence_state(self._fence_msg, snap.fence, snap.t, self.frame_id)
@@ -748,11 +768,10 @@ class SimulatorNode(FenceSorterNode):
             self._ready.set()
 
     def heartbeat_stamp(self):
-        """Sim time, as every other stamp of this node and the /diagnostics of the nodes that
-        follow its /clock (one time base on the topic: bag tools order it by this stamp)."""
-        with self._lock:
-            t = self.sim_time
-        return convert.fill_clock(Clock(), t).clock
+        """The last /clock this node published (sim time), as the /diagnostics of the nodes
+        that follow that clock are stamped: one time base on the topic, and no stamp ahead of
+        what a sim-time recorder has seen (bag tools order the topic by this stamp)."""
+        return convert.fill_clock(Clock(), self._clock_published).clock
 
     def heartbeat_status(self) -> DiagnosticStatus:
         status = super().heartbeat_status()
