@@ -19,6 +19,8 @@ DEFAULT_OUT = "docs/benchmarks.md"
 
 
 def register(subparsers) -> None:
+    from fence_sorter.cli.run import add_param_option
+
     parser = subparsers.add_parser(
         "bench-suite",
         help="node suite benchmark: pacing, lost messages, controller latency, unpaced RTF",
@@ -28,13 +30,9 @@ def register(subparsers) -> None:
     parser.add_argument("--out", default=DEFAULT_OUT, help="markdown file (section replaced)")
     parser.add_argument("--duration", type=float, default=60.0, help="paced stream length [s]")
     parser.add_argument("--unpaced-parcels", type=int, default=40, help="parcels, unpaced run")
-    parser.add_argument(
-        "--param",
-        dest="params",
-        action="append",
-        default=[],
-        metavar="NODE:KEY=VALUE",
-        help="node parameter override for both runs, e.g. simulator:physics_rate=500 "
+    add_param_option(
+        parser,
+        "node parameter override for both runs, e.g. simulator:physics_rate=500.0 "
         "(repeatable; the report lists them)",
     )
     parser.add_argument(

@@ -44,16 +44,18 @@ def register(subparsers) -> None:
         "--timeout", type=float, help="wall-time limit [s] (default: from the stream)"
     )
     parser.add_argument("--log-dir", help="node logs (default: a new temporary directory)")
-    parser.add_argument(
-        "--param",
-        dest="params",
-        action="append",
-        default=[],
-        metavar="NODE:KEY=VALUE",
-        help="node parameter override, e.g. controller:max_evaluations=5 (repeatable)",
+    add_param_option(
+        parser, "node parameter override, e.g. controller:max_evaluations=5 (repeatable)"
     )
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
     parser.set_defaults(func=run)
+
+
+def add_param_option(parser: argparse.ArgumentParser, help: str) -> None:
+    """``--param NODE:KEY=VALUE`` (repeatable) into ``args.params``; checked by the job."""
+    parser.add_argument(
+        "--param", dest="params", action="append", default=[], metavar="NODE:KEY=VALUE", help=help
+    )
 
 
 def run(args: argparse.Namespace) -> int:
