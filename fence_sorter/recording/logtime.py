@@ -17,7 +17,10 @@ keeps its reception time exactly; an out-of-order one is logged at the log time 
 message stamped after it (earlier than its reception by the size of the race). Only messages
 stamped within ``tolerance`` of their reception take part: a stamp on another clock (a
 sim-time node recorded by a recorder on system time) keeps its reception time and moves no
-other message, so a misconfigured clock costs the check, never the timing of the bag.
+other message, so a misconfigured clock costs the check, never the timing of the bag. A zero
+stamp always takes part: it comes from a sim-time node whose clock has not started yet (a
+scanner's first heartbeat before its first /clock, received seconds into the run), and is
+logged before every message stamped later.
 """
 
 from __future__ import annotations
@@ -94,7 +97,9 @@ class StampOrder:
         """Log time [ns] of a message of ``topic`` (a topic whose type starts with a Header)
         received at ``received_ns``; the message is remembered."""
         stamp = header_stamp_ns(data)
-        if stamp is None or abs(stamp - received_ns) > self.tolerance_ns:
+        # a zero stamp is a sim-time node whose clock has not started (no /clock yet): it
+        # takes part whatever its distance, so it is logged before every later stamp
+        if stamp is None or (stamp != 0 and abs(stamp - received_ns) > self.tolerance_ns):
             return received_ns
         pairs = self._topics.setdefault(topic, _Pairs())
         stamps, logs = pairs.stamps, pairs.logs

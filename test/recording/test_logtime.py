@@ -119,6 +119,21 @@ def test_a_stamp_on_another_clock_keeps_its_reception_time(typestore):
         StampOrder(tolerance_ns=-1)
 
 
+def test_a_zero_stamp_received_late_joins_the_zero_stamps(typestore):
+    """A sim-time node's heartbeat sent before its first /clock is stamped 0; received 1.74 s
+    into the run (CI once had one), it is logged before every message stamped later, not at
+    its reception (Rerun's --full check saw a row-order conflict)."""
+    order = StampOrder()
+    rows = [(order.log_time("/diagnostics", 0, diagnostics(typestore, 0, "recorder")), 0)]
+    for k in range(1, 4):  # controller heartbeats on the sim clock: (log time, stamp)
+        t = k * 400 * MS
+        rows.append((order.log_time("/diagnostics", t, diagnostics(typestore, t, "c")), t))
+    late = order.log_time("/diagnostics", 1740 * MS, diagnostics(typestore, 0, "scanner"))
+    assert late == 400 * MS and order.adjusted == 1  # the first message stamped after it
+    assert pairs_agree([*rows, (late, 0)])
+    assert not pairs_agree([*rows, (1740 * MS, 0)])  # at its reception time: the conflict
+
+
 def test_window_is_bounded(typestore):
     order = StampOrder(window=10)
     for k in range(100):
