@@ -7,6 +7,7 @@ module-level ``main()`` that calls :func:`run_node`.
 
 from __future__ import annotations
 
+import signal
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -204,8 +205,13 @@ def run_node(node_class: type[FenceSorterNode], args: Sequence[str] | None = Non
     shutdown; return the exit code.
 
     rclpy's own signal handlers (SIGINT and SIGTERM) shut the context down, which ends the spin
-    with ExternalShutdownException; a KeyboardInterrupt that slips through ends it as well.
+    with ExternalShutdownException. On SIGINT rclpy then calls the Python handler it found,
+    which by default raises KeyboardInterrupt at whatever bytecode the main thread is in: once
+    inside an rclpy Task's constructor, whose half-built object then printed "Exception ignored
+    in Task.__del__" with a traceback at exit. Python's SIGINT handler is therefore a no-op
+    here; a KeyboardInterrupt that still slips through ends the spin as well.
     """
+    signal.signal(signal.SIGINT, lambda *_: None)
     rclpy.init(args=list(args) if args is not None else None)
     node: FenceSorterNode | None = None
     try:
