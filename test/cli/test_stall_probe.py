@@ -39,3 +39,21 @@ def test_probe_child_process_reports_its_policy():
     r = run_probe(0.05, priority=0)
     assert r.policy == "SCHED_OTHER" and r.readings > 1000
     assert r.gaps_over_2ms <= r.gaps_over_1ms <= r.gaps_over_0_5ms
+
+
+@pytest.mark.parametrize(
+    "args", [("--duration", "0"), ("--duration", "601"), ("--priority", "100")]
+)
+def test_bad_probe_options_exit_2_naming_the_range(args):
+    import subprocess
+    import sys
+
+    done = subprocess.run(
+        [sys.executable, "-m", "fence_sorter.verification.stall_probe", *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert done.returncode == 2
+    assert "--duration must be in (0, 600] s, --priority in [0, 99]" in done.stderr
+    assert "Traceback" not in done.stderr
