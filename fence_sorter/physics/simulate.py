@@ -343,9 +343,7 @@ class Observer:
             w_n = float(st.out[slots, K.C_DDOT].max())
             if math.isnan(self.impact_speed):
                 self.impact_speed = w_n
-            peak = K.stiff_impact_peak_force(
-                md.mass, w_n, md.sc.contact.b_p, md.sc.contact.k_p, K.N_STIFF_STEPS
-            )
+            peak = K.n_stiff(md.mass, w_n, md.sc.contact.b_p, md.sc.contact.k_p)
             self.impacts.append((t, w_n, peak))
         self.had_fence = fence_on
         n = res[K.R_FENCE_N]

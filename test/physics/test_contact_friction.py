@@ -64,16 +64,47 @@ def test_restitution_is_mass_independent_and_duration_scales_as_m_to_one_fifth()
 
 @pytest.mark.parametrize("b_p", [0.0, 3.3e5, 3.3e6])
 def test_observer_n_stiff_matches_the_dop853_impact(b_p):
-    """The observers' N_stiff (RK4 with N_STIFF_STEPS steps, peak refined by the parabola
-    vertex) agrees with the DOP853 solve at rtol 1e-10 to 3e-7 over masses 0.1-60 kg and
-    approach speeds 1e-4-20 m/s (the discrete maximum of 4000 steps used before: up to 1e-6)."""
+    """The observers' N_stiff (``kernel.n_stiff``: the similarity form inside its range, RK4
+    with N_STIFF_STEPS steps and the parabola vertex beyond it) agrees with the DOP853 solve at
+    rtol 1e-10 to 3e-7 over masses 0.1-60 kg and approach speeds 1e-4-20 m/s (b_p = 3.3e6 at
+    0.01-20 m/s lies beyond N_STIFF_C_MAX: the RK4 branch)."""
     contact = ContactParams(b_p=b_p)
     worst = 0.0
     for mass, v0 in ((0.1, 0.05), (0.1, 20.0), (1.0, 1.5), (5.0, 0.01), (5.0, 3.0), (60.0, 1e-4)):
         ref = stiff_impact(mass, v0, contact, samples=4001).peak_force
-        fast = K.stiff_impact_peak_force(mass, v0, b_p, contact.k_p, K.N_STIFF_STEPS)
+        fast = K.n_stiff(mass, v0, b_p, contact.k_p)
         worst = max(worst, abs(fast / ref - 1.0))
     assert worst < 3e-7
+
+
+def test_n_stiff_similarity_form_matches_the_integrated_impact():
+    """Law (16) against a rigid wall scales to x'' = -(c x' x^2 + x^4) with c = b_p k_p^-0.6
+    w^0.2: the Chebyshev series of the scaled peak gives the RK4 peak at N_STIFF_FIT_STEPS steps
+    to 1e-8 for any mass, speed and stiffness with c inside its range (up to N_STIFF_C_MAX), and
+    its coefficients are the ones n_stiff_coefficients() computes."""
+    np.testing.assert_allclose(K.n_stiff_coefficients(), K._N_STIFF_CHEBYSHEV, rtol=0, atol=1e-12)
+    inside = 0
+    for mass in (0.1, 5.0, 60.0):
+        for speed in (1e-10, 1.5e-6, 1e-3, 0.3, 1.85, 20.0):
+            for b_p in (0.0, 3.3e4, 3.3e5, 3.3e6):
+                for k_p in (1e6, 1.72e9, 1.72e12):
+                    c = b_p * k_p**-0.6 * speed**0.2
+                    fast = K.n_stiff(mass, speed, b_p, k_p)
+                    rk4 = K.stiff_impact_peak_force(mass, speed, b_p, k_p, K.N_STIFF_FIT_STEPS)
+                    if c <= K.N_STIFF_C_MAX:
+                        inside += 1
+                        assert fast == pytest.approx(rk4, rel=1e-8, abs=0.0)
+                    else:  # the RK4 branch
+                        assert fast == K.stiff_impact_peak_force(
+                            mass, speed, b_p, k_p, K.N_STIFF_STEPS
+                        )
+    assert inside > 100
+    # undamped closed form: D_max = (5 m w^2 / (2 k))^0.2, N = k D_max^4
+    for mass, speed in ((0.1, 1e-6), (5.0, 2.0), (60.0, 20.0)):
+        d_max = (5.0 * mass * speed**2 / (2.0 * 1.72e9)) ** 0.2
+        assert K.n_stiff(mass, speed, 0.0, 1.72e9) == pytest.approx(1.72e9 * d_max**4, rel=1e-9)
+    assert K.n_stiff(1.0, 0.0, 3.3e5, 1.72e9) == 0.0
+    assert K.n_stiff(1.0, -1.0, 3.3e5, 1.72e9) == 0.0
 
 
 def test_pure_spin_torque_of_a_square_and_rectangle_integral():
