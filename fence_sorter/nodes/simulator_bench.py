@@ -65,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
 
     def feed() -> None:
         i = 0
-        while not node._stop.is_set():
+        while not node._stopping:
             ts = SPACING * i
             if node.sim_time >= ts:
                 spec = ParcelSpec(
@@ -86,10 +86,10 @@ def main(argv: list[str] | None = None) -> int:
                 i += 1
             time.sleep(0.002)
 
-    threading.Thread(target=feed, daemon=True).start()
     load0 = os.getloadavg()[0]
     wall0 = time.perf_counter()
     node.start()
+    threading.Thread(target=feed, daemon=True).start()
     while node.sim_time < a.sim and node.loop_error is None:
         time.sleep(0.05)
     wall = time.perf_counter() - wall0

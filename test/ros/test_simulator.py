@@ -8,6 +8,7 @@ simulator's clock so every outcome comes within a few seconds of sim time at rtf
 from __future__ import annotations
 
 import math
+import os
 import signal
 import time
 from pathlib import Path
@@ -248,3 +249,33 @@ def test_real_time_factor_can_change_at_run_time(domain_id: int) -> None:
         node.destroy_node()
         rclpy.try_shutdown(context=context)
     assert gc.isenabled()
+
+
+def _loop_process(pid: int) -> int:
+    """The pacing loop's process among the simulator's children."""
+    for _ in range(200):
+        for task in Path(f"/proc/{pid}/task").iterdir():
+            for child in (task / "children").read_text().split():
+                cmdline = Path(f"/proc/{child}/cmdline").read_bytes()
+                if b"fence_sorter.line.worker" in cmdline:
+                    return int(child)
+        time.sleep(0.05)
+    raise AssertionError("no loop process")
+
+
+def test_a_killed_loop_process_ends_the_node_with_status_1(env, probe) -> None:
+    """kill -9 of the pacing loop's process: the node says so (FATAL, diagnostics ERROR) and
+    exits 1 instead of publishing a frozen clock."""
+    from fence_sorter.testing import venv_executable
+
+    executor, _, got = probe
+    cmd = [venv_executable("python"), "-m", "fence_sorter.nodes.simulator", "--ros-args"]
+    cmd += ["-p", "heartbeat_period:=0.2", "-p", "warm_up:=false"]
+    with managed_process(cmd, env) as proc:
+        _spin_until(executor, proc, lambda: len(got["clock"]) >= 3)
+        loop = _loop_process(proc.pid)
+        os.kill(loop, signal.SIGKILL)
+        stdout, stderr = proc.communicate(timeout=TIMEOUT)
+    assert proc.returncode == 1, stdout + stderr
+    assert "pacing loop process ended (exit status -9)" in stdout + stderr
+    assert "Traceback" not in stdout + stderr

@@ -1,0 +1,580 @@
+"""The pacing loop in a process of its own: the line stepped against the wall clock, with no
+ROS and no other Python thread beside it.
+
+Why a process: Python threads share one interpreter lock with no priorities. In the
+simulator node's process, rclpy's executor, the publisher thread and the log calls took that
+lock from the loop for up to ~2 ms at a time (an rclpy ``publish()`` does not release it); the
+cycle traces showed this as the main cause of deadline misses (docs/simulator.md). Here the
+loop is the process's only thread. It reads parcels and commands from one pipe at the start of
+every cycle (non-blocking) and writes what the node publishes (snapshots, events, log lines,
+statistics) to another, never waiting for the reader in a paced run.
+
+Wire format (both pipes): frames of a 4-byte little-endian length and a pickle. The node
+(:class:`LineProcess`) sends ``("parcel", ParcelSpec)``, ``("command", StrokeCommand)``,
+``("rtf", float)`` and ``("stop",)``; the loop sends ``("ready", t)``,
+``("states", LineSnapshot, due)``, ``("markers", LineSnapshot, due)``, ``("events", list)``,
+``("log", level, text)``, ``("stats", LoopStats)``, ``("error", text)``. ``due`` is the cycle's
+wake time on ``time.perf_counter`` (CLOCK_MONOTONIC, the same in both processes).
+
+Run as ``python -m fence_sorter.line.worker IN_FD OUT_FD PARENT_PID``; the first frame on IN_FD
+is ``(LineConfig, scenario or None, LoopSettings)``.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import fcntl
+import gc
+import math
+import os
+import pickle
+import select
+import signal
+import struct
+import subprocess
+import sys
+import threading
+import time
+import traceback
+from collections import Counter, deque
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+
+from .line import LineConfig, SortingLine
+from .pacing import CycleTrace, LatenessHistogram, Pacer
+from .types import ParcelSpec, StrokeCommand
+from .validate import InputError
+
+#: sim time a command for a not-yet-known parcel waits for its parcel message [s]
+COMMAND_HOLD = 0.5
+#: the loop collects garbage or computes statistics only with this much time left before the
+#: next deadline [s]
+GC_SLACK = 0.0006
+#: wall time between full collections [s]
+FULL_GC_PERIOD = 10.0
+#: wall time between statistics frames [s]
+STATS_PERIOD = 0.25
+#: unpaced, the loop waits for the reader beyond this many unsent bytes (backpressure)
+UNPACED_BACKLOG = 1 << 18
+#: paced, unsent bytes beyond this mean the reader is gone: the loop fails
+PACED_BACKLOG = 1 << 26
+#: pipe buffer asked for (Linux F_SETPIPE_SZ; the default is 64 KiB)
+PIPE_SIZE = 1 << 20
+_HEADER = struct.Struct("<I")
+_F_SETPIPE_SZ = 1031
+
+
+class LoopStartError(RuntimeError):
+    """The loop's process ended or failed before it was ready."""
+
+
+@dataclass(frozen=True)
+class LoopSettings:
+    """How the loop paces and what it sends (the simulator node's parameters, SI)."""
+
+    period: float  # wall period of a paced cycle [s]
+    rtf: float  # real-time factor (0: unpaced)
+    max_catch_up: float = 0.1  # [s] of sim time one late cycle may advance
+    spin_margin: float = 4e-4  # largest busy-wait before a deadline [s]
+    lookahead: float = 0.05  # [s] of sim time the solves may run ahead in spare time
+    prefetch_reserve: float = 2e-4  # [s] of wall time kept free when stepping ahead
+    publish_every: int = 20  # cycles between state snapshots
+    marker_every: int = 100  # cycles between marker snapshots (0: none)
+    rt_priority: int = 0  # SCHED_FIFO priority in paced runs (0: normal scheduling)
+    debug: bool = False  # send DEBUG log lines
+    trace_path: str = ""  # CycleTrace .npz written at the end ("": none)
+    warm_up: bool = True  # one short stroke before the loop starts
+
+    def __post_init__(self) -> None:
+        checks = (
+            ("period", self.period, self.period > 0.0, "> 0 s"),
+            ("rtf", self.rtf, self.rtf >= 0.0, ">= 0"),
+            ("max_catch_up", self.max_catch_up, self.max_catch_up > 0.0, "> 0 s"),
+            ("spin_margin", self.spin_margin, self.spin_margin >= 0.0, ">= 0 s"),
+            ("lookahead", self.lookahead, self.lookahead >= 0.0, ">= 0 s"),
+            ("prefetch_reserve", self.prefetch_reserve, self.prefetch_reserve >= 0.0, ">= 0 s"),
+            ("publish_every", self.publish_every, self.publish_every >= 1, ">= 1"),
+            ("marker_every", self.marker_every, self.marker_every >= 0, ">= 0"),
+            ("rt_priority", self.rt_priority, 0 <= self.rt_priority <= 99, "in 0..99"),
+        )
+        for name, value, ok, allowed in checks:
+            if not ok:
+                raise ValueError(f"LoopSettings.{name} = {value!r}: must be {allowed}")
+
+
+@dataclass
+class LoopStats:
+    """What the loop measured and counted, sent every ``STATS_PERIOD`` and at the end."""
+
+    cycles: int = 0
+    misses: int = 0
+    slips: int = 0
+    sim_time: float = 0.0
+    parcels_on_line: int = 0
+    # (p50, p99, p99.9, max) [s] of cycle lateness (wake - deadline) and work (wake to done)
+    lateness: tuple[float, float, float, float] = (math.nan,) * 4
+    work: tuple[float, float, float, float] = (math.nan,) * 4
+    counts: dict[str, int] = field(default_factory=dict)
+    bad_parcels: dict[str, int] = field(default_factory=dict)
+    rejected_commands: dict[str, int] = field(default_factory=dict)
+
+
+def _summary(hist: LatenessHistogram) -> tuple[float, float, float, float]:
+    return (*hist.percentiles((50.0, 99.0, 99.9)), hist.max if hist.n else math.nan)
+
+
+# -- frames ---------------------------------------------------------------------------------------
+def _frame(obj: object) -> bytes:
+    data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
+    return _HEADER.pack(len(data)) + data
+
+
+class FrameBuffer:
+    """Reassembles frames from bytes read off a pipe."""
+
+    def __init__(self) -> None:
+        self.buf = bytearray()
+
+    def feed(self, data: bytes) -> list:
+        self.buf += data
+        out, buf, pos = [], self.buf, 0
+        while len(buf) - pos >= 4:
+            (n,) = _HEADER.unpack_from(buf, pos)
+            if len(buf) - pos - 4 < n:
+                break
+            out.append(pickle.loads(buf[pos + 4 : pos + 4 + n]))
+            pos += 4 + n
+        if pos:
+            del buf[:pos]
+        return out
+
+
+class _Outbox:
+    """Frames waiting for the pipe (loop side): written without blocking, in order."""
+
+    def __init__(self, fd: int) -> None:
+        self.fd = fd
+        self.buf = bytearray()
+        os.set_blocking(fd, False)
+
+    def send(self, obj: object) -> None:
+        self.buf += _frame(obj)
+
+    def flush(self) -> None:
+        """Write what the pipe takes now."""
+        while self.buf:
+            try:
+                n = os.write(self.fd, self.buf)
+            except BlockingIOError:
+                return
+            del self.buf[:n]
+
+    def drain(self, limit: int, inbox: _Inbox | None = None) -> None:
+        """Block until at most ``limit`` bytes are unsent, reading ``inbox`` meanwhile (so a
+        writer blocked on the other pipe cannot deadlock with this one)."""
+        self.flush()
+        while len(self.buf) > limit:
+            rfds = [inbox.fd] if inbox is not None else []
+            r, w, _ = select.select(rfds, [self.fd], [], 1.0)
+            if r:
+                inbox.read()
+            if w:
+                self.flush()
+
+
+class _Inbox:
+    """Frames from the node (loop side), read without blocking."""
+
+    def __init__(self, fd: int) -> None:
+        self.fd = fd
+        self.frames = FrameBuffer()
+        self.items: list = []
+        self.closed = False
+        os.set_blocking(fd, False)
+
+    def read(self) -> None:
+        while not self.closed:
+            try:
+                data = os.read(self.fd, 1 << 16)
+            except BlockingIOError:
+                return
+            if not data:  # the node is gone
+                self.closed = True
+                return
+            self.items += self.frames.feed(data)
+
+    def take(self) -> list:
+        self.read()
+        items, self.items = self.items, []
+        return items
+
+
+# -- the loop -------------------------------------------------------------------------------------
+class PacedLoop:
+    """The line stepped on a :class:`Pacer` grid: inputs at the start of each cycle, physics,
+    snapshots every ``publish_every`` cycles, garbage collection and statistics in the slack,
+    then the running solves stepped ahead in the spare time (``SortingLine.prefetch``)."""
+
+    def __init__(self, line: SortingLine, settings: LoopSettings, inbox: _Inbox, out: _Outbox):
+        self.line, self.s, self.inbox, self.out = line, settings, inbox, out
+        self.rtf = settings.rtf
+        self.stop = False
+        self.hist = LatenessHistogram()
+        self.work = LatenessHistogram()
+        self.stats = LoopStats(sim_time=line.t)
+        self.counts: Counter[str] = Counter()
+        self.bad_parcels: Counter[str] = Counter()
+        self.rejected: Counter[str] = Counter()
+        self.held: list[tuple[float, StrokeCommand]] = []  # commands for unknown parcels
+        self.trace = CycleTrace() if settings.trace_path else None
+
+    def log(self, level: str, text: str) -> None:
+        if level != "debug" or self.s.debug:
+            self.out.send(("log", level, text))
+
+    def set_priority(self) -> None:
+        """SCHED_FIFO in paced runs: a wake-up is then not delayed by another process's time
+        slice. Normal scheduling with a warning where the process may not."""
+        if self.s.rt_priority <= 0 or self.rtf <= 0.0:
+            return
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self.s.rt_priority))
+        except (OSError, AttributeError) as exc:
+            self.log("warning", f"realtime_priority not applied ({exc}); normal scheduling")
+            return
+        self.log("info", f"pacing process: SCHED_FIFO priority {self.s.rt_priority}")
+
+    def send_stats(self) -> None:
+        st = self.stats
+        st.sim_time, st.parcels_on_line = self.line.t, self.line.parcels_on_line
+        st.lateness, st.work = _summary(self.hist), _summary(self.work)
+        st.counts, st.bad_parcels = dict(self.counts), dict(self.bad_parcels)
+        st.rejected_commands = dict(self.rejected)
+        self.out.send(("stats", st))
+
+    def take_inputs(self) -> None:
+        """Parcels first, then commands. A command for a parcel the line does not know yet is
+        held up to ``COMMAND_HOLD`` of sim time (the parcel may still be in flight on the
+        other topic) before it is rejected."""
+        items = self.inbox.take()
+        if self.inbox.closed:
+            self.stop = True
+        line, log = self.line, self.log
+        commands = []
+        for item in items:
+            kind = item[0]
+            if kind == "parcel":
+                spec: ParcelSpec = item[1]
+                self.counts["parcels_received"] += 1
+                try:
+                    line.add_parcel(spec, line.t)
+                except InputError as exc:
+                    self.bad_parcels[exc.key] += 1
+                    log("warning", f"parcel {spec.parcel_id} rejected ({exc.key}): {exc}")
+                except (ValueError, OverflowError) as exc:
+                    self.bad_parcels["invalid"] += 1
+                    log("warning", f"parcel {spec.parcel_id} rejected (invalid): {exc}")
+            elif kind == "command":
+                self.counts["commands_received"] += 1
+                commands.append(item[1])
+            elif kind == "rtf":
+                self.rtf = float(item[1])
+            elif kind == "stop":
+                self.stop = True
+        held, self.held = self.held, []
+        held += [(line.t, cmd) for cmd in commands]
+        for t_in, cmd in held:
+            res = line.command(cmd, line.t)
+            if res.code == "unknown_parcel" and line.t - t_in < COMMAND_HOLD:
+                self.held.append((t_in, cmd))
+            elif res.accepted:
+                self.counts[f"commands_{res.code}"] += 1
+                if res.code == "accepted":
+                    log(
+                        "debug",
+                        f"parcel {cmd.parcel_id}: stroke planned at t = "
+                        f"{res.start_time:.3f} s (t1 = {cmd.t1:g} s)",
+                    )
+            else:
+                self.rejected[res.code] += 1
+                log("warning", f"command for parcel {cmd.parcel_id} rejected: {res.reason}")
+
+    def run(self) -> None:
+        s, line, out = self.s, self.line, self.out
+        clock = time.perf_counter
+        period = s.period
+        pacer = Pacer(
+            period, self.rtf, line.t, s.max_catch_up, s.spin_margin,
+            unpaced_step=s.publish_every * period,
+        )  # fmt: skip
+        self.set_priority()
+        next_pub = next_marker = next_gc = next_full_gc = 0  # cycle indices (k may skip)
+        next_stats = clock() + STATS_PERIOD
+        out.send(("states", line.snapshot(), None))
+        while not self.stop:
+            rtf = pacer.rtf
+            out.flush()
+            tick = pacer.wait()
+            deadline = tick.deadline
+            # k counts periods of 1/physics_rate in both modes (publication schedule)
+            k = tick.k if rtf > 0.0 else tick.k * s.publish_every
+            wake = deadline + tick.lateness if rtf > 0.0 else None
+            if wake is not None:
+                self.hist.add(tick.lateness)
+            flags = 0
+            self.take_inputs()
+            events = line.advance(tick.t_sim)
+            if events:
+                flags |= CycleTrace.EVENTS
+                out.send(("events", events))
+            advanced = clock()
+            if k >= next_pub:
+                flags |= CycleTrace.STATES
+                next_pub = (k // s.publish_every + 1) * s.publish_every
+                out.send(("states", line.snapshot(), wake))
+            if s.marker_every and k >= next_marker:
+                flags |= CycleTrace.MARKERS
+                next_marker = (k // s.marker_every + 1) * s.marker_every
+                out.send(("markers", line.snapshot(), wake))
+            out.flush()
+            done = clock()
+            slack = pacer.next_deadline - done > GC_SLACK
+            if k >= next_gc and slack:
+                gen = 2 if k >= next_full_gc else 0
+                flags |= CycleTrace.GC_FULL if gen == 2 else CycleTrace.GC_YOUNG
+                gc.collect(gen)
+                next_gc = k + s.publish_every
+                if gen == 2:
+                    next_full_gc = k + round(FULL_GC_PERIOD / period)
+            self.stats.cycles += 1
+            self.stats.slips = pacer.slips
+            if wake is not None:
+                self.work.add(done - wake)
+                if done > deadline + period:
+                    self.stats.misses += 1
+                    flags |= CycleTrace.MISS
+            if done >= next_stats and (slack or rtf == 0.0):
+                next_stats = done + STATS_PERIOD
+                self.send_stats()
+            collected = clock()
+            if rtf > 0.0 and s.lookahead > 0.0:
+                # spare time: step the running solves ahead (the wait still starts its
+                # busy-wait on time; one solver step may overrun by its own cost)
+                line.prefetch(
+                    s.lookahead * rtf,
+                    pacer.next_deadline - s.spin_margin - s.prefetch_reserve,
+                    clock,
+                )
+            elif rtf == 0.0:  # unpaced: the reader sets the pace
+                out.drain(UNPACED_BACKLOG, self.inbox)
+            if len(out.buf) > PACED_BACKLOG:
+                raise RuntimeError(f"{len(out.buf)} bytes unsent: the node stopped reading")
+            if self.trace is not None and rtf > 0.0:
+                self.trace.record(k, (deadline, wake, advanced, done, collected, clock()), flags)
+            if self.rtf != pacer.rtf:  # changed at run time: a new grid from here
+                if self.rtf == 0.0 and os.sched_getscheduler(0) == os.SCHED_FIFO:
+                    os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+                elif pacer.rtf == 0.0:
+                    self.set_priority()
+                pacer.restart(self.rtf, line.t)
+                next_pub = next_marker = next_gc = next_full_gc = 0
+
+    def finish(self) -> None:
+        """After the loop: the trace written, the final statistics sent."""
+        if self.trace is not None:
+            try:
+                self.trace.save(self.s.trace_path)
+                self.log("info", f"cycle trace: {self.trace.n} cycles in {self.s.trace_path}")
+            except OSError as exc:
+                self.log("error", f"cycle_trace {self.s.trace_path}: not written: {exc}")
+        self.send_stats()
+
+
+def warm_up(config: LineConfig, scenario) -> None:
+    """One short stroke on a scratch line so the kernel's compiled code is loaded before the
+    pacing loop starts (loading it inside the loop would stall it by a few hundred ms)."""
+    line = SortingLine(config)
+    pp = scenario.parcel
+    spec = ParcelSpec(
+        0,
+        length_a=pp.length_a,
+        width_b=pp.width_b,
+        height=pp.height,
+        mass=pp.mass,
+        cog_offset_x=pp.cog_offset_x,
+        cog_offset_y=pp.cog_offset_y,
+        lateral_gap=pp.lateral_gap,
+        yaw=pp.yaw,
+        divert=True,
+        scan_position_x=scenario.drive.r_s,
+    )
+    line.add_parcel(spec)
+    drive = scenario.drive
+    line.command(StrokeCommand(0, r_s=drive.r_s, t1=drive.t1, alpha_k=drive.alpha_k))
+    for k in range(1, 41):
+        line.advance(0.01 * k)
+        line.snapshot()
+
+
+def _read_exact(fd: int, n: int) -> bytes:
+    data = b""
+    while len(data) < n:
+        chunk = os.read(fd, n - len(data))
+        if not chunk:
+            raise EOFError("the node closed the pipe during set-up")
+        data += chunk
+    return data
+
+
+def main(argv: list[str]) -> int:
+    """The process: read the set-up frame, build and warm the line, run the loop until the
+    node sends ``stop`` or goes away."""
+    in_fd, out_fd, parent = (int(a) for a in argv[:3])
+    # die with the node; Ctrl-C and SIGTERM reach the whole process group, but only the node
+    # ends this process (stop frame, or its end of the pipe closing), after the last frames
+    ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    if os.getppid() != parent:
+        return 0
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    try:
+        fcntl.fcntl(out_fd, _F_SETPIPE_SZ, PIPE_SIZE)
+    except OSError:
+        pass  # the default 64 KiB: the outbox holds the rest
+    out = _Outbox(out_fd)
+    try:
+        (n,) = _HEADER.unpack(_read_exact(in_fd, 4))  # the set-up frame, blocking
+        config, scenario, settings = pickle.loads(_read_exact(in_fd, n))
+        inbox = _Inbox(in_fd)
+        line = SortingLine(config)
+        if settings.warm_up and scenario is not None:
+            warm_up(config, scenario)
+        loop = PacedLoop(line, settings, inbox, out)
+        # the cyclic GC would stop the loop for 1-60 ms at moments of its choosing: freeze
+        # what exists after start-up (modules, compiled kernel, scene); the loop collects the
+        # young generation in the slack after its work, the old one every few seconds
+        gc.collect()
+        gc.freeze()
+        gc.disable()
+        out.send(("ready", line.t))
+        out.flush()
+        try:
+            loop.run()
+        finally:
+            loop.finish()
+    except Exception:
+        out.send(("error", traceback.format_exc(limit=8)))
+        code = 1
+    else:
+        code = 0
+    os.set_blocking(out_fd, True)
+    out.drain(0)
+    os.close(out_fd)
+    return code
+
+
+# -- the node's side ------------------------------------------------------------------------------
+class LineProcess:
+    """The loop's process seen from the node: start it, send it inputs (thread-safe), iterate
+    over what it sends, stop it."""
+
+    def __init__(self, config: LineConfig, scenario, settings: LoopSettings) -> None:
+        to_child_r, self._to_child = os.pipe()
+        self._from_child, from_child_w = os.pipe()
+        try:
+            fcntl.fcntl(from_child_w, _F_SETPIPE_SZ, PIPE_SIZE)
+        except OSError:
+            pass
+        self._lock = threading.Lock()
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "fence_sorter.line.worker", str(to_child_r),
+             str(from_child_w), str(os.getpid())],
+            pass_fds=(to_child_r, from_child_w),
+            stdin=subprocess.DEVNULL,
+        )  # fmt: skip
+        os.close(to_child_r)
+        os.close(from_child_w)
+        self._frames = FrameBuffer()
+        self._pending: deque = deque()
+        self._eof = False
+        self.send((config, scenario, settings))
+
+    def send(self, item: object) -> bool:
+        """Send one frame; False if the loop's process is gone."""
+        data = _frame(item)
+        with self._lock:
+            if self._to_child < 0:
+                return False
+            try:
+                os.write(self._to_child, data)  # blocking: the loop reads every cycle
+            except OSError:  # BrokenPipeError: it ended
+                return False
+        return True
+
+    def _read(self) -> None:
+        data = os.read(self._from_child, 1 << 20)
+        if data:
+            self._pending.extend(self._frames.feed(data))
+        else:
+            self._eof = True
+
+    def frames(self) -> Iterator:
+        """What the loop sends, in order, until its end of the pipe closes (blocking)."""
+        while True:
+            while self._pending:
+                yield self._pending.popleft()
+            if self._eof:
+                return
+            self._read()
+
+    def wait_ready(self, timeout: float) -> float:
+        """Block until the loop is ready (after its warm-up); return the line time. Raises
+        LoopStartError with the loop's error if it ended instead, or after ``timeout`` [s]."""
+        end = time.monotonic() + timeout
+        while True:
+            for item in self._pending:
+                if item[0] == "ready":
+                    self._pending.remove(item)
+                    return float(item[1])
+                if item[0] == "error":
+                    raise LoopStartError(item[1].strip().splitlines()[-1])
+            if self._eof:
+                raise LoopStartError(f"line process exited ({self.proc.wait()}) before ready")
+            left = end - time.monotonic()
+            if left <= 0.0 or not select.select([self._from_child], [], [], left)[0]:
+                raise LoopStartError(f"line process not ready after {timeout:g} s")
+            self._read()
+
+    def stop(self, timeout: float = 5.0) -> int | None:
+        """Ask the loop to stop (it sends its last frames first) and reap the process."""
+        self.send(("stop",))
+        try:
+            return self.proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            return self.proc.wait(timeout=timeout)
+
+    def close(self) -> None:
+        """Close our ends of the pipes, after the reader is done with :meth:`frames` (the
+        loop's process, if still running, sees its input end and stops)."""
+        with self._lock:
+            if self._to_child >= 0:
+                os.close(self._to_child)
+                self._to_child = -1
+        if self.proc.poll() is None:
+            try:
+                self.proc.wait(timeout=5.0)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(timeout=5.0)
+        if self._from_child >= 0:
+            os.close(self._from_child)
+            self._from_child = -1
+
+
+if __name__ == "__main__":
+    # through the package's module, so what it pickles is fence_sorter.line.worker.X, not
+    # __main__.X (which the node could not unpickle)
+    from fence_sorter.line import worker
+
+    raise SystemExit(worker.main(sys.argv[1:]))

@@ -1,0 +1,205 @@
+"""The pacing loop's own process (fence_sorter.line.worker), no ROS: frames on the pipes, the
+same outcome as the line in-process, bad input counted, backpressure when unpaced, errors
+reported, and a process that outlives neither a stop nor its parent."""
+
+from __future__ import annotations
+
+import fcntl
+import math
+import os
+import pickle
+import signal
+import struct
+import subprocess
+import sys
+import termios
+import time
+
+import pytest
+
+from fence_sorter.line import LineConfig, Outcome, OutcomeCode, SortingLine
+from fence_sorter.line.worker import (
+    PIPE_SIZE,
+    FrameBuffer,
+    LineProcess,
+    LoopSettings,
+    LoopStartError,
+    LoopStats,
+    _frame,
+)
+from fence_sorter.scene import load_scene
+
+from .test_line import heavy, stroke
+
+F_GETPIPE_SZ = 1032
+CONFIG = LineConfig.from_scenario(load_scene("impact_flexible").scenario)
+# rtf 4 at 500 Hz: a stroke's 3 s of sim in under a second of wall time
+FAST = LoopSettings(period=2e-3, rtf=4.0, publish_every=10, marker_every=0, warm_up=False)
+
+
+def _collect(lp: LineProcess, until, timeout: float = 60.0) -> list:
+    """Frames until ``until(frames)`` holds (the loop runs on while we read)."""
+    got: list = []
+    end = time.monotonic() + timeout
+    for item in lp.frames():
+        got.append(item)
+        if until(got) or time.monotonic() > end:
+            break
+    return got
+
+
+def _outcomes(frames) -> dict[int, Outcome]:
+    return {
+        e.parcel_id: e for f in frames if f[0] == "events" for e in f[1] if isinstance(e, Outcome)
+    }
+
+
+def _last_stats(frames) -> LoopStats:
+    return [f[1] for f in frames if f[0] == "stats"][-1]
+
+
+def test_frames_reassemble_from_any_split():
+    items = [("states", {"t": 0.5}, 1.25), ("log", "warning", "x" * 5000), ("stop",)]
+    data = b"".join(_frame(i) for i in items)
+    for chunk in (1, 3, 4, 7, 4096, len(data)):
+        buf, out = FrameBuffer(), []
+        for k in range(0, len(data), chunk):
+            out += buf.feed(data[k : k + chunk])
+        assert out == items and not buf.buf
+
+
+def test_loop_process_sorts_like_the_line_in_process_and_stops_cleanly():
+    # the same parcel and command on a line stepped here, in 2 ms chunks
+    line = SortingLine(CONFIG)
+    line.add_parcel(heavy(1))
+    assert line.command(stroke(1)).accepted
+    ref = {}
+    for k in range(1, 2001):
+        for e in line.advance(k * 2e-3):
+            if isinstance(e, Outcome):
+                ref[e.parcel_id] = e
+
+    lp = LineProcess(CONFIG, None, FAST)
+    try:
+        t0 = lp.wait_ready(60.0)
+        assert t0 == 0.0
+        lp.send(("parcel", heavy(1)))
+        lp.send(("command", stroke(1)))
+        frames = _collect(lp, lambda got: 1 in _outcomes(got))
+        assert lp.stop() == 0
+        frames += list(lp.frames())  # the last frames sent before it ended
+    finally:
+        lp.close()
+    out = _outcomes(frames)[1]
+    assert out.code is OutcomeCode.SORTED
+    # the same solve whatever the chunks the pacer cut the time into
+    assert out.peak_normal_force == ref[1].peak_normal_force
+    assert out.exit_speed_y == ref[1].exit_speed_y
+    times = [f[1].t for f in frames if f[0] == "states"]
+    assert times == sorted(times) and times[-1] > out.t - 0.1  # states every 80 ms of sim
+    st = _last_stats(frames)  # the final statistics, sent after the loop ended
+    assert st.counts["parcels_received"] == 1 and st.counts["commands_accepted"] == 1
+    assert st.cycles > 100 and st.sim_time >= out.t and st.parcels_on_line == 0
+    assert math.isfinite(st.lateness[1]) and st.lateness[3] >= st.lateness[1]
+    assert lp.proc.returncode == 0
+
+
+def test_bad_parcel_is_counted_and_logged_and_the_loop_runs_on():
+    lp = LineProcess(CONFIG, None, FAST)
+    try:
+        lp.wait_ready(60.0)
+        lp.send(("parcel", heavy(7, mass=math.nan)))
+        lp.send(("parcel", heavy(8, width_b=0.6)))  # 0.25 + 0.6 m > s = 0.7 m
+        frames = _collect(
+            lp, lambda got: any(f[0] == "stats" and f[1].bad_parcels for f in got[-1:])
+        )
+        frames += _collect(lp, lambda got: got[-1][0] == "states")  # still stepping
+        assert lp.stop() == 0
+    finally:
+        lp.close()
+    logs = [f[2] for f in frames if f[0] == "log" and f[1] == "warning"]
+    assert any("parcel 7" in t and "mass" in t for t in logs), logs
+    assert any("parcel 8" in t and "wider_than_belt" in t for t in logs), logs
+    assert _last_stats(frames).bad_parcels == {"non_finite": 1, "wider_than_belt": 1}
+
+
+def _cpu_seconds(pid: int) -> float:
+    fields = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime + stime
+
+
+def test_unpaced_loop_waits_for_its_reader():
+    """rtf 0: the loop runs as fast as it can until the pipe is full and UNPACED_BACKLOG
+    bytes wait beyond it; then it blocks (no CPU) until the reader reads again."""
+    lp = LineProcess(CONFIG, None, LoopSettings(period=1e-3, rtf=0.0, warm_up=False))
+    try:
+        lp.wait_ready(60.0)
+        time.sleep(1.0)  # not reading: the pipe and the loop's outbox fill up
+        in_pipe = fcntl.fcntl(lp._from_child, F_GETPIPE_SZ)
+        assert PIPE_SIZE >= in_pipe >= 1 << 16
+        assert _nread(lp._from_child) > in_pipe // 2  # full (a partly filled page ends it)
+        cpu0 = _cpu_seconds(lp.proc.pid)
+        time.sleep(0.5)
+        assert _cpu_seconds(lp.proc.pid) - cpu0 < 0.1  # blocked, not stepping
+        # reading again lets it run on: sim time moves past what was waiting
+        frames = _collect(lp, lambda got: False, timeout=0.5)
+        times = [f[1].t for f in frames if f[0] == "states"]
+        assert times == sorted(times) and times[-1] > times[0] + 1.0
+        assert lp.stop() == 0
+    finally:
+        lp.close()
+
+
+def _nread(fd: int) -> int:
+    return struct.unpack("i", fcntl.ioctl(fd, termios.FIONREAD, b"\0\0\0\0"))[0]
+
+
+def test_settings_are_checked_and_a_failing_set_up_is_reported():
+    with pytest.raises(ValueError, match="period"):
+        LoopSettings(period=0.0, rtf=1.0)
+    with pytest.raises(ValueError, match="publish_every"):
+        LoopSettings(period=1e-3, rtf=1.0, publish_every=0)
+    # the warm-up needs a Scenario: the loop's process reports the error and ends
+    lp = LineProcess(CONFIG, "not a scenario", LoopSettings(period=1e-3, rtf=1.0))
+    try:
+        with pytest.raises(LoopStartError, match="AttributeError"):
+            lp.wait_ready(60.0)
+        assert lp.proc.wait(timeout=10.0) == 1
+    finally:
+        lp.close()
+
+
+def test_loop_process_ignores_ctrl_c_and_dies_with_its_parent():
+    lp = LineProcess(CONFIG, None, FAST)
+    try:
+        lp.wait_ready(60.0)
+        lp.proc.send_signal(signal.SIGINT)  # Ctrl-C reaches the whole process group
+        time.sleep(0.3)
+        assert lp.proc.poll() is None  # only the node ends it, after its last frames
+        assert lp.stop() == 0
+    finally:
+        lp.close()
+
+    code = (
+        "import sys, time, pickle\n"
+        "from fence_sorter.line.worker import LineProcess\n"
+        "config, settings = pickle.loads(bytes.fromhex(sys.argv[1]))\n"
+        "lp = LineProcess(config, None, settings)\n"
+        "lp.wait_ready(60.0)\n"
+        "print(lp.proc.pid, flush=True)\n"
+        "time.sleep(60)\n"
+    )
+    arg = pickle.dumps((CONFIG, FAST)).hex()
+    parent = subprocess.Popen([sys.executable, "-c", code, arg], stdout=subprocess.PIPE, text=True)
+    child = int(parent.stdout.readline())
+    os.kill(child, 0)  # running
+    parent.kill()
+    parent.wait()
+    for _ in range(100):
+        try:
+            os.kill(child, 0)
+        except ProcessLookupError:
+            break
+        time.sleep(0.05)
+    else:
+        raise AssertionError(f"loop process {child} outlived its parent")
