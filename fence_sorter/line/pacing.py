@@ -164,8 +164,9 @@ class CycleTrace:
     Preallocated arrays (no allocation per cycle); when full, the oldest cycles are
     overwritten. :meth:`save` writes an ``.npz`` with one array per column, in cycle order."""
 
-    #: wall times recorded per cycle: deadline, wake, then the end of each phase (physics
-    #: advanced and events handled; messages published; garbage collected; prefetch done)
+    #: wall times recorded per cycle: deadline, wake, then the end of each phase (inputs taken,
+    #: physics advanced and events handed over; snapshots taken: the cycle's due work is done;
+    #: frames sent, garbage collected, statistics; prefetch done)
     COLUMNS = ("deadline", "wake", "advanced", "published", "collected", "end")
     #: flag bits
     STATES, MARKERS, EVENTS, GC_YOUNG, GC_FULL, MISS = 1, 2, 4, 8, 16, 32

@@ -150,18 +150,25 @@ class FrameBuffer:
 
 
 class _Outbox:
-    """Frames waiting for the pipe (loop side): written without blocking, in order."""
+    """Frames waiting for the pipe (loop side): kept as objects by :meth:`send` (cheap, in
+    the cycle), pickled and written without blocking by :meth:`flush` (in the cycle's slack),
+    in order."""
 
     def __init__(self, fd: int) -> None:
         self.fd = fd
+        self.objects: list = []
         self.buf = bytearray()
         os.set_blocking(fd, False)
 
     def send(self, obj: object) -> None:
-        self.buf += _frame(obj)
+        self.objects.append(obj)
 
     def flush(self) -> None:
-        """Write what the pipe takes now."""
+        """Serialise what was sent; write what the pipe takes now."""
+        if self.objects:
+            objects, self.objects = self.objects, []
+            for obj in objects:
+                self.buf += _frame(obj)
         while self.buf:
             try:
                 n = os.write(self.fd, self.buf)
@@ -173,7 +180,7 @@ class _Outbox:
         """Block until at most ``limit`` bytes are unsent, reading ``inbox`` meanwhile (so a
         writer blocked on the other pipe cannot deadlock with this one)."""
         self.flush()
-        while len(self.buf) > limit:
+        while len(self.buf) > limit or self.objects:
             rfds = [inbox.fd] if inbox is not None else []
             r, w, _ = select.select(rfds, [self.fd], [], 1.0)
             if r:
@@ -313,7 +320,6 @@ class PacedLoop:
         out.send(("states", line.snapshot(), None))
         while not self.stop:
             rtf = pacer.rtf
-            out.flush()
             tick = pacer.wait()
             deadline = tick.deadline
             # k counts periods of 1/physics_rate in both modes (publication schedule)
@@ -336,9 +342,11 @@ class PacedLoop:
                 flags |= CycleTrace.MARKERS
                 next_marker = (k // s.marker_every + 1) * s.marker_every
                 out.send(("markers", line.snapshot(), wake))
-            out.flush()
             done = clock()
-            slack = pacer.next_deadline - done > GC_SLACK
+            # the cycle's due work ends here: serialising and writing what it sent, garbage
+            # collection and statistics use its slack (a cycle misses when `done` is late)
+            out.flush()
+            slack = pacer.next_deadline - clock() > GC_SLACK
             if k >= next_gc and slack:
                 gen = 2 if k >= next_full_gc else 0
                 flags |= CycleTrace.GC_FULL if gen == 2 else CycleTrace.GC_YOUNG
@@ -356,6 +364,7 @@ class PacedLoop:
             if done >= next_stats and (slack or rtf == 0.0):
                 next_stats = done + STATS_PERIOD
                 self.send_stats()
+                out.flush()
             collected = clock()
             if rtf > 0.0 and s.lookahead > 0.0:
                 # spare time: step the running solves ahead (the wait still starts its
