@@ -458,8 +458,12 @@ class Integrator:
             h_try = min(h, to_break)
             if self.adaptive:
                 # do not step over a contact: end the step by the time the closest gap closes
-                # at its closing speed (floor 10 min_dt: a grazing approach does not stall)
-                h_try = min(h_try, max(K.time_to_contact(a.out), 10.0 * sv.min_dt))
+                # at its closing speed (floor 10 min_dt: a grazing approach does not stall);
+                # resolve a lightly damped contact oscillation (kernel.oscillation_step)
+                cap = min(
+                    K.time_to_contact(a.out), K.oscillation_step(self.model.P, a.out, sv.rtol)
+                )
+                h_try = min(h_try, max(cap, 10.0 * sv.min_dt))
             tiny = h_try <= 1e-3 * self.h_nom if not self.adaptive else h_try <= 4.0 * sv.min_dt
             status = sch.step(h_try, a, b, self.jump_at(a.t), on_belt, tiny)
             if status == K.STEP_REJECTED:

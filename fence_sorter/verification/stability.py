@@ -252,17 +252,13 @@ CASES: tuple[Case, ...] = (
         {"contact.k_p": 1.72e12},
         item="contact stiffness k_p x1000",
         note=(
-            "Known failure (convergence, ~2.6 % against 2.4 %): the load rattles on the two "
-            "stiff corner contacts at ~26 Hz with mm amplitude, almost undamped (omega ~270 "
-            "rad/s, damping ratio of law (16) ~0.005; ~0.3 at the paper's k_p); rtol 1e-4 "
-            "scales position errors by 1 m, so the ~2 ms steps drift in phase (trapezoidal "
-            "phase lag (omega h)^2 / 12 per radian) and the peak N is ~3.5 % low (90.7 N "
-            "against 94.0 N at dt = 1e-5 s; not a sampling error: the peak sits on smooth "
-            "steps); rtol 1e-5 gives 93.3 N, 1e-6 93.8 N. Capping the step at omega h <= 10 "
-            "sqrt(rtol) passes it (93.7 N, 0.25 %) but also caps the bench scenes (omega 50-230 "
-            "rad/s there: positioned_stiff 157 -> 391 steps), and no cap on omega or on the "
-            "damping ratio separates the two; an error estimate on the contact's own "
-            "oscillation is the fix (follow-up)."
+            "The load rattles on the two stiff corner contacts at ~26 Hz with mm amplitude, "
+            "almost undamped (omega ~270 rad/s, damping ratio of law (16) ~0.003; 0.1-0.4 at "
+            "the paper's k_p). Milne's estimate (positions scaled by 1 m) does not see it and "
+            "the trapezoidal phase lag ((omega h)^2 / 12 per radian) left the peak N 3.5 % "
+            "low (90.7 N against 94.0 N at dt = 1e-5 s; failed convergence, 2.6 % against "
+            "2.4 %). kernel.oscillation_step caps omega h <= 10 sqrt(rtol) on contacts damped "
+            "below zeta = 0.02 (the bench scenes never meet it): 93.1 N, 258 -> 786 steps."
         ),
     ),
     Case(

@@ -232,3 +232,39 @@ def test_wall_time_limit_counts_stepping_not_the_pauses_between_chunks():
         t += 0.1
     assert integ.outcome[1] is None, integ.outcome[1]
     assert integ.cur.t == pytest.approx(0.6)
+
+
+def test_oscillation_step_caps_only_lightly_damped_contacts() -> None:
+    """kernel.oscillation_step linearises law (16) at (D, D'): stiffness 4 k D^3 + 2 b D D',
+    damping b D^2 (b = b_p m^0.4) on the load's mass. Undamped: omega h = 10 sqrt(rtol)
+    exactly; the paper's b_p at a pushing contact's depth (zeta > OSC_ZETA): no cap; the cap
+    starts where zeta = b D^2 / (2 sqrt(K m)) falls below OSC_ZETA."""
+    from fence_sorter.physics import kernel as K
+
+    sc = load_scene("positioned_stiff").scenario
+    md = SortingModel(sc)
+    m, k = md.mass, sc.contact.k_p
+    out = np.zeros((K.N_SLOTS, K.N_COLS))
+    assert K.oscillation_step(md.P, out, 1e-4) == math.inf  # no contact
+    out[1, K.C_ACTIVE], out[1, K.C_D], out[1, K.C_DDOT] = 1.0, 0.0139, 0.0  # N ~ 65 N
+    b = sc.contact.b_p * m**0.4
+    stiff = 4.0 * k * 0.0139**3
+    zeta = b * 0.0139**2 / (2.0 * math.sqrt(stiff * m))
+    assert zeta > 0.1  # the paper's contact is well damped: not capped
+    assert K.oscillation_step(md.P, out, 1e-4) == math.inf
+    undamped = SortingModel(load_scene("positioned_stiff", ["contact.b_p=0"]).scenario)
+    h = K.oscillation_step(undamped.P, out, 1e-4)
+    assert h * math.sqrt(stiff / m) == pytest.approx(10.0 * math.sqrt(1e-4), rel=1e-12)
+    # k_p x1000 at the same force (D smaller by 1000^0.25): zeta ~ 0.003, capped
+    stiffer = SortingModel(load_scene("positioned_stiff", ["contact.k_p=1.72e12"]).scenario)
+    d = 0.0139 / 1000.0**0.25
+    out[1, K.C_D] = d
+    stiff = 4.0 * 1.72e12 * d**3
+    assert b * d * d / (2.0 * math.sqrt(stiff * m)) < K.OSC_ZETA
+    h = K.oscillation_step(stiffer.P, out, 1e-5)
+    assert h * math.sqrt(stiff / m) == pytest.approx(10.0 * math.sqrt(1e-5), rel=1e-12)
+    # the damping ratio's boundary: just above it no cap, just below it the cap
+    for scale, capped in ((1.01, False), (0.99, True)):
+        d_b = (2.0 * K.OSC_ZETA * scale * math.sqrt(4.0 * k * m) / b) ** 2  # zeta ~ sqrt(D)
+        out[1, K.C_D] = d_b
+        assert (K.oscillation_step(md.P, out, 1e-4) < math.inf) == capped

@@ -14,10 +14,7 @@ from fence_sorter.verification import stability as S
 
 # Fast cases that currently violate an invariant with the default solver: bugs reported to the
 # physics/integrator owners (see docs/stability/README.md). Not strict: a fix turns them green.
-KNOWN_ISSUES = {
-    "kp_x1000_stiff": "peak contact force changes by ~3 % when the adaptive step is halved "
-    "(rtol 1e-4 samples the peak of the stiff pushing contact too coarsely)",
-}
+KNOWN_ISSUES: dict[str, str] = {}
 
 
 @pytest.fixture(scope="module")
