@@ -7,17 +7,20 @@ lock from the loop for up to ~2 ms at a time (an rclpy ``publish()`` does not re
 cycle traces showed this as the main cause of deadline misses (docs/simulator.md). Here the
 loop is the process's only thread. It reads parcels and commands from one pipe at the start of
 every cycle (non-blocking) and writes what the node publishes (snapshots, events, log lines,
-statistics) to another, never waiting for the reader in a paced run.
+counters) to another, never waiting for the reader in a paced run.
 
 Wire format (both pipes): frames of a 4-byte little-endian length and a pickle. The node
 (:class:`LineProcess`) sends ``("parcel", ParcelSpec)``, ``("command", StrokeCommand)``,
 ``("rtf", float)`` and ``("stop",)``; the loop sends ``("ready", t)``,
 ``("states", LineSnapshot, due)``, ``("markers", LineSnapshot, due)``, ``("events", list)``,
-``("log", level, text)``, ``("stats", LoopStats)``, ``("error", text)``. ``due`` is the cycle's
-wake time on ``time.perf_counter`` (CLOCK_MONOTONIC, the same in both processes).
+``("log", level, text)``, ``("stats", LoopStats)`` (counters by name, when they change),
+``("error", text)``; a ``markers`` frame with no snapshot means the one of the ``states`` frame
+before it. ``due`` is the cycle's wake time on ``time.perf_counter`` (CLOCK_MONOTONIC, the same
+in both processes). The running figures (cycles, misses, lateness and work histograms, sim
+time) are not sent: the loop writes them into shared memory (:class:`Gauges`) every cycle.
 
-Run as ``python -m fence_sorter.line.worker IN_FD OUT_FD PARENT_PID``; the first frame on IN_FD
-is ``(LineConfig, scenario or None, LoopSettings)``.
+Run as ``python -m fence_sorter.line.worker IN_FD OUT_FD GAUGES_FD PARENT_PID``; the first
+frame on IN_FD is ``(LineConfig, scenario or None, LoopSettings)``.
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ from __future__ import annotations
 import ctypes
 import fcntl
 import gc
-import math
+import mmap
 import os
 import pickle
 import select
@@ -40,6 +43,8 @@ from collections import Counter, deque
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from .line import LineConfig, SortingLine
 from .pacing import CycleTrace, LatenessHistogram, Pacer
 from .types import ParcelSpec, StrokeCommand
@@ -47,13 +52,11 @@ from .validate import InputError
 
 #: sim time a command for a not-yet-known parcel waits for its parcel message [s]
 COMMAND_HOLD = 0.5
-#: the loop collects garbage or computes statistics only with this much time left before the
+#: the loop collects garbage or sends its counters only with this much time left before the
 #: next deadline [s]
 GC_SLACK = 0.0006
 #: wall time between full collections [s]
 FULL_GC_PERIOD = 10.0
-#: wall time between statistics frames [s]
-STATS_PERIOD = 0.25
 #: unpaced, the loop waits for the reader beyond this many unsent bytes (backpressure)
 UNPACED_BACKLOG = 1 << 18
 #: paced, unsent bytes beyond this mean the reader is gone: the loop fails
@@ -81,6 +84,7 @@ class LoopSettings:
     publish_every: int = 20  # cycles between state snapshots
     marker_every: int = 100  # cycles between marker snapshots (0: none)
     rt_priority: int = 0  # SCHED_FIFO priority in paced runs (0: normal scheduling)
+    loop_cpu: int = -1  # CPU the loop's process is pinned to (-1: not pinned)
     debug: bool = False  # send DEBUG log lines
     trace_path: str = ""  # CycleTrace .npz written at the end ("": none)
     warm_up: bool = True  # one short stroke before the loop starts
@@ -96,6 +100,7 @@ class LoopSettings:
             ("publish_every", self.publish_every, self.publish_every >= 1, ">= 1"),
             ("marker_every", self.marker_every, self.marker_every >= 0, ">= 0"),
             ("rt_priority", self.rt_priority, 0 <= self.rt_priority <= 99, "in 0..99"),
+            ("loop_cpu", self.loop_cpu, self.loop_cpu >= -1, ">= -1"),
         )
         for name, value, ok, allowed in checks:
             if not ok:
@@ -104,23 +109,46 @@ class LoopSettings:
 
 @dataclass
 class LoopStats:
-    """What the loop measured and counted, sent every ``STATS_PERIOD`` and at the end."""
+    """The loop's counters by name, sent when they change and at the end (the running
+    figures are in :class:`Gauges`)."""
 
-    cycles: int = 0
-    misses: int = 0
-    slips: int = 0
-    sim_time: float = 0.0
-    parcels_on_line: int = 0
-    # (p50, p99, p99.9, max) [s] of cycle lateness (wake - deadline) and work (wake to done)
-    lateness: tuple[float, float, float, float] = (math.nan,) * 4
-    work: tuple[float, float, float, float] = (math.nan,) * 4
     counts: dict[str, int] = field(default_factory=dict)
     bad_parcels: dict[str, int] = field(default_factory=dict)
     rejected_commands: dict[str, int] = field(default_factory=dict)
 
 
-def _summary(hist: LatenessHistogram) -> tuple[float, float, float, float]:
-    return (*hist.percentiles((50.0, 99.0, 99.9)), hist.max if hist.n else math.nan)
+class Gauges:
+    """The loop's running figures in memory shared with the node (a memfd mapped by both):
+    the loop writes them every cycle at the cost of a few array stores, the node reads them
+    for its heartbeat with no frame and no work in the loop. Aligned 8-byte stores, so no
+    value is ever read torn; a set read while a cycle runs may be one cycle apart."""
+
+    CYCLES, MISSES, SLIPS, SIM_TIME, LATENESS_MAX, WORK_MAX, ON_LINE = range(7)
+    HEADER = 8
+
+    def __init__(self, fd: int | None = None) -> None:
+        bins = LatenessHistogram.BINS + 1
+        size = 8 * (self.HEADER + 2 * bins)
+        if fd is None:
+            fd = os.memfd_create("fence_sorter_gauges")
+            os.ftruncate(fd, size)
+        self.fd = fd
+        self._mm = mmap.mmap(fd, size)
+        #: cycles, misses, slips, sim time [s], lateness and work max [s], parcels on line
+        self.header = np.ndarray((self.HEADER,), np.float64, self._mm, 0)
+        #: lateness and work histogram counts (LatenessHistogram bins)
+        self.counts = np.ndarray((2, bins), np.int64, self._mm, 8 * self.HEADER)
+
+    def histogram(self, which: int) -> LatenessHistogram:
+        """A copy of histogram 0 (lateness) or 1 (work) (node side)."""
+        h = LatenessHistogram.__new__(LatenessHistogram)
+        h.counts = self.counts[which].copy()
+        h.n = int(h.counts.sum())
+        h.max = float(self.header[self.LATENESS_MAX if which == 0 else self.WORK_MAX])
+        return h
+
+    def value(self, index: int) -> float:
+        return float(self.header[index])
 
 
 # -- frames ---------------------------------------------------------------------------------------
@@ -222,13 +250,22 @@ class PacedLoop:
     snapshots every ``publish_every`` cycles, garbage collection and statistics in the slack,
     then the running solves stepped ahead in the spare time (``SortingLine.prefetch``)."""
 
-    def __init__(self, line: SortingLine, settings: LoopSettings, inbox: _Inbox, out: _Outbox):
+    def __init__(
+        self,
+        line: SortingLine,
+        settings: LoopSettings,
+        inbox: _Inbox,
+        out: _Outbox,
+        gauges: Gauges,
+    ):
         self.line, self.s, self.inbox, self.out = line, settings, inbox, out
         self.rtf = settings.rtf
         self.stop = False
-        self.hist = LatenessHistogram()
-        self.work = LatenessHistogram()
-        self.stats = LoopStats(sim_time=line.t)
+        self.gauges = gauges
+        # histograms counting straight into the shared memory
+        self.hist, self.work = LatenessHistogram(), LatenessHistogram()
+        self.hist.counts, self.work.counts = gauges.counts[0], gauges.counts[1]
+        self.counters_changed = False
         self.counts: Counter[str] = Counter()
         self.bad_parcels: Counter[str] = Counter()
         self.rejected: Counter[str] = Counter()
@@ -241,7 +278,14 @@ class PacedLoop:
 
     def set_priority(self) -> None:
         """SCHED_FIFO in paced runs: a wake-up is then not delayed by another process's time
-        slice. Normal scheduling with a warning where the process may not."""
+        slice. Normal scheduling with a warning where the process may not. Pinned to
+        ``loop_cpu`` if set (whatever the rate)."""
+        if self.s.loop_cpu >= 0 and os.sched_getaffinity(0) != {self.s.loop_cpu}:
+            try:
+                os.sched_setaffinity(0, {self.s.loop_cpu})
+                self.log("info", f"pacing process: pinned to CPU {self.s.loop_cpu}")
+            except OSError as exc:
+                self.log("warning", f"loop_cpu {self.s.loop_cpu} not applied ({exc})")
         if self.s.rt_priority <= 0 or self.rtf <= 0.0:
             return
         try:
@@ -252,18 +296,17 @@ class PacedLoop:
         self.log("info", f"pacing process: SCHED_FIFO priority {self.s.rt_priority}")
 
     def send_stats(self) -> None:
-        st = self.stats
-        st.sim_time, st.parcels_on_line = self.line.t, self.line.parcels_on_line
-        st.lateness, st.work = _summary(self.hist), _summary(self.work)
-        st.counts, st.bad_parcels = dict(self.counts), dict(self.bad_parcels)
-        st.rejected_commands = dict(self.rejected)
-        self.out.send(("stats", st))
+        self.counters_changed = False
+        stats = LoopStats(dict(self.counts), dict(self.bad_parcels), dict(self.rejected))
+        self.out.send(("stats", stats))
 
     def take_inputs(self) -> None:
         """Parcels first, then commands. A command for a parcel the line does not know yet is
         held up to ``COMMAND_HOLD`` of sim time (the parcel may still be in flight on the
         other topic) before it is rejected."""
         items = self.inbox.take()
+        if items or self.held:
+            self.counters_changed = True
         if self.inbox.closed:
             self.stop = True
         line, log = self.line, self.log
@@ -316,7 +359,9 @@ class PacedLoop:
         )  # fmt: skip
         self.set_priority()
         next_pub = next_marker = next_gc = next_full_gc = 0  # cycle indices (k may skip)
-        next_stats = clock() + STATS_PERIOD
+        g = self.gauges.header
+        cycles = misses = 0
+        g[Gauges.SIM_TIME] = line.t
         out.send(("states", line.snapshot(), None))
         while not self.stop:
             rtf = pacer.rtf
@@ -334,14 +379,17 @@ class PacedLoop:
                 flags |= CycleTrace.EVENTS
                 out.send(("events", events))
             advanced = clock()
+            snap = None
             if k >= next_pub:
                 flags |= CycleTrace.STATES
                 next_pub = (k // s.publish_every + 1) * s.publish_every
-                out.send(("states", line.snapshot(), wake))
+                snap = line.snapshot()
+                out.send(("states", snap, wake))
             if s.marker_every and k >= next_marker:
                 flags |= CycleTrace.MARKERS
                 next_marker = (k // s.marker_every + 1) * s.marker_every
-                out.send(("markers", line.snapshot(), wake))
+                # None: the node builds the markers from the states snapshot just sent
+                out.send(("markers", None if snap is not None else line.snapshot(), wake))
             done = clock()
             # the cycle's due work ends here: serialising and writing what it sent, garbage
             # collection and statistics use its slack (a cycle misses when `done` is late)
@@ -354,15 +402,16 @@ class PacedLoop:
                 next_gc = k + s.publish_every
                 if gen == 2:
                     next_full_gc = k + round(FULL_GC_PERIOD / period)
-            self.stats.cycles += 1
-            self.stats.slips = pacer.slips
+            cycles += 1
             if wake is not None:
                 self.work.add(done - wake)
                 if done > deadline + period:
-                    self.stats.misses += 1
+                    misses += 1
                     flags |= CycleTrace.MISS
-            if done >= next_stats and (slack or rtf == 0.0):
-                next_stats = done + STATS_PERIOD
+            g[Gauges.CYCLES], g[Gauges.MISSES], g[Gauges.SLIPS] = cycles, misses, pacer.slips
+            g[Gauges.SIM_TIME], g[Gauges.ON_LINE] = line.t, line.parcels_on_line
+            g[Gauges.LATENESS_MAX], g[Gauges.WORK_MAX] = self.hist.max, self.work.max
+            if self.counters_changed and (slack or rtf == 0.0):
                 self.send_stats()
                 out.flush()
             collected = clock()
@@ -438,7 +487,7 @@ def _read_exact(fd: int, n: int) -> bytes:
 def main(argv: list[str]) -> int:
     """The process: read the set-up frame, build and warm the line, run the loop until the
     node sends ``stop`` or goes away."""
-    in_fd, out_fd, parent = (int(a) for a in argv[:3])
+    in_fd, out_fd, gauges_fd, parent = (int(a) for a in argv[:4])
     # die with the node; Ctrl-C and SIGTERM reach the whole process group, but only the node
     # ends this process (stop frame, or its end of the pipe closing), after the last frames
     ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
@@ -458,7 +507,7 @@ def main(argv: list[str]) -> int:
         line = SortingLine(config)
         if settings.warm_up and scenario is not None:
             warm_up(config, scenario)
-        loop = PacedLoop(line, settings, inbox, out)
+        loop = PacedLoop(line, settings, inbox, out, Gauges(gauges_fd))
         # the cyclic GC would stop the loop for 1-60 ms at moments of its choosing: freeze
         # what exists after start-up (modules, compiled kernel, scene); the loop collects the
         # young generation in the slack after its work, the old one every few seconds
@@ -495,14 +544,17 @@ class LineProcess:
         except OSError:
             pass
         self._lock = threading.Lock()
+        #: the loop's running figures (cycles, misses, lateness and work histograms, ...)
+        self.gauges = Gauges()
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "fence_sorter.line.worker", str(to_child_r),
-             str(from_child_w), str(os.getpid())],
-            pass_fds=(to_child_r, from_child_w),
+             str(from_child_w), str(self.gauges.fd), str(os.getpid())],
+            pass_fds=(to_child_r, from_child_w, self.gauges.fd),
             stdin=subprocess.DEVNULL,
         )  # fmt: skip
         os.close(to_child_r)
         os.close(from_child_w)
+        os.close(self.gauges.fd)  # the mapping stays
         self._frames = FrameBuffer()
         self._pending: deque = deque()
         self._eof = False

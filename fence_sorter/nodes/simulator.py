@@ -48,7 +48,7 @@ from fence_sorter.line import (
     StrokeStarted,
 )
 from fence_sorter.line.awake import start_spinners, stop_spinners
-from fence_sorter.line.worker import LineProcess, LoopSettings, LoopStartError, LoopStats
+from fence_sorter.line.worker import Gauges, LineProcess, LoopSettings, LoopStartError, LoopStats
 from fence_sorter.nodes import convert
 from fence_sorter.nodes.base import FenceSorterNode, ParamSpec, spin_node
 from fence_sorter.nodes.qos import RELIABLE_QOS, SENSOR_QOS
@@ -191,6 +191,16 @@ class SimulatorNode(FenceSorterNode):
             max_value=99,
         ),
         ParamSpec(
+            "loop_cpu",
+            -1,
+            "CPU the pacing loop's process is pinned to, this node's own threads kept off it "
+            "(-1: not pinned). `fence-sorter run` sets it to the last CPU and keeps the other "
+            "nodes off it too, so their work does not evict the loop's caches while it sleeps",
+            read_only=True,
+            min_value=-1,
+            max_value=1023,
+        ),
+        ParamSpec(
             "warm_up",
             True,
             "Run one short stroke before starting so the compiled kernel is loaded",
@@ -262,6 +272,7 @@ class SimulatorNode(FenceSorterNode):
             publish_every=max(1, round(float(p["physics_rate"]) / float(p["publish_rate"]))),
             marker_every=max(1, round(float(p["physics_rate"]) / rate)) if rate > 0.0 else 0,
             rt_priority=int(p["realtime_priority"]),
+            loop_cpu=int(p["loop_cpu"]),
             debug=self.get_logger().is_enabled_for(LoggingSeverity.DEBUG),
             trace_path=str(p["cycle_trace"]),
             warm_up=bool(p["warm_up"]),
@@ -290,11 +301,12 @@ class SimulatorNode(FenceSorterNode):
         # what the loop's process reports (reader thread) and what this process counts
         # (reader and executor threads), read by the heartbeat under the lock
         self._lock = threading.Lock()
-        self.stats = LoopStats(sim_time=line.t, parcels_on_line=0)
+        self.stats = LoopStats()
         self.publish_lag = LatenessHistogram()  # snapshot due -> its messages published [s]
         self.counts: Counter[str] = Counter()
         self.outcome_counts: Counter[str] = Counter()
-        self.sim_time = line.t
+        self._gauges_left: Gauges | None = None  # the stopped loop's, for a last heartbeat
+        self._t0 = line.t
         self.loop_error: str | None = None
         self._rtf_window = (time.perf_counter(), line.t)
         self._stopping = False
@@ -312,6 +324,12 @@ class SimulatorNode(FenceSorterNode):
             f"{cfg.conveyor.belt_speed:g} m/s, s = {cfg.conveyor.width:g} m); rtf {self.rtf:g}, "
             f"{p['physics_rate']:g} Hz loop, {p['publish_rate']:g} Hz publication"
         )
+
+    @property
+    def sim_time(self) -> float:
+        """The line's sim time [s], as the loop's process last wrote it."""
+        g = self.loop.gauges if self.loop is not None else self._gauges_left
+        return g.value(Gauges.SIM_TIME) if g is not None else self._t0
 
     # -- callbacks: hand off only --------------------------------------------------------------
     def _on_parcel(self, msg: Parcel) -> None:
@@ -331,7 +349,9 @@ class SimulatorNode(FenceSorterNode):
         """Start the loop's process (it warms the kernel up first) and the publisher thread.
         Raises LoopStartError if the loop does not come up."""
         if self.keep_cpus_awake and self.rtf > 0.0:
-            self._spinners = start_spinners()
+            cpus = set(os.sched_getaffinity(0))  # and the loop's, if pinned outside them
+            cpus |= {self.settings.loop_cpu} if self.settings.loop_cpu >= 0 else set()
+            self._spinners = start_spinners(cpus)
             self.get_logger().info(
                 f"keep_cpus_awake: {len(self._spinners)} SCHED_IDLE spinner processes"
             )
@@ -346,6 +366,7 @@ class SimulatorNode(FenceSorterNode):
         self._stopping = True
         loop, self.loop = self.loop, None
         if loop is not None:
+            self._gauges_left = loop.gauges
             loop.stop()
             if self._reader.is_alive():
                 self._reader.join(timeout=5.0)
@@ -360,7 +381,17 @@ class SimulatorNode(FenceSorterNode):
         """In paced runs, this process's threads (rclpy executor, publisher, DDS) at SCHED_FIFO
         one level below the loop's process, as ros2_control does for the threads around its
         update loop: outcomes and /clock then leave on time on a loaded machine. Normal
-        scheduling where the process may not (no CAP_SYS_NICE or rtprio limit)."""
+        scheduling where the process may not (no CAP_SYS_NICE or rtprio limit). With
+        ``loop_cpu`` set, the threads keep off the loop's CPU."""
+        cpu = self.settings.loop_cpu
+        others = os.sched_getaffinity(0) - {cpu}
+        if cpu >= 0 and others:
+            for tid in os.listdir("/proc/self/task"):
+                try:
+                    os.sched_setaffinity(int(tid), others)
+                except OSError:
+                    pass
+            self.get_logger().info(f"node threads: kept off CPU {cpu} (the loop's)")
         prio = self.settings.rt_priority - 1
         if prio < 1 or self.rtf <= 0.0:
             return
@@ -381,6 +412,7 @@ class SimulatorNode(FenceSorterNode):
         asked to by stop()) ends this node with status 1."""
         clock = time.perf_counter
         loop = self.loop
+        snap = None
         try:
             for item in loop.frames():
                 kind = item[0]
@@ -390,8 +422,8 @@ class SimulatorNode(FenceSorterNode):
                     if due is not None:
                         with self._lock:
                             self.publish_lag.add(clock() - due)
-                elif kind == "markers":
-                    self.pub_markers.publish(self._markers.build(item[1]))
+                elif kind == "markers":  # no snapshot: the states snapshot just before
+                    self.pub_markers.publish(self._markers.build(item[1] or snap))
                 elif kind == "events":
                     self._handle(item[1])
                 elif kind == "log":
@@ -399,7 +431,6 @@ class SimulatorNode(FenceSorterNode):
                 elif kind == "stats":
                     with self._lock:
                         self.stats = item[1]
-                        self.sim_time = item[1].sim_time
                 elif kind == "error":
                     self._fail(f"pacing loop failed: {item[1].strip().splitlines()[-1]}")
                     self.get_logger().error(item[1])
@@ -420,7 +451,6 @@ class SimulatorNode(FenceSorterNode):
         per topic, filled in place (publish() serialises it at once)."""
         self.pub_clock.publish(convert.fill_clock(self._clock_msg, snap.t))
         self._clock_published = snap.t
-        self.sim_time = max(self.sim_time, snap.t)
         self.pub_fence.publish(
             convert.fill_fence_state(self._fence_msg, snap.fence, snap.t, self.frame_id)
         )
@@ -490,13 +520,24 @@ class SimulatorNode(FenceSorterNode):
             st, lag = self.stats, self.publish_lag.copy()
             counts = Counter(st.counts) + self.counts
             outcomes = dict(self.outcome_counts)
+        loop = self.loop
+        g = loop.gauges if loop is not None else self._gauges_left
+        if g is not None:  # the loop's running figures, read from the shared memory
+            hist, work = g.histogram(0), g.histogram(1)
+            cycles, misses = int(g.value(Gauges.CYCLES)), int(g.value(Gauges.MISSES))
+            slips, on_line = int(g.value(Gauges.SLIPS)), int(g.value(Gauges.ON_LINE))
+        else:  # before start()
+            hist, work = LatenessHistogram(), LatenessHistogram()
+            cycles = misses = slips = on_line = 0
         bad, rejected = st.bad_parcels, st.rejected_commands
-        p50, p99, p999, lat_max = (1e3 * v for v in st.lateness)
-        w50, w99, w999, w_max = (1e3 * v for v in st.work)
-        g50, g99, g999 = (1e3 * v for v in lag.percentiles((50.0, 99.0, 99.9)))
+        qs = (50.0, 99.0, 99.9)
+        p50, p99, p999 = (1e3 * v for v in hist.percentiles(qs))
+        w50, w99, w999 = (1e3 * v for v in work.percentiles(qs))
+        g50, g99, g999 = (1e3 * v for v in lag.percentiles(qs))
+        lat_max, w_max = 1e3 * hist.max, 1e3 * work.max
         g_max = 1e3 * lag.max if lag.n else math.nan
         w0, s0 = self._rtf_window
-        sim_t = max(st.sim_time, self.sim_time)
+        sim_t = self.sim_time
         self._rtf_window = (now, sim_t)
         rtf = (sim_t - s0) / (now - w0) if now > w0 else math.nan
         values = {
@@ -504,9 +545,9 @@ class SimulatorNode(FenceSorterNode):
             "sim_time_s": f"{sim_t:.3f}",
             "real_time_factor_target": f"{self.rtf:g}",
             "real_time_factor_achieved": f"{rtf:.3f}",
-            "cycles": str(st.cycles),
-            "deadline_misses": str(st.misses),
-            "catch_up_slips": str(st.slips),
+            "cycles": str(cycles),
+            "deadline_misses": str(misses),
+            "catch_up_slips": str(slips),
             "cycle_lateness_p50_ms": f"{p50:.4f}",
             "cycle_lateness_p99_ms": f"{p99:.4f}",
             "cycle_lateness_p99_9_ms": f"{p999:.4f}",
@@ -520,7 +561,7 @@ class SimulatorNode(FenceSorterNode):
             "publish_lag_p99_ms": f"{g99:.4f}",
             "publish_lag_p99_9_ms": f"{g999:.4f}",
             "publish_lag_max_ms": f"{g_max:.4f}",
-            "parcels_on_line": str(st.parcels_on_line),
+            "parcels_on_line": str(on_line),
             "bad_parcels": str(sum(bad.values())),
             "commands_rejected": str(sum(rejected.values())),
             "overlap_warnings": str(counts.get("overlap_warnings", 0)),
@@ -536,9 +577,9 @@ class SimulatorNode(FenceSorterNode):
         if self.loop_error:
             status.level = DiagnosticStatus.ERROR
             status.message = self.loop_error
-        elif st.cycles and st.misses > 0.001 * st.cycles:
+        elif cycles and misses > 0.001 * cycles:
             status.level = DiagnosticStatus.WARN
-            status.message = f"running; deadline misses {st.misses} of {st.cycles} cycles"
+            status.message = f"running; deadline misses {misses} of {cycles} cycles"
         return status
 
     def validate_parameters(self, parameters: Sequence[Parameter]) -> str | None:

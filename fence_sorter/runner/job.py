@@ -5,6 +5,7 @@ an isolated ROS domain, watch the run until every parcel has its outcome, stop c
 from __future__ import annotations
 
 import math
+import os
 import signal
 import tempfile
 import threading
@@ -152,6 +153,25 @@ def _ros_args(node: str, plan: Plan, opts: RunOptions, extra: list[str]) -> list
     return args
 
 
+def loop_cpu(plan: Plan) -> int:
+    """The simulator's ``loop_cpu`` for this run: its last ``--param`` override, else
+    config/simulator.yaml's, else -1 (not pinned)."""
+    for item in reversed(plan.node_params.get("simulator", [])):
+        key, _, value = item.partition(":=")
+        if key == "loop_cpu":
+            try:
+                return int(value)
+            except ValueError:
+                return -1  # the simulator rejects it with its own message
+    try:
+        import yaml
+
+        doc = yaml.safe_load((REPO_CONFIG / "simulator.yaml").read_text()) or {}
+        return int(doc["simulator"]["ros__parameters"].get("loop_cpu", -1))
+    except (OSError, KeyError, TypeError, ValueError):
+        return -1
+
+
 def _terminate(signum, frame) -> None:
     raise KeyboardInterrupt(f"signal {signum}")
 
@@ -162,9 +182,11 @@ def run_job(opts: RunOptions, say: Callable[[str], None] = print) -> RunResult:
     previous = None
     if threading.current_thread() is threading.main_thread():
         previous = signal.signal(signal.SIGTERM, _terminate)
+    affinity = os.sched_getaffinity(0)  # _run may keep this thread off the loop's CPU
     try:
         return _run(plan, opts, say)
     finally:
+        os.sched_setaffinity(0, affinity)
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
 
@@ -174,7 +196,14 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None]) -> RunResult:
     log_dir = Path(opts.log_dir or tempfile.mkdtemp(prefix="fence_sorter_run_"))
     log_dir.mkdir(parents=True, exist_ok=True)
     env = node_env(domain, log_dir / "ros")
-    group = ProcessGroup(env, log_dir)
+    # paced with the loop pinned: every other process of the run keeps off the loop's CPU, so
+    # its work does not evict the loop's caches while the loop sleeps (docs/simulator.md)
+    pinned = loop_cpu(plan) if opts.rtf > 0.0 else -1
+    others = set(os.sched_getaffinity(0)) - {pinned}
+    cpus = others if pinned >= 0 and others else None
+    group = ProcessGroup(env, log_dir, cpus)
+    if cpus is not None:  # this thread, and the monitor's threads created from it
+        os.sched_setaffinity(0, cpus)
     from fence_sorter.runner.monitor import Monitor
 
     monitor = Monitor(domain)

@@ -74,8 +74,10 @@ class NodeProcess:
 class ProcessGroup:
     """The node processes of one run; :meth:`stop` ends them all, in order, with escalation."""
 
-    def __init__(self, env: Mapping[str, str], log_dir: Path):
+    def __init__(self, env: Mapping[str, str], log_dir: Path, cpus: set[int] | None = None):
+        """``cpus``: the CPUs every node process may run on (None: as this process)."""
         self.env = dict(env)
+        self.cpus = cpus
         self.log_dir = Path(log_dir)
         self.log_dir.mkdir(parents=True, exist_ok=True)
         self.nodes: dict[str, NodeProcess] = {}
@@ -92,6 +94,11 @@ class ProcessGroup:
             stderr=subprocess.STDOUT,
             stdin=subprocess.DEVNULL,
         )
+        if self.cpus is not None:  # before the interpreter starts any thread (inherited)
+            try:
+                os.sched_setaffinity(proc.pid, self.cpus)
+            except OSError:
+                pass
         node = NodeProcess(name, proc, log_path, log)
         self.nodes[name] = node
         self.pgids.append(proc.pid)

@@ -40,3 +40,36 @@ def test_bad_manifest_names_line_and_column(tmp_path: Path) -> None:
     proc = run_cli("run", "--stream", str(bad), timeout=120)
     assert proc.returncode == 2
     assert f"manifest {bad} line 2 column 'mass'" in proc.stderr
+
+
+def test_loop_cpu_comes_from_the_last_override_then_the_config(tmp_path: Path) -> None:
+    from fence_sorter.runner.job import RunOptions, loop_cpu, prepare
+
+    plan = prepare(RunOptions(parcels=2))
+    assert loop_cpu(plan) == -1  # config/simulator.yaml: not pinned
+    opts = RunOptions(parcels=2, params=["simulator:loop_cpu=3", "simulator:loop_cpu=1"])
+    assert loop_cpu(prepare(opts)) == 1
+
+
+@pytest.mark.skipif(len(__import__("os").sched_getaffinity(0)) < 2, reason="needs 2 CPUs")
+def test_process_group_keeps_its_nodes_on_the_cpus_it_is_given(tmp_path: Path) -> None:
+    import os
+    import sys
+
+    from fence_sorter.runner.processes import ProcessGroup, leftovers
+
+    cpus = {min(os.sched_getaffinity(0))}
+    group = ProcessGroup(dict(os.environ), tmp_path, cpus)
+    code = "import threading, time; threading.Thread(target=time.sleep, args=(30,)).start()"
+    node = group.start("sleeper", [sys.executable, "-c", code])
+    try:
+        for _ in range(100):  # the thread it starts inherits the mask
+            tids = os.listdir(f"/proc/{node.proc.pid}/task")
+            if len(tids) > 1:
+                break
+            __import__("time").sleep(0.05)
+        assert len(tids) > 1
+        assert all(os.sched_getaffinity(int(t)) == cpus for t in tids)
+    finally:
+        group.stop()
+    assert not leftovers(group.pgids)

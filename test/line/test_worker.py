@@ -21,6 +21,7 @@ from fence_sorter.line import LineConfig, Outcome, OutcomeCode, SortingLine
 from fence_sorter.line.worker import (
     PIPE_SIZE,
     FrameBuffer,
+    Gauges,
     LineProcess,
     LoopSettings,
     LoopStartError,
@@ -97,10 +98,17 @@ def test_loop_process_sorts_like_the_line_in_process_and_stops_cleanly():
     assert out.exit_speed_y == ref[1].exit_speed_y
     times = [f[1].t for f in frames if f[0] == "states"]
     assert times == sorted(times) and times[-1] > out.t - 0.1  # states every 80 ms of sim
-    st = _last_stats(frames)  # the final statistics, sent after the loop ended
+    st = _last_stats(frames)  # the final counters, sent after the loop ended
     assert st.counts["parcels_received"] == 1 and st.counts["commands_accepted"] == 1
-    assert st.cycles > 100 and st.sim_time >= out.t and st.parcels_on_line == 0
-    assert math.isfinite(st.lateness[1]) and st.lateness[3] >= st.lateness[1]
+    # the running figures, in the memory shared with the loop's process
+    g = lp.gauges
+    assert g.value(Gauges.SIM_TIME) >= out.t and g.value(Gauges.ON_LINE) == 0
+    cycles = g.value(Gauges.CYCLES)
+    assert cycles > 100 and g.value(Gauges.MISSES) <= cycles
+    lateness, work = g.histogram(0), g.histogram(1)
+    assert lateness.n == work.n == cycles  # one sample of each per paced cycle
+    p99 = lateness.percentile(99.0)
+    assert math.isfinite(p99) and lateness.max >= p99 - lateness.BIN
     assert lp.proc.returncode == 0
 
 
@@ -165,6 +173,20 @@ def test_settings_are_checked_and_a_failing_set_up_is_reported():
         with pytest.raises(LoopStartError, match="AttributeError"):
             lp.wait_ready(60.0)
         assert lp.proc.wait(timeout=10.0) == 1
+    finally:
+        lp.close()
+
+
+@pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="needs 2 CPUs")
+def test_loop_process_pins_itself_to_loop_cpu():
+    cpu = max(os.sched_getaffinity(0))
+    lp = LineProcess(CONFIG, None, LoopSettings(period=1e-3, rtf=1.0, loop_cpu=cpu))
+    try:
+        lp.wait_ready(60.0)
+        frames = _collect(lp, lambda got: any(f[0] == "log" and "pinned" in f[2] for f in got))
+        assert any(f[0] == "log" and f"CPU {cpu}" in f[2] for f in frames)
+        assert os.sched_getaffinity(lp.proc.pid) == {cpu}
+        assert lp.stop() == 0
     finally:
         lp.close()
 
