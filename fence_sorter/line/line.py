@@ -123,6 +123,18 @@ class LineConfig:
             )
 
 
+@dataclass(frozen=True)
+class LineCapture:
+    """What :meth:`SortingLine.capture` took at time ``t``: the fence's stroke with its local
+    time and interpolated state (or None at rest), and per parcel (parcel, state vector or
+    belt pose, extras or None, stage, peak N_stiff). Refers to the line's objects; only for
+    :meth:`SortingLine.render` of the same line."""
+
+    t: float
+    fence: tuple | None
+    parcels: list[tuple]
+
+
 class _Tap:
     """Observer wrapper keeping the accepted points a snapshot at the line time may need.
 
@@ -649,7 +661,37 @@ class SortingLine:
     # -- state --------------------------------------------------------------------------------
     def snapshot(self) -> LineSnapshot:
         """Fence and every parcel on the line at the current time (no diverged state ever)."""
-        return LineSnapshot(self.t, self._fence_snapshot(), self._parcel_snapshots())
+        return self.render(self.capture())
+
+    def capture(self) -> LineCapture:
+        """The state :meth:`snapshot` needs at the current time, without the costly part
+        (fence shape, corners, the snapshot objects): :meth:`render` builds the snapshot from
+        it later, whatever the line did meanwhile. For a soft-real-time caller: capture in the
+        cycle, render in its slack."""
+        t = self.t
+        s = self._fence_stroke()
+        fence = None
+        if s is not None:
+            if s.alive and s.tap.cur is not None and s.model.flexible:
+                fence = (s, t - s.t_start, *s.tap.at(t - s.t_start))
+            else:
+                fence = (s, t - s.t_start, None, None)
+        parcels = []
+        for p in self.parcels.values():
+            st = p.stroke
+            if st is not None and st.alive and st.tap.cur is not None:
+                y, e = st.tap.at(t - st.t_start)
+                impacts = st.observer.impacts
+                stiff = impacts[-1][2] if impacts and e[3] > 0 else 0.0
+                parcels.append((p, y, e, STAGES.get(st.observer.stage, Stage.ON_BELT), stiff))
+            else:
+                stage = Stage.PASSED if p.passed else Stage.ON_BELT
+                parcels.append((p, p.pose(t), None, stage, 0.0))
+        return LineCapture(t, fence, parcels)
+
+    def render(self, cap: LineCapture) -> LineSnapshot:
+        """The snapshot of a :meth:`capture` (same as :meth:`snapshot` at its time)."""
+        return LineSnapshot(cap.t, self._render_fence(cap.fence), self._render_parcels(cap))
 
     def _fence_stroke(self) -> _Stroke | None:
         owner = None
@@ -658,19 +700,17 @@ class SortingLine:
                 owner = s
         return owner
 
-    def _fence_snapshot(self) -> FenceSnapshot:
-        s = self._fence_stroke()
+    def _render_fence(self, fence) -> FenceSnapshot:
         n = len(self._rest_s)
         zeros = np.zeros(n)
-        if s is None:
+        if fence is None:
             return FenceSnapshot(
                 0.0, 0.0, 0.0, self._rest_s, self._rest_s.copy(), zeros, zeros, zeros, 0.0,
                 None, False,
             )  # fmt: skip
+        s, t_local, y, extra = fence
         pid = s.parcel.spec.parcel_id
-        t_local = self.t - s.t_start
-        if s.alive and s.tap.cur is not None and s.model.flexible:
-            y, extra = s.tap.at(t_local)
+        if y is not None:
             m = s.model.n_modes
             w_free = s.model.phi @ y[6 : 6 + m]
             alpha = float(extra[0])
@@ -688,9 +728,9 @@ class SortingLine:
             zeros, 0.0, pid, s.alive,
         )  # fmt: skip
 
-    def _parcel_snapshots(self) -> list[ParcelSnapshot]:
+    def _render_parcels(self, cap: LineCapture) -> list[ParcelSnapshot]:
         out = []
-        for p in self.parcels.values():
+        for p, y, e, stage, stiff in cap.parcels:
             spec = p.spec
             common = dict(
                 length_a=spec.length_a,
@@ -698,12 +738,7 @@ class SortingLine:
                 height=spec.height,
                 divert=spec.divert,
             )
-            s = p.stroke
-            if s is not None and s.alive and s.tap.cur is not None:
-                y, e = s.tap.at(self.t - s.t_start)
-                stage = STAGES.get(s.observer.stage, Stage.ON_BELT)
-                impacts = s.observer.impacts
-                n = float(e[3])
+            if e is not None:  # in its stroke's solve: y is the state vector
                 out.append(
                     ParcelSnapshot(
                         spec.parcel_id,
@@ -714,8 +749,8 @@ class SortingLine:
                         float(y[3]),
                         float(y[4]),
                         float(y[5]),
-                        contact_normal_force=n,
-                        contact_normal_force_stiff=impacts[-1][2] if impacts and n > 0 else 0.0,
+                        contact_normal_force=float(e[3]),
+                        contact_normal_force_stiff=stiff,
                         deformation=float(e[4]),
                         deformation_rate=float(e[5]),
                         contact_point=(float(e[6]), float(e[7])),
@@ -724,11 +759,11 @@ class SortingLine:
                     )
                 )
                 continue
-            x, y_, yaw = p.pose(self.t)
+            x, y_, yaw = y  # on the belt: its pose
             out.append(
                 ParcelSnapshot(
                     spec.parcel_id,
-                    Stage.PASSED if p.passed else Stage.ON_BELT,
+                    stage,
                     x,
                     y_,
                     yaw,

@@ -28,6 +28,7 @@ from __future__ import annotations
 import ctypes
 import fcntl
 import gc
+import math
 import mmap
 import os
 import pickle
@@ -45,7 +46,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .line import LineConfig, SortingLine
+from .line import LineCapture, LineConfig, SortingLine
 from .pacing import CycleTrace, LatenessHistogram, Pacer
 from .types import ParcelSpec, StrokeCommand
 from .validate import InputError
@@ -61,6 +62,10 @@ FULL_GC_PERIOD = 10.0
 UNPACED_BACKLOG = 1 << 18
 #: paced, unsent bytes beyond this mean the reader is gone: the loop fails
 PACED_BACKLOG = 1 << 26
+#: a frame is pickled in a cycle's slack only if its kind's mean cost, times this, fits
+FLUSH_COST_SAFETY = 2.0
+#: ... or once it has been held back this long [s]
+FLUSH_MAX_HOLD = 0.01
 #: pipe buffer asked for (Linux F_SETPIPE_SZ; the default is 64 KiB)
 PIPE_SIZE = 1 << 20
 _HEADER = struct.Struct("<I")
@@ -179,24 +184,40 @@ class FrameBuffer:
 
 class _Outbox:
     """Frames waiting for the pipe (loop side): kept as objects by :meth:`send` (cheap, in
-    the cycle), pickled and written without blocking by :meth:`flush` (in the cycle's slack),
-    in order."""
+    the cycle), pickled and written without blocking by :meth:`flush` (in the cycle's slack,
+    as much as fits), in order."""
 
     def __init__(self, fd: int) -> None:
         self.fd = fd
-        self.objects: list = []
+        self.objects: deque = deque()
         self.buf = bytearray()
+        self.cost: dict[str, float] = {}  # running mean time to pickle a frame, by kind [s]
+        self.held_since = math.inf  # when the first waiting frame was first put off
+        self.render = None  # LineCapture -> LineSnapshot, applied before pickling
         os.set_blocking(fd, False)
 
-    def send(self, obj: object) -> None:
+    def send(self, obj: tuple) -> None:
         self.objects.append(obj)
 
-    def flush(self) -> None:
-        """Serialise what was sent; write what the pipe takes now."""
-        if self.objects:
-            objects, self.objects = self.objects, []
-            for obj in objects:
-                self.buf += _frame(obj)
+    def flush(self, until: float = math.inf, clock=time.perf_counter) -> None:
+        """Pickle the frames sent, oldest first, while each one's expected cost (its kind's
+        running mean, x ``FLUSH_COST_SAFETY``) ends before ``until`` on ``clock``; a frame
+        held for ``FLUSH_MAX_HOLD`` goes anyway. Then write what the pipe takes now."""
+        objects, cost = self.objects, self.cost
+        while objects:
+            kind = objects[0][0]
+            now = clock()
+            if now + FLUSH_COST_SAFETY * cost.get(kind, 0.0) > until:
+                self.held_since = min(self.held_since, now)
+                if now - self.held_since < FLUSH_MAX_HOLD:
+                    break
+            obj = objects.popleft()
+            if isinstance(obj[1], LineCapture):  # captured in the cycle, rendered now
+                obj = (kind, self.render(obj[1]), *obj[2:])
+            self.buf += _frame(obj)
+            spent = clock() - now
+            cost[kind] = 0.9 * cost.get(kind, spent) + 0.1 * spent
+            self.held_since = math.inf
         while self.buf:
             try:
                 n = os.write(self.fd, self.buf)
@@ -206,13 +227,16 @@ class _Outbox:
 
     def drain(self, limit: int, inbox: _Inbox | None = None) -> None:
         """Block until at most ``limit`` bytes are unsent, reading ``inbox`` meanwhile (so a
-        writer blocked on the other pipe cannot deadlock with this one)."""
+        writer blocked on the other pipe cannot deadlock with this one); returns early when the
+        node asks the loop to stop."""
         self.flush()
         while len(self.buf) > limit or self.objects:
             rfds = [inbox.fd] if inbox is not None else []
             r, w, _ = select.select(rfds, [self.fd], [], 1.0)
             if r:
                 inbox.read()
+                if inbox.closed or any(item[0] == "stop" for item in inbox.items):
+                    return  # the loop ends now, whatever is unsent
             if w:
                 self.flush()
 
@@ -259,6 +283,7 @@ class PacedLoop:
         gauges: Gauges,
     ):
         self.line, self.s, self.inbox, self.out = line, settings, inbox, out
+        out.render = line.render
         self.rtf = settings.rtf
         self.stop = False
         self.gauges = gauges
@@ -379,21 +404,23 @@ class PacedLoop:
                 flags |= CycleTrace.EVENTS
                 out.send(("events", events))
             advanced = clock()
-            snap = None
+            # the cycle captures the line's state; the snapshot is rendered in the slack
+            cap = None
             if k >= next_pub:
                 flags |= CycleTrace.STATES
                 next_pub = (k // s.publish_every + 1) * s.publish_every
-                snap = line.snapshot()
-                out.send(("states", snap, wake))
+                cap = line.capture()
+                out.send(("states", cap, wake))
             if s.marker_every and k >= next_marker:
                 flags |= CycleTrace.MARKERS
                 next_marker = (k // s.marker_every + 1) * s.marker_every
                 # None: the node builds the markers from the states snapshot just sent
-                out.send(("markers", None if snap is not None else line.snapshot(), wake))
+                out.send(("markers", None if cap is not None else line.capture(), wake))
             done = clock()
             # the cycle's due work ends here: serialising and writing what it sent, garbage
             # collection and statistics use its slack (a cycle misses when `done` is late)
-            out.flush()
+            budget_end = pacer.next_deadline - s.spin_margin
+            out.flush(budget_end)
             slack = pacer.next_deadline - clock() > GC_SLACK
             if k >= next_gc and slack:
                 gen = 2 if k >= next_full_gc else 0
@@ -413,7 +440,7 @@ class PacedLoop:
             g[Gauges.LATENESS_MAX], g[Gauges.WORK_MAX] = self.hist.max, self.work.max
             if self.counters_changed and (slack or rtf == 0.0):
                 self.send_stats()
-                out.flush()
+                out.flush(budget_end)
             collected = clock()
             if rtf > 0.0 and s.lookahead > 0.0:
                 # spare time: step the running solves ahead (the wait still starts its

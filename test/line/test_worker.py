@@ -153,7 +153,9 @@ def test_unpaced_loop_waits_for_its_reader():
         frames = _collect(lp, lambda got: False, timeout=0.5)
         times = [f[1].t for f in frames if f[0] == "states"]
         assert times == sorted(times) and times[-1] > times[0] + 1.0
-        assert lp.stop() == 0
+        lp.send(("stop",))  # it sends what it holds before it ends: read on to the end
+        frames = list(lp.frames())
+        assert frames[-1][0] == "stats" and lp.proc.wait(timeout=10.0) == 0
     finally:
         lp.close()
 
