@@ -418,16 +418,36 @@ def ladder_search(
                 f"  {method:13s} rtol {rtol:7.0e}  {wall:8.3f} s  {o.steps:7d} steps  "
                 f"err {run.err_ref:.2e} (ref) {run.err_self:.2e} (scipy ref)  {state}"
             )
-            if capped or ladder_done(run, error, gap):
+            if capped:
                 break
+            if ladder_done(run, error, gap):
+                # with a SciPy reference this rung is judged against converged answers; without
+                # one, also run the next tighter rung so a rung that met the error by a
+                # cancellation of errors is seen as such (not sustained) and not chosen
+                if math.isfinite(gap) or _met_twice(runs, method, error):
+                    break
     return runs
 
 
+def _met_twice(runs: Sequence[LadderRun], method: str, error: float) -> bool:
+    """The method's last two rungs both reached ``error`` against our reference."""
+    mine = [r for r in runs if r.method == method]
+    return len(mine) >= 2 and all(r.ok and r.err_ref <= error for r in mine[-2:])
+
+
 def _loosest(runs: Sequence[LadderRun], method: str, metric: str, thr: float):
-    for r in runs:  # ladder order: loosest first
-        if r.method == method and r.ok:
-            e = r.err_ref if metric == "ref" else r.err_self
-            if math.isfinite(e) and e <= thr:
+    """The method's loosest rung reaching ``thr`` whose next tighter rung, if it ran, reaches
+    it too (a rung that met it by a cancellation of errors and lost it at the next tolerance
+    is skipped)."""
+
+    def err(r: LadderRun) -> float:
+        return r.err_ref if metric == "ref" else r.err_self
+
+    mine = [r for r in runs if r.method == method]  # ladder order: loosest first
+    for i, r in enumerate(mine):
+        if r.ok and math.isfinite(err(r)) and err(r) <= thr:
+            nxt = mine[i + 1] if i + 1 < len(mine) else None
+            if nxt is None or not nxt.ok or err(nxt) <= thr:
                 return r
     return None
 

@@ -135,3 +135,19 @@ def test_bench_keeps_the_node_suite_section_of_the_file(tmp_path):
     kept = _suite_section(out)
     assert kept.strip().startswith("<!-- suite:begin -->")
     assert "| rtf | 1.0 |" in kept and "old tail" not in kept and "# old" not in kept
+
+
+def test_a_rung_that_meets_the_error_by_cancellation_is_not_chosen() -> None:
+    """DOP853 on arbitrary_stiff (session 6): rtol 1e-2 lands within 2.5e-4 of our reference
+    by a cancellation of errors, rtol 1e-3 and 1e-4 are off by ~1e-2; rtol 1e-5 and 1e-6 hold.
+    The loosest *sustained* rung is chosen, and without a SciPy reference the ladder runs on
+    until two rungs in a row meet the error."""
+    from types import SimpleNamespace
+
+    ok = SimpleNamespace(success=True)
+    errors = {1e-2: 2.5e-4, 1e-3: 1.1e-2, 1e-4: 1.3e-2, 1e-5: 4e-4, 1e-6: 1e-5}
+    runs = [B.LadderRun("scipy:DOP853", r, r, 0.01, ok, e, e, False) for r, e in errors.items()]
+    assert B._loosest(runs, "scipy:DOP853", "ref", 9.5e-4).rtol == 1e-5
+    assert B._loosest(runs[:1], "scipy:DOP853", "ref", 9.5e-4).rtol == 1e-2  # next not run
+    assert not B._met_twice(runs[:2], "scipy:DOP853", 9.5e-4)
+    assert B._met_twice(runs, "scipy:DOP853", 9.5e-4)
