@@ -153,23 +153,29 @@ def _ros_args(node: str, plan: Plan, opts: RunOptions, extra: list[str]) -> list
     return args
 
 
-def loop_cpu(plan: Plan) -> int:
-    """The simulator's ``loop_cpu`` for this run: its last ``--param`` override, else
-    config/simulator.yaml's, else -1 (not pinned)."""
+def loop_cpu(plan: Plan, rtf: float, cpus: set[int]) -> tuple[int, bool]:
+    """The simulator's ``loop_cpu`` for this run and whether the run sets it: a ``--param``
+    override as given (-1 turns pinning off), else config/simulator.yaml's if >= 0, else, for
+    a paced run on two CPUs or more, the last CPU (set by the run)."""
     for item in reversed(plan.node_params.get("simulator", [])):
         key, _, value = item.partition(":=")
         if key == "loop_cpu":
             try:
-                return int(value)
+                return int(value), False
             except ValueError:
-                return -1  # the simulator rejects it with its own message
+                return -1, False  # the simulator rejects it with its own message
     try:
         import yaml
 
         doc = yaml.safe_load((REPO_CONFIG / "simulator.yaml").read_text()) or {}
-        return int(doc["simulator"]["ros__parameters"].get("loop_cpu", -1))
+        configured = int(doc["simulator"]["ros__parameters"].get("loop_cpu", -1))
     except (OSError, KeyError, TypeError, ValueError):
-        return -1
+        configured = -1
+    if configured >= 0:
+        return configured, False
+    if rtf > 0.0 and len(cpus) >= 2:
+        return max(cpus), True
+    return -1, False
 
 
 def _terminate(signum, frame) -> None:
@@ -198,9 +204,10 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None]) -> RunResult:
     env = node_env(domain, log_dir / "ros")
     # paced with the loop pinned: every other process of the run keeps off the loop's CPU, so
     # its work does not evict the loop's caches while the loop sleeps (docs/simulator.md)
-    pinned = loop_cpu(plan) if opts.rtf > 0.0 else -1
-    others = set(os.sched_getaffinity(0)) - {pinned}
-    cpus = others if pinned >= 0 and others else None
+    allowed = set(os.sched_getaffinity(0))
+    pinned, set_here = loop_cpu(plan, opts.rtf, allowed)
+    others = allowed - {pinned}
+    cpus = others if pinned >= 0 and opts.rtf > 0.0 and others else None
     group = ProcessGroup(env, log_dir, cpus)
     if cpus is not None:  # this thread, and the monitor's threads created from it
         os.sched_setaffinity(0, cpus)
@@ -255,6 +262,7 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None]) -> RunResult:
                     plan,
                     opts,
                     [scene, f"real_time_factor:={opts.rtf}"]
+                    + ([f"loop_cpu:={pinned}"] if set_here else [])
                     + (
                         [
                             f"rrd_path:={Path(opts.rrd).resolve()}",

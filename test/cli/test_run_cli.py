@@ -42,13 +42,18 @@ def test_bad_manifest_names_line_and_column(tmp_path: Path) -> None:
     assert f"manifest {bad} line 2 column 'mass'" in proc.stderr
 
 
-def test_loop_cpu_comes_from_the_last_override_then_the_config(tmp_path: Path) -> None:
+def test_loop_cpu_comes_from_the_override_the_config_or_the_run(tmp_path: Path) -> None:
     from fence_sorter.runner.job import RunOptions, loop_cpu, prepare
 
     plan = prepare(RunOptions(parcels=2))
-    assert loop_cpu(plan) == -1  # config/simulator.yaml: not pinned
+    # config/simulator.yaml leaves it to the run: the last CPU when paced on 2 CPUs or more
+    assert loop_cpu(plan, 1.0, {0, 1}) == (1, True)
+    assert loop_cpu(plan, 0.0, {0, 1}) == (-1, False)  # unpaced: the loop never sleeps
+    assert loop_cpu(plan, 1.0, {0}) == (-1, False)
     opts = RunOptions(parcels=2, params=["simulator:loop_cpu=3", "simulator:loop_cpu=1"])
-    assert loop_cpu(prepare(opts)) == 1
+    assert loop_cpu(prepare(opts), 1.0, {0, 1, 2, 3}) == (1, False)  # the last override
+    off = RunOptions(parcels=2, params=["simulator:loop_cpu=-1"])
+    assert loop_cpu(prepare(off), 1.0, {0, 1}) == (-1, False)
 
 
 @pytest.mark.skipif(len(__import__("os").sched_getaffinity(0)) < 2, reason="needs 2 CPUs")
