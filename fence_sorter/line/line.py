@@ -22,6 +22,7 @@ import bisect
 import math
 import time
 from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 import numpy as np
 
@@ -41,6 +42,7 @@ from fence_sorter.physics.parcel import ParcelBody, initial_pose, parcel_body, w
 from fence_sorter.physics.simulate import Observer, Scenario, SimulationResult, SortingModel
 
 from .types import (
+    NAN,
     CommandResult,
     FenceSnapshot,
     LineEvent,
@@ -123,12 +125,15 @@ class LineConfig:
             )
 
 
-@dataclass(frozen=True)
-class LineCapture:
-    """What :meth:`SortingLine.capture` took at time ``t``: the fence's stroke with its local
-    time and interpolated state (or None at rest), and per parcel (parcel, state vector or
-    belt pose, extras or None, stage, peak N_stiff). Refers to the line's objects; only for
-    :meth:`SortingLine.render` of the same line."""
+class LineCapture(NamedTuple):
+    """What :meth:`SortingLine.capture` took at time ``t``, as plain numbers (cheap to pickle
+    and to send to another process; :meth:`SortingLine.render` builds the snapshot from it).
+
+    ``fence``: None at rest, else (alpha_w, rate, accel, w_free or None, stroke parcel id,
+    from_solve), w_free being the fence's nodal displacements (root excluded) when a
+    flexible fence's solve gives them. ``parcels``: per parcel, the fields of
+    :class:`ParcelSnapshot` in order, the stage as its value.
+    """
 
     t: float
     fence: tuple | None
@@ -664,34 +669,55 @@ class SortingLine:
         return self.render(self.capture())
 
     def capture(self) -> LineCapture:
-        """The state :meth:`snapshot` needs at the current time, without the costly part
-        (fence shape, corners, the snapshot objects): :meth:`render` builds the snapshot from
-        it later, whatever the line did meanwhile. For a soft-real-time caller: capture in the
-        cycle, render in its slack."""
+        """The state :meth:`snapshot` needs at the current time, as plain numbers, without the
+        costly part (fence node positions, the snapshot objects): :meth:`render` builds the
+        snapshot from it later or in another process, whatever the line did meanwhile. For a
+        soft-real-time caller: capture in the cycle, render elsewhere."""
         t = self.t
         s = self._fence_stroke()
         fence = None
         if s is not None:
+            pid = s.parcel.spec.parcel_id
+            t_local = t - s.t_start
             if s.alive and s.tap.cur is not None and s.model.flexible:
-                fence = (s, t - s.t_start, *s.tap.at(t - s.t_start))
+                y, extra = s.tap.at(t_local)
+                w_free = (s.model.phi @ y[6 : 6 + s.model.n_modes]).tolist()
+                fence = (float(extra[0]), float(extra[1]), float(extra[2]), w_free, pid, True)
             else:
-                fence = (s, t - s.t_start, None, None)
+                d = drive_state(s.sc.drive, t_local)
+                fence = (d.alpha, d.rate, d.accel, None, pid, s.alive)
         parcels = []
         for p in self.parcels.values():
+            spec = p.spec
+            dims = (spec.length_a, spec.width_b, spec.height)
             st = p.stroke
             if st is not None and st.alive and st.tap.cur is not None:
                 y, e = st.tap.at(t - st.t_start)
+                x, y_, yaw, vx, vy, wz = y[:6].tolist()
+                n, depth, rate, px, py = float(e[3]), float(e[4]), float(e[5]), e[6], e[7]
                 impacts = st.observer.impacts
-                stiff = impacts[-1][2] if impacts and e[3] > 0 else 0.0
-                parcels.append((p, y, e, STAGES.get(st.observer.stage, Stage.ON_BELT), stiff))
-            else:
-                stage = Stage.PASSED if p.passed else Stage.ON_BELT
-                parcels.append((p, p.pose(t), None, stage, 0.0))
+                stiff = impacts[-1][2] if impacts and n > 0 else 0.0
+                stage = STAGES.get(st.observer.stage, Stage.ON_BELT)
+                parcels.append((
+                    spec.parcel_id, stage.value, x, y_, yaw, vx, vy, wz, n, stiff, depth,
+                    rate, (float(px), float(py)), *dims,
+                    tuple(world_corners(p.body, x, y_, yaw)), spec.divert,
+                ))  # fmt: skip
+                continue
+            x, y_, yaw = (float(v) for v in p.pose(t))
+            stage = Stage.PASSED if p.passed else Stage.ON_BELT
+            parcels.append((
+                spec.parcel_id, stage.value, x, y_, yaw, self.v, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                (NAN, NAN), *dims, tuple(world_corners(p.body, x, y_, yaw)), spec.divert,
+            ))  # fmt: skip
         return LineCapture(t, fence, parcels)
 
     def render(self, cap: LineCapture) -> LineSnapshot:
-        """The snapshot of a :meth:`capture` (same as :meth:`snapshot` at its time)."""
-        return LineSnapshot(cap.t, self._render_fence(cap.fence), self._render_parcels(cap))
+        """The snapshot of a :meth:`capture` (the same as :meth:`snapshot` at its time); needs
+        only the line's fence geometry, so a copy of the line in another process renders the
+        captures of this one."""
+        parcels = [ParcelSnapshot(p[0], Stage(p[1]), *p[2:]) for p in cap.parcels]
+        return LineSnapshot(cap.t, self._render_fence(cap.fence), parcels)
 
     def _fence_stroke(self) -> _Stroke | None:
         owner = None
@@ -701,80 +727,25 @@ class SortingLine:
         return owner
 
     def _render_fence(self, fence) -> FenceSnapshot:
-        n = len(self._rest_s)
-        zeros = np.zeros(n)
+        rest = self._rest_s
+        zeros = np.zeros(len(rest))
         if fence is None:
             return FenceSnapshot(
-                0.0, 0.0, 0.0, self._rest_s, self._rest_s.copy(), zeros, zeros, zeros, 0.0,
-                None, False,
-            )  # fmt: skip
-        s, t_local, y, extra = fence
-        pid = s.parcel.spec.parcel_id
-        if y is not None:
-            m = s.model.n_modes
-            w_free = s.model.phi @ y[6 : 6 + m]
-            alpha = float(extra[0])
+                0.0, 0.0, 0.0, rest, rest.copy(), zeros, zeros, zeros, 0.0, None, False
+            )
+        alpha, rate, accel, w_free, pid, from_solve = fence
+        if w_free is not None:
+            w_free = np.asarray(w_free)
             x_n, y_n = node_positions(self.fem, w_free, alpha)
             defl = np.concatenate(([0.0], w_free[0::2]))
             rot = np.concatenate(([0.0], w_free[1::2]))
             return FenceSnapshot(
-                alpha, float(extra[1]), float(extra[2]), self._rest_s, x_n, y_n, defl, rot,
-                float(defl[-1]), pid, True,
-            )  # fmt: skip
-        d = drive_state(s.sc.drive, t_local)
-        c, sn = math.cos(d.alpha), math.sin(d.alpha)
+                alpha, rate, accel, rest, x_n, y_n, defl, rot, float(defl[-1]), pid, True
+            )
+        c, sn = math.cos(alpha), math.sin(alpha)
         return FenceSnapshot(
-            d.alpha, d.rate, d.accel, self._rest_s, c * self._rest_s, sn * self._rest_s, zeros,
-            zeros, 0.0, pid, s.alive,
-        )  # fmt: skip
-
-    def _render_parcels(self, cap: LineCapture) -> list[ParcelSnapshot]:
-        out = []
-        for p, y, e, stage, stiff in cap.parcels:
-            spec = p.spec
-            common = dict(
-                length_a=spec.length_a,
-                width_b=spec.width_b,
-                height=spec.height,
-                divert=spec.divert,
-            )
-            if e is not None:  # in its stroke's solve: y is the state vector
-                out.append(
-                    ParcelSnapshot(
-                        spec.parcel_id,
-                        stage,
-                        float(y[0]),
-                        float(y[1]),
-                        float(y[2]),
-                        float(y[3]),
-                        float(y[4]),
-                        float(y[5]),
-                        contact_normal_force=float(e[3]),
-                        contact_normal_force_stiff=stiff,
-                        deformation=float(e[4]),
-                        deformation_rate=float(e[5]),
-                        contact_point=(float(e[6]), float(e[7])),
-                        corners=tuple(world_corners(p.body, y[0], y[1], y[2])),
-                        **common,
-                    )
-                )
-                continue
-            x, y_, yaw = y  # on the belt: its pose
-            out.append(
-                ParcelSnapshot(
-                    spec.parcel_id,
-                    stage,
-                    x,
-                    y_,
-                    yaw,
-                    self.v,
-                    0.0,
-                    0.0,
-                    corners=tuple(world_corners(p.body, x, y_, yaw)),
-                    **common,
-                )
-            )
-        return out
+            alpha, rate, accel, rest, c * rest, sn * rest, zeros, zeros, 0.0, pid, from_solve
+        )
 
     # -- helpers ------------------------------------------------------------------------------
     def _planned(self) -> list[_Parcel]:

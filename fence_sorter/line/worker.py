@@ -12,12 +12,14 @@ counters) to another, never waiting for the reader in a paced run.
 Wire format (both pipes): frames of a 4-byte little-endian length and a pickle. The node
 (:class:`LineProcess`) sends ``("parcel", ParcelSpec)``, ``("command", StrokeCommand)``,
 ``("rtf", float)`` and ``("stop",)``; the loop sends ``("ready", t)``,
-``("states", LineSnapshot, due)``, ``("markers", LineSnapshot, due)``, ``("events", list)``,
+``("states", LineCapture, due)``, ``("markers", LineCapture, due)``, ``("events", list)``,
 ``("log", level, text)``, ``("stats", LoopStats)`` (counters by name, when they change),
-``("error", text)``; a ``markers`` frame with no snapshot means the one of the ``states`` frame
-before it. ``due`` is the cycle's wake time on ``time.perf_counter`` (CLOCK_MONOTONIC, the same
-in both processes). The running figures (cycles, misses, lateness and work histograms, sim
-time) are not sent: the loop writes them into shared memory (:class:`Gauges`) every cycle.
+``("error", text)``; a ``markers`` frame with no capture means the one of the ``states`` frame
+before it. The node renders a capture into a ``LineSnapshot`` with its own copy of the line's
+fence geometry (``SortingLine.render``). ``due`` is the cycle's wake time on
+``time.perf_counter`` (CLOCK_MONOTONIC, the same in both processes). The running figures
+(cycles, misses, lateness and work histograms, sim time) are not sent: the loop writes them
+into shared memory (:class:`Gauges`) every cycle.
 
 Run as ``python -m fence_sorter.line.worker IN_FD OUT_FD GAUGES_FD PARENT_PID``; the first
 frame on IN_FD is ``(LineConfig, scenario or None, LoopSettings)``.
@@ -46,7 +48,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .line import LineCapture, LineConfig, SortingLine
+from .line import LineConfig, SortingLine
 from .pacing import CycleTrace, LatenessHistogram, Pacer
 from .types import ParcelSpec, StrokeCommand
 from .validate import InputError
@@ -193,7 +195,6 @@ class _Outbox:
         self.buf = bytearray()
         self.cost: dict[str, float] = {}  # running mean time to pickle a frame, by kind [s]
         self.held_since = math.inf  # when the first waiting frame was first put off
-        self.render = None  # LineCapture -> LineSnapshot, applied before pickling
         os.set_blocking(fd, False)
 
     def send(self, obj: tuple) -> None:
@@ -211,10 +212,7 @@ class _Outbox:
                 self.held_since = min(self.held_since, now)
                 if now - self.held_since < FLUSH_MAX_HOLD:
                     break
-            obj = objects.popleft()
-            if isinstance(obj[1], LineCapture):  # captured in the cycle, rendered now
-                obj = (kind, self.render(obj[1]), *obj[2:])
-            self.buf += _frame(obj)
+            self.buf += _frame(objects.popleft())
             spent = clock() - now
             cost[kind] = 0.9 * cost.get(kind, spent) + 0.1 * spent
             self.held_since = math.inf
@@ -283,7 +281,6 @@ class PacedLoop:
         gauges: Gauges,
     ):
         self.line, self.s, self.inbox, self.out = line, settings, inbox, out
-        out.render = line.render
         self.rtf = settings.rtf
         self.stop = False
         self.gauges = gauges
@@ -387,7 +384,7 @@ class PacedLoop:
         g = self.gauges.header
         cycles = misses = 0
         g[Gauges.SIM_TIME] = line.t
-        out.send(("states", line.snapshot(), None))
+        out.send(("states", line.capture(), None))
         while not self.stop:
             rtf = pacer.rtf
             tick = pacer.wait()
@@ -404,7 +401,7 @@ class PacedLoop:
                 flags |= CycleTrace.EVENTS
                 out.send(("events", events))
             advanced = clock()
-            # the cycle captures the line's state; the snapshot is rendered in the slack
+            # the cycle captures the line's state as plain numbers; the node renders it
             cap = None
             if k >= next_pub:
                 flags |= CycleTrace.STATES

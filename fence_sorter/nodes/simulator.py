@@ -257,8 +257,11 @@ class SimulatorNode(FenceSorterNode):
             r_s_range=(float(p["r_s_min"]), float(p["r_s_max"])),
             line_end_x=float(p["line_end_x"]),
         )
-        line = SortingLine(self.line_config)  # ValueError: exit 2 in main(); the loop's own
-        self._warm_scenario = loaded.scenario if p["warm_up"] else None  # is in its process
+        # ValueError: exit 2 in main(). The loop's own line is in its process; this copy
+        # renders the loop's captures into snapshots (it has the same fence geometry)
+        line = SortingLine(self.line_config)
+        self._render = line.render
+        self._warm_scenario = loaded.scenario if p["warm_up"] else None
         self.rtf = float(p["real_time_factor"])
         self.period = 1.0 / float(p["physics_rate"])
         rate = float(p["marker_rate"])
@@ -417,13 +420,15 @@ class SimulatorNode(FenceSorterNode):
             for item in loop.frames():
                 kind = item[0]
                 if kind == "states":
-                    _, snap, due = item
+                    _, cap, due = item
+                    snap = self._render(cap)
                     self._publish_states(snap)
                     if due is not None:
                         with self._lock:
                             self.publish_lag.add(clock() - due)
-                elif kind == "markers":  # no snapshot: the states snapshot just before
-                    self.pub_markers.publish(self._markers.build(item[1] or snap))
+                elif kind == "markers":  # no capture: the states snapshot just before
+                    mark = self._render(item[1]) if item[1] is not None else snap
+                    self.pub_markers.publish(self._markers.build(mark))
                 elif kind == "events":
                     self._handle(item[1])
                 elif kind == "log":
