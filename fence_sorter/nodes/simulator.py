@@ -284,8 +284,12 @@ class SimulatorNode(FenceSorterNode):
         self._spinners: list = []
         self.loop: LineProcess | None = None
 
-        self.create_subscription(Parcel, "/parcels", self._on_parcel, RELIABLE_QOS)
-        self.create_subscription(FenceCommand, "/fence_commands", self._on_command, RELIABLE_QOS)
+        self._parcel_sub = self.create_subscription(
+            Parcel, "/parcels", self._on_parcel, RELIABLE_QOS
+        )
+        self._command_sub = self.create_subscription(
+            FenceCommand, "/fence_commands", self._on_command, RELIABLE_QOS
+        )
         self.pub_clock = self.create_publisher(Clock, "/clock", CLOCK_QOS)
         self.pub_fence = self.create_publisher(FenceState, "/fence_state", SENSOR_QOS)
         self.pub_joint = self.create_publisher(JointState, "/joint_states", VIEWER_QOS)
@@ -570,6 +574,10 @@ class SimulatorNode(FenceSorterNode):
             "bad_parcels": str(sum(bad.values())),
             "commands_rejected": str(sum(rejected.values())),
             "overlap_warnings": str(counts.get("overlap_warnings", 0)),
+            # publishers this node's subscriptions are matched with (its side of discovery:
+            # a command sent before the simulator matched its publisher is lost)
+            "parcel_publishers": str(self._parcel_sub.get_publisher_count()),
+            "command_publishers": str(self._command_sub.get_publisher_count()),
         }
         if self.rerun is not None:
             values["rerun_frames_sent"] = str(self.rerun.sent)

@@ -93,6 +93,8 @@ def test_controller_killed_and_restarted(suite, tmp_path: Path) -> None:
     # no controller listens before its process exists; the monitor's sim time trails the
     # simulator's, so this bound errs early (the safe side)
     restarted = rec.sim_time
+    sim_beats = rec.diagnostics_history["fence_sorter/simulator"]
+    s0 = len(sim_beats)
     group.start("controller2", node_command("controller", ctrl))
     wait(
         monitor,
@@ -100,6 +102,17 @@ def test_controller_killed_and_restarted(suite, tmp_path: Path) -> None:
         60,
         "the restarted controller",
     )
+
+    def simulator_matched_it() -> bool:
+        """The simulator's subscription matched the new /fence_commands publisher (the two
+        sides of discovery are not simultaneous: a command sent before the simulator's side
+        matched was lost once on a loaded machine). The killed controller's publisher may
+        still be counted until its lease ends: a rise above the lowest count seen since the
+        restart began is the new one."""
+        counts = [int(h.get("command_publishers", 0)) for h in sim_beats[s0 - 1 :]]
+        return len(counts) > 1 and counts[-1] > min(counts[:-1])
+
+    wait(monitor, simulator_matched_it, 60, "the simulator to match the new controller")
     ready = rec.sim_time
     wait(monitor, lambda: len(rec.outcomes) == 12, 60, "all 12 outcomes")
     assert sim.poll() is None
@@ -109,7 +122,8 @@ def test_controller_killed_and_restarted(suite, tmp_path: Path) -> None:
     # reaches the monitor only after DDS discovery of the new process, which took over 1 s on
     # a loaded CI machine while the new controller already planned (parcel 6 SORTED). `ready`
     # is when the new controller is matched with the scanner (not merely subscribed: a parcel
-    # published 1.7 s after "listening" was lost to it once, before discovery completed)
+    # published 1.7 s after "listening" was lost to it once, before discovery completed) and the
+    # simulator with the new controller (a command 1.1 s after "listening" was lost once)
     dead = [p for p, d in rec.parcels.items() if killed + 1.0 < d["scan_time"] < restarted]
     after = [p for p, d in rec.parcels.items() if d["scan_time"] > ready + 1.0]
     assert len(dead) >= 1 and len(after) >= 2, (dead, after)
