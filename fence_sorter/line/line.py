@@ -502,6 +502,20 @@ class SortingLine:
             # the costliest recent build (decays 1 % per build): only built where it fits
             self._build_cost = max(clock() - now, 0.99 * self._build_cost)
 
+    def awaiting_command(self, skip: frozenset[int] | set[int] = frozenset()) -> tuple[float, int]:
+        """(sim time, parcel id) of the first parcel to divert that has no command yet and
+        whose front reaches the lowest R_s a command may ask for (``r_s_range[0]``) soonest:
+        after that time a command could come too late. (inf, -1) if none (``skip``: ids not
+        to wait for). An unpaced caller holds the line there until the command arrives."""
+        best = (math.inf, -1)
+        lo = self.config.r_s_range[0]
+        for p in self.parcels.values():
+            pid = p.spec.parcel_id
+            if p.spec.divert and p.command is None and p.outcome is None and pid not in skip:
+                if p.stroke is None and not p.passed and p.rejected is None:
+                    best = min(best, (p.time_front_at(lo), pid))
+        return best
+
     def _next_event(self) -> tuple[float, int, _Parcel | None]:
         """Earliest of: a planned stroke start (0), a point of no return (1), a line end (2)."""
         best = (math.inf, 3, None)

@@ -92,6 +92,9 @@ class LoopSettings:
     marker_every: int = 100  # cycles between marker snapshots (0: none)
     rt_priority: int = 0  # SCHED_FIFO priority in paced runs (0: normal scheduling)
     loop_cpu: int = -1  # CPU the loop's process is pinned to (-1: not pinned)
+    command_wait: float = 1.0  # unpaced: wall time to hold sim time for a command [s]; 0: off
+    publish_lead: float = math.inf  # unpaced: sim time the loop may be ahead of the node's
+    # last published snapshot (Gauges.PUBLISHED) [s]; inf: no such wait
     debug: bool = False  # send DEBUG log lines
     trace_path: str = ""  # CycleTrace .npz written at the end ("": none)
     warm_up: bool = True  # one short stroke before the loop starts
@@ -108,6 +111,8 @@ class LoopSettings:
             ("marker_every", self.marker_every, self.marker_every >= 0, ">= 0"),
             ("rt_priority", self.rt_priority, 0 <= self.rt_priority <= 99, "in 0..99"),
             ("loop_cpu", self.loop_cpu, self.loop_cpu >= -1, ">= -1"),
+            ("command_wait", self.command_wait, 0.0 <= self.command_wait <= 60.0, "in [0, 60] s"),
+            ("publish_lead", self.publish_lead, self.publish_lead > 0.0, "> 0 s"),
         )
         for name, value, ok, allowed in checks:
             if not ok:
@@ -130,7 +135,7 @@ class Gauges:
     for its heartbeat with no frame and no work in the loop. Aligned 8-byte stores, so no
     value is ever read torn; a set read while a cycle runs may be one cycle apart."""
 
-    CYCLES, MISSES, SLIPS, SIM_TIME, LATENESS_MAX, WORK_MAX, ON_LINE = range(7)
+    CYCLES, MISSES, SLIPS, SIM_TIME, LATENESS_MAX, WORK_MAX, ON_LINE, PUBLISHED = range(8)
     HEADER = 8
 
     def __init__(self, fd: int | None = None) -> None:
@@ -141,7 +146,8 @@ class Gauges:
             os.ftruncate(fd, size)
         self.fd = fd
         self._mm = mmap.mmap(fd, size)
-        #: cycles, misses, slips, sim time [s], lateness and work max [s], parcels on line
+        #: cycles, misses, slips, sim time [s], lateness and work max [s], parcels on line,
+        #: and (written by the node) the sim time of the last snapshot it published [s]
         self.header = np.ndarray((self.HEADER,), np.float64, self._mm, 0)
         #: lateness and work histogram counts (LatenessHistogram bins)
         self.counts = np.ndarray((2, bins), np.int64, self._mm, 8 * self.HEADER)
@@ -292,6 +298,8 @@ class PacedLoop:
         self.bad_parcels: Counter[str] = Counter()
         self.rejected: Counter[str] = Counter()
         self.held: list[tuple[float, StrokeCommand]] = []  # commands for unknown parcels
+        self.waiting: dict[int, float] = {}  # unpaced lockstep: parcel id -> wait start
+        self.gave_up: set[int] = set()
         self.trace = CycleTrace() if settings.trace_path else None
 
     def log(self, level: str, text: str) -> None:
@@ -371,6 +379,46 @@ class PacedLoop:
                 self.rejected[res.code] += 1
                 log("warning", f"command for parcel {cmd.parcel_id} rejected: {res.reason}")
 
+    def hold_for_commands(self, t_target: float, pacer: Pacer) -> float:
+        """Unpaced lockstep: a parcel to divert without a command must not reach the lowest
+        R_s before its command had a chance to arrive (at hundreds of times real time the
+        controller's answer would otherwise come too late). Advance only up to there, and
+        wait for the command there, taking inputs, for up to ``command_wait`` of wall time per
+        parcel; then give up on it (it becomes NO_COMMAND as in a paced run). Sim time goes
+        on from the held time."""
+        line, clock = self.line, time.perf_counter
+        while not self.stop:
+            t_hold, pid = line.awaiting_command(self.gave_up)
+            if t_target <= t_hold:
+                return t_target
+            if t_hold > line.t:
+                # the next tick goes on from the held time (the grid index is kept: it counts
+                # the publication schedule)
+                pacer.sim0 = t_hold - pacer.k * pacer.unpaced_step
+                return t_hold
+            waited_since = self.waiting.setdefault(pid, clock())
+            if clock() - waited_since > self.s.command_wait:
+                self.gave_up.add(pid)
+                self.counts["command_waits_given_up"] += 1
+                self.counters_changed = True
+                continue
+            self.out.drain(0, self.inbox)  # the node publishes what it holds meanwhile
+            select.select([self.inbox.fd], [], [], 1e-3)
+            self.take_inputs()
+        return line.t
+
+    def wait_for_publisher(self) -> None:
+        """Unpaced: wait until the node has published the line up to ``publish_lead`` behind
+        its time. The other nodes run on the published /clock: a loop far ahead of it would
+        receive parcels scanned (and commands planned) seconds of sim time in its past."""
+        g, lead, inbox = self.gauges.header, self.s.publish_lead, self.inbox
+        while g[Gauges.PUBLISHED] < self.line.t - lead and not self.stop:
+            self.out.drain(0, inbox)
+            if select.select([inbox.fd], [], [], 2e-4)[0]:
+                inbox.read()
+            if inbox.closed or any(item[0] == "stop" for item in inbox.items):
+                return
+
     def run(self) -> None:
         s, line, out = self.s, self.line, self.out
         clock = time.perf_counter
@@ -396,7 +444,10 @@ class PacedLoop:
                 self.hist.add(tick.lateness)
             flags = 0
             self.take_inputs()
-            events = line.advance(tick.t_sim)
+            t_target = tick.t_sim
+            if rtf == 0.0 and s.command_wait > 0.0:
+                t_target = self.hold_for_commands(t_target, pacer)
+            events = line.advance(t_target)
             if events:
                 flags |= CycleTrace.EVENTS
                 out.send(("events", events))
@@ -449,6 +500,7 @@ class PacedLoop:
                 )
             elif rtf == 0.0:  # unpaced: the reader sets the pace
                 out.drain(UNPACED_BACKLOG, self.inbox)
+                self.wait_for_publisher()
             if len(out.buf) > PACED_BACKLOG:
                 raise RuntimeError(f"{len(out.buf)} bytes unsent: the node stopped reading")
             if self.trace is not None and rtf > 0.0:

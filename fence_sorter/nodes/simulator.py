@@ -56,6 +56,10 @@ from fence_sorter.scene import load_scene
 from fence_sorter_msgs.msg import FenceCommand, FenceState, LoadState, Parcel, SortOutcome
 
 DEFAULT_SCENE = "impact_flexible"
+#: unpaced, the loop waits for this node to publish up to this much sim time behind it [s]
+UNPACED_PUBLISH_LEAD = 0.1
+#: the node process's GIL switch interval while running [s] (see start())
+SWITCH_INTERVAL = 2e-4
 
 # /clock: reliable keep-last, compatible with rclpy/rclcpp's best-effort clock subscriptions
 # and with reliable ones (recorders).
@@ -191,6 +195,16 @@ class SimulatorNode(FenceSorterNode):
             max_value=99,
         ),
         ParamSpec(
+            "command_wait",
+            1.0,
+            "Unpaced runs (lockstep): a parcel to divert without a command is held before its "
+            "front reaches r_s_min until its command arrives, for at most this long in wall "
+            "time [s]; 0: off (commands may then come too late at high speed)",
+            read_only=True,
+            min_value=0.0,
+            max_value=60.0,
+        ),
+        ParamSpec(
             "loop_cpu",
             -1,
             "CPU the pacing loop's process is pinned to, this node's own threads kept off it "
@@ -276,6 +290,8 @@ class SimulatorNode(FenceSorterNode):
             marker_every=max(1, round(float(p["physics_rate"]) / rate)) if rate > 0.0 else 0,
             rt_priority=int(p["realtime_priority"]),
             loop_cpu=int(p["loop_cpu"]),
+            command_wait=float(p["command_wait"]),
+            publish_lead=UNPACED_PUBLISH_LEAD,
             debug=self.get_logger().is_enabled_for(LoggingSeverity.DEBUG),
             trace_path=str(p["cycle_trace"]),
             warm_up=bool(p["warm_up"]),
@@ -317,6 +333,7 @@ class SimulatorNode(FenceSorterNode):
         self.loop_error: str | None = None
         self._rtf_window = (time.perf_counter(), line.t)
         self._stopping = False
+        self._saved_switch: float | None = None
         self._clock_published = line.t  # sim time of the last /clock message
         self._reader = threading.Thread(
             target=self._receive_loop, name="simulator-publisher", daemon=True
@@ -355,6 +372,12 @@ class SimulatorNode(FenceSorterNode):
     def start(self, ready_timeout: float = 120.0) -> None:
         """Start the loop's process (it warms the kernel up first) and the publisher thread.
         Raises LoopStartError if the loop does not come up."""
+        # the publisher thread is busy all the time when unpaced; rclpy's executor takes and
+        # drops the interpreter lock many times per callback and would wait up to the switch
+        # interval (5 ms by default) each time: /parcels and /fence_commands would reach the
+        # loop seconds late in sim time
+        self._saved_switch = sys.getswitchinterval()
+        sys.setswitchinterval(SWITCH_INTERVAL)
         if self.keep_cpus_awake and self.rtf > 0.0:
             cpus = set(os.sched_getaffinity(0))  # and the loop's, if pinned outside them
             cpus |= {self.settings.loop_cpu} if self.settings.loop_cpu >= 0 else set()
@@ -380,6 +403,9 @@ class SimulatorNode(FenceSorterNode):
             loop.close()
         spinners, self._spinners = self._spinners, []
         stop_spinners(spinners)
+        if self._saved_switch is not None:
+            sys.setswitchinterval(self._saved_switch)
+            self._saved_switch = None
         if self.rerun is not None:  # the child logs what it holds, then the file is closed
             rerun, self.rerun = self.rerun, None
             rerun.close()
@@ -460,6 +486,9 @@ class SimulatorNode(FenceSorterNode):
         per topic, filled in place (publish() serialises it at once)."""
         self.pub_clock.publish(convert.fill_clock(self._clock_msg, snap.t))
         self._clock_published = snap.t
+        loop = self.loop
+        if loop is not None:  # the unpaced loop waits for this (LoopSettings.publish_lead)
+            loop.gauges.header[Gauges.PUBLISHED] = snap.t
         self.pub_fence.publish(
             convert.fill_fence_state(self._fence_msg, snap.fence, snap.t, self.frame_id)
         )

@@ -227,3 +227,63 @@ def test_loop_process_ignores_ctrl_c_and_dies_with_its_parent():
         time.sleep(0.05)
     else:
         raise AssertionError(f"loop process {child} outlived its parent")
+
+
+def test_unpaced_lockstep_holds_a_parcel_to_divert_for_its_command():
+    """rtf 0: the line does not let a parcel to divert reach the lowest R_s (r_s_min, -0.5 m
+    by default) before its command came, for up to command_wait of wall time; a command that
+    comes while it waits is accepted and the parcel sorted; one that never comes lets the
+    line go on after command_wait (NO_COMMAND, counted)."""
+    settings = LoopSettings(period=1e-3, rtf=0.0, warm_up=False, command_wait=5.0)
+    lp = LineProcess(CONFIG, None, settings)
+    try:
+        lp.wait_ready(60.0)
+        lp.send(("parcel", heavy(1, scan_position_x=-3.0)))  # front at -0.5 m at t = 2.5 s
+        time.sleep(1.0)  # unpaced, an empty line would be hundreds of s of sim time further
+        held = lp.gauges.value(Gauges.SIM_TIME)
+        assert held == pytest.approx(2.5, abs=1e-9)
+        lp.send(("command", stroke(1)))  # R_s 0.42 m: the front gets there at t = 3.42 s
+        frames = _collect(lp, lambda got: 1 in _outcomes(got))
+        assert _outcomes(frames)[1].code is OutcomeCode.SORTED
+        lp.send(("stop",))
+        frames += list(lp.frames())
+        assert "command_waits_given_up" not in _last_stats(frames).counts
+    finally:
+        lp.close()
+
+    settings = LoopSettings(period=1e-3, rtf=0.0, warm_up=False, command_wait=0.2)
+    lp = LineProcess(CONFIG, None, settings)
+    try:
+        lp.wait_ready(60.0)
+        lp.send(("parcel", heavy(2, scan_position_x=-3.0)))
+        t0 = time.monotonic()
+        frames = _collect(lp, lambda got: 2 in _outcomes(got))
+        assert time.monotonic() - t0 >= 0.2  # it waited
+        assert _outcomes(frames)[2].code is OutcomeCode.NO_COMMAND
+        lp.send(("stop",))
+        frames += list(lp.frames())
+        assert _last_stats(frames).counts["command_waits_given_up"] == 1
+    finally:
+        lp.close()
+
+
+def test_unpaced_loop_keeps_within_publish_lead_of_what_the_node_published():
+    """rtf 0: the loop waits for the node (Gauges.PUBLISHED) so it is never more than
+    publish_lead of sim time ahead of the /clock the other nodes run on (they scan parcels
+    and plan commands on that clock)."""
+    settings = LoopSettings(period=1e-3, rtf=0.0, warm_up=False, publish_lead=0.1)
+    lp = LineProcess(CONFIG, None, settings)
+    step = settings.publish_every * settings.period  # sim time of one unpaced cycle
+    try:
+        lp.wait_ready(60.0)
+        g = lp.gauges
+        time.sleep(0.5)  # publish nothing (what it sent fits in the pipe)
+        assert g.value(Gauges.SIM_TIME) <= 0.1 + step + 1e-9
+        g.header[Gauges.PUBLISHED] = 5.0  # "published" up to 5 s
+        time.sleep(0.5)
+        assert 5.0 <= g.value(Gauges.SIM_TIME) <= 5.1 + step + 1e-9
+        lp.send(("stop",))
+        list(lp.frames())
+        assert lp.proc.wait(timeout=10.0) == 0
+    finally:
+        lp.close()
