@@ -270,9 +270,10 @@ def render(fig: dict, command: str, machine: dict, revision: str) -> str:
         f"time at {f['unpaced_rtf']:.1f}x real time (sim over wall time between the simulator's "
         f"first and last heartbeat, /clock, states and markers published); "
         f"{f['unpaced_sorted']} of {f['unpaced_divert']} to divert sorted; controller p99 "
-        f"{f['unpaced_controller_p99_ms']:.1f} ms; outcomes {f['unpaced_by_reason']} (at this "
-        "speed a parcel covers the 3 m from the scan line in a few tens of ms of wall time, so "
-        "late commands are expected); exit "
+        f"{f['unpaced_controller_p99_ms']:.1f} ms; outcomes {f['unpaced_by_reason']} (the "
+        "loop keeps within 0.1 s of sim of the published /clock and holds a parcel to divert "
+        "for its command; a parcel the scanner publishes seconds of sim late at this speed may "
+        "still miss its command); exit "
         f"{f['unpaced_exit']} ({f['unpaced_message']}).",
         "",
         _probe_line(f.get("probes", [])),
