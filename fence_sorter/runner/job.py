@@ -153,6 +153,11 @@ def _ros_args(node: str, plan: Plan, opts: RunOptions, extra: list[str]) -> list
     return args
 
 
+#: the run gives up on parcels without an outcome past the stream's end only after this much
+#: wall time without any new outcome [s]
+STALL_TIMEOUT = 10.0
+
+
 def loop_cpu(plan: Plan, rtf: float, cpus: set[int]) -> tuple[int, bool]:
     """The simulator's ``loop_cpu`` for this run and whether the run sets it: a ``--param``
     override as given (-1 turns pinning off), else config/simulator.yaml's if >= 0, else, for
@@ -300,11 +305,14 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None]) -> RunResult:
         deadline = time.monotonic() + timeout
         expected = set(plan.expected_ids)
         sim_start = None
+        outcomes_seen, last_outcome = 0, time.monotonic()
         while True:
             monitor.spin_for(0.1)
             rec = monitor.records
             if expected <= rec.outcomes.keys():
                 break
+            if len(rec.outcomes) > outcomes_seen:
+                outcomes_seen, last_outcome = len(rec.outcomes), time.monotonic()
             dead = group.dead()
             if dead:
                 n = dead[0]
@@ -327,7 +335,14 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None]) -> RunResult:
                 # the stream's sim time starts with the first scan (at rtf 0 the scanner may
                 # come up long after the simulator's clock started)
                 sim_start = min(p["scan_time"] for p in rec.parcels.values()) - START_DELAY
-            if sim_start is not None and rec.sim_time - sim_start > plan.sim_duration + 30.0:
+            # past the stream's end in sim time with no outcome for a while in wall time (at
+            # rtf 0 the /clock seen here runs ahead of the outcomes still on their way: 30 s of
+            # sim time is a fraction of a second of wall time there)
+            if (
+                sim_start is not None
+                and rec.sim_time - sim_start > plan.sim_duration + 30.0
+                and time.monotonic() - last_outcome > STALL_TIMEOUT
+            ):
                 code, message = (
                     EXIT_FAILED,
                     (
