@@ -690,11 +690,12 @@ class SortingLine:
         t = self.t
         s = self._fence_stroke()
         fence = None
+        at: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # one interpolation per stroke
         if s is not None:
             pid = s.parcel.spec.parcel_id
             t_local = t - s.t_start
             if s.alive and s.tap.cur is not None and s.model.flexible:
-                y, extra = s.tap.at(t_local)
+                y, extra = at[id(s)] = s.tap.at(t_local)
                 w_free = (s.model.phi @ y[6 : 6 + s.model.n_modes]).tolist()
                 fence = (float(extra[0]), float(extra[1]), float(extra[2]), w_free, pid, True)
             else:
@@ -706,7 +707,7 @@ class SortingLine:
             dims = (spec.length_a, spec.width_b, spec.height)
             st = p.stroke
             if st is not None and st.alive and st.tap.cur is not None:
-                y, e = st.tap.at(t - st.t_start)
+                y, e = at[id(st)] if id(st) in at else st.tap.at(t - st.t_start)
                 x, y_, yaw, vx, vy, wz = y[:6].tolist()
                 n, depth, rate, px, py = float(e[3]), float(e[4]), float(e[5]), e[6], e[7]
                 impacts = st.observer.impacts

@@ -239,7 +239,7 @@ class _Outbox:
             r, w, _ = select.select(rfds, [self.fd], [], 1.0)
             if r:
                 inbox.read()
-                if inbox.closed or any(item[0] == "stop" for item in inbox.items):
+                if inbox.stop_requested:
                     return  # the loop ends now, whatever is unsent
             if w:
                 self.flush()
@@ -265,6 +265,11 @@ class _Inbox:
                 self.closed = True
                 return
             self.items += self.frames.feed(data)
+
+    @property
+    def stop_requested(self) -> bool:
+        """The node asked the loop to stop (a stop frame read, or its end of the pipe closed)."""
+        return self.closed or any(item[0] == "stop" for item in self.items)
 
     def take(self) -> list:
         self.read()
@@ -416,7 +421,7 @@ class PacedLoop:
             self.out.drain(0, inbox)
             if select.select([inbox.fd], [], [], 2e-4)[0]:
                 inbox.read()
-            if inbox.closed or any(item[0] == "stop" for item in inbox.items):
+            if inbox.stop_requested:
                 return
 
     def run(self) -> None:
@@ -563,7 +568,15 @@ def _read_exact(fd: int, n: int) -> bytes:
 def main(argv: list[str]) -> int:
     """The process: read the set-up frame, build and warm the line, run the loop until the
     node sends ``stop`` or goes away."""
-    in_fd, out_fd, gauges_fd, parent = (int(a) for a in argv[:4])
+    try:
+        in_fd, out_fd, gauges_fd, parent = (int(a) for a in argv)
+    except ValueError:
+        print(
+            "usage: python -m fence_sorter.line.worker IN_FD OUT_FD GAUGES_FD PARENT_PID "
+            f"(four integers, started by the simulator node); got {argv}",
+            file=sys.stderr,
+        )
+        return 2
     # die with the node; Ctrl-C and SIGTERM reach the whole process group, but only the node
     # ends this process (stop frame, or its end of the pipe closing), after the last frames
     ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG

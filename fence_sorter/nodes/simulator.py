@@ -352,8 +352,13 @@ class SimulatorNode(FenceSorterNode):
     @property
     def sim_time(self) -> float:
         """The line's sim time [s], as the loop's process last wrote it."""
-        g = self.loop.gauges if self.loop is not None else self._gauges_left
+        g = self._gauges()
         return g.value(Gauges.SIM_TIME) if g is not None else self._t0
+
+    def _gauges(self) -> Gauges | None:
+        """The running loop's gauges, the stopped loop's after stop(), None before start()."""
+        loop = self.loop
+        return loop.gauges if loop is not None else self._gauges_left
 
     # -- callbacks: hand off only --------------------------------------------------------------
     def _on_parcel(self, msg: Parcel) -> None:
@@ -558,8 +563,7 @@ class SimulatorNode(FenceSorterNode):
             st, lag = self.stats, self.publish_lag.copy()
             counts = Counter(st.counts) + self.counts
             outcomes = dict(self.outcome_counts)
-        loop = self.loop
-        g = loop.gauges if loop is not None else self._gauges_left
+        g = self._gauges()
         if g is not None:  # the loop's running figures, read from the shared memory
             hist, work = g.histogram(0), g.histogram(1)
             cycles, misses = int(g.value(Gauges.CYCLES)), int(g.value(Gauges.MISSES))

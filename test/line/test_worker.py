@@ -287,3 +287,17 @@ def test_unpaced_loop_keeps_within_publish_lead_of_what_the_node_published():
         assert lp.proc.wait(timeout=10.0) == 0
     finally:
         lp.close()
+
+
+def test_worker_started_by_hand_with_bad_arguments_exits_2_with_usage():
+    proc = subprocess.run(
+        [sys.executable, "-m", "fence_sorter.line.worker", "3", "four"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 2
+    assert "usage: python -m fence_sorter.line.worker IN_FD OUT_FD GAUGES_FD PARENT_PID" in (
+        proc.stderr
+    )
+    assert "Traceback" not in proc.stderr
