@@ -148,7 +148,7 @@ class _Tap:
     ones) and :meth:`at` interpolates between the two around the time asked for.
     """
 
-    __slots__ = ("obs", "ts", "points", "t_sorted", "width")
+    __slots__ = ("obs", "ts", "points", "t_sorted", "width", "on_sorted")
 
     def __init__(self, obs: Observer, width: float):
         self.obs = obs
@@ -156,6 +156,7 @@ class _Tap:
         self.points: list[tuple[np.ndarray, np.ndarray]] = []
         self.t_sorted: float | None = None  # C_s crossing y0 = s (interpolated) [s]
         self.width = width
+        self.on_sorted = None  # called once, at the accepted point where C_s crossed y0 = s
 
     @property
     def cur(self):
@@ -194,6 +195,8 @@ class _Tap:
             y1 = st.y[1]
             frac = (self.width - y0) / (y1 - y0) if y1 > y0 else 1.0
             self.t_sorted = t0 + min(max(frac, 0.0), 1.0) * (st.t - t0)
+            if self.on_sorted is not None:
+                self.on_sorted()
         return out
 
     def trim(self, t: float) -> None:
@@ -230,6 +233,10 @@ class _Stroke:
         self.integ = Integrator(self.model)
         self.observer = Observer(self.model)
         self.tap = _Tap(self.observer, sc.conveyor.width)
+        # the figures of a SORTED outcome: the solve up to the point where C_s crossed y0 = s,
+        # as simulate() reports them, however far the solve has run ahead of the line since
+        self.sorted_result: SimulationResult | None = None
+        self.tap.on_sorted = self._sorted_now
         self.stepper = self.integ.stepping(self.tap)
         next(self.stepper, None)  # the initial point (t = 0) and the first step
         self.finished = False  # the solve has ended (maybe ahead of the line time)
@@ -261,8 +268,7 @@ class _Stroke:
 
     def prefetch(self, t_local: float, wall_deadline: float, clock) -> None:
         """Step the solve ahead towards local time ``t_local`` while the costliest recent call
-        of its stepper still fits before ``wall_deadline`` on ``clock()``. Not past the sort
-        crossing: the line reports SORTED with the figures of the solve up to there."""
+        of its stepper still fits before ``wall_deadline`` on ``clock()``."""
         integ = self.integ
         now = clock()
         # a next() may run a compiled chunk of several steps: go on only while the costliest
@@ -271,7 +277,6 @@ class _Stroke:
         self.step_cost *= 0.99
         while (
             not self.finished
-            and self.tap.t_sorted is None
             and integ.cur.t < t_local - 1e-12
             and now + self.step_cost < wall_deadline
         ):
@@ -287,6 +292,9 @@ class _Stroke:
         if self.integ.outcome[1] is not None and len(self.tap.ts) > 1:
             self.tap.ts.pop()
             self.tap.points.pop()
+
+    def _sorted_now(self) -> None:
+        self.sorted_result = self.result()
 
     def close(self) -> None:
         self.stepper.close()
@@ -481,9 +489,11 @@ class SortingLine:
         return events
 
     def prefetch(self, horizon: float, wall_deadline: float, clock=time.perf_counter) -> None:
-        """Use spare wall time: step the running solves ahead of the line time by up to
-        ``horizon`` of sim time, then build the next planned stroke's model, while ``clock()``
-        is before ``wall_deadline``. The line time and its events do not move; later
+        """Use spare wall time while ``clock()`` is before ``wall_deadline``: step the running
+        solves ahead of the line time by up to ``horizon`` of sim time, build the next planned
+        stroke, then step the built strokes' solves ahead, as far as they go. A stroke's solve
+        depends on its command and its parcel only (the fence starts each stroke at rest), so
+        it can run before the stroke starts. The line time and its events do not move; later
         :meth:`advance` calls find the work done (soft real time: a costly stretch of an event,
         an impact, is spread over the cycles before it is due)."""
         for s in self.strokes:
@@ -491,16 +501,21 @@ class SortingLine:
                 s.prefetch(self.t + horizon - s.t_start, wall_deadline, clock)
         now = clock()
         self._build_cost *= 0.999  # one slow build (e.g. loading the JIT) is forgotten in ~5 s
-        if self.strokes or now + self._build_cost >= wall_deadline:
-            return
-        waiting = [
-            p for p in self._planned() if p.stroke is None and p.prepared is None and not p.passed
-        ]
-        if waiting:
-            p = min(waiting, key=lambda q: q.t_start)
-            p.prepared = _Stroke(p, p.t_start, self._stroke_scenario(p))
-            # the costliest recent build (decays 1 % per build): only built where it fits
-            self._build_cost = max(clock() - now, 0.99 * self._build_cost)
+        planned = sorted(
+            (p for p in self._planned() if p.stroke is None and not p.passed),
+            key=lambda q: q.t_start,
+        )
+        for p in planned:
+            if p.prepared is None:
+                if now + self._build_cost >= wall_deadline:
+                    return
+                p.prepared = _Stroke(p, p.t_start, self._stroke_scenario(p))
+                # the costliest recent build (decays 1 % per build): only built where it fits
+                self._build_cost = max(clock() - now, 0.99 * self._build_cost)
+            p.prepared.prefetch(math.inf, wall_deadline, clock)
+            now = clock()
+            if now >= wall_deadline or not p.prepared.finished:
+                return
 
     def awaiting_command(self, skip: frozenset[int] | set[int] = frozenset()) -> tuple[float, int]:
         """(sim time, parcel id) of the first parcel to divert that has no command yet and
@@ -559,7 +574,7 @@ class SortingLine:
                     self.events.append(SolverWarning(t, pid, s.failed))
                 self.parcels.pop(pid, None)
         elif s.tap.t_sorted is not None and t - s.t_start >= s.tap.t_sorted and p.outcome is None:
-            self._finish(p, OutcomeCode.SORTED, t, "sorted: C_s crossed y0 = s", s.result())
+            self._finish(p, OutcomeCode.SORTED, t, "sorted: C_s crossed y0 = s", s.sorted_result)
             self.parcels.pop(pid, None)
         elif not s.alive and p.outcome is None:
             res = s.result()

@@ -165,8 +165,8 @@ class CycleTrace:
     overwritten. :meth:`save` writes an ``.npz`` with one array per column, in cycle order."""
 
     #: wall times recorded per cycle: deadline, wake, then the end of each phase (inputs taken,
-    #: physics advanced and events handed over; snapshots taken: the cycle's due work is done;
-    #: frames sent, garbage collected, statistics; prefetch done)
+    #: physics advanced and events handed over: the cycle's due work is done; snapshots
+    #: captured; frames sent, garbage collected, statistics; prefetch done)
     COLUMNS = ("deadline", "wake", "advanced", "published", "collected", "end")
     #: flag bits
     STATES, MARKERS, EVENTS, GC_YOUNG, GC_FULL, MISS = 1, 2, 4, 8, 16, 32

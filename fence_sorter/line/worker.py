@@ -456,7 +456,11 @@ class PacedLoop:
             if events:
                 flags |= CycleTrace.EVENTS
                 out.send(("events", events))
-            advanced = clock()
+            # the cycle's due work ends here: the line has reached the cycle's sim time and its
+            # outcomes are on their way (a cycle misses when `done` is late). Captures of the
+            # line at that time, serialising and writing frames, garbage collection and
+            # statistics use the slack before the next cycle advances the line
+            done = advanced = clock()
             # the cycle captures the line's state as plain numbers; the node renders it
             cap = None
             if k >= next_pub:
@@ -469,9 +473,7 @@ class PacedLoop:
                 next_marker = (k // s.marker_every + 1) * s.marker_every
                 # None: the node builds the markers from the states snapshot just sent
                 out.send(("markers", None if cap is not None else line.capture(), wake))
-            done = clock()
-            # the cycle's due work ends here: serialising and writing what it sent, garbage
-            # collection and statistics use its slack (a cycle misses when `done` is late)
+            captured = clock()
             budget_end = pacer.next_deadline - s.spin_margin
             out.flush(budget_end)
             slack = pacer.next_deadline - clock() > GC_SLACK
@@ -509,7 +511,9 @@ class PacedLoop:
             if len(out.buf) > PACED_BACKLOG:
                 raise RuntimeError(f"{len(out.buf)} bytes unsent: the node stopped reading")
             if self.trace is not None and rtf > 0.0:
-                self.trace.record(k, (deadline, wake, advanced, done, collected, clock()), flags)
+                self.trace.record(
+                    k, (deadline, wake, advanced, captured, collected, clock()), flags
+                )
             if self.rtf != pacer.rtf:  # changed at run time: a new grid from here
                 if self.rtf == 0.0 and os.sched_getscheduler(0) == os.SCHED_FIFO:
                     os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))

@@ -406,25 +406,33 @@ def _snap_key(s):
 
 
 def test_prefetch_steps_ahead_without_changing_anything():
-    """Soft real time steps the running solves ahead of the line clock in spare wall time
-    (prefetch): the events, outcome figures and snapshots must be the very same as stepping
-    each cycle's physics when it is due (the adaptive step sequence does not depend on when
-    the generator is advanced, and SORTED is reported from the solve up to its crossing)."""
+    """Soft real time steps the solves ahead of the line clock in spare wall time (prefetch):
+    the running ones past the sort crossing, the planned ones before their stroke starts. The
+    events, outcome figures and snapshots must be the very same as stepping each cycle's
+    physics when it is due (the adaptive step sequence does not depend on when the generator
+    is advanced, and SORTED is reported from the solve up to its crossing)."""
     runs = []
     for horizon in (0.0, 0.05):
         line = _stream_line()
-        snaps, ahead = [], []
+        snaps, ahead, solved_before_start = [], [], set()
 
-        def on_step(ln, horizon=horizon, snaps=snaps, ahead=ahead):
+        def on_step(ln, horizon=horizon, snaps=snaps, ahead=ahead, solved=solved_before_start):
             snaps.append(_snap_key(ln.snapshot()))
             if horizon:
                 ln.prefetch(horizon, math.inf)
                 ahead.extend(s.integ.cur.t + s.t_start - ln.t for s in ln.strokes if s.alive)
+                solved.update(
+                    pid
+                    for pid, p in ln.parcels.items()
+                    if p.prepared is not None and p.prepared.finished and p.stroke is None
+                )
 
         events = run(line, 7.0, on_step=on_step)
-        runs.append((outcomes(events), snaps, ahead))
-    (o0, s0, _), (o1, s1, ahead) = runs
+        runs.append((outcomes(events), snaps, ahead, solved_before_start))
+    (o0, s0, _, _), (o1, s1, ahead, solved_before_start) = runs
     assert max(ahead) > 0.03  # the solves really ran ahead of the line clock
+    # every stroke of the stream was solved to its end before it started
+    assert solved_before_start == {1, 3}
     assert o0.keys() == o1.keys() == {1, 2, 3}
     assert o0[1].code is OutcomeCode.SORTED and o0[3].code is OutcomeCode.SORTED
     for pid in o0:
