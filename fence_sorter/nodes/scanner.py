@@ -11,6 +11,8 @@ import math
 from collections.abc import Sequence
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from rclpy.clock import JumpThreshold
+from rclpy.duration import Duration
 from rclpy.exceptions import ParameterException
 from rclpy.time import Time
 
@@ -43,6 +45,10 @@ def fill_parcel(msg, spec: ParcelSpec, scan_time: float, scan_x: float, frame_id
     msg.divert = spec.divert
     msg.scan_time = stamp
     msg.scan_position_x = scan_x
+
+
+#: a parcel published this much sim time after its scan time is logged [s]
+SCAN_LAG_WARN = 0.1
 
 
 def due(stream: Sequence[ParcelSpec], next_index: int, t0: float, now: float) -> int:
@@ -80,7 +86,15 @@ class ScannerNode(FenceSorterNode):
             0,
             100,
         ),
-        ParamSpec("tick_period", 0.005, "Sim-time period of the scan check [s]", True, 1e-4, 1.0),
+        ParamSpec(
+            "tick_period",
+            0.005,
+            "Period of the scan check on the wall clock [s] (with use_sim_time the check runs "
+            "on every /clock update instead)",
+            True,
+            1e-4,
+            1.0,
+        ),
     )
 
     def __init__(self) -> None:
@@ -116,10 +130,24 @@ class ScannerNode(FenceSorterNode):
         self.frame_id = p["frame_id"]
         self.t0: float | None = None
         self.next_index = 0
+        # sim time from a parcel's scan time to its publication (the tick, and how late the
+        # executor ran it: /clock at hundreds of messages per second when unpaced)
+        self.scan_lag_max = 0.0
         self._parcel_class = Parcel
         self._pub = self.create_publisher(Parcel, PARCELS_TOPIC, RELIABLE_QOS)
-        # a sim-time timer: it fires only while /clock advances
-        self._timer = self.create_timer(float(p["tick_period"]), self.tick)
+        self._timer = self._jump = None
+        if self.get_parameter("use_sim_time").value:
+            # once per /clock message: sim time only moves then, and a sim-time timer of a
+            # shorter period fires several times per message, each through the executor,
+            # which fell behind an unpaced simulator's /clock (parcels published seconds late)
+            self._jump = self.get_clock().create_jump_callback(
+                JumpThreshold(
+                    min_forward=Duration(nanoseconds=1), min_backward=None, on_clock_change=False
+                ),
+                post_callback=lambda jump: self.tick(),
+            )
+        else:
+            self._timer = self.create_timer(float(p["tick_period"]), self.tick)
         self.get_logger().info(
             f"scanner: {len(self.stream)} parcels from {self.stream_name} at x = "
             f"{self.scan_x:g} m, belt {self.belt_speed:g} m/s"
@@ -137,8 +165,15 @@ class ScannerNode(FenceSorterNode):
         end = due(self.stream, self.next_index, self.t0, now)
         for spec in self.stream[self.next_index : end]:
             msg = self._parcel_class()
-            fill_parcel(msg, spec, self.t0 + spec.arrival_time, self.scan_x, self.frame_id)
+            stamp = self.t0 + spec.arrival_time
+            fill_parcel(msg, spec, stamp, self.scan_x, self.frame_id)
             self._pub.publish(msg)
+            self.scan_lag_max = max(self.scan_lag_max, now - stamp)
+            if now - stamp > SCAN_LAG_WARN:
+                self.get_logger().warning(
+                    f"parcel {spec.parcel_id} published {now - stamp:.3f} s (sim) after its "
+                    "scan time: the scanner is behind /clock"
+                )
         self.next_index = end
 
     def heartbeat_status(self) -> DiagnosticStatus:
@@ -153,6 +188,7 @@ class ScannerNode(FenceSorterNode):
                 "parcels_published": str(self.next_index),
                 "done": str(done).lower(),
                 "last_arrival_s": f"{last:.3f}",
+                "scan_lag_max_s": f"{self.scan_lag_max:.4f}",
             }.items()
         )
         return status

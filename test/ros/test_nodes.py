@@ -104,3 +104,55 @@ def test_out_of_range_parameter_is_refused(env: dict[str, str], param: str) -> N
     assert proc.returncode == 2  # the simulator exits 2 on a bad scene or parameter
     assert param.split(":=")[0] in err and "range" in err
     assert "Traceback" not in out + err
+
+
+def test_scanner_on_the_wall_clock_publishes_its_stream_in_order(
+    env: dict[str, str], domain_id: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Without use_sim_time the scanner checks the scan line on a wall-clock timer (with sim
+    time it checks on every /clock update, which the suite's tests cover): each parcel comes
+    once, in order, with its scan time."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    from fence_sorter.nodes.qos import RELIABLE_QOS
+    from fence_sorter_msgs.msg import Parcel
+
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    monkeypatch.setenv("ROS_LOG_DIR", str(tmp_path / "ros_log_listener"))
+    context = rclpy.Context()
+    rclpy.init(
+        context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO
+    )
+    node = rclpy.create_node("test_parcels", context=context)
+    got: list = []
+    node.create_subscription(Parcel, "/parcels", got.append, RELIABLE_QOS)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    cmd = [
+        str(resolve_executable("scanner")),
+        "--ros-args",
+        "-p", "parcels:=3",
+        "-p", "start_delay:=0.2",
+        "-p", "wait_for_subscribers:=1",
+        "-p", "tick_period:=0.01",
+    ]  # fmt: skip
+    try:
+        with managed_process(cmd, env) as proc:
+            deadline = time.monotonic() + TIMEOUT
+            while len(got) < 3 and time.monotonic() < deadline:
+                assert proc.poll() is None, proc.communicate()
+                executor.spin_once(timeout_sec=0.1)
+            received_at = time.time()
+            proc.send_signal(signal.SIGTERM)
+            proc.communicate(timeout=TIMEOUT)
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+    assert [m.parcel_id for m in got] == [1, 2, 3]
+    stamps = [m.scan_time.sec + 1e-9 * m.scan_time.nanosec for m in got]
+    assert stamps == sorted(stamps)
+    # wall-clock stamps (system time), not sim time starting at 0
+    assert abs(stamps[0] - received_at) < 60.0
