@@ -28,6 +28,8 @@ from collections.abc import Sequence
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from rclpy.clock import Clock as RosClock
+from rclpy.clock import ClockType
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.logging import LoggingSeverity
@@ -215,6 +217,13 @@ class SimulatorNode(FenceSorterNode):
             max_value=1023,
         ),
         ParamSpec(
+            "wait_for_scanner",
+            True,
+            "Unpaced runs: sim time waits at its start until /parcels has a publisher (a "
+            "scanner); otherwise the line runs minutes of empty belt while the scanner starts",
+            read_only=True,
+        ),
+        ParamSpec(
             "warm_up",
             True,
             "Run one short stroke before starting so the compiled kernel is loaded",
@@ -299,6 +308,10 @@ class SimulatorNode(FenceSorterNode):
         self.keep_cpus_awake = bool(p["keep_cpus_awake"])
         self._spinners: list = []
         self.loop: LineProcess | None = None
+        # unpaced: the loop holds (LoopSettings.publish_lead) until the node marks what it
+        # published, which it starts doing once /parcels has a publisher
+        self._released = not (self.rtf == 0.0 and bool(p["wait_for_scanner"]))
+        self._scanner_timer = None
 
         self._parcel_sub = self.create_subscription(
             Parcel, "/parcels", self._on_parcel, RELIABLE_QOS
@@ -394,6 +407,21 @@ class SimulatorNode(FenceSorterNode):
         self.loop.wait_ready(ready_timeout)
         self._set_priority()
         self._reader.start()
+        if not self._released:
+            self.get_logger().info("unpaced: sim time starts when /parcels has a publisher")
+            self._scanner_timer = self.create_timer(
+                0.05, self._check_scanner, clock=RosClock(clock_type=ClockType.STEADY_TIME)
+            )
+
+    def _check_scanner(self) -> None:
+        """Unpaced, wait_for_scanner: let sim time run once /parcels has a publisher."""
+        loop = self.loop
+        if loop is None or self._parcel_sub.get_publisher_count() == 0:
+            return
+        self._released = True
+        loop.gauges.header[Gauges.PUBLISHED] = self._clock_published
+        self._scanner_timer.cancel()
+        self.get_logger().info("unpaced: /parcels has a publisher; sim time runs")
 
     def stop(self) -> None:
         """Stop the loop's process (its last outcomes and statistics are published first),
@@ -492,8 +520,8 @@ class SimulatorNode(FenceSorterNode):
         self.pub_clock.publish(convert.fill_clock(self._clock_msg, snap.t))
         self._clock_published = snap.t
         loop = self.loop
-        if loop is not None:  # the unpaced loop waits for this (LoopSettings.publish_lead)
-            loop.gauges.header[Gauges.PUBLISHED] = snap.t
+        if loop is not None and self._released:  # the unpaced loop waits for this
+            loop.gauges.header[Gauges.PUBLISHED] = snap.t  # (LoopSettings.publish_lead)
         self.pub_fence.publish(
             convert.fill_fence_state(self._fence_msg, snap.fence, snap.t, self.frame_id)
         )

@@ -4,7 +4,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from fence_sorter.verification.bench_suite import BEGIN, END, lost, message_counts, write_section
+from fence_sorter.runner.monitor import Records
+from fence_sorter.verification.bench_suite import (
+    BEGIN,
+    END,
+    lost,
+    message_counts,
+    unpaced_rtf,
+    write_section,
+)
 
 
 def test_section_is_appended_then_replaced_in_place(tmp_path: Path) -> None:
@@ -37,3 +45,17 @@ def test_lost_messages_counts_every_subscriber_short() -> None:
     counts = message_counts(summary)
     assert counts["/sort_outcomes"]["published (simulator)"] == 10
     assert lost(counts) == 2  # one parcel missing at the controller, one command at the simulator
+
+
+def test_unpaced_rtf_counts_the_stream_not_the_empty_belt_before_it() -> None:
+    """Heartbeats each wall second: 200 s of empty belt in the first second (nothing on it),
+    then the stream from sim 200.5 s at 25x."""
+    rec = Records()
+    sims = [0.1, 200.0, 225.0, 250.0, 275.0]
+    rec.diagnostics_history["fence_sorter/simulator"] = [
+        {"_wall": str(w), "sim_time_s": str(s)} for w, s in enumerate(sims)
+    ]
+    rec.parcels = {1: {"scan_time": 200.5}, 2: {"scan_time": 201.7}}
+    assert unpaced_rtf(rec) == 25.0
+    rec.parcels = {}  # no parcel seen: the whole run
+    assert unpaced_rtf(rec) == (275.0 - 0.1) / 4

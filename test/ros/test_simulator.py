@@ -251,6 +251,51 @@ def test_real_time_factor_can_change_at_run_time(domain_id: int) -> None:
     assert gc.isenabled()
 
 
+def test_unpaced_sim_time_waits_for_a_parcel_publisher(domain_id: int) -> None:
+    """Unpaced (rtf 0, wait_for_scanner): sim time stays at its start while /parcels has no
+    publisher, then runs as fast as the node publishes. In-process node on its own context."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    from fence_sorter.nodes.qos import RELIABLE_QOS
+    from fence_sorter.nodes.simulator import SimulatorNode
+    from fence_sorter_msgs.msg import Parcel
+
+    context = rclpy.Context()
+    rclpy.init(
+        args=["--ros-args", "-p", "warm_up:=false", "-p", "real_time_factor:=0.0"],
+        context=context,
+        domain_id=domain_id,
+        signal_handler_options=SignalHandlerOptions.NO,
+    )
+    node = SimulatorNode(context=context)
+    other = rclpy.create_node("test_scanner_stand_in", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    executor.add_node(other)
+
+    def spin(seconds: float) -> None:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.02)
+
+    try:
+        node.start()
+        spin(1.5)
+        held = node.sim_time
+        assert held <= 0.2  # publish_lead (0.1 s) past the start at most
+        other.create_publisher(Parcel, "/parcels", RELIABLE_QOS)
+        spin(2.0)
+        assert node.sim_time > held + 5.0  # unpaced: many times real time once released
+    finally:
+        executor.shutdown()
+        node.stop()
+        other.destroy_node()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
 def _loop_process(pid: int) -> int:
     """The pacing loop's process among the simulator's children."""
     for _ in range(200):
