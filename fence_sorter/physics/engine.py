@@ -374,7 +374,8 @@ BENCH_SCENES = ("impact_flexible", "slide_flexible", "positioned_stiff", "arbitr
 
 def compare_engines(scenes=BENCH_SCENES, repeats: int = 7) -> list[dict]:
     """Wall time per event of each scene (as ``fence-sorter bench`` times it: ``simulate`` on a
-    freshly built model), python and compiled loop interleaved, medians of ``repeats``."""
+    freshly built model, the garbage collector off during the call and a collection before the
+    repeats), python and compiled loop interleaved, medians of ``repeats``."""
     import dataclasses as dc
     import gc
     import statistics
@@ -393,14 +394,20 @@ def compare_engines(scenes=BENCH_SCENES, repeats: int = 7) -> list[dict]:
         walls: dict[str, list[float]] = {e: [] for e in runs}
         cpus: dict[str, list[float]] = {e: [] for e in runs}
         results = {e: simulate(s) for e, s in runs.items()}  # warm-up (loads the JIT cache)
+        gc.collect()  # before the block of repeats; the collector is off during each call
         for _ in range(repeats):
             for e, s in runs.items():
-                gc.collect()
-                c0 = time.process_time()
-                t0 = time.perf_counter()
-                results[e] = simulate(s, SortingModel(s))
-                walls[e].append(time.perf_counter() - t0)
-                cpus[e].append(time.process_time() - c0)
+                enabled = gc.isenabled()
+                gc.disable()
+                try:
+                    c0 = time.process_time()
+                    t0 = time.perf_counter()
+                    results[e] = simulate(s, SortingModel(s))
+                    walls[e].append(time.perf_counter() - t0)
+                    cpus[e].append(time.process_time() - c0)
+                finally:
+                    if enabled:
+                        gc.enable()
         med = {e: statistics.median(w) for e, w in walls.items()}
         cpu = {e: statistics.median(c) for e, c in cpus.items()}
         sim = results["compiled"].sim_time
