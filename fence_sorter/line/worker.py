@@ -136,19 +136,24 @@ class Gauges:
     value is ever read torn; a set read while a cycle runs may be one cycle apart."""
 
     CYCLES, MISSES, SLIPS, SIM_TIME, LATENESS_MAX, WORK_MAX, ON_LINE, PUBLISHED = range(8)
-    HEADER = 8
+    SCAN_LIMIT = 8
+    HEADER = 9
 
     def __init__(self, fd: int | None = None) -> None:
         bins = LatenessHistogram.BINS + 1
         size = 8 * (self.HEADER + 2 * bins)
+        created = fd is None
         if fd is None:
             fd = os.memfd_create("fence_sorter_gauges")
             os.ftruncate(fd, size)
         self.fd = fd
         self._mm = mmap.mmap(fd, size)
         #: cycles, misses, slips, sim time [s], lateness and work max [s], parcels on line,
-        #: and (written by the node) the sim time of the last snapshot it published [s]
+        #: and (written by the node) the sim time of the last snapshot it published [s] and
+        #: the sim time an unpaced loop may not pass (the scanner's progress; inf: no limit)
         self.header = np.ndarray((self.HEADER,), np.float64, self._mm, 0)
+        if created:
+            self.header[self.SCAN_LIMIT] = math.inf
         #: lateness and work histogram counts (LatenessHistogram bins)
         self.counts = np.ndarray((2, bins), np.int64, self._mm, 8 * self.HEADER)
 
@@ -414,10 +419,14 @@ class PacedLoop:
 
     def wait_for_publisher(self) -> None:
         """Unpaced: wait until the node has published the line up to ``publish_lead`` behind
-        its time. The other nodes run on the published /clock: a loop far ahead of it would
-        receive parcels scanned (and commands planned) seconds of sim time in its past."""
-        g, lead, inbox = self.gauges.header, self.s.publish_lead, self.inbox
-        while g[Gauges.PUBLISHED] < self.line.t - lead and not self.stop:
+        its time, and while the line has reached ``Gauges.SCAN_LIMIT`` (the scanner's
+        progress plus a lead, written by the node). The other nodes run on the published
+        /clock: a loop far ahead of it, or of the scanner, would receive parcels scanned (and
+        commands planned) seconds of sim time in its past."""
+        g, lead, inbox, line = self.gauges.header, self.s.publish_lead, self.inbox, self.line
+        while (
+            g[Gauges.PUBLISHED] < line.t - lead or line.t >= g[Gauges.SCAN_LIMIT]
+        ) and not self.stop:
             self.out.drain(0, inbox)
             if select.select([inbox.fd], [], [], 2e-4)[0]:
                 inbox.read()
@@ -629,7 +638,10 @@ class LineProcess:
     """The loop's process seen from the node: start it, send it inputs (thread-safe), iterate
     over what it sends, stop it."""
 
-    def __init__(self, config: LineConfig, scenario, settings: LoopSettings) -> None:
+    def __init__(
+        self, config: LineConfig, scenario, settings: LoopSettings, scan_limit: float = math.inf
+    ) -> None:
+        """``scan_limit``: the initial Gauges.SCAN_LIMIT (an unpaced loop does not pass it)."""
         to_child_r, self._to_child = os.pipe()
         self._from_child, from_child_w = os.pipe()
         try:
@@ -639,6 +651,7 @@ class LineProcess:
         self._lock = threading.Lock()
         #: the loop's running figures (cycles, misses, lateness and work histograms, ...)
         self.gauges = Gauges()
+        self.gauges.header[Gauges.SCAN_LIMIT] = scan_limit
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "fence_sorter.line.worker", str(to_child_r),
              str(from_child_w), str(self.gauges.fd), str(os.getpid())],

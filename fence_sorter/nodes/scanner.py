@@ -11,12 +11,15 @@ import math
 from collections.abc import Sequence
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
-from rclpy.clock import JumpThreshold
+from rclpy.clock import Clock as RosClock
+from rclpy.clock import ClockType, JumpThreshold
 from rclpy.duration import Duration
 from rclpy.exceptions import ParameterException
 from rclpy.time import Time
+from rosgraph_msgs.msg import Clock
 
 from fence_sorter.nodes.base import FenceSorterNode, ParamSpec, run_node
+from fence_sorter.nodes.convert import fill_clock
 from fence_sorter.nodes.qos import RELIABLE_QOS
 from fence_sorter.physics.params import ParameterError
 from fence_sorter.stream import ParcelSpec, load_stream
@@ -24,6 +27,8 @@ from fence_sorter.stream import ParcelSpec, load_stream
 DEFAULT_SCENE = "impact_flexible"
 DEFAULT_STREAM = "default"
 PARCELS_TOPIC = "/parcels"
+#: the scanner's progress (rosgraph_msgs/Clock: every parcel due by this sim time is out)
+SCAN_PROGRESS_TOPIC = "/scan_progress"
 
 
 def fill_parcel(msg, spec: ParcelSpec, scan_time: float, scan_x: float, frame_id: str) -> None:
@@ -49,6 +54,9 @@ def fill_parcel(msg, spec: ParcelSpec, scan_time: float, scan_x: float, frame_id
 
 #: a parcel published this much sim time after its scan time is logged [s]
 SCAN_LAG_WARN = 0.1
+#: /scan_progress at least every this much sim time [s] and this much wall time [s]
+PROGRESS_PERIOD = 0.2
+PROGRESS_WALL_PERIOD = 0.1
 
 
 def due(stream: Sequence[ParcelSpec], next_index: int, t0: float, now: float) -> int:
@@ -135,7 +143,11 @@ class ScannerNode(FenceSorterNode):
         self.scan_lag_max = 0.0
         self._parcel_class = Parcel
         self._pub = self.create_publisher(Parcel, PARCELS_TOPIC, RELIABLE_QOS)
-        self._timer = self._jump = None
+        # how far it has scanned: an unpaced simulator keeps within its scan_lead of it
+        self._progress = self.create_publisher(Clock, SCAN_PROGRESS_TOPIC, RELIABLE_QOS)
+        self._progress_msg = Clock()
+        self._progress_sent = -math.inf
+        self._timer = self._jump = self._wall = None
         if self.get_parameter("use_sim_time").value:
             # once per /clock message: sim time only moves then, and a sim-time timer of a
             # shorter period fires several times per message, each through the executor,
@@ -146,6 +158,13 @@ class ScannerNode(FenceSorterNode):
                 ),
                 post_callback=lambda jump: self.tick(),
             )
+            # and on the wall clock: the first progress report while sim time still waits
+            # for it (an unpaced simulator holds at its start), then a steady report
+            self._wall = self.create_timer(
+                PROGRESS_WALL_PERIOD,
+                lambda: self.tick(report=True),
+                clock=RosClock(clock_type=ClockType.STEADY_TIME),
+            )
         else:
             self._timer = self.create_timer(float(p["tick_period"]), self.tick)
         self.get_logger().info(
@@ -153,13 +172,15 @@ class ScannerNode(FenceSorterNode):
             f"{self.scan_x:g} m, belt {self.belt_speed:g} m/s"
         )
 
-    def tick(self) -> None:
-        """Publish the parcels whose front crossed the scan line since the last tick."""
+    def tick(self, report: bool = False) -> None:
+        """Publish the parcels whose front crossed the scan line since the last tick, and the
+        progress every PROGRESS_PERIOD of sim time (``report``: now)."""
         now = self.get_clock().now().nanoseconds * 1e-9
-        if now <= 0.0:
-            return
         if self.t0 is None:
             if self._pub.get_subscription_count() < self.wait_for_subscribers:
+                return
+            self._report(max(now, 0.0), report)  # ready: nothing is due before now
+            if now <= 0.0:  # no /clock yet
                 return
             self.t0 = now + self.start_delay
         end = due(self.stream, self.next_index, self.t0, now)
@@ -175,6 +196,13 @@ class ScannerNode(FenceSorterNode):
                     "scan time: the scanner is behind /clock"
                 )
         self.next_index = end
+        self._report(now, report)
+
+    def _report(self, now: float, force: bool) -> None:
+        """/scan_progress: every parcel due by sim time ``now`` is out."""
+        if force or now - self._progress_sent >= PROGRESS_PERIOD:
+            self._progress.publish(fill_clock(self._progress_msg, now))
+            self._progress_sent = now
 
     def heartbeat_status(self) -> DiagnosticStatus:
         status = super().heartbeat_status()

@@ -28,8 +28,6 @@ from collections.abc import Sequence
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
-from rclpy.clock import Clock as RosClock
-from rclpy.clock import ClockType
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.logging import LoggingSeverity
@@ -54,6 +52,7 @@ from fence_sorter.line.worker import Gauges, LineProcess, LoopSettings, LoopStar
 from fence_sorter.nodes import convert
 from fence_sorter.nodes.base import FenceSorterNode, ParamSpec, spin_node
 from fence_sorter.nodes.qos import RELIABLE_QOS, SENSOR_QOS
+from fence_sorter.nodes.scanner import SCAN_PROGRESS_TOPIC
 from fence_sorter.scene import load_scene
 from fence_sorter_msgs.msg import FenceCommand, FenceState, LoadState, Parcel, SortOutcome
 
@@ -217,11 +216,15 @@ class SimulatorNode(FenceSorterNode):
             max_value=1023,
         ),
         ParamSpec(
-            "wait_for_scanner",
-            True,
-            "Unpaced runs: sim time waits at its start until /parcels has a publisher (a "
-            "scanner); otherwise the line runs minutes of empty belt while the scanner starts",
+            "scan_lead",
+            1.0,
+            "Unpaced runs: sim time stays within this much of the scanner's progress "
+            "(/scan_progress) and waits at its start for the first report, so a scanner "
+            "behind the fast /clock cannot publish parcels past their hold point [s]; 0: off "
+            "(for a parcel source that does not report progress)",
             read_only=True,
+            min_value=0.0,
+            max_value=100.0,
         ),
         ParamSpec(
             "warm_up",
@@ -308,16 +311,17 @@ class SimulatorNode(FenceSorterNode):
         self.keep_cpus_awake = bool(p["keep_cpus_awake"])
         self._spinners: list = []
         self.loop: LineProcess | None = None
-        # unpaced: the loop holds (LoopSettings.publish_lead) until the node marks what it
-        # published, which it starts doing once /parcels has a publisher
-        self._released = not (self.rtf == 0.0 and bool(p["wait_for_scanner"]))
-        self._scanner_timer = None
+        self.scan_lead = float(p["scan_lead"])
+        self._scan_limit = -math.inf  # the scanner's progress + scan_lead (sim s)
 
         self._parcel_sub = self.create_subscription(
             Parcel, "/parcels", self._on_parcel, RELIABLE_QOS
         )
         self._command_sub = self.create_subscription(
             FenceCommand, "/fence_commands", self._on_command, RELIABLE_QOS
+        )
+        self._progress_sub = self.create_subscription(
+            Clock, SCAN_PROGRESS_TOPIC, self._on_scan_progress, RELIABLE_QOS
         )
         self.pub_clock = self.create_publisher(Clock, "/clock", CLOCK_QOS)
         self.pub_fence = self.create_publisher(FenceState, "/fence_state", SENSOR_QOS)
@@ -403,25 +407,31 @@ class SimulatorNode(FenceSorterNode):
             self.get_logger().info(
                 f"keep_cpus_awake: {len(self._spinners)} SCHED_IDLE spinner processes"
             )
-        self.loop = LineProcess(self.line_config, self._warm_scenario, self.settings)
+        # unpaced, with scan_lead: held at the start until the scanner's first report
+        held = self.scan_lead > 0.0 and self.rtf == 0.0
+        self.loop = LineProcess(
+            self.line_config,
+            self._warm_scenario,
+            self.settings,
+            scan_limit=self._t0 if held else math.inf,
+        )
         self.loop.wait_ready(ready_timeout)
         self._set_priority()
         self._reader.start()
-        if not self._released:
-            self.get_logger().info("unpaced: sim time starts when /parcels has a publisher")
-            self._scanner_timer = self.create_timer(
-                0.05, self._check_scanner, clock=RosClock(clock_type=ClockType.STEADY_TIME)
+        if held:
+            self.get_logger().info(
+                f"unpaced: sim time keeps within scan_lead {self.scan_lead:g} s of the "
+                "scanner's /scan_progress (scan_lead:=0 turns it off)"
             )
 
-    def _check_scanner(self) -> None:
-        """Unpaced, wait_for_scanner: let sim time run once /parcels has a publisher."""
+    def _on_scan_progress(self, msg: Clock) -> None:
+        """The scanner has scanned up to this sim time: an unpaced loop may run scan_lead past
+        it (Gauges.SCAN_LIMIT; a paced loop does not look)."""
         loop = self.loop
-        if loop is None or self._parcel_sub.get_publisher_count() == 0:
-            return
-        self._released = True
-        loop.gauges.header[Gauges.PUBLISHED] = self._clock_published
-        self._scanner_timer.cancel()
-        self.get_logger().info("unpaced: /parcels has a publisher; sim time runs")
+        if loop is not None and self.scan_lead > 0.0:
+            t = msg.clock.sec + 1e-9 * msg.clock.nanosec
+            self._scan_limit = max(self._scan_limit, t + self.scan_lead)
+            loop.gauges.header[Gauges.SCAN_LIMIT] = self._scan_limit
 
     def stop(self) -> None:
         """Stop the loop's process (its last outcomes and statistics are published first),
@@ -520,8 +530,8 @@ class SimulatorNode(FenceSorterNode):
         self.pub_clock.publish(convert.fill_clock(self._clock_msg, snap.t))
         self._clock_published = snap.t
         loop = self.loop
-        if loop is not None and self._released:  # the unpaced loop waits for this
-            loop.gauges.header[Gauges.PUBLISHED] = snap.t  # (LoopSettings.publish_lead)
+        if loop is not None:  # the unpaced loop waits for this (LoopSettings.publish_lead)
+            loop.gauges.header[Gauges.PUBLISHED] = snap.t
         self.pub_fence.publish(
             convert.fill_fence_state(self._fence_msg, snap.fence, snap.t, self.frame_id)
         )

@@ -289,6 +289,32 @@ def test_unpaced_loop_keeps_within_publish_lead_of_what_the_node_published():
         lp.close()
 
 
+def test_unpaced_loop_stops_at_the_scan_limit():
+    """rtf 0: the loop does not pass Gauges.SCAN_LIMIT (the scanner's progress plus a lead,
+    written by the node; inf when nobody reports progress)."""
+    settings = LoopSettings(period=1e-3, rtf=0.0, warm_up=False)
+    free = LineProcess(CONFIG, None, settings)
+    try:
+        assert free.gauges.value(Gauges.SCAN_LIMIT) == math.inf  # no limit unless given one
+    finally:
+        free.close()
+    lp = LineProcess(CONFIG, None, settings, scan_limit=0.0)  # held at the start
+    step = settings.publish_every * settings.period
+    try:
+        g = lp.gauges
+        lp.wait_ready(60.0)
+        time.sleep(0.5)
+        assert g.value(Gauges.SIM_TIME) <= step + 1e-9
+        g.header[Gauges.SCAN_LIMIT] = 3.0
+        time.sleep(0.5)
+        assert 3.0 <= g.value(Gauges.SIM_TIME) <= 3.0 + step + 1e-9
+        lp.send(("stop",))
+        list(lp.frames())
+        assert lp.proc.wait(timeout=10.0) == 0
+    finally:
+        lp.close()
+
+
 def test_worker_started_by_hand_with_bad_arguments_exits_2_with_usage():
     proc = subprocess.run(
         [sys.executable, "-m", "fence_sorter.line.worker", "3", "four"],

@@ -251,29 +251,35 @@ def test_real_time_factor_can_change_at_run_time(domain_id: int) -> None:
     assert gc.isenabled()
 
 
-def test_unpaced_sim_time_waits_for_a_parcel_publisher(domain_id: int) -> None:
-    """Unpaced (rtf 0, wait_for_scanner): sim time stays at its start while /parcels has no
-    publisher, then runs as fast as the node publishes. In-process node on its own context."""
+def test_unpaced_sim_time_follows_the_scanners_progress(domain_id: int) -> None:
+    """Unpaced (rtf 0, scan_lead 1 s): sim time waits at its start for the scanner's first
+    /scan_progress, then keeps within scan_lead of it. In-process node on its own context."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
+    from rosgraph_msgs.msg import Clock
 
+    from fence_sorter.nodes.convert import fill_clock
     from fence_sorter.nodes.qos import RELIABLE_QOS
+    from fence_sorter.nodes.scanner import SCAN_PROGRESS_TOPIC
     from fence_sorter.nodes.simulator import SimulatorNode
-    from fence_sorter_msgs.msg import Parcel
 
     context = rclpy.Context()
+    args = ["--ros-args", "-p", "warm_up:=false", "-p", "real_time_factor:=0.0"]
+    args += ["-p", "scan_lead:=1.0"]
     rclpy.init(
-        args=["--ros-args", "-p", "warm_up:=false", "-p", "real_time_factor:=0.0"],
+        args=args,
         context=context,
         domain_id=domain_id,
         signal_handler_options=SignalHandlerOptions.NO,
     )
     node = SimulatorNode(context=context)
     other = rclpy.create_node("test_scanner_stand_in", context=context)
+    progress = other.create_publisher(Clock, SCAN_PROGRESS_TOPIC, RELIABLE_QOS)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     executor.add_node(other)
+    step = node.settings.publish_every * node.period  # sim time of one unpaced cycle
 
     def spin(seconds: float) -> None:
         end = time.monotonic() + seconds
@@ -283,11 +289,13 @@ def test_unpaced_sim_time_waits_for_a_parcel_publisher(domain_id: int) -> None:
     try:
         node.start()
         spin(1.5)
-        held = node.sim_time
-        assert held <= 0.2  # publish_lead (0.1 s) past the start at most
-        other.create_publisher(Parcel, "/parcels", RELIABLE_QOS)
+        assert node.sim_time <= step + 1e-9  # no report yet: held at the start
+        progress.publish(fill_clock(Clock(), 4.0))
+        spin(1.5)
+        assert 5.0 <= node.sim_time <= 5.0 + step + 1e-9  # up to the report + scan_lead
+        progress.publish(fill_clock(Clock(), 30.0))
         spin(2.0)
-        assert node.sim_time > held + 5.0  # unpaced: many times real time once released
+        assert node.sim_time > 20.0  # and on, many times real time
     finally:
         executor.shutdown()
         node.stop()
