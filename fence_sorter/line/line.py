@@ -140,6 +140,11 @@ class LineCapture(NamedTuple):
     parcels: list[tuple]
 
 
+#: index of the first extra of a :class:`_Tap` point that is held between points, not
+#: interpolated (the stage, then the current impact's N_stiff)
+HELD = 8
+
+
 class _Tap:
     """Observer wrapper keeping the accepted points a snapshot at the line time may need.
 
@@ -166,7 +171,8 @@ class _Tap:
         return (self.ts[-1], *self.points[-1])
 
     def __call__(self, st, on_belt: bool):
-        out = self.obs(st, on_belt)
+        obs = self.obs
+        out = obs(st, on_belt)
         res, slots = st.res, st.out
         active = np.flatnonzero(slots[: K.SLOT_BORDER, K.C_ACTIVE])
         if len(active):
@@ -185,6 +191,10 @@ class _Tap:
                 ddot,
                 px,
                 py,
+                # held, not interpolated (:meth:`at`): the stage and the current impact's
+                # N_stiff at this point, as the observer had them when it was taken
+                STAGES.get(obs.stage, Stage.ON_BELT).value,
+                obs.impacts[-1][2] if obs.impacts else 0.0,
             ]
         )
         prev = (self.ts[-1], self.points[-1][0]) if self.ts else None
@@ -219,7 +229,9 @@ class _Tap:
         if t1 <= t0:
             return y1, e1
         w = (t - t0) / (t1 - t0)
-        return y0 + w * (y1 - y0), e0 + w * (e1 - e0)
+        e = e0 + w * (e1 - e0)
+        e[HELD:] = e0[HELD:]  # stage and N_stiff: the point at or before t
+        return y0 + w * (y1 - y0), e
 
 
 class _Stroke:
@@ -725,9 +737,9 @@ class SortingLine:
                 y, e = at[id(st)] if id(st) in at else st.tap.at(t - st.t_start)
                 x, y_, yaw, vx, vy, wz = y[:6].tolist()
                 n, depth, rate, px, py = float(e[3]), float(e[4]), float(e[5]), e[6], e[7]
-                impacts = st.observer.impacts
-                stiff = impacts[-1][2] if impacts and n > 0 else 0.0
-                stage = STAGES.get(st.observer.stage, Stage.ON_BELT)
+                # at the line time, not where the solve has run ahead to (prefetch)
+                stiff = float(e[HELD + 1]) if n > 0 else 0.0
+                stage = Stage(int(e[HELD]))
                 parcels.append((
                     spec.parcel_id, stage.value, x, y_, yaw, vx, vy, wz, n, stiff, depth,
                     rate, (float(px), float(py)), *dims,

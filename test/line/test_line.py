@@ -398,10 +398,15 @@ def _stream_line() -> SortingLine:
 
 def _snap_key(s):
     """(ids and flags, numbers) of a snapshot."""
-    ids = (s.fence.from_solve, s.fence.stroke_parcel_id, tuple(p.parcel_id for p in s.parcels))
+    ids = (
+        s.fence.from_solve,
+        s.fence.stroke_parcel_id,
+        tuple((p.parcel_id, p.stage) for p in s.parcels),
+    )
     nums = [s.t, s.fence.drive_angle, s.fence.tip_deflection, *s.fence.node_y]
     for p in s.parcels:
-        nums += [p.x, p.y, p.yaw, p.vx, p.vy]
+        nums += [p.x, p.y, p.yaw, p.vx, p.vy, p.contact_normal_force]
+        nums += [p.contact_normal_force_stiff, p.deformation]
     return ids, np.array(nums)
 
 
