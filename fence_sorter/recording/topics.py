@@ -7,6 +7,7 @@ from __future__ import annotations
 TOPIC_TYPES: dict[str, tuple[str, bool]] = {
     "/clock": ("rosgraph_msgs/msg/Clock", True),
     "/parcels": ("fence_sorter_msgs/msg/Parcel", True),
+    "/scan_progress": ("rosgraph_msgs/msg/Clock", True),
     "/fence_commands": ("fence_sorter_msgs/msg/FenceCommand", True),
     "/fence_state": ("fence_sorter_msgs/msg/FenceState", False),
     "/load_states": ("fence_sorter_msgs/msg/LoadState", False),
