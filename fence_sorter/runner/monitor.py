@@ -1,5 +1,5 @@
 """The run's own rclpy node: listens to /parcels, /fence_commands, /sort_outcomes, /diagnostics
-and /clock, and keeps plain records for :mod:`fence_sorter.runner.summary`."""
+and /scan_progress, and keeps plain records for :mod:`fence_sorter.runner.summary`."""
 
 from __future__ import annotations
 
@@ -35,12 +35,13 @@ class Monitor:
     def __init__(self, domain_id: int, name: str = "fence_sorter_run"):
         import rclpy
         from diagnostic_msgs.msg import DiagnosticArray
-        from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import QoSProfile, ReliabilityPolicy
         from rclpy.signals import SignalHandlerOptions
         from rosgraph_msgs.msg import Clock
 
+        from fence_sorter.nodes.base import make_executor
         from fence_sorter.nodes.qos import RELIABLE_QOS
+        from fence_sorter.nodes.scanner import SCAN_PROGRESS_TOPIC
         from fence_sorter_msgs.msg import FenceCommand, Parcel, SortOutcome
 
         os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
@@ -58,18 +59,26 @@ class Monitor:
         n.create_subscription(FenceCommand, "/fence_commands", self._on_command, RELIABLE_QOS)
         n.create_subscription(SortOutcome, "/sort_outcomes", self._on_outcome, RELIABLE_QOS)
         n.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, RELIABLE_QOS)
+        # sim time from the scanner's progress (5 per sim second), the simulator's heartbeat and
+        # the outcomes, not /clock: an unpaced run sends thousands of /clock messages per
+        # second, and taking them cost this process a third of a core
         n.create_subscription(
             Clock,
-            "/clock",
-            self._on_clock,
+            SCAN_PROGRESS_TOPIC,
+            self._on_progress,
             QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT),
         )
-        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor = make_executor(True, context=self.context)
         self.executor.add_node(self.node)
 
     # -- callbacks (record only) -----------------------------------------------------------
-    def _on_clock(self, msg) -> None:
-        self.records.sim_time = stamp_sec(msg.clock)
+    def _seen(self, t: float) -> None:
+        """Sim time reached, as far as the monitor knows (monotonic)."""
+        if t > self.records.sim_time:
+            self.records.sim_time = t
+
+    def _on_progress(self, msg) -> None:
+        self._seen(stamp_sec(msg.clock))
 
     def _on_parcel(self, msg) -> None:
         r = self.records
@@ -124,6 +133,7 @@ class Monitor:
                 "exit_speed_y": msg.exit_speed_y,
             },
         )
+        self._seen(stamp_sec(msg.header.stamp))
 
     def _on_diag(self, msg) -> None:
         r = self.records
@@ -138,6 +148,11 @@ class Monitor:
             values["_wall"] = f"{time.monotonic():.6f}"
             r.diagnostics[status.name] = values
             r.diagnostics_history.setdefault(status.name, []).append(values)
+            if status.name == "fence_sorter/simulator" and "sim_time_s" in values:
+                try:
+                    self._seen(float(values["sim_time_s"]))
+                except ValueError:
+                    pass
 
     # -- driving ---------------------------------------------------------------------------
     def spin_for(self, seconds: float) -> None:

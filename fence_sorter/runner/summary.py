@@ -26,14 +26,16 @@ def pick(values: dict[str, str] | None, *needles: str) -> dict[str, str]:
 
 
 def command_leads(records, belt_speed: float) -> list[float]:
-    """Per command: sim time from its arrival at the monitor to the front reaching R_s [s]."""
+    """Per command: sim time from its publication (its header stamp, the controller's clock;
+    else its arrival at the monitor) to the front reaching R_s [s]."""
     leads = []
     for pid, cmd in records.commands.items():
         parcel = records.parcels.get(pid)
         if parcel is None or not cmd["feasible"] or not math.isfinite(cmd["r_s"]):
             continue
         t_rs = parcel["scan_time"] + (cmd["r_s"] - parcel["scan_position_x"]) / belt_speed
-        leads.append(t_rs - cmd["received_sim"])
+        sent = cmd["stamp"] if cmd.get("stamp", 0.0) > 0.0 else cmd["received_sim"]
+        leads.append(t_rs - sent)
     return leads
 
 

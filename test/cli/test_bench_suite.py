@@ -10,6 +10,7 @@ from fence_sorter.verification.bench_suite import (
     END,
     lost,
     message_counts,
+    stream_sim_span,
     unpaced_rtf,
     write_section,
 )
@@ -47,15 +48,18 @@ def test_lost_messages_counts_every_subscriber_short() -> None:
     assert lost(counts) == 2  # one parcel missing at the controller, one command at the simulator
 
 
-def test_unpaced_rtf_counts_the_stream_not_the_empty_belt_before_it() -> None:
-    """Heartbeats each wall second: 200 s of empty belt in the first second (nothing on it),
-    then the stream from sim 200.5 s at 25x."""
+def test_unpaced_rtf_counts_the_stream_not_the_empty_belt_around_it() -> None:
+    """Heartbeats each wall second: 200 s of empty belt in the first second, the stream from
+    sim 200.5 s to its last outcome at 262 s at 25x, then 100 s of empty belt in a second
+    while the run stops its nodes."""
     rec = Records()
-    sims = [0.1, 200.0, 225.0, 250.0, 275.0]
+    sims = [0.1, 200.0, 225.0, 250.0, 275.0, 375.0]
     rec.diagnostics_history["fence_sorter/simulator"] = [
         {"_wall": str(w), "sim_time_s": str(s)} for w, s in enumerate(sims)
     ]
     rec.parcels = {1: {"scan_time": 200.5}, 2: {"scan_time": 201.7}}
+    rec.outcomes = {1: {"time": 206.0}, 2: {"time": 262.0}}
     assert unpaced_rtf(rec) == 25.0
-    rec.parcels = {}  # no parcel seen: the whole run
-    assert unpaced_rtf(rec) == (275.0 - 0.1) / 4
+    assert stream_sim_span(rec) == 262.0 - 200.5
+    rec.parcels, rec.outcomes = {}, {}  # nothing seen: the whole run
+    assert unpaced_rtf(rec) == (375.0 - 0.1) / 5
