@@ -38,7 +38,7 @@ def register(subparsers) -> None:
     parser.add_argument(
         "--rrd",
         action="store_true",
-        help="the paced run also saves a Rerun recording (measures the logging overhead)",
+        help="both runs also save a Rerun recording (measures the logging overhead)",
     )
     parser.add_argument("--no-write", action="store_true", help="print only")
     parser.set_defaults(func=run)

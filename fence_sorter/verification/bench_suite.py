@@ -120,7 +120,7 @@ def run_bench(
     rrd: bool = False,
 ) -> dict:
     """Both runs; returns the figures (and the raw summaries). ``params`` (NODE:KEY=VALUE)
-    apply to both runs; ``rrd`` makes the paced run save a Rerun recording (deleted after)."""
+    apply to both runs; ``rrd`` makes both runs save a Rerun recording (deleted after)."""
     load0 = os.getloadavg()
     wall0 = time.time()
     probes = [run_probe(PROBE_S)]  # the host's own stalls, before and after the paced run
@@ -170,7 +170,12 @@ def run_bench(
         "rrd": rrd,
         "probes": [asdict(p) for p in probes],
     }
-    unpaced = run_job(RunOptions(parcels=unpaced_parcels, rtf=0.0, params=list(params)), say=say)
+    with tempfile.TemporaryDirectory(prefix="bench_suite_") as tmp:
+        rrd_file = str(Path(tmp) / "unpaced.rrd") if rrd else None
+        unpaced = run_job(
+            RunOptions(parcels=unpaced_parcels, rtf=0.0, params=list(params), rrd=rrd_file),
+            say=say,
+        )
     fig.update(
         {
             "unpaced_exit": unpaced.code,
@@ -281,7 +286,8 @@ def render(fig: dict, command: str, machine: dict, revision: str) -> str:
         lines.append(f"| {topic} | " + ", ".join(f"{k} {v}" for k, v in c.items()) + " |")
     lines += [
         "",
-        f"Unpaced run: `fence-sorter run --parcels {f['unpaced_parcels']} --rtf 0{extra}`: "
+        f"Unpaced run: `fence-sorter run --parcels {f['unpaced_parcels']} --rtf 0{extra}"
+        f"{' --rrd FILE' if f.get('rrd') else ''}`: "
         f"the stream took {f['unpaced_sim_s']:.1f} s of sim "
         f"time (first scan to last outcome) at {f['unpaced_rtf']:.1f}x real time (sim over "
         "wall time between the simulator's heartbeats around it, /clock, states and markers "
