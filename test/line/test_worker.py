@@ -267,21 +267,30 @@ def test_unpaced_lockstep_holds_a_parcel_to_divert_for_its_command():
         lp.close()
 
 
-def test_unpaced_loop_keeps_within_publish_lead_of_what_the_node_published():
-    """rtf 0: the loop waits for the node (Gauges.PUBLISHED) so it is never more than
-    publish_lead of sim time ahead of the /clock the other nodes run on (they scan parcels
-    and plan commands on that clock)."""
-    settings = LoopSettings(period=1e-3, rtf=0.0, warm_up=False, publish_lead=0.1)
-    lp = LineProcess(CONFIG, None, settings)
+@pytest.mark.parametrize(
+    "gauge, lead",
+    [(Gauges.PUBLISHED, 0.1), (Gauges.SCAN_LIMIT, 0.0)],
+    ids=["publish_lead", "scan_limit"],
+)
+def test_unpaced_loop_waits_for_the_node(gauge: int, lead: float):
+    """rtf 0: the loop stays within publish_lead of the sim time the node has published
+    (Gauges.PUBLISHED: the scanner and the controller plan on that /clock), and does not pass
+    Gauges.SCAN_LIMIT (the scanner's progress plus scan_lead, written by the node)."""
+    if gauge == Gauges.PUBLISHED:
+        settings = LoopSettings(period=1e-3, rtf=0.0, warm_up=False, publish_lead=lead)
+        lp = LineProcess(CONFIG, None, settings)
+    else:
+        settings = LoopSettings(period=1e-3, rtf=0.0, warm_up=False)
+        lp = LineProcess(CONFIG, None, settings, scan_limit=0.0)  # held at the start
     step = settings.publish_every * settings.period  # sim time of one unpaced cycle
     try:
         lp.wait_ready(60.0)
         g = lp.gauges
-        time.sleep(0.5)  # publish nothing (what it sent fits in the pipe)
-        assert g.value(Gauges.SIM_TIME) <= 0.1 + step + 1e-9
-        g.header[Gauges.PUBLISHED] = 5.0  # "published" up to 5 s
+        time.sleep(0.5)  # the node publishes nothing, the scanner reports nothing
+        assert g.value(Gauges.SIM_TIME) <= lead + step + 1e-9
+        g.header[gauge] = 5.0  # published (reported) up to 5 s
         time.sleep(0.5)
-        assert 5.0 <= g.value(Gauges.SIM_TIME) <= 5.1 + step + 1e-9
+        assert 5.0 <= g.value(Gauges.SIM_TIME) <= 5.0 + lead + step + 1e-9
         lp.send(("stop",))
         list(lp.frames())
         assert lp.proc.wait(timeout=10.0) == 0
@@ -289,28 +298,10 @@ def test_unpaced_loop_keeps_within_publish_lead_of_what_the_node_published():
         lp.close()
 
 
-def test_unpaced_loop_stops_at_the_scan_limit():
-    """rtf 0: the loop does not pass Gauges.SCAN_LIMIT (the scanner's progress plus a lead,
-    written by the node; inf when nobody reports progress)."""
-    settings = LoopSettings(period=1e-3, rtf=0.0, warm_up=False)
-    free = LineProcess(CONFIG, None, settings)
+def test_no_scan_limit_unless_one_is_given():
+    lp = LineProcess(CONFIG, None, LoopSettings(period=1e-3, rtf=0.0, warm_up=False))
     try:
-        assert free.gauges.value(Gauges.SCAN_LIMIT) == math.inf  # no limit unless given one
-    finally:
-        free.close()
-    lp = LineProcess(CONFIG, None, settings, scan_limit=0.0)  # held at the start
-    step = settings.publish_every * settings.period
-    try:
-        g = lp.gauges
-        lp.wait_ready(60.0)
-        time.sleep(0.5)
-        assert g.value(Gauges.SIM_TIME) <= step + 1e-9
-        g.header[Gauges.SCAN_LIMIT] = 3.0
-        time.sleep(0.5)
-        assert 3.0 <= g.value(Gauges.SIM_TIME) <= 3.0 + step + 1e-9
-        lp.send(("stop",))
-        list(lp.frames())
-        assert lp.proc.wait(timeout=10.0) == 0
+        assert lp.gauges.value(Gauges.SCAN_LIMIT) == math.inf
     finally:
         lp.close()
 

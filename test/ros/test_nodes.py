@@ -34,14 +34,11 @@ def resolve_executable(name: str) -> Path:
 
 
 @pytest.fixture
-def listener(domain_id: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
-    """An rclpy node in the test process listening on /diagnostics."""
+def test_node(domain_id: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    """An rclpy node in the test process, on a context of its own, and its executor."""
     import rclpy
-    from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
-
-    from fence_sorter.nodes.qos import RELIABLE_QOS
 
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     monkeypatch.setenv("ROS_LOG_DIR", str(tmp_path / "ros_log_listener"))
@@ -50,16 +47,27 @@ def listener(domain_id: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
         context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO
     )
     node = rclpy.create_node("test_listener", context=context)
-    received: list = []
-    node.create_subscription(DiagnosticArray, "/diagnostics", received.append, RELIABLE_QOS)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     try:
-        yield executor, received
+        yield node, executor
     finally:
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown(context=context)
+
+
+@pytest.fixture
+def listener(test_node):
+    """The test node listening on /diagnostics."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    from fence_sorter.nodes.qos import RELIABLE_QOS
+
+    node, executor = test_node
+    received: list = []
+    node.create_subscription(DiagnosticArray, "/diagnostics", received.append, RELIABLE_QOS)
+    return executor, received
 
 
 @pytest.mark.parametrize("name", sorted(NODES))
@@ -107,29 +115,17 @@ def test_out_of_range_parameter_is_refused(env: dict[str, str], param: str) -> N
 
 
 def test_scanner_on_the_wall_clock_publishes_its_stream_in_order(
-    env: dict[str, str], domain_id: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    env: dict[str, str], test_node
 ) -> None:
     """Without use_sim_time the scanner checks the scan line on a wall-clock timer (with sim
     time it checks on every /clock update, which the suite's tests cover): each parcel comes
     once, in order, with its scan time."""
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.signals import SignalHandlerOptions
-
     from fence_sorter.nodes.qos import RELIABLE_QOS
     from fence_sorter_msgs.msg import Parcel
 
-    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    monkeypatch.setenv("ROS_LOG_DIR", str(tmp_path / "ros_log_listener"))
-    context = rclpy.Context()
-    rclpy.init(
-        context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO
-    )
-    node = rclpy.create_node("test_parcels", context=context)
+    node, executor = test_node
     got: list = []
     node.create_subscription(Parcel, "/parcels", got.append, RELIABLE_QOS)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
     cmd = [
         str(resolve_executable("scanner")),
         "--ros-args",
@@ -138,19 +134,14 @@ def test_scanner_on_the_wall_clock_publishes_its_stream_in_order(
         "-p", "wait_for_subscribers:=1",
         "-p", "tick_period:=0.01",
     ]  # fmt: skip
-    try:
-        with managed_process(cmd, env) as proc:
-            deadline = time.monotonic() + TIMEOUT
-            while len(got) < 3 and time.monotonic() < deadline:
-                assert proc.poll() is None, proc.communicate()
-                executor.spin_once(timeout_sec=0.1)
-            received_at = time.time()
-            proc.send_signal(signal.SIGTERM)
-            proc.communicate(timeout=TIMEOUT)
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown(context=context)
+    with managed_process(cmd, env) as proc:
+        deadline = time.monotonic() + TIMEOUT
+        while len(got) < 3 and time.monotonic() < deadline:
+            assert proc.poll() is None, proc.communicate()
+            executor.spin_once(timeout_sec=0.1)
+        received_at = time.time()
+        proc.send_signal(signal.SIGTERM)
+        proc.communicate(timeout=TIMEOUT)
     assert [m.parcel_id for m in got] == [1, 2, 3]
     stamps = [m.scan_time.sec + 1e-9 * m.scan_time.nanosec for m in got]
     assert stamps == sorted(stamps)
