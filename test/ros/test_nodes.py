@@ -104,7 +104,9 @@ def test_invalid_parameter_is_refused_without_traceback(env: dict[str, str]) -> 
     assert "Traceback" not in out + err
 
 
-@pytest.mark.parametrize("param", ["real_time_factor:=1e6", "loop_cpu:=-5", "command_wait:=120.0"])
+@pytest.mark.parametrize(
+    "param", ["real_time_factor:=1e6", "loop_cpu:=-5", "command_wait:=120.0", "scan_lead:=-1.0"]
+)
 def test_out_of_range_parameter_is_refused(env: dict[str, str], param: str) -> None:
     cmd = [str(resolve_executable("simulator")), "--ros-args", "-p", param]
     with managed_process(cmd, env) as proc:
