@@ -625,6 +625,8 @@ class SimulatorNode(FenceSorterNode):
             "sim_time_s": f"{sim_t:.3f}",
             "real_time_factor_target": f"{self.rtf:g}",
             "real_time_factor_achieved": f"{rtf:.3f}",
+            # unpaced: how far the scanner's progress lets the line run (-inf: no report yet)
+            "scan_limit_s": f"{self._scan_limit:.3f}",
             "cycles": str(cycles),
             "deadline_misses": str(misses),
             "catch_up_slips": str(slips),
