@@ -216,8 +216,10 @@ def test_run_bag_has_every_topic_and_consistent_counts(recorded_run):
     assert counts["/sort_outcomes"] == 3 == summary["outcome_messages"]
     assert counts["/fence_commands"] == summary["command_messages"]
     # one snapshot publishes /clock, /fence_state and /joint_states together (reliable, reliable,
-    # best effort)
-    assert counts["/clock"] == counts["/joint_states"] > 100
+    # best effort); Ctrl-C shuts the simulator's context down at once, which may fall between
+    # the /clock and the /joint_states of its last snapshot (seen once, in CI under load)
+    assert counts["/joint_states"] > 100
+    assert 0 <= counts["/clock"] - counts["/joint_states"] <= 1
     assert counts["/clock"] >= counts["/fence_state"] >= 0.99 * counts["/clock"]
     # the recorder's own account at close: everything received was written
     log = (bag.parent / "logs" / "recorder.log").read_text()
