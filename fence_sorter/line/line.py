@@ -739,9 +739,8 @@ class SortingLine:
                 n, depth, rate, px, py = float(e[3]), float(e[4]), float(e[5]), e[6], e[7]
                 # at the line time, not where the solve has run ahead to (prefetch)
                 stiff = float(e[HELD + 1]) if n > 0 else 0.0
-                stage = Stage(int(e[HELD]))
                 parcels.append((
-                    spec.parcel_id, stage.value, x, y_, yaw, vx, vy, wz, n, stiff, depth,
+                    spec.parcel_id, int(e[HELD]), x, y_, yaw, vx, vy, wz, n, stiff, depth,
                     rate, (float(px), float(py)), *dims,
                     tuple(world_corners(p.body, x, y_, yaw)), spec.divert,
                 ))  # fmt: skip

@@ -142,7 +142,6 @@ class Gauges:
     def __init__(self, fd: int | None = None) -> None:
         bins = LatenessHistogram.BINS + 1
         size = 8 * (self.HEADER + 2 * bins)
-        created = fd is None
         if fd is None:
             fd = os.memfd_create("fence_sorter_gauges")
             os.ftruncate(fd, size)
@@ -152,8 +151,6 @@ class Gauges:
         #: and (written by the node) the sim time of the last snapshot it published [s] and
         #: the sim time an unpaced loop may not pass (the scanner's progress; inf: no limit)
         self.header = np.ndarray((self.HEADER,), np.float64, self._mm, 0)
-        if created:
-            self.header[self.SCAN_LIMIT] = math.inf
         #: lateness and work histogram counts (LatenessHistogram bins)
         self.counts = np.ndarray((2, bins), np.int64, self._mm, 8 * self.HEADER)
 
@@ -417,7 +414,7 @@ class PacedLoop:
             self.take_inputs()
         return line.t
 
-    def wait_for_publisher(self) -> None:
+    def wait_for_node(self) -> None:
         """Unpaced: wait until the node has published the line up to ``publish_lead`` behind
         its time, and while the line has reached ``Gauges.SCAN_LIMIT`` (the scanner's
         progress plus a lead, written by the node). The other nodes run on the published
@@ -469,7 +466,7 @@ class PacedLoop:
             # outcomes are on their way (a cycle misses when `done` is late). Captures of the
             # line at that time, serialising and writing frames, garbage collection and
             # statistics use the slack before the next cycle advances the line
-            done = advanced = clock()
+            done = clock()
             # the cycle captures the line's state as plain numbers; the node renders it
             cap = None
             if k >= next_pub:
@@ -516,13 +513,11 @@ class PacedLoop:
                 )
             elif rtf == 0.0:  # unpaced: the reader sets the pace
                 out.drain(UNPACED_BACKLOG, self.inbox)
-                self.wait_for_publisher()
+                self.wait_for_node()
             if len(out.buf) > PACED_BACKLOG:
                 raise RuntimeError(f"{len(out.buf)} bytes unsent: the node stopped reading")
             if self.trace is not None and rtf > 0.0:
-                self.trace.record(
-                    k, (deadline, wake, advanced, captured, collected, clock()), flags
-                )
+                self.trace.record(k, (deadline, wake, done, captured, collected, clock()), flags)
             if self.rtf != pacer.rtf:  # changed at run time: a new grid from here
                 if self.rtf == 0.0 and os.sched_getscheduler(0) == os.SCHED_FIFO:
                     os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))

@@ -336,8 +336,8 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None]) -> RunResult:
                 # come up long after the simulator's clock started)
                 sim_start = min(p["scan_time"] for p in rec.parcels.values()) - START_DELAY
             # past the stream's end in sim time with no outcome for a while in wall time (at
-            # rtf 0 the /clock seen here runs ahead of the outcomes still on their way: 30 s of
-            # sim time is a fraction of a second of wall time there)
+            # rtf 0 the sim time seen here runs ahead of the outcomes still on their way: 30 s
+            # of sim time is a fraction of a second of wall time there)
             if (
                 sim_start is not None
                 and rec.sim_time - sim_start > plan.sim_duration + 30.0
