@@ -17,9 +17,12 @@ loop and always runs the Python one.
 
 from __future__ import annotations
 
+import gc
 import math
 import os
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import numpy as np
 
@@ -104,7 +107,7 @@ class CompiledSolve:
         body = model.body
         v_ref = max(model.belt, 0.1)
         # filled as a list, one array at the end (a numpy item assignment per field cost more
-        # than the rest of this constructor on a cold cache, as after the bench's gc.collect)
+        # than the rest of this constructor on a cold cache)
         cfg = [0.0] * K.N_CFG
         cfg[K.G_H_NOM] = h_nom
         cfg[K.G_T_END] = t_end
@@ -369,6 +372,20 @@ def run_compiled(model):
     )
 
 
+@contextmanager
+def collector_off() -> Iterator[None]:
+    """The garbage collector off for a timed call (as ``timeit`` does) and back in its previous
+    state after it, also when the call raises. A collection belongs before a block of timed
+    calls, not before each: it walks every live object and leaves the CPU caches cold."""
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()
+
+
 BENCH_SCENES = ("impact_flexible", "slide_flexible", "positioned_stiff", "arbitrary_stiff")
 
 
@@ -377,7 +394,6 @@ def compare_engines(scenes=BENCH_SCENES, repeats: int = 7) -> list[dict]:
     freshly built model, the garbage collector off during the call and a collection before the
     repeats), python and compiled loop interleaved, medians of ``repeats``."""
     import dataclasses as dc
-    import gc
     import statistics
 
     from fence_sorter.scene import load_scene
@@ -397,17 +413,12 @@ def compare_engines(scenes=BENCH_SCENES, repeats: int = 7) -> list[dict]:
         gc.collect()  # before the block of repeats; the collector is off during each call
         for _ in range(repeats):
             for e, s in runs.items():
-                enabled = gc.isenabled()
-                gc.disable()
-                try:
+                with collector_off():
                     c0 = time.process_time()
                     t0 = time.perf_counter()
                     results[e] = simulate(s, SortingModel(s))
                     walls[e].append(time.perf_counter() - t0)
                     cpus[e].append(time.process_time() - c0)
-                finally:
-                    if enabled:
-                        gc.enable()
         med = {e: statistics.median(w) for e, w in walls.items()}
         cpu = {e: statistics.median(c) for e, c in cpus.items()}
         sim = results["compiled"].sim_time

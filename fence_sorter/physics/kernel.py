@@ -131,7 +131,7 @@ def pack(
 ) -> np.ndarray:
     """The packed parameter vector ``P`` (SI units)."""
     # filled as a list, one array at the end (a NumPy item assignment per field costs ~1 us on
-    # a cold cache, as after the bench's gc.collect(); a model is built per event)
+    # a cold cache; a model is built per event)
     p = [0.0] * N_PARAMS
     p[P_ALPHA_K], p[P_T1] = alpha_k, t1
     p[P_MASS], p[P_INERTIA], p[P_FMAX], p[P_TMAX] = mass, inertia, f_max, t_max

@@ -239,8 +239,8 @@ def _load_geometry(parcel: ParcelParams, conveyor: ConveyorParams, r_s: float):
     """The load's body, corner and face-normal arrays, initial pose (C_s, yaw) and reach (the
     largest corner distance from C_s): pure functions of frozen parameters, shared by every model
     of the same load (the optimiser and the line build a model per event for the same parcels;
-    after the bench's gc.collect() these few NumPy and dataclass calls cost ~0.13 ms of a
-    stiff event). The arrays are shared, so nothing may write to them (the kernels only read)."""
+    on a cold cache these few NumPy and dataclass calls cost ~0.13 ms of a stiff event). The
+    arrays are shared, so nothing may write to them (the kernels only read)."""
     body = parcel_body(parcel, conveyor)
     corners = np.array(body.corners, dtype=float)
     normals = np.array(body.face_normals, dtype=float)

@@ -177,19 +177,15 @@ def timed_run(sc, force_border: bool = False) -> tuple[Outcome, float, float]:
     the timed call, and none runs just before it to leave the caches cold (call :func:`collect`
     before a block of calls instead). Every timed run of the benchmark, ours and SciPy's, goes
     through here."""
+    from fence_sorter.physics.engine import collector_off
     from fence_sorter.physics.simulate import simulate
 
-    enabled = gc.isenabled()
-    gc.disable()
-    try:
+    with collector_off():
         c0 = time.process_time()
         t0 = time.perf_counter()
         r = simulate(sc, build_model(sc, force_border))
         wall = time.perf_counter() - t0
         cpu = time.process_time() - c0
-    finally:
-        if enabled:
-            gc.enable()
     return Outcome.of(r), wall, cpu
 
 
