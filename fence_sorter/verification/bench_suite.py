@@ -91,10 +91,7 @@ def unpaced_rtf(records) -> float:
     hist = [
         h for h in records.diagnostics_history.get("fence_sorter/simulator", []) if "_wall" in h
     ]
-    scans = [p["scan_time"] for p in records.parcels.values()]
-    ends = [o["time"] for o in records.outcomes.values()]
-    start = min(scans) if scans else -math.inf
-    end = max(ends) if ends else math.inf
+    start, end = _stream_bounds(records)
     sims = [_num(h, "sim_time_s") for h in hist]
     first = max((i for i, t in enumerate(sims) if t <= start), default=0)
     last = min((i for i, t in enumerate(sims) if t >= end), default=len(hist) - 1)
@@ -105,11 +102,17 @@ def unpaced_rtf(records) -> float:
     return d_sim / d_wall if d_wall > 0 else math.nan
 
 
-def stream_sim_span(records) -> float:
-    """Sim time from the first parcel's scan to the last outcome [s] (NaN without both)."""
+def _stream_bounds(records) -> tuple[float, float]:
+    """Sim time of the first parcel's scan and of the last outcome (-inf / inf if none)."""
     scans = [p["scan_time"] for p in records.parcels.values()]
     ends = [o["time"] for o in records.outcomes.values()]
-    return max(ends) - min(scans) if scans and ends else math.nan
+    return (min(scans) if scans else -math.inf), (max(ends) if ends else math.inf)
+
+
+def stream_sim_span(records) -> float:
+    """Sim time from the first parcel's scan to the last outcome [s] (NaN without both)."""
+    start, end = _stream_bounds(records)
+    return end - start if math.isfinite(start) and math.isfinite(end) else math.nan
 
 
 def run_bench(
