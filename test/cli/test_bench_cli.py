@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import subprocess
 import sys
@@ -140,8 +141,7 @@ def test_bench_keeps_the_node_suite_section_of_the_file(tmp_path):
 def test_a_rung_that_meets_the_error_by_cancellation_is_not_chosen() -> None:
     """DOP853 on arbitrary_stiff (session 6): rtol 1e-2 lands within 2.5e-4 of our reference
     by a cancellation of errors, rtol 1e-3 and 1e-4 are off by ~1e-2; rtol 1e-5 and 1e-6 hold.
-    The loosest *sustained* rung is chosen, and without a SciPy reference the ladder runs on
-    until two rungs in a row meet the error."""
+    The loosest *sustained* rung is chosen; a rung whose next one did not run stands."""
     from types import SimpleNamespace
 
     ok = SimpleNamespace(success=True)
@@ -149,5 +149,64 @@ def test_a_rung_that_meets_the_error_by_cancellation_is_not_chosen() -> None:
     runs = [B.LadderRun("scipy:DOP853", r, r, 0.01, ok, e, e, False) for r, e in errors.items()]
     assert B._loosest(runs, "scipy:DOP853", "ref", 9.5e-4).rtol == 1e-5
     assert B._loosest(runs[:1], "scipy:DOP853", "ref", 9.5e-4).rtol == 1e-2  # next not run
-    assert not B._met_twice(runs[:2], "scipy:DOP853", 9.5e-4)
-    assert B._met_twice(runs, "scipy:DOP853", 9.5e-4)
+
+
+def _fake_rungs(errors: dict[str, dict[float, float]], walls: dict[str, float]):
+    """A ``run_rung`` over a table of peak-force errors (both metrics the same) and per-method
+    wall times that grow 10 % a rung; it records which rungs were run."""
+    from types import SimpleNamespace
+
+    called: list[tuple[str, float]] = []
+
+    def run_rung(method: str, rtol: float):
+        called.append((method, rtol))
+        e = errors[method][rtol]
+        ok = math.isfinite(e)
+        wall = walls[method] * 1.1 ** -math.log10(rtol)
+        return B.LadderRun(method, rtol, rtol, wall, SimpleNamespace(success=ok), e, e, False)
+
+    return run_rung, called
+
+
+LADDER = (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7)
+
+
+def test_the_fastest_candidate_is_confirmed_at_the_next_rung() -> None:
+    """positioned_stiff (docs/accuracy, session 7): LSODA meets 3.2e-4 at rtol 1e-3 (8.3e-6)
+    but not at 1e-4 (8.2e-4); rtol 1e-5 and tighter hold. RK45 holds from 1e-2 on but is
+    slower. The search must run LSODA's 1e-4 rung, go on to 1e-5, confirm it at 1e-6, and the
+    choice is LSODA rtol 1e-5; with a SciPy reference the refuted rung used to be chosen."""
+    errors = {
+        "scipy:RK45": {1e-2: 2.4e-5, 1e-3: 1.2e-4, 1e-4: 6.2e-5, 1e-5: 4.3e-5},
+        "scipy:LSODA": {1e-2: 8.3e-4, 1e-3: 8.3e-6, 1e-4: 8.2e-4, 1e-5: 1.1e-4, 1e-6: 9e-7},
+    }
+    run_rung, called = _fake_rungs(errors, {"scipy:RK45": 0.010, "scipy:LSODA": 0.005})
+    for gap in (math.inf, 3.5e-6):  # without and with a SciPy reference
+        called.clear()
+        runs = B.search_rungs(list(errors), LADDER, run_rung, 3.2e-4, gap)
+        assert ("scipy:LSODA", 1e-4) in called and ("scipy:LSODA", 1e-6) in called
+        assert ("scipy:RK45", 1e-3) not in called  # slower: its candidate is not confirmed
+        picks = {m: B._loosest(runs, m, "ref", 3.2e-4) for m in errors}
+        assert picks["scipy:LSODA"].rtol == 1e-5 and picks["scipy:RK45"].rtol == 1e-2
+        assert len(called) == len(set(called))  # no rung run twice
+
+
+def test_a_confirmed_fastest_candidate_ends_the_search() -> None:
+    """A fastest candidate whose next rung holds ends the search at once; a refuted method
+    that never reaches the error again drops out and the next fastest is confirmed."""
+    errors = {
+        "scipy:LSODA": {1e-2: 1e-5, 1e-3: 2e-5, 1e-4: 1e-5},
+        "scipy:BDF": {1e-2: 1e-5, 1e-3: 5e-3, 1e-4: 5e-3, 1e-5: 5e-3, 1e-6: 5e-3, 1e-7: 5e-3},
+        "scipy:Radau": {1e-2: 1e-4, 1e-3: 1e-4},
+    }
+    run_rung, called = _fake_rungs(
+        errors, {"scipy:LSODA": 0.009, "scipy:BDF": 0.001, "scipy:Radau": 0.05}
+    )
+    runs = B.search_rungs(list(errors), LADDER, run_rung, 3e-4, math.inf)
+    assert [c for c in called if c[0] == "scipy:LSODA"] == [
+        ("scipy:LSODA", 1e-2),
+        ("scipy:LSODA", 1e-3),
+    ]
+    assert len([c for c in called if c[0] == "scipy:BDF"]) == len(LADDER)
+    assert B._loosest(runs, "scipy:BDF", "ref", 3e-4) is None
+    assert called.count(("scipy:Radau", 1e-3)) == 0
