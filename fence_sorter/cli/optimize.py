@@ -152,6 +152,13 @@ def register(subparsers) -> None:
         help="continue a sweep from its saved results (default: yes)",
     )
     p.add_argument(
+        "--repair",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="after a sweep, re-solve each looser problem whose optimum lies below a tighter "
+        "neighbour's, starting from the tighter optima (default: yes)",
+    )
+    p.add_argument(
         "--max-points",
         type=int,
         default=None,

@@ -19,7 +19,7 @@ import functools
 import itertools
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -28,7 +28,8 @@ from fence_sorter.capacity.constraints import CONSTRAINT_TEXT, violated
 from fence_sorter.capacity.evaluate import evaluate_stroke, planning_scenario
 from fence_sorter.capacity.formulas import pitch
 from fence_sorter.jsonsafe import json_safe
-from fence_sorter.optimize.problem import VARIABLES, OptimizeSpec
+from fence_sorter.optimize.problem import UNITS, VARIABLES, OptimizeSpec
+from fence_sorter.physics.params import ParameterError
 
 #: normalisation of each constraint's violation in the energy (its natural scale)
 SCALES = {7: 1.0, 8: 0.7, 9: 1.0}
@@ -273,12 +274,18 @@ def _parallelism(executor) -> int:
 
 
 def optimize(
-    spec: OptimizeSpec, executor: concurrent.futures.Executor | None = None
+    spec: OptimizeSpec,
+    executor: concurrent.futures.Executor | None = None,
+    starts: Sequence[Mapping[str, float]] = (),
 ) -> OptimumResult:
     """Maximise W_t (1) for ``spec``; twin evaluations on ``executor`` (None: this process).
 
-    Deterministic for a given spec (seed) whatever the executor. Raises ParameterError for an
-    invalid spec; an infeasible problem returns ``feasible=False`` with the reason.
+    ``starts``: points X (R_s, v, t1, R_z) evaluated before the search; the best feasible one
+    replaces the first member of the initial population, so the answer is never below a
+    feasible start (a sweep starts a looser problem from a tighter neighbour's optimum, which
+    is feasible for it). Deterministic for a given spec (seed) and starts whatever the
+    executor. Raises ParameterError for an invalid spec or a start outside the ranges or off
+    a fixed value; an infeasible problem returns ``feasible=False`` with the reason.
     """
     from scipy.optimize import differential_evolution
 
@@ -289,6 +296,7 @@ def optimize(
     fixed = spec.fixed_values()
     free = spec.free_variables()
     history: list[dict] = []
+    starts = [_check_start(X, ranges, fixed, i) for i, X in enumerate(starts)]
 
     def full(x: Sequence[float]) -> dict[str, float]:
         X = dict(fixed)
@@ -299,6 +307,11 @@ def optimize(
     if why is not None:
         return _result(spec, ev, None, t0, history, why)
 
+    x0 = None
+    feasible_starts = [r for r in ev.batch(starts) if r["feasible"]]
+    if feasible_starts and free:
+        best_start = max(feasible_starts, key=lambda r: r["W_t"])
+        x0 = [best_start["X"][n] for n in free]
     if not free:
         ev.batch([full(())])
     else:
@@ -337,9 +350,34 @@ def optimize(
             updating="deferred",
             workers=workers,
             callback=callback,
+            x0=x0,
         )
         _refine(spec, ev, ranges, free, full)
     return _result(spec, ev, ev.best_feasible(), t0, history, None)
+
+
+def _check_start(
+    X: Mapping[str, float], ranges: dict, fixed: dict[str, float], i: int
+) -> dict[str, float]:
+    """A start point as a plain dict; ParameterError if it misses a variable, lies outside
+    the ranges or differs from a fixed value."""
+    missing = [n for n in VARIABLES if n not in X]
+    if missing:
+        raise ParameterError(f"starts[{i}] lacks {', '.join(missing)}; give all of {VARIABLES}")
+    out = {n: float(X[n]) for n in VARIABLES}
+    for n, v in out.items():
+        if n in fixed:
+            if abs(v - fixed[n]) > 1e-12 * max(1.0, abs(fixed[n])):
+                raise ParameterError(
+                    f"starts[{i}].{n} = {v:g} differs from the fixed {fixed[n]:g}"
+                )
+            continue
+        lo, hi = ranges[n]
+        if not lo <= v <= hi:
+            raise ParameterError(
+                f"starts[{i}].{n} = {v:g} {UNITS[n]} outside its range [{lo:g}, {hi:g}]"
+            )
+    return out
 
 
 def _pow2(n: int) -> bool:

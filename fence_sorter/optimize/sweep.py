@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import csv
 import hashlib
+import io
 import json
 import math
 import os
@@ -95,6 +96,8 @@ RESULT_COLUMNS: dict[str, type] = {
     "infeasible": str,
     "evaluations": int,
     "wall_time": float,
+    # keys of the points whose optima started this search (the nesting repair), space-separated
+    "started_from": str,
 }
 COLUMNS: dict[str, type] = {"key": str, **INPUT_COLUMNS, **RESULT_COLUMNS}
 
@@ -176,12 +179,16 @@ def read_rows(path: Path, *, repair: bool = False) -> list[dict]:
     good_lines: list[str] = []
     rows: list[dict] = []
     bad = 0
+    old = False
     for i, line in enumerate(lines):
         if not line.endswith("\n"):  # cut mid-write
             bad += 1
             continue
         if i == 0:
-            if line.rstrip("\r\n").split(",") != list(COLUMNS):
+            header = line.rstrip("\r\n").split(",")
+            if header == list(COLUMNS)[:-1]:  # before "started_from": none was started
+                old = True
+            elif header != list(COLUMNS):
                 raise ValueError(
                     f"{path}: header differs from this version's columns; move the file away "
                     "to recompute the sweep"
@@ -190,13 +197,24 @@ def read_rows(path: Path, *, repair: bool = False) -> list[dict]:
             continue
         try:
             (cells,) = list(csv.reader([line]))
-            rows.append(parse_row(cells))
+            rows.append(parse_row(cells + [""] if old else cells))
             good_lines.append(line)
         except ValueError:
             bad += 1
-    if repair and bad:
+    if repair and old:  # rewritten in this version's columns, so appends stay aligned
+        path.write_text(_csv_text(rows))
+    elif repair and bad:
         path.write_text("".join(good_lines))
     return rows
+
+
+def _csv_text(rows: Iterable[Mapping]) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(list(COLUMNS))
+    for r in rows:
+        w.writerow(format_row(r))
+    return buf.getvalue()
 
 
 class RowWriter:
@@ -306,22 +324,25 @@ def result_row(inputs: Mapping, res) -> dict:
         "infeasible": infeasible.replace("\n", " "),
         "evaluations": int(d.get("evaluations") or 0),
         "wall_time": num(d.get("wall_time")),
+        "started_from": "",
     }
     return row
 
 
-def solve_point(inputs: Mapping) -> dict:
-    """One optimum (serial optimiser: the sweep parallelises over points); the result columns."""
+def solve_point(inputs: Mapping, starts: Sequence[Mapping] = (), started_from: str = "") -> dict:
+    """One optimum (serial optimiser: the sweep parallelises over points); the result columns.
+    ``starts``: points X the search starts from (:func:`repair_nesting`), ``started_from``
+    the keys of the points they came from."""
     from fence_sorter.optimize import solve
 
     spec = make_spec(inputs)
-    d = solve.optimize(spec, executor=None).to_dict()
+    d = solve.optimize(spec, executor=None, starts=starts).to_dict()
     if d.get("feasible") and hasattr(solve, "evaluate_point"):
         # the figures of the constraints the profile leaves out (Fig. 6f: exit speed without
         # (12)): one more twin run of the optimum, worst over the loads of the case
         full = solve.evaluate_point(spec, d["X"])["margins"]
         d["margins"] = {**{int(c): m for c, m in full.items()}, **d["margins"]}
-    return result_row(inputs, d)
+    return {**result_row(inputs, d), "started_from": started_from}
 
 
 # -- sweep definitions --------------------------------------------------------------------------
@@ -726,44 +747,85 @@ NESTED_RUNS = (("fig7", "fig6"), ("fig10", "fig8"))
 LIMIT_SERIES = ("fig3", "fig5", "fig6", "fig7", "fig8", "fig10")
 
 
-def nesting_violations(
-    rows_of: Callable[[str], Sequence[dict]], tol: float = 0.005
-) -> tuple[int, list[str]]:
-    """Check the optima against the nesting of their problems: a looser limit (w_dop,
-    a_Ndop) or one constraint less widens the feasible set, so its optimum W_t (1) cannot be
-    lower. ``rows_of(name)`` gives a sweep's rows; returns (pairs checked, the pairs where the
-    tighter problem's W_t exceeds the looser one's by more than ``tol``, relative)."""
-
-    def w(r) -> float:
-        return r["W_t"] if r["feasible"] else 0.0
-
-    pairs, bad = 0, []
-
-    def check(tag: str, tight: dict, loose: dict) -> None:
-        nonlocal pairs
-        pairs += 1
-        if w(tight) > w(loose) * (1.0 + tol):
-            bad.append(f"{tag}: tighter {w(tight):.0f} > looser {w(loose):.0f} pcs/h")
-
+def nested_pairs(rows_of: Callable[[str], Sequence[dict]]) -> list[tuple[str, dict, dict, str]]:
+    """Every nested pair of optima in the rows given by ``rows_of(name)``: (what the pair is,
+    the tighter problem's row, the looser problem's row, the run (CSV) of the looser one).
+    A looser limit (w_dop, a_Ndop) or one constraint less ((12)) widens the feasible set."""
+    out = []
     for tight, loose in NESTED_RUNS:
         sd = get_sweep(tight)
         other = {(r[sd.x], r[sd.series]): r for r in rows_of(loose)}
         for r in rows_of(tight):
             k = (r[sd.x], r[sd.series])
             if k in other:
-                check(f"{tight} vs {loose} at {sd.x} {k[0]:g}, {sd.series} {k[1]:g}", r, other[k])
+                tag = f"{tight} vs {loose} at {sd.x} {k[0]:g}, {sd.series} {k[1]:g}"
+                out.append((tag, r, other[k], get_sweep(loose).run))
     for name in LIMIT_SERIES:
         sd = get_sweep(name)
         rs = rows_of(name)
         for xv in sorted({r[sd.x] for r in rs}):
             col = sorted((r for r in rs if r[sd.x] == xv), key=lambda r: r[sd.series])
             for a, b in zip(col, col[1:], strict=False):
-                check(
-                    f"{name} at {sd.x} {xv:g}: {sd.series} {a[sd.series]:g} vs {b[sd.series]:g}",
-                    a,
-                    b,
-                )
-    return pairs, bad
+                tag = f"{name} at {sd.x} {xv:g}: {sd.series} {a[sd.series]:g} vs {b[sd.series]:g}"
+                out.append((tag, a, b, sd.run))
+    return out
+
+
+def _w(r: Mapping) -> float:
+    return r["W_t"] if r["feasible"] else 0.0
+
+
+def nesting_violations(
+    rows_of: Callable[[str], Sequence[dict]], tol: float = 0.005
+) -> tuple[int, list[str]]:
+    """Check the optima against the nesting of their problems (:func:`nested_pairs`): the
+    looser problem's optimum W_t (1) cannot be lower. Returns (pairs checked, the pairs where
+    the tighter problem's W_t exceeds the looser one's by more than ``tol``, relative)."""
+    pairs = nested_pairs(rows_of)
+    bad = [
+        f"{tag}: tighter {_w(t):.0f} > looser {_w(lo):.0f} pcs/h"
+        for tag, t, lo, _ in pairs
+        if _w(t) > _w(lo) * (1.0 + tol)
+    ]
+    return len(pairs), bad
+
+
+def repair_nesting(
+    out_dir: str | Path, executor: Executor, tol: float = 0.005, rounds: int = 8
+) -> tuple[int, set[str]]:
+    """Re-solve every looser problem whose optimum lies below a tighter neighbour's, starting
+    the search from the tighter optima (feasible for the looser problem, so the answer cannot
+    be lower); the new rows are appended (the last row of a key wins) and name the points they
+    started from (``started_from``). Repeated while a repair moves a point above its own
+    looser neighbour, at most ``rounds`` times. Returns (points re-solved, runs changed)."""
+    out_dir = Path(out_dir)
+
+    def rows_of(name: str) -> list[dict]:
+        return _order(get_sweep(name), read_rows(out_dir / f"{get_sweep(name).run}.csv"))
+
+    solved, changed = 0, set()
+    for _ in range(rounds):
+        todo: dict[str, tuple[str, dict, list[dict]]] = {}
+        for _tag, tight, loose, run in nested_pairs(rows_of):
+            tried = set(loose["started_from"].split())
+            if _w(tight) > _w(loose) * (1.0 + tol) and tight["key"] not in tried:
+                todo.setdefault(loose["key"], (run, loose, []))[2].append(tight)
+        if not todo:
+            break
+        futures = {}
+        for run, loose, tights in todo.values():
+            inputs = {k: loose[k] for k in INPUT_COLUMNS}
+            starts = [{n: t[n] for n in ("R_s", "v", "t1", "R_z")} for t in tights]
+            keys = set(loose["started_from"].split()) | {t["key"] for t in tights}
+            fut = executor.submit(solve_point, inputs, starts, " ".join(sorted(keys)))
+            futures[fut] = (run, loose["key"], inputs)
+        for fut in as_completed(futures):
+            run, key, inputs = futures[fut]
+            with RowWriter(out_dir / f"{run}.csv") as w:
+                w.write({"key": key, **inputs, **fut.result()})
+            solved += 1
+            changed.add(run)
+    return solved, changed
 
 
 # -- plots --------------------------------------------------------------------------------------
@@ -873,6 +935,8 @@ def main(args) -> int:
         return EXIT_BAD_INPUT
     from fence_sorter.optimize.executor import make_executor
 
+    repair = bool(getattr(args, "repair", True))
+    changed: set[str] = set()
     wall0 = time.perf_counter()
     status = EXIT_OK
     try:
@@ -880,6 +944,13 @@ def main(args) -> int:
             scheduler=getattr(args, "scheduler", None), workers=getattr(args, "workers", None)
         ) as executor:
             run_sweeps(sweeps, out, executor, resume=resume, max_points=max_points)
+            if repair:
+                n_solved, changed = repair_nesting(out, executor)
+                if n_solved:
+                    print(
+                        f"nesting repair: {n_solved} looser problem(s) re-solved from their "
+                        f"tighter neighbours' optima ({', '.join(sorted(changed))})"
+                    )
     except KeyboardInterrupt:
         print(
             "fence-sorter: interrupted; finished points are in the CSV, rerun to resume",
@@ -889,7 +960,9 @@ def main(args) -> int:
     except Exception as exc:
         print(f"fence-sorter: sweep failed: {type(exc).__name__}: {exc}", file=sys.stderr)
         status = EXIT_FAILED
-    for sweep in sweeps:
+    # the sweeps asked for, and any other whose run the repair changed
+    names += [n for n in SWEEPS if n not in names and get_sweep(n).run in changed]
+    for sweep in [get_sweep(n) for n in names]:
         for line in finish(sweep, out, table_path):
             print(line)
     pairs, bad = nesting_violations(lambda n: _order(get_sweep(n), read_rows(_csv(out, n))))
@@ -909,12 +982,14 @@ __all__ = [
     "get_sweep",
     "main",
     "make_spec",
+    "nested_pairs",
     "nesting_violations",
     "parse_names",
     "plot_sweep",
     "point",
     "point_key",
     "read_rows",
+    "repair_nesting",
     "result_row",
     "run_sweep",
     "run_sweeps",

@@ -4,6 +4,7 @@ infeasible problems, bad input, and the Dask path against the process pool."""
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import replace
 
 import pytest
@@ -203,3 +204,24 @@ def test_dask_cluster_gives_the_process_pool_optimum(reduced):
     assert on_dask.X == reduced.X
     assert on_dask.W_t == reduced.W_t
     assert on_dask.evaluations == reduced.evaluations
+
+
+def test_a_looser_problem_started_from_the_tighter_optimum_is_not_lower(reduced, pool):
+    """A looser (11) widens the feasible set: started from the tighter optimum, a search on a
+    starved budget cannot return less."""
+    loose = replace(REDUCED, a_ndop=2.0 * REDUCED.a_ndop, budget=30)
+    r = optimize(loose, pool, starts=[reduced.X])
+    assert r.feasible and r.W_t >= reduced.W_t
+
+
+@pytest.mark.parametrize(
+    ("start", "named"),
+    [
+        ({"R_s": 0.0, "v": 2.0, "t1": 0.5}, "lacks R_z"),
+        ({"R_s": 0.0, "v": 1.0, "t1": 0.5, "R_z": 1.2}, "starts[0].v = 1 differs"),
+        ({"R_s": 3.0, "v": 2.0, "t1": 0.5, "R_z": 1.2}, "starts[0].R_s = 3 m outside"),
+    ],
+)
+def test_a_bad_start_is_refused_naming_it(start, named):
+    with pytest.raises(ParameterError, match=re.escape(named)):
+        optimize(REDUCED, None, starts=[start])
