@@ -311,7 +311,13 @@ def optimize(
     feasible_starts = [r for r in ev.batch(starts) if r["feasible"]]
     if feasible_starts and free:
         best_start = max(feasible_starts, key=lambda r: r["W_t"])
-        x0 = [best_start["X"][n] for n in free]
+        # a hair inside the box: SciPy rescales x0 to [0, 1] and a value on a bound can land
+        # a rounding error outside (the start itself is already evaluated and kept)
+        x0 = [
+            min(max(best_start["X"][n], lo + 1e-9 * (hi - lo)), hi - 1e-9 * (hi - lo))
+            for n in free
+            for lo, hi in [ranges[n]]
+        ]
     if not free:
         ev.batch([full(())])
     else:

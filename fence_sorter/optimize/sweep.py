@@ -791,7 +791,11 @@ def nesting_violations(
 
 
 def repair_nesting(
-    out_dir: str | Path, executor: Executor, tol: float = 0.005, rounds: int = 8
+    out_dir: str | Path,
+    executor: Executor,
+    tol: float = 0.005,
+    rounds: int = 8,
+    progress: bool = False,
 ) -> tuple[int, set[str]]:
     """Re-solve every looser problem whose optimum lies below a tighter neighbour's, starting
     the search from the tighter optima (feasible for the looser problem, so the answer cannot
@@ -819,12 +823,21 @@ def repair_nesting(
             keys = set(loose["started_from"].split()) | {t["key"] for t in tights}
             fut = executor.submit(solve_point, inputs, starts, " ".join(sorted(keys)))
             futures[fut] = (run, loose["key"], inputs)
-        for fut in as_completed(futures):
-            run, key, inputs = futures[fut]
-            with RowWriter(out_dir / f"{run}.csv") as w:
-                w.write({"key": key, **inputs, **fut.result()})
-            solved += 1
-            changed.add(run)
+        bar = _progress(len(futures), 0, "nesting repair", progress)
+        try:
+            for fut in as_completed(futures):
+                run, key, inputs = futures[fut]
+                with RowWriter(out_dir / f"{run}.csv") as w:
+                    w.write({"key": key, **inputs, **fut.result()})
+                solved += 1
+                changed.add(run)
+                if bar is not None:
+                    bar.update(1)
+        finally:
+            for fut in futures:
+                fut.cancel()
+            if bar is not None:
+                bar.close()
     return solved, changed
 
 
@@ -945,7 +958,7 @@ def main(args) -> int:
         ) as executor:
             run_sweeps(sweeps, out, executor, resume=resume, max_points=max_points)
             if repair:
-                n_solved, changed = repair_nesting(out, executor)
+                n_solved, changed = repair_nesting(out, executor, progress=True)
                 if n_solved:
                     print(
                         f"nesting repair: {n_solved} looser problem(s) re-solved from their "

@@ -18,6 +18,7 @@ from fence_sorter.optimize import (
     optimize,
 )
 from fence_sorter.optimize.problem import PAPER_RANGES
+from fence_sorter.optimize.solve import closed_form
 from fence_sorter.physics.params import ParameterError
 
 ALPHA_40 = math.radians(40.0)
@@ -212,6 +213,15 @@ def test_a_looser_problem_started_from_the_tighter_optimum_is_not_lower(reduced,
     loose = replace(REDUCED, a_ndop=2.0 * REDUCED.a_ndop, budget=30)
     r = optimize(loose, pool, starts=[reduced.X])
     assert r.feasible and r.W_t >= reduced.W_t
+
+
+def test_a_start_on_the_bounds_is_accepted():
+    """Sweep optima often sit on a bound (t1 = 0.1 s); SciPy rescales x0 to [0, 1], where
+    t1 = 0.1 of the range [0.1, 1.5] lands at -1.1e-16 and was refused."""
+    spec = replace(REDUCED, constraints=(7,), budget=8)  # (7) alone: decided in closed form
+    start = {"R_s": 1.0, "v": 2.0, "t1": PAPER_RANGES["t1"][0], "R_z": 1.2}
+    r = optimize(spec, None, starts=[start])
+    assert r.feasible and r.W_t >= closed_form(spec, start)[0]
 
 
 @pytest.mark.parametrize(
