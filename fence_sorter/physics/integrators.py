@@ -323,7 +323,9 @@ class Integrator:
         # a corner sliding off the tip drops its force from N(D) to zero: end that step just
         # before the slide-off (the force there is the peak the step would otherwise skip);
         # the next step then crosses it with a bracket of ~1e-7 of a step
-        keep_before = kind == K.EVENT_SLIDE_OFF
+        # (unless the corner is already within the contact iteration's tolerance of the tip:
+        # then it slides off in this step; another step before it would only creep up on it)
+        keep_before = kind == K.EVENT_SLIDE_OFF and g0 > sch.tol
         before = None
         # Illinois variant: the end kept twice in a row has its value halved in the secant, so
         # the bracket shrinks from both sides (plain regula falsi stalls on a curved event
@@ -332,6 +334,8 @@ class Integrator:
         for _ in range(60):
             if hi - lo <= 1e-7 * h or (onset and g_hi <= EVENT_TOL):
                 break
+            if before is not None and g_lo <= sch.tol:
+                break  # the step before the slide-off ends within tolerance of the tip
             h_loc = lo + (hi - lo) * (f_lo / (f_lo - f_hi))
             h_loc = min(max(h_loc, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
             st = sch.step(h_loc, a, self.loc, jump, on_belt, False)

@@ -24,10 +24,11 @@ The two functions that allocate (``modal_propagators``, ``generalized_alpha_step
 ``_nrt=True`` explicitly: a callee otherwise inherits the flag of whoever compiles it first.
 
 The small helpers of the contact iteration (``_add``, ``_surface``, ``_fence_friction``,
-``implicit_belt``, ``_friction_prev``) are inlined into their callers by Numba
-(``inline="always"``): a call passes every array as ~7-9 machine words, and the profile showed
-the callers pushing ~150 words per ``_evaluate`` call and dozens per ``_add`` (same arithmetic,
-bitwise the same results; compiled loop 5-12 % faster, docs/numerics.md).
+``implicit_belt``, ``belt_multiplier``, ``_friction_prev``, ``_newton_load``) are inlined into
+their callers by Numba (``inline="always"``): a call passes every array as ~7-9 machine words,
+and the profile showed the callers pushing ~150 words per ``_evaluate`` call and dozens per
+``_add`` (same arithmetic, bitwise the same results; compiled loop 5-12 % faster,
+docs/numerics.md).
 
 The time-stepping schemes built on it (trapezoidal, generalized-alpha) are ``*_step`` functions
 here. The control loop (events, step size, stages, recording) exists twice: :func:`solve` at the
@@ -343,7 +344,20 @@ def implicit_belt(P, u0, u1, u2, w0, w1, w2, lam):
     """Belt wrench lambda with u = u* + W lambda and the elliptic law at the end velocity u.
 
     Stick (returns True) when the wrench -u*/W that zeroes u lies inside the limit ellipse;
-    otherwise slip, lambda = -P u / sqrt(u^T P u), one scalar Newton root (see friction.py).
+    otherwise slip, lambda = -P u / sqrt(u^T P u), one scalar Newton root (see friction.py and
+    :func:`belt_multiplier`).
+    """
+    return belt_multiplier(P, u0, u1, u2, w0, w1, w2, lam, 0.0) < 0.0
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def belt_multiplier(P, u0, u1, u2, w0, w1, w2, lam, sigma0):
+    """:func:`implicit_belt` returning the slip multiplier sigma (lambda_i = -P_i u_i /
+    (sigma + W_i P_i), end velocity u_i sigma / (sigma + W_i P_i)), or -1 when the belt sticks.
+
+    ``sigma0`` >= 0 starts the Newton iteration (a contact iteration passes its previous
+    iterate's multiplier: the iterates' u* differ by the iteration's residual, so the root is
+    a step or two away instead of four from sigma = 0).
     """
     fm2 = P[P_FMAX] * P[P_FMAX]
     tm2 = P[P_TMAX] * P[P_TMAX]
@@ -359,15 +373,18 @@ def implicit_belt(P, u0, u1, u2, w0, w1, w2, lam):
         q = math.inf
     if q <= 1.0:
         lam[0], lam[1], lam[2] = l0, l1, l2
-        return True
+        return -1.0
     a0, a1, a2 = fm2 * u0 * u0, fm2 * u1 * u1, tm2 * u2 * u2
     c0, c1, c2 = w0 * fm2, w1 * fm2, w2 * tm2
     # the multiplier sigma >= 0 is the root of q(sigma) = sum a_i / (sigma + c_i)^2 = 1 (q(0) is
     # the stick test's q > 1 here). Newton on the secular equation 1 / sqrt(q(sigma)) = 1 (More
     # and Sorensen's form: 1 / sqrt(q) is concave and increasing, exactly linear for one term),
     # so the iterates climb monotonically onto the root from sigma = 0 in a few steps (Newton on
-    # q itself crept up by a factor ~1.5 per iteration: 17-25 iterations on the bench scenes)
-    sigma = 0.0
+    # q itself crept up by a factor ~1.5 per iteration: 17-25 iterations on the bench scenes).
+    # From a start beyond the root (q < 1) the step lands at or below it (the tangent of a
+    # concave function lies above it; clipped at 0), and the climb goes on from there; a
+    # landing just past the root (round-off, e.g. from a start far beyond it) steps back.
+    sigma = sigma0 if sigma0 > 0.0 else 0.0
     for _ in range(100):
         q = 0.0
         s3 = 0.0
@@ -383,11 +400,11 @@ def implicit_belt(P, u0, u1, u2, w0, w1, w2, lam):
             r = 1.0 / (sigma + c2)
             q += a2 * r * r
             s3 += a2 * r * r * r
-        if q <= 1.0 + 1e-14 or s3 == 0.0:
+        if abs(q - 1.0) <= 1e-14 or s3 == 0.0:
             break
         step = q * (math.sqrt(q) - 1.0) / s3
-        sigma += step
-        if step <= 1e-15 * sigma:
+        sigma = max(sigma + step, 0.0)
+        if abs(step) <= 1e-15 * sigma:
             break
     if sigma > 0.0:
         lam[0] = -fm2 * (u0 * sigma / (sigma + c0)) / sigma
@@ -395,7 +412,7 @@ def implicit_belt(P, u0, u1, u2, w0, w1, w2, lam):
         lam[2] = -tm2 * (u2 * sigma / (sigma + c2)) / sigma
     else:
         lam[0] = lam[1] = lam[2] = 0.0
-    return False
+    return sigma
 
 
 # -- contacts -----------------------------------------------------------------------------------
@@ -736,6 +753,88 @@ def _friction_prev(out, prev):
         prev[k] = out[k, C_FT] if out[k, C_ACTIVE] != 0.0 else math.nan
 
 
+# the contact iteration of a stiff fence by Newton (``_newton_load``); False: the Anderson-
+# accelerated fixed point alone, as for a flexible fence (tests compare the two)
+NEWTON = True
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _newton_load(P, out, y1, g_new, hh, im0, im2):
+    """Turn the fixed-point update of the load, G(y1), into a Newton update with the contacts'
+    stiffness: (I - dG/dy) delta = G(y1) - y1, g_new <- y1 + delta (load rows only).
+
+    With v_new = v0 + hh M^-1 (F0 + F(q, v)) and q_new = q0 + hh (v0 + v_new), and law (16)'s
+    N = b D' D^2 + k_p D^4 acting along J = (n, r x n) with dD/dq = dD'/dv = -J^T (geometric
+    terms of the contact point dropped), dG/dy reduces to the 3 x 3 system
+    (I + hh M^-1 sum c_k u_k J_k^T) dv = r_v, dq = hh dv + (r_q - hh r_v), with
+    c_k = hh (4 k_p D^3 + 2 b D D') + b D^2 and u_k = J_k + (ft / N) T_k for a sliding contact
+    (|ft| = mu2 N: friction proportional to N), J_k otherwise. The belt's own implicit solve and
+    a sticking contact's friction (already a Newton step on the slip) are left to the iteration.
+    """
+    b = P[P_BEFF]
+    kp = P[P_KP]
+    mu2 = P[P_MU2]
+    x, y = y1[0], y1[1]
+    m00 = m11 = m22 = 1.0
+    m01 = m02 = m10 = m12 = m20 = m21 = 0.0
+    active = False
+    for k in range(N_SLOTS):
+        row = out[k]
+        if row[C_ACTIVE] == 0.0:
+            continue
+        nn = row[C_N]
+        if nn <= 0.0:
+            continue
+        d = row[C_D]
+        c = hh * (4.0 * kp * d * d * d + 2.0 * b * d * row[C_DDOT]) + b * d * d
+        if c <= 0.0:
+            continue
+        active = True
+        nx, ny = row[C_NX], row[C_NY]
+        rx, ry = row[C_PX] - x, row[C_PY] - y
+        j0, j1, j2 = nx, ny, rx * ny - ry * nx
+        u0, u1, u2 = j0, j1, j2
+        ft = row[C_FT]
+        if ft != 0.0 and abs(ft) >= mu2 * nn * (1.0 - 1e-12):
+            s = ft / nn
+            tx, ty = ny, -nx
+            u0 += s * tx
+            u1 += s * ty
+            u2 += s * (rx * ty - ry * tx)
+        c *= hh
+        a0, a1, a2 = c * im0 * u0, c * im0 * u1, c * im2 * u2
+        m00 += a0 * j0
+        m01 += a0 * j1
+        m02 += a0 * j2
+        m10 += a1 * j0
+        m11 += a1 * j1
+        m12 += a1 * j2
+        m20 += a2 * j0
+        m21 += a2 * j1
+        m22 += a2 * j2
+    if not active:
+        return False
+    r0, r1, r2 = g_new[3] - y1[3], g_new[4] - y1[4], g_new[5] - y1[5]
+    e0 = g_new[0] - y1[0] - hh * r0
+    e1 = g_new[1] - y1[1] - hh * r1
+    e2 = g_new[2] - y1[2] - hh * r2
+    c00 = m11 * m22 - m12 * m21
+    c01 = m12 * m20 - m10 * m22
+    c02 = m10 * m21 - m11 * m20
+    det = m00 * c00 + m01 * c01 + m02 * c02
+    if not (det > 1e-12):
+        return False
+    inv = 1.0 / det
+    d0 = (c00 * r0 + (m02 * m21 - m01 * m22) * r1 + (m01 * m12 - m02 * m11) * r2) * inv
+    d1 = (c01 * r0 + (m00 * m22 - m02 * m20) * r1 + (m02 * m10 - m00 * m12) * r2) * inv
+    d2 = (c02 * r0 + (m01 * m20 - m00 * m21) * r1 + (m00 * m11 - m01 * m10) * r2) * inv
+    g_new[3], g_new[4], g_new[5] = y1[3] + d0, y1[4] + d1, y1[5] + d2
+    g_new[0] = y1[0] + hh * d0 + e0
+    g_new[1] = y1[1] + hh * d1 + e1
+    g_new[2] = y1[2] + hh * d2 + e2
+    return True
+
+
 @njit(cache=True, _nrt=False)
 def trapezoidal_step(
     P,
@@ -769,8 +868,11 @@ def trapezoidal_step(
 ):
     """One step of the trapezoidal rule, implicit in the contact forces and belt friction.
 
-    Load: q1 = q0 + h/2 (v0 + v1), v1 = v0 + h/2 M^-1 (F0 + F1 + lambda1), fixed-point iteration
-    on F1; lambda1 solves the belt law at the step end (stick exact). Fence: each mode
+    Load: q1 = q0 + h/2 (v0 + v1), v1 = v0 + h/2 M^-1 (F0 + F1 + lambda1), iterated on F1 until
+    the update is within ``tol``: Newton with the contacts' stiffness on a stiff fence
+    (``_newton_load``), an Anderson-accelerated fixed point with the fence's modes; lambda1
+    solves the belt law at the step end (stick exact; its multiplier warm-started from the
+    previous iterate's). Fence: each mode
     propagated exactly for a modal force linear over the step (``props`` = (A, G0, G1) from
     Van Loan's matrix exponential). ``f0``/``lam0``/``modal0``: forces at the step start.
     Returns STEP_OK, STEP_REJECTED or STEP_FORCED; the end-of-step forces are left in out/res/
@@ -832,6 +934,7 @@ def trapezoidal_step(
     for k in range(N_SLOTS):
         prev[k] = math.nan
     stuck = False
+    sigma = 0.0  # the belt's slip multiplier at the last iterate (-1: stuck)
     lam1[0] = lam1[1] = lam1[2] = 0.0
     converged = False
     iterations = 0
@@ -865,7 +968,8 @@ def trapezoidal_step(
         vf2 = y0[5] + hh * (f0[2] + lam0[2] + res[R_MZ]) * im2
         if on_belt:
             w0, w1, w2 = hh * im0, hh * im0, hh * im2
-            stuck = implicit_belt(P, vf0 - belt, vf1, vf2, w0, w1, w2, lam1)
+            sigma = belt_multiplier(P, vf0 - belt, vf1, vf2, w0, w1, w2, lam1, sigma)
+            stuck = sigma < 0.0
             vi0 = vf0 + w0 * lam1[0]
             vi1 = vf1 + w1 * lam1[1]
             vi2 = vf2 + w2 * lam1[2]
@@ -890,6 +994,12 @@ def trapezoidal_step(
                 y1[k] = g_new[k]
             converged = True
             break
+        # a stiff fence (no modes): Newton with the contacts' stiffness (the Anderson history
+        # is not needed then); a stuck belt holds v1 fixed, where the plain update is exact
+        if NEWTON and m == 0 and not stuck and _newton_load(P, out, y1, g_new, hh, im0, im2):
+            for k in range(n):
+                y1[k] = g_new[k]
+            continue
         # Anderson step on the scaled residual f = G(x) - x over the last two differences
         # (least squares); a residual that grows (a friction or contact switch inside the
         # iteration: G is not smooth there) turns it off
@@ -1898,12 +2008,15 @@ def _locate(
     jump = _jump_at(P, T[a])
     best = 0.0
     have_best = False
-    keep_before = kind == EVENT_SLIDE_OFF
+    keep_before = kind == EVENT_SLIDE_OFF and g0 > cfg[G_TOL]
+    g_lo = g0
     before = 0.0
     have_before = False
     f_lo, f_hi, last = g0, g1, 0
     for _ in range(60):
         if hi - lo <= 1e-7 * h or (onset and g_hi <= EVENT_TOL):
+            break
+        if have_before and g_lo <= cfg[G_TOL]:
             break
         h_loc = lo + (hi - lo) * (f_lo / (f_lo - f_hi))
         h_loc = min(max(h_loc, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
@@ -1929,7 +2042,7 @@ def _locate(
             have_best = True
             _copy_state(T, Y, LAM, OUT, RES, MODAL, ACC, trial, S_LOC)
         else:
-            lo, f_lo = h_loc, g
+            lo, g_lo, f_lo = h_loc, g, g
             if last == -1:
                 f_hi *= 0.5
             last = -1

@@ -1,0 +1,148 @@
+"""The inner solves of a trapezoidal step: the contact Newton iteration, the belt multiplier's
+warm start and the slide-off location (kernel.trapezoidal_step, belt_multiplier, _locate)."""
+
+from __future__ import annotations
+
+import dataclasses as dc
+import math
+
+import numpy as np
+import pytest
+
+from fence_sorter.physics import engine as E
+from fence_sorter.physics import integrators as I
+from fence_sorter.physics import kernel as K
+from fence_sorter.physics.friction import _limits
+from fence_sorter.physics.simulate import SortingModel, simulate
+from fence_sorter.scene import load_scene
+
+STIFF = load_scene("positioned_stiff").scenario
+
+
+def _state_at(t: float):
+    """positioned_stiff's model and compiled solve advanced to the first accepted point >= t."""
+    md = SortingModel(STIFF)
+    cs = E.CompiledSolve(md)
+    cs.advance(t)
+    return md, cs, int(cs.ctl[K.I_CUR])
+
+
+def _step(md, cs, a, h, max_iter, force, tol=1e-14):
+    """One trapezoidal step from row a (the Python body of the compiled function, so the module
+    flag NEWTON is read at call time); (status, y1, iterations)."""
+    y1, lam1 = np.zeros(md.n_state), np.zeros(3)
+    out, res = np.zeros((K.N_SLOTS, K.N_COLS)), np.zeros(K.N_RES)
+    props = (np.zeros((0, 2, 2)), np.zeros((0, 2)), np.zeros((0, 2)))
+    status = K.trapezoidal_step.py_func(
+        md.P, md.corners, md.normals, cs.modes[0], cs.modes[1], props, h, cs.T[a], cs.Y[a],
+        cs.RES[a], cs.LAM[a], cs.MODAL[a], cs.OUT[a], 0.0, bool(cs.ctl[K.I_ON_BELT]), tol,
+        max_iter, force, y1, lam1, out, res, np.zeros(0), cs.w, cs.wdot, cs.nodes, cs.prev,
+        cs.work,
+    )  # fmt: skip
+    return status, y1, int(res[K.R_ITERATIONS])
+
+
+def _distance(y, ref, h):
+    """The iteration's own error measure: position plus h times velocity."""
+    d = np.abs(y - ref)
+    return float(d[:3].max() + h * d[3:6].max())
+
+
+@pytest.mark.parametrize("t", [0.2, 0.4])
+def test_newton_contact_iteration_reaches_the_fixed_point_of_the_plain_iteration(
+    t, monkeypatch
+) -> None:
+    """Mid-push, the load pressed on the fence at one or two contacts, sliding on the belt:
+    Newton with the contacts' stiffness and the Anderson-accelerated fixed point converge to the
+    same end state (to round-off at a tolerance of 1e-14 m), and Newton's error falls by at
+    least 100x per iteration (linear with a small constant: the belt's and the contact points'
+    own motion are left out of its matrix) where the fixed point contracts by ~10x."""
+    md, cs, a = _state_at(t)
+    assert cs.RES[a, K.R_FENCE_N] > 10.0  # pushing
+    h = STIFF.solver.dt_max
+    errors = {}
+    ends = {}
+    for newton in (True, False):
+        monkeypatch.setattr(K, "NEWTON", newton)
+        status, ref, iterations = _step(md, cs, a, h, 50, False)
+        assert status == K.STEP_OK and iterations < 10
+        ends[newton] = ref
+        errors[newton] = [_distance(_step(md, cs, a, h, k, True)[1], ref, h) for k in (1, 2, 3)]
+    assert _distance(ends[True], ends[False], h) < 1e-13
+    e = errors[True]
+    assert e[1] < 1e-2 * e[0] and e[2] < 1e-2 * e[1], e
+    assert e[0] < 0.2 * errors[False][0], (e, errors[False])
+    assert e[1] < 1e-2 * errors[False][1], (e, errors[False])
+
+
+def test_newton_iteration_needs_fewer_force_evaluations_per_step(monkeypatch) -> None:
+    """At the solver's tolerance (1e-9 m) a mid-push step converges in at most 3 evaluations
+    with Newton, and no faster without it."""
+    md, cs, a = _state_at(0.3)
+    h = STIFF.solver.dt_max
+    count = {}
+    for newton in (True, False):
+        monkeypatch.setattr(K, "NEWTON", newton)
+        status, _, count[newton] = _step(md, cs, a, h, 50, False, tol=STIFF.solver.tolerance)
+        assert status == K.STEP_OK
+    assert count[True] <= 3 and count[True] <= count[False], count
+
+
+def _secular(u, w, f_max, t_max, sigma):
+    p = np.array([f_max**2, f_max**2, t_max**2])
+    c = np.asarray(w) * p
+    return float(np.sum(p * np.asarray(u) ** 2 / (sigma + c) ** 2))
+
+
+@pytest.mark.parametrize(
+    "u",
+    [(1.0, 0.5, 2.0), (-0.3, 1e-3, 0.0), (0.0, 0.0, 5.0), (2e-3, -1e-3, 1e-2)],
+)
+def test_belt_multiplier_from_any_start_is_the_same_root(u) -> None:
+    """The slip multiplier sigma solves sum P_i u_i^2 / (sigma + W_i P_i)^2 = 1 wherever its
+    Newton iteration starts: from 0 (the cold start), below or far above the root, or next to
+    it (a contact iteration's previous iterate); the wrench is the same to round-off."""
+    f_max, t_max = 10.0, 1.0
+    w = (1e-4, 1e-4, 1e-3)
+    p = _limits(f_max, t_max)
+    lam0 = np.zeros(3)
+    root = K.belt_multiplier(p, *u, *w, lam0, 0.0)
+    assert root > 0.0  # slipping
+    assert _secular(u, w, f_max, t_max, root) == pytest.approx(1.0, rel=1e-12)
+    for start in (0.3 * root, root * (1 + 1e-9), 1.01 * root, 3.0 * root, 1e6 * root):
+        lam = np.zeros(3)
+        sigma = K.belt_multiplier(p, *u, *w, lam, start)
+        assert sigma == pytest.approx(root, rel=1e-13), start
+        np.testing.assert_allclose(lam, lam0, rtol=1e-12, atol=1e-12 * f_max)
+    # a stuck belt ignores the start
+    lam = np.zeros(3)
+    assert K.belt_multiplier(p, 1e-4, 0.0, 0.0, *w, lam, 5.0) == -1.0
+    assert lam[0] == pytest.approx(-1.0)  # -u/W
+
+
+def test_a_slide_off_is_located_once_before_and_once_across() -> None:
+    """A corner sliding off the fence tip: one location ends the step just before it (within
+    the iteration tolerance of the tip, so the force there is not skipped), the next crosses
+    it; no further steps creep up on the tip (positioned_stiff slides one corner off)."""
+    sc = dc.replace(STIFF, solver=dc.replace(STIFF.solver, engine="python"))
+    seen = []
+    orig = I.Integrator._locate
+
+    def spy(self, h, on_belt, slot, kind, g0, g1):
+        taken = orig(self, h, on_belt, slot, kind, g0, g1)
+        if kind == K.EVENT_SLIDE_OFF:
+            seen.append((g0, K.event_value(self.model.P, self.trial.out, slot, kind)))
+        return taken
+
+    I.Integrator._locate = spy
+    try:
+        r = simulate(sc)
+    finally:
+        I.Integrator._locate = orig
+    assert r.success
+    assert len(seen) == 2, seen
+    (g0_before, g_before), (g0_across, g_across) = seen
+    assert g0_before > STIFF.solver.tolerance
+    assert 0.0 < g_before <= STIFF.solver.tolerance  # ends just before the tip
+    assert g0_across == pytest.approx(g_before, abs=1e-15) and not g_across > 0.0
+    assert math.isfinite(r.peak_contact_force)
