@@ -122,7 +122,16 @@ def register(subparsers) -> None:
     p.add_argument("--fence", choices=("stiff", "flexible"), default=d.fence)
     p.add_argument("--seed", type=int, default=d.seed)
     p.add_argument(
-        "--budget", type=int, default=d.budget, help="max twin evaluations (%(default)s)"
+        "--budget",
+        type=int,
+        default=d.budget,
+        help="max twin evaluations per restart (%(default)s)",
+    )
+    p.add_argument(
+        "--restarts",
+        type=int,
+        default=d.restarts,
+        help="independent searches (seeds SEED, SEED+1, ...); the best counts (%(default)s)",
     )
     p.add_argument("--workers", type=int, default=None, help="processes (default: CPU count)")
     p.add_argument(
@@ -209,6 +218,7 @@ def spec_from_args(args: argparse.Namespace):
         fence=args.fence,
         seed=args.seed,
         budget=args.budget,
+        restarts=args.restarts,
         gap=args.gap,
     )
     try:
@@ -221,7 +231,15 @@ def spec_from_args(args: argparse.Namespace):
                 msg = "--" + field.replace("_", "-") + msg[len(field) :]
                 break
         else:
-            if msg.split(" ", 1)[0] in ("mu1", "mu2", "gap", "seed", "budget", "constraints"):
+            if msg.split(" ", 1)[0] in (
+                "mu1",
+                "mu2",
+                "gap",
+                "seed",
+                "budget",
+                "restarts",
+                "constraints",
+            ):
                 msg = "--" + msg
             elif msg.startswith("fixed"):
                 msg = "--fix " + msg
@@ -253,6 +271,12 @@ def summary(d: dict) -> str:
     if d.get("at_bounds"):
         lines.append(
             "at range bounds: " + ", ".join(f"{n} {s}" for n, s in d["at_bounds"].items())
+        )
+    if len(d.get("restarts") or ()) > 1:
+        lines.append(
+            "restarts reached (before the final compass search): "
+            + ", ".join("none feasible" if w is None else f"{w:.0f}" for w in d["restarts"])
+            + " pcs/h"
         )
     lines.append(tail)
     return "\n".join(lines)

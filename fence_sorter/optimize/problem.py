@@ -70,7 +70,8 @@ class OptimizeSpec:
     bounds: tuple[tuple[str, float, float], ...] = ()  # overrides of ranges (3)-(6)
     fence: str = "stiff"  # "stiff" | "flexible"
     seed: int = 0
-    budget: int = 4000  # max twin evaluations (points X simulated)
+    budget: int = 4000  # max twin evaluations (points X simulated) per restart
+    restarts: int = 3  # independent searches (seeds seed, seed + 1, ...); the best counts
     gap: float = 0.0  # Delta of (2): least distance between loads [m]
 
     # -- validation ------------------------------------------------------------------------
@@ -101,11 +102,16 @@ class OptimizeSpec:
                 f"constraints must be distinct numbers from {list(CONSTRAINT_IDS)} (at least "
                 f"one), got {list(cons)}"
             )
-        for name, field in (("seed", self.seed), ("budget", self.budget)):
+        for name, field in (
+            ("seed", self.seed),
+            ("budget", self.budget),
+            ("restarts", self.restarts),
+        ):
             if isinstance(field, bool) or not isinstance(field, int):
                 raise ParameterError(f"{name} must be an integer, got {field!r}")
         check_range("seed", self.seed, 0, 2**32 - 1)
         check_range("budget", self.budget, 1, 10**7)
+        check_range("restarts", self.restarts, 1, 100)
         seen: set[str] = set()
         for item in self.bounds:
             if len(item) != 3:

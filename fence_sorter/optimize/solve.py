@@ -156,6 +156,9 @@ class OptimumResult:
     blocking: dict[str, list[int]] = field(default_factory=dict)
     points: int = 0  # points scored (twin evaluations + closed-form rejections by (7))
     history: list[dict] = field(default_factory=list)  # best W_t per generation
+    # best W_t [pcs/h] each restart's differential evolution reached (NaN: none feasible),
+    # before the compass search from the best of all: their spread shows how sure the answer is
+    restarts: list[float] = field(default_factory=list)
 
     def to_dict(self) -> dict:
         return json_safe(
@@ -171,6 +174,7 @@ class OptimumResult:
                 "infeasible": self.infeasible,
                 "evaluations": self.evaluations,
                 "points": self.points,
+                "restarts": list(self.restarts),
                 "wall_time": self.wall_time,
                 "spec": self.spec,
             }
@@ -308,6 +312,7 @@ def optimize(
         return _result(spec, ev, None, t0, history, why)
 
     x0 = None
+    restart_w: list[float] = []  # best W_t of each restart's differential evolution
     feasible_starts = [r for r in ev.batch(starts) if r["feasible"]]
     if feasible_starts and free:
         best_start = max(feasible_starts, key=lambda r: r["W_t"])
@@ -335,31 +340,35 @@ def optimize(
             ev.batch([full(x) for x in xs])  # in parallel, fills the cache
             return list(map(func, xs))
 
-        def callback(intermediate_result):
-            best = ev.best_feasible()
-            history.append(
-                {"evaluations": ev.evaluations, "W_t": best["W_t"] if best else math.nan}
-            )
-            return ev.evaluations >= de_budget
+        for i in range(spec.restarts):
+            stop_at = ev.evaluations + de_budget
 
-        differential_evolution(
-            objective,
-            bounds,
-            popsize=popsize,
-            maxiter=max(1, 4 * spec.budget // pop_n),
-            mutation=(0.5, 1.0),
-            recombination=0.7,
-            tol=1e-3,
-            seed=spec.seed,
-            polish=False,
-            init="sobol" if _pow2(pop_n) else "latinhypercube",
-            updating="deferred",
-            workers=workers,
-            callback=callback,
-            x0=x0,
-        )
-        _refine(spec, ev, ranges, free, full)
-    return _result(spec, ev, ev.best_feasible(), t0, history, None)
+            def callback(intermediate_result, stop_at=stop_at):
+                best = ev.best_feasible()
+                history.append(
+                    {"evaluations": ev.evaluations, "W_t": best["W_t"] if best else math.nan}
+                )
+                return ev.evaluations >= stop_at
+
+            res = differential_evolution(
+                objective,
+                bounds,
+                popsize=popsize,
+                maxiter=max(1, 4 * spec.budget // pop_n),
+                mutation=(0.5, 1.0),
+                recombination=0.7,
+                tol=1e-3,
+                seed=(spec.seed + i) % 2**32,
+                polish=False,
+                init="sobol" if _pow2(pop_n) else "latinhypercube",
+                updating="deferred",
+                workers=workers,
+                callback=callback,
+                x0=x0 if i == 0 else None,
+            )
+            restart_w.append(-float(res.fun) if res.fun < 0.0 else math.nan)
+        _refine(spec, ev, ranges, free, full, spec.budget * spec.restarts)
+    return _result(spec, ev, ev.best_feasible(), t0, history, None, restart_w)
 
 
 def _check_start(
@@ -390,7 +399,7 @@ def _pow2(n: int) -> bool:
     return n > 0 and n & (n - 1) == 0
 
 
-def _refine(spec, ev: _Evaluator, ranges, free, full) -> None:
+def _refine(spec, ev: _Evaluator, ranges, free, full, budget: int) -> None:
     """Compass search from the best feasible point: poll, in parallel, every move of the
     3^k - 1 pattern {-1, 0, 1}^k x step (k free variables; R_z included: W_t ignores it, the
     constraints do not) that raises W_t (1); move to the best feasible poll point, else halve
@@ -400,13 +409,13 @@ def _refine(spec, ev: _Evaluator, ranges, free, full) -> None:
     if best is None:
         return
     step = REFINE_STEP
-    while step >= REFINE_MIN_STEP and ev.evaluations < spec.budget:
+    while step >= REFINE_MIN_STEP and ev.evaluations < budget:
         polls = _polls(spec, best, ranges, free, step)
         if not polls:
             break
         # best W_t first, within what is left of the budget
         polls.sort(key=lambda X: -closed_form(spec, X)[0])
-        polls = polls[: max(1, spec.budget - ev.evaluations)]
+        polls = polls[: max(1, budget - ev.evaluations)]
         res = [r for r in ev.batch(polls) if r["feasible"] and r["W_t"] > best["W_t"]]
         if res:
             best = max(res, key=lambda r: (r["W_t"], ev._slack(r)))
@@ -510,7 +519,7 @@ def _low(ms) -> str:
     return f"{min(finite):.3g}" if finite else "n/a"
 
 
-def _result(spec, ev: _Evaluator, best, t0, history, why) -> OptimumResult:
+def _result(spec, ev: _Evaluator, best, t0, history, why, restart_w=()) -> OptimumResult:
     wall = time.perf_counter() - t0
     common = dict(
         evaluations=ev.evaluations,
@@ -518,6 +527,7 @@ def _result(spec, ev: _Evaluator, best, t0, history, why) -> OptimumResult:
         wall_time=wall,
         spec=spec.to_dict(),
         history=history,
+        restarts=list(restart_w),
     )
     if best is None:
         return OptimumResult(

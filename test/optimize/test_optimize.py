@@ -56,7 +56,8 @@ def test_reduced_optimum_is_feasible_within_ranges_and_re_evaluates(reduced):
         assert again["margins"][c] == pytest.approx(reduced.margins[c], abs=1e-9)
     # the answer sits on the boundary: some constraint stops W_t from growing
     assert reduced.active and set(reduced.active) <= set(REDUCED.constraints)
-    assert reduced.evaluations <= REDUCED.budget + 4  # the budget, plus the blocking probes
+    # the budget of each restart, plus the blocking probes
+    assert reduced.evaluations <= REDUCED.budget * REDUCED.restarts + 4
 
 
 def test_reduced_optimum_beats_a_coarse_grid(reduced, pool):
@@ -159,6 +160,7 @@ def test_impossible_ranges_give_the_infeasible_result_without_simulating():
         ("bounds", (("t1", 1.0, 0.5),), "bounds.t1"),
         ("fixed", (("speed", 1.0),), "speed"),
         ("budget", 0, "budget"),
+        ("restarts", 0, "restarts"),
     ],
 )
 def test_spec_validation_names_the_field(field, value, named):
@@ -176,6 +178,7 @@ def test_spec_validation_names_the_field(field, value, named):
         (["--alpha-k", "40", "--constraints", "7,13"], "--constraints"),
         (["--alpha-k", "40", "--bound", "t1=1:0.5"], "--bound"),
         (["--alpha-k", "40", "--workers", "0"], "--workers"),
+        (["--alpha-k", "40", "--restarts", "0"], "--restarts"),
         (["--alpha-k", "40", "--scheduler", "nowhere"], "scheduler"),
     ],
 )
@@ -235,3 +238,12 @@ def test_a_start_on_the_bounds_is_accepted():
 def test_a_bad_start_is_refused_naming_it(start, named):
     with pytest.raises(ParameterError, match=re.escape(named)):
         optimize(REDUCED, None, starts=[start])
+
+
+def test_restarts_are_independent_searches_and_the_best_counts(reduced):
+    """Each restart's differential evolution runs with its own seed; the answer, after the
+    compass search from the best of them, is at least the best any restart reached."""
+    assert REDUCED.restarts == 3 and len(reduced.restarts) == 3
+    reached = [w for w in reduced.restarts if math.isfinite(w)]
+    assert reached and reduced.W_t >= max(reached) - 1e-9
+    assert evaluate_point(REDUCED, reduced.X)["W_t"] == pytest.approx(reduced.W_t, rel=1e-12)
