@@ -340,15 +340,19 @@ def optimize(
             ev.batch([full(x) for x in xs])  # in parallel, fills the cache
             return list(map(func, xs))
 
+        stop_at = 0
+
+        # the one parameter must be named intermediate_result: SciPy inspects the signature
+        # and calls any other callback as callback(x, convergence)
+        def callback(intermediate_result):
+            best = ev.best_feasible()
+            history.append(
+                {"evaluations": ev.evaluations, "W_t": best["W_t"] if best else math.nan}
+            )
+            return ev.evaluations >= stop_at
+
         for i in range(spec.restarts):
             stop_at = ev.evaluations + de_budget
-
-            def callback(intermediate_result, stop_at=stop_at):
-                best = ev.best_feasible()
-                history.append(
-                    {"evaluations": ev.evaluations, "W_t": best["W_t"] if best else math.nan}
-                )
-                return ev.evaluations >= stop_at
 
             res = differential_evolution(
                 objective,
