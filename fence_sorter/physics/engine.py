@@ -88,6 +88,36 @@ def _propagator_cache(model):
     return cache
 
 
+# per (n_state, modes, elements): the arrays of finished solves, reused by the next one (an
+# event of the optimiser, the line or the benchmark builds ~20 small arrays otherwise: ~6 us
+# of NumPy calls, ~15 us on a cold cache, per ~0.3 ms stiff event)
+_WORKSPACES: dict[tuple, list[tuple]] = {}
+
+
+def _workspace(n: int, m: int, n_el: int, trace: int) -> tuple:
+    """The arrays of one compiled solve, in the order ``CompiledSolve`` unpacks them."""
+    s = K.N_STATES
+    return (
+        np.zeros(K.N_CTL, dtype=np.int64),
+        np.zeros(K.N_FC),
+        np.zeros(s),
+        np.zeros((s, n)),
+        np.zeros((s, 3)),
+        np.zeros((s, K.N_SLOTS, K.N_COLS)),
+        np.zeros((s, K.N_RES)),
+        np.zeros((s, m)),
+        np.zeros((s, 3 + m)),
+        np.zeros(max(2 * n_el, 2)),
+        np.zeros(max(2 * n_el, 2)),
+        np.zeros((n_el + 1, 2)),
+        np.zeros(K.N_SLOTS),
+        np.zeros(K.trapezoidal_work_shape(m)),
+        np.zeros((8, 3)),
+        np.zeros((16, 2)),
+        np.zeros((trace, K.trace_width(n, m))),
+    )
+
+
 class CompiledSolve:
     """The arrays of one compiled solve and its chunked driver."""
 
@@ -132,45 +162,43 @@ class CompiledSolve:
         cfg[K.G_UP] = 2.0**0.25
         cfg[K.G_DOWN] = 2.0**-0.25
         cfg[K.G_FLUSH] = FLUSH_ANGLE
-        cfg = np.array(cfg, dtype=float)
-        self.cfg = cfg
-        ctl = np.zeros(K.N_CTL, dtype=np.int64)
-        ctl[K.I_CUR], ctl[K.I_TRIAL] = 0, 1
+        self.cfg = np.array(cfg, dtype=float)
+        n, m = model.n_state, model.n_modes
+        self._key = (n, m, model.n_el) if trace == 0 else None
+        pool = _WORKSPACES.get(self._key)
+        arrays = pool.pop() if pool else None  # (list.pop: atomic under the GIL)
+        if arrays is None:
+            arrays = _workspace(n, m, model.n_el, trace)
+        (
+            self.ctl, self.fc, self.T, self.Y, self.LAM, self.OUT, self.RES, self.MODAL,
+            self.ACC, self.w, self.wdot, self.nodes, self.prev, self.work, self.IMP, self.STG,
+            self.TR,
+        ) = arrays  # fmt: skip
+        # kernel.solve zeroes the other state rows and the scratch arrays on its first call
+        ctl = self.ctl
+        ctl.fill(0)
+        ctl[K.I_TRIAL] = 1
         ctl[K.I_ON_BELT] = 1
         ctl[K.I_FIRST] = 1
         ctl[K.I_MASK] = ctl[K.I_STAGE] = -1
         ctl[K.I_LAST_MASK0] = ctl[K.I_LAST_MASK1] = -1
-        self.ctl = ctl
-        fc = np.zeros(K.N_FC)
+        fc = self.fc
+        fc.fill(0.0)
         fc[K.F_EXIT_SPEED] = fc[K.F_IMPACT_SPEED] = math.nan
         fc[K.F_Y_MAX] = -math.inf
         fc[K.F_FLOW] = fc[K.F_E0] = math.nan
-        self.fc = fc
-        n, m = model.n_state, model.n_modes
-        s = K.N_STATES
-        self.T = np.zeros(s)
-        self.Y = np.zeros((s, n))
-        self.Y[0] = model.initial_state()
-        self.LAM = np.zeros((s, 3))
-        self.OUT = np.zeros((s, K.N_SLOTS, K.N_COLS))
-        self.RES = np.zeros((s, K.N_RES))
-        self.MODAL = np.zeros((s, m))
-        self.ACC = np.zeros((s, 3 + m))
-        n_el = model.n_el
-        self.w = np.zeros(max(2 * n_el, 2))
-        self.wdot = np.zeros(max(2 * n_el, 2))
-        self.nodes = np.zeros((n_el + 1, 2))
-        self.prev = np.zeros(K.N_SLOTS)
-        self.work = np.zeros(K.trapezoidal_work_shape(m))
+        y0 = self.Y[0]
+        y0.fill(0.0)
+        y0[:3] = model.initial
+        v = sc.initial_velocity
+        y0[3:6] = v if v is not None else (model.belt, 0.0, 0.0)
         self.PK, self.PA, self.PG0, self.PG1, n_props = _propagator_cache(model)
         self._n_props = n_props
         ctl[K.I_N_PROPS] = n_props[0]
-        self.IMP = np.zeros((8, 3))
-        self.STG = np.zeros((16, 2))
-        # a row per accepted point when anything is recorded (one row otherwise: none is written)
-        rows = int(1.5 * t_end / h_nom) + 64 if sc.record else 1
-        self.REC = np.zeros((min(rows, 1 << 16), K.N_REC_COLS))
-        self.TR = np.zeros((trace, K.trace_width(n, m)))
+        # a column per accepted point when anything is recorded (one otherwise: none is written);
+        # not reused: the result's series are views of it
+        cols = int(1.5 * t_end / h_nom) + 64 if sc.record else 1
+        self.REC = np.zeros((K.N_REC_COLS, min(cols, 1 << 16)))
         # the modal basis of a flexible fence is read-only (cached per fence): writable copies
         # keep one signature of kernel.solve for stiff and flexible models (one compiled
         # specialisation to load from Numba's cache per process, ~0.3 s, instead of two)
@@ -190,13 +218,34 @@ class CompiledSolve:
         return float(self.T[self.ctl[K.I_CUR]])
 
     def _grow(self) -> None:
-        for name in ("IMP", "STG", "REC"):
+        for name in ("IMP", "STG"):
             arr = getattr(self, name)
-            used = self.ctl[{"IMP": K.I_N_IMPACTS, "STG": K.I_N_STAGES, "REC": K.I_N_REC}[name]]
+            used = self.ctl[K.I_N_IMPACTS if name == "IMP" else K.I_N_STAGES]
             if used >= arr.shape[0]:
                 bigger = np.zeros((2 * arr.shape[0], arr.shape[1]))
                 bigger[:used] = arr[:used]
                 setattr(self, name, bigger)
+        used = self.ctl[K.I_N_REC]
+        if used >= self.REC.shape[1]:
+            bigger = np.zeros((self.REC.shape[0], 2 * self.REC.shape[1]))
+            bigger[:, :used] = self.REC[:, :used]
+            self.REC = bigger
+
+    def release(self) -> None:
+        """Hand the arrays back for the next solve of the same shape (``run_compiled``, once it
+        has copied out everything it returns; nothing may use this solve afterwards)."""
+        if self._key is None:
+            return
+        pool = _WORKSPACES.setdefault(self._key, [])
+        if len(pool) < 4:
+            pool.append(
+                (
+                    self.ctl, self.fc, self.T, self.Y, self.LAM, self.OUT, self.RES, self.MODAL,
+                    self.ACC, self.w, self.wdot, self.nodes, self.prev, self.work, self.IMP,
+                    self.STG, self.TR,
+                )
+            )  # fmt: skip
+        self._key = None
 
     def _call(self, t_target: float) -> int:
         """One call of ``kernel.solve`` (at most CHUNK step attempts); grows a full buffer."""
@@ -298,6 +347,17 @@ class CompiledSolve:
             f"m/s at t = {t:.6f} s: runaway energy, the solve diverged"
         )
 
+    def _stages(self, ctl) -> list[tuple[str, float]]:
+        return [(STAGE_NAMES[int(c)], t) for t, c in self.STG[: ctl[K.I_N_STAGES]].tolist()]
+
+    def _audit(self, fc, audit) -> None:
+        audit.max_residual, audit.min_residual = fc[K.F_MAX_RES], fc[K.F_MIN_RES]
+        audit.flow, audit.e0 = fc[K.F_FLOW], fc[K.F_E0]
+        audit.t_max, audit.t_min = fc[K.F_T_MAX], fc[K.F_T_MIN]
+        audit.max_rise = fc[K.F_MAX_RISE]
+        audit.t_rise = (fc[K.F_T_RISE0], fc[K.F_T_RISE1])
+        audit.run_min, audit.t_run_min = fc[K.F_RUN_MIN], fc[K.F_T_RUN_MIN]
+
     def fill(self, obs) -> None:
         """Copy the loop's reductions into a ``simulate.Observer`` (for ``Observer.result``)."""
         ctl, fc = self.ctl.tolist(), self.fc.tolist()  # Python numbers, read once each
@@ -311,23 +371,41 @@ class CompiledSolve:
         obs.peak_tip = fc[K.F_PEAK_TIP]
         obs.max_depth = fc[K.F_MAX_DEPTH]
         obs.y_max = fc[K.F_Y_MAX]
-        stages = [(STAGE_NAMES[int(c)], t) for t, c in self.STG[: ctl[K.I_N_STAGES]].tolist()]
+        stages = self._stages(ctl)
         obs.stages = stages
         obs.stage = stages[-1][0] if stages else None
-        a = obs.audit
-        a.max_residual, a.min_residual = fc[K.F_MAX_RES], fc[K.F_MIN_RES]
-        a.flow, a.e0 = fc[K.F_FLOW], fc[K.F_E0]
-        a.t_max, a.t_min = fc[K.F_T_MAX], fc[K.F_T_MIN]
-        a.max_rise = fc[K.F_MAX_RISE]
-        a.t_rise = (fc[K.F_T_RISE0], fc[K.F_T_RISE1])
-        a.run_min, a.t_run_min = fc[K.F_RUN_MIN], fc[K.F_T_RUN_MIN]
-        obs.rec = self.series(obs.want)
+        self._audit(fc, obs.audit)
+        obs.rec = self.series(obs.want, stages)
 
-    def series(self, want) -> dict[str, np.ndarray]:
-        """The recorded series, keyed as ``Observer._record`` keys them (each its own array)."""
+    def result(self, wall0: float):
+        """The ``SimulationResult`` of the finished solve: ``Observer.result`` of :meth:`fill`
+        without the observer (``simulate.make_result`` on the loop's figures); ``wall0``: the
+        ``time.perf_counter()`` the run started at."""
+        from .simulate import EnergyAudit, make_result
+
+        t, diagnosis, steps, rejected = self.outcome()
+        ctl, fc = self.ctl.tolist(), self.fc.tolist()  # Python numbers, read once each
+        stages = self._stages(ctl)
+        audit = EnergyAudit()
+        self._audit(fc, audit)
+        md = self.model
+        return make_result(
+            md, t, diagnosis, steps, rejected, time.perf_counter() - wall0, ctl[K.I_FORCED],
+            ctl[K.I_EVENTS], sorted_=bool(ctl[K.I_SORTED]), touched=bool(ctl[K.I_TOUCHED]),
+            exit_speed=fc[K.F_EXIT_SPEED], impact_speed=fc[K.F_IMPACT_SPEED],
+            impacts=[(t, w, p) for t, w, p in self.IMP[: ctl[K.I_N_IMPACTS]].tolist()],
+            peak_n=fc[K.F_PEAK_N], peak_tip=fc[K.F_PEAK_TIP], max_depth=fc[K.F_MAX_DEPTH],
+            y_max=fc[K.F_Y_MAX], stages=stages, audit=audit,
+            series=self.series(md.sc.record, stages),
+        )  # fmt: skip
+
+    def series(self, want, stages=None) -> dict[str, np.ndarray]:
+        """The recorded series, keyed as ``Observer._record`` keys them (each its own array: a
+        row of the loop's REC or a copy of its time row); ``stages``: the run's stage list, if
+        known (the recorded stage names are the names in it)."""
         if not want:
             return {}
-        cols = np.ascontiguousarray(self.REC[: self.ctl[K.I_N_REC]].T)  # one row per column
+        cols = self.REC[:, : self.ctl[K.I_N_REC]]  # one row per recorded quantity, contiguous
         out: dict[str, np.ndarray] = {}
         if "trajectory" in want:
             out["t"] = cols[K.REC_T].copy()
@@ -345,31 +423,25 @@ class CompiledSolve:
             out["t_stage"] = cols[K.REC_T].copy()
             codes = cols[K.REC_STAGE].astype(np.intp)
             # the dtype np.asarray gives the Python loop's list of names: the longest present
-            width = int(_STAGE_LENGTHS[codes].max()) if len(codes) else 1
+            # (every stage the run entered was recorded at the point it was entered)
+            if not len(codes):
+                width = 1
+            elif stages:
+                width = max(len(name) for name, _ in stages)
+            else:
+                width = int(_STAGE_LENGTHS[codes].max())
             out["stage"] = _STAGE_BY_WIDTH[width][codes]
         return out
 
 
 def run_compiled(model):
     """:func:`simulate.simulate` with the compiled loop: the same ``SimulationResult``."""
-    from .simulate import Observer
-
     wall0 = time.perf_counter()
     solve = CompiledSolve(model)
     solve.advance()
-    t, diagnosis, steps, rejected = solve.outcome()
-    obs = Observer(model)
-    solve.fill(obs)
-    ctl = solve.ctl
-    return obs.result(
-        t,
-        diagnosis,
-        steps,
-        rejected,
-        time.perf_counter() - wall0,
-        int(ctl[K.I_FORCED]),
-        int(ctl[K.I_EVENTS]),
-    )
+    result = solve.result(wall0)
+    solve.release()
+    return result
 
 
 @contextmanager

@@ -2167,15 +2167,14 @@ def _observe(P, normals, cfg, ctl, fc, T, Y, LAM, OUT, RES, IMP, STG, REC, i, on
             ctl[I_N_STAGES] = n_stg + 1
     if cfg[G_RECORD] != 0.0:
         n_rec = ctl[I_N_REC]
-        row = REC[n_rec]
-        row[REC_T] = t
+        REC[REC_T, n_rec] = t
         for k in range(6):
-            row[REC_Y + k] = y[k]
-        row[REC_ALPHA] = res[R_ALPHA]
-        row[REC_TIP_W] = res[R_TIP_W]
-        row[REC_FENCE_N] = res[R_FENCE_N]
-        row[REC_MAX_D] = res[R_MAX_D]
-        row[REC_STAGE] = ctl[I_STAGE]
+            REC[REC_Y + k, n_rec] = y[k]
+        REC[REC_ALPHA, n_rec] = res[R_ALPHA]
+        REC[REC_TIP_W, n_rec] = res[R_TIP_W]
+        REC[REC_FENCE_N, n_rec] = res[R_FENCE_N]
+        REC[REC_MAX_D, n_rec] = res[R_MAX_D]
+        REC[REC_STAGE, n_rec] = ctl[I_STAGE]
         ctl[I_N_REC] = n_rec + 1
     fc[F_PREV_T] = t
     for k in range(6):
@@ -2242,10 +2241,12 @@ def solve(
 ):  # fmt: skip
     """Run the solve loop (``Integrator.stepping`` with ``Observer``) from where ``ctl``/``fc``
     left it: until it ends (SOLVE_DONE, the diagnosis in ctl[I_DIAG]), ``max_attempts`` step
-    attempts (SOLVE_PAUSED), an output buffer (IMP, STG, REC) without a free row (SOLVE_GROW),
+    attempts (SOLVE_PAUSED), an output buffer (IMP, STG rows; REC columns, one row per
+    recorded quantity REC_*) without a free entry (SOLVE_GROW),
     the accepted time reaching ``t_target`` (SOLVE_REACHED) or a full trace (SOLVE_TRACED: ``TR``
     with rows keeps every observed point for a Python observer, ``integrators.Integrator``; no
-    rows, no trace). Row 0 of Y holds the initial state on the first call."""
+    rows, no trace). Row 0 of Y holds the initial state on the first call, which zeroes the
+    other state rows and the scratch arrays."""
     adaptive = cfg[G_ADAPTIVE] != 0.0
     h_nom = cfg[G_H_NOM]
     min_dt = cfg[G_MIN_DT]
@@ -2255,7 +2256,21 @@ def solve(
         # Scheme.initialize: forces at t = 0, belt wrench by Karnopp, accelerations
         ctl[I_STARTED] = 1
         a = ctl[I_CUR]
-        T[a] = 0.0
+        # the state rows other than the initial state, and the scratch arrays, start at zero
+        # (the caller may pass arrays of an earlier solve: engine reuses them)
+        T[:] = 0.0
+        for i in range(Y.shape[0]):
+            if i != a:
+                Y[i, :] = 0.0
+        LAM[:, :] = 0.0
+        OUT[:, :, :] = 0.0
+        RES[:, :] = 0.0
+        MODAL[:, :] = 0.0
+        ACC[:, :] = 0.0
+        w[:] = 0.0
+        wdot[:] = 0.0
+        nodes[:, :] = 0.0
+        work[:, :] = 0.0
         for k in range(N_SLOTS):
             prev[k] = math.nan
         evaluate(
@@ -2298,7 +2313,7 @@ def solve(
         if (
             ctl[I_N_IMPACTS] >= IMP.shape[0]
             or ctl[I_N_STAGES] >= STG.shape[0]
-            or ctl[I_N_REC] >= REC.shape[0]
+            or ctl[I_N_REC] >= REC.shape[1]
         ):
             return SOLVE_GROW
         if TR.shape[0] > 0 and ctl[I_N_TRACE] >= TR.shape[0]:

@@ -423,40 +423,56 @@ class Observer:
             rec.setdefault("stage", []).append(self.stage)
 
     def result(self, t, diagnosis, steps, rejected, wall, forced=0, events=0) -> SimulationResult:
-        md = self.md
-        sorted_ = self.sorted and diagnosis is None
-        if diagnosis is not None:
-            reason = "solver failure: " + diagnosis
-        elif self.sorted:
-            reason = "sorted: centre of gravity crossed the chute edge y0 = s"
-        elif not self.touched:
-            reason = "not sorted: the fence never touched the load"
-        else:
-            reason = f"not sorted: y_max = {self.y_max:.3f} m < s = {self.width:g} m"
-        return SimulationResult(
-            success=diagnosis is None,
-            sorted=sorted_,
-            reason=reason,
-            diagnosis=diagnosis,
-            peak_contact_force=self.peak_n,
-            peak_contact_force_stiff=max((p for _, _, p in self.impacts), default=0.0),
-            peak_normal_accel=self.peak_n / md.mass,
-            impact_normal_speed=self.impact_speed,
-            exit_speed_y=self.exit_speed,
-            y_max=self.y_max,
-            peak_tip_deflection=self.peak_tip,
-            stages=self.stages,
-            sim_time=t,
-            wall_time=wall,
-            steps=steps,
-            rejected_steps=rejected,
-            forced_steps=forced,
-            method=md.sc.solver.method,
-            events=events,
-            energy_excess=self.audit.max_residual,
-            energy=self.audit,
-            max_penetration=self.max_depth,
-            impacts=self.impacts,
+        return make_result(
+            self.md, t, diagnosis, steps, rejected, wall, forced, events,
+            sorted_=self.sorted, touched=self.touched, exit_speed=self.exit_speed,
+            impact_speed=self.impact_speed, impacts=self.impacts, peak_n=self.peak_n,
+            peak_tip=self.peak_tip, max_depth=self.max_depth, y_max=self.y_max,
+            stages=self.stages, audit=self.audit,
             series={k: np.asarray(v) for k, v in self.rec.items()},
-            model_parts=md.parts,
-        )
+        )  # fmt: skip
+
+
+def make_result(
+    md: SortingModel, t, diagnosis, steps, rejected, wall, forced, events, *, sorted_, touched,
+    exit_speed, impact_speed, impacts, peak_n, peak_tip, max_depth, y_max, stages, audit, series,
+) -> SimulationResult:  # fmt: skip
+    """The :class:`SimulationResult` of a run from its reductions (``Observer.result``; the
+    compiled loop's driver calls it with the loop's figures directly)."""
+    width = md.sc.conveyor.width
+    success = diagnosis is None
+    if not success:
+        reason = "solver failure: " + diagnosis
+    elif sorted_:
+        reason = "sorted: centre of gravity crossed the chute edge y0 = s"
+    elif not touched:
+        reason = "not sorted: the fence never touched the load"
+    else:
+        reason = f"not sorted: y_max = {y_max:.3f} m < s = {width:g} m"
+    return SimulationResult(
+        success=success,
+        sorted=sorted_ and success,
+        reason=reason,
+        diagnosis=diagnosis,
+        peak_contact_force=peak_n,
+        peak_contact_force_stiff=max((p for _, _, p in impacts), default=0.0),
+        peak_normal_accel=peak_n / md.mass,
+        impact_normal_speed=impact_speed,
+        exit_speed_y=exit_speed,
+        y_max=y_max,
+        peak_tip_deflection=peak_tip,
+        stages=stages,
+        sim_time=t,
+        wall_time=wall,
+        steps=steps,
+        rejected_steps=rejected,
+        forced_steps=forced,
+        method=md.sc.solver.method,
+        events=events,
+        energy_excess=audit.max_residual,
+        energy=audit,
+        max_penetration=max_depth,
+        impacts=impacts,
+        series=series,
+        model_parts=md.parts,
+    )
