@@ -88,6 +88,21 @@ def _propagator_cache(model):
     return cache
 
 
+_UP, _DOWN = 2.0**0.25, 2.0**-0.25  # the adaptive step's ladder rungs
+_CFG_ORDER = (
+    "G_H_NOM G_T_END G_DT G_MIN_DT G_TOL G_MAX_ITER G_ATOL G_RTOL G_V_REF G_OM_REF G_WIDTH "
+    "G_ADAPTIVE G_STOP_SORTED G_RECORD G_BP G_KP G_DEEP G_SPEED_LIMIT G_VMIN G_PHIDOT_MIN G_UP "
+    "G_DOWN G_FLUSH"
+).split()
+assert [getattr(K, g) for g in _CFG_ORDER] == list(range(K.N_CFG)), "CompiledSolve's cfg order"
+# the control integers and figures at the start of a solve
+_CTL0 = np.zeros(K.N_CTL, dtype=np.int64)
+_CTL0[K.I_TRIAL] = _CTL0[K.I_ON_BELT] = _CTL0[K.I_FIRST] = 1
+_CTL0[[K.I_MASK, K.I_STAGE, K.I_LAST_MASK0, K.I_LAST_MASK1]] = -1
+_FC0 = np.zeros(K.N_FC)
+_FC0[[K.F_EXIT_SPEED, K.F_IMPACT_SPEED, K.F_FLOW, K.F_E0]] = math.nan
+_FC0[K.F_Y_MAX] = -math.inf
+
 # per (n_state, modes, elements): the arrays of finished solves, reused by the next one (an
 # event of the optimiser, the line or the benchmark builds ~20 small arrays otherwise: ~6 us
 # of NumPy calls, ~15 us on a cold cache, per ~0.3 ms stiff event)
@@ -131,38 +146,42 @@ class CompiledSolve:
         h_nom = sv.dt_max if adaptive else sv.dt
         t_cycle = 2.0 * sc.drive.t1
         self.t_end = t_end = sv.t_end if sv.t_end > 0 else t_cycle + sv.settle_time
-        breaks = sorted({b for b in (sc.drive.t1, t_cycle) if 0.0 < b < t_end})
+        t1 = sc.drive.t1
+        breaks = [b for b in ((t1, t_cycle) if t1 < t_cycle else (t_cycle,)) if 0.0 < b < t_end]
         breaks.append(t_end)
         self.breaks = np.array(breaks, dtype=float)
         body = model.body
+        contact = sc.contact
         v_ref = max(model.belt, 0.1)
-        # filled as a list, one array at the end (a numpy item assignment per field cost more
-        # than the rest of this constructor on a cold cache)
-        cfg = [0.0] * K.N_CFG
-        cfg[K.G_H_NOM] = h_nom
-        cfg[K.G_T_END] = t_end
-        cfg[K.G_DT] = sv.dt
-        cfg[K.G_MIN_DT] = sv.min_dt
-        cfg[K.G_TOL] = sv.tolerance
-        cfg[K.G_MAX_ITER] = sv.max_iterations
-        cfg[K.G_ATOL] = sv.atol
-        cfg[K.G_RTOL] = sv.rtol
-        cfg[K.G_V_REF] = v_ref
-        cfg[K.G_OM_REF] = v_ref / min(body.length_a, body.width_b)
-        cfg[K.G_WIDTH] = sc.conveyor.width
-        cfg[K.G_ADAPTIVE] = float(adaptive)
-        cfg[K.G_STOP_SORTED] = float(sv.stop_when_sorted)
-        cfg[K.G_RECORD] = float(bool(sc.record))
-        cfg[K.G_BP] = sc.contact.b_p
-        cfg[K.G_KP] = sc.contact.k_p
-        cfg[K.G_DEEP] = model.deep
-        cfg[K.G_SPEED_LIMIT] = model.speed_limit
-        cfg[K.G_VMIN] = sc.contact.v_min
-        cfg[K.G_PHIDOT_MIN] = sc.contact.phidot_min
-        cfg[K.G_UP] = 2.0**0.25
-        cfg[K.G_DOWN] = 2.0**-0.25
-        cfg[K.G_FLUSH] = FLUSH_ANGLE
-        self.cfg = np.array(cfg, dtype=float)
+        # one list in the order of the G_* indices (checked at import), one array
+        self.cfg = np.array(
+            [
+                h_nom,
+                t_end,
+                sv.dt,
+                sv.min_dt,
+                sv.tolerance,
+                sv.max_iterations,
+                sv.atol,
+                sv.rtol,
+                v_ref,
+                v_ref / min(body.length_a, body.width_b),
+                sc.conveyor.width,
+                float(adaptive),
+                float(sv.stop_when_sorted),
+                float(bool(sc.record)),
+                contact.b_p,
+                contact.k_p,
+                model.deep,
+                model.speed_limit,
+                contact.v_min,
+                contact.phidot_min,
+                _UP,
+                _DOWN,
+                FLUSH_ANGLE,
+            ],
+            dtype=float,
+        )
         n, m = model.n_state, model.n_modes
         self._key = (n, m, model.n_el) if trace == 0 else None
         pool = _WORKSPACES.get(self._key)
@@ -176,17 +195,8 @@ class CompiledSolve:
         ) = arrays  # fmt: skip
         # kernel.solve zeroes the other state rows and the scratch arrays on its first call
         ctl = self.ctl
-        ctl.fill(0)
-        ctl[K.I_TRIAL] = 1
-        ctl[K.I_ON_BELT] = 1
-        ctl[K.I_FIRST] = 1
-        ctl[K.I_MASK] = ctl[K.I_STAGE] = -1
-        ctl[K.I_LAST_MASK0] = ctl[K.I_LAST_MASK1] = -1
-        fc = self.fc
-        fc.fill(0.0)
-        fc[K.F_EXIT_SPEED] = fc[K.F_IMPACT_SPEED] = math.nan
-        fc[K.F_Y_MAX] = -math.inf
-        fc[K.F_FLOW] = fc[K.F_E0] = math.nan
+        ctl[:] = _CTL0
+        self.fc[:] = _FC0
         y0 = self.Y[0]
         y0.fill(0.0)
         y0[:3] = model.initial
@@ -202,10 +212,10 @@ class CompiledSolve:
         # the modal basis of a flexible fence is read-only (cached per fence): writable copies
         # keep one signature of kernel.solve for stiff and flexible models (one compiled
         # specialisation to load from Numba's cache per process, ~0.3 s, instead of two)
-        self.modes = tuple(
-            a if a.flags.writeable else a.copy()
-            for a in (model.phi, model.rigid_modal, model.omega, model.zeta)
-        )
+        modes = (model.phi, model.rigid_modal, model.omega, model.zeta)
+        if model.flexible:
+            modes = tuple(a if a.flags.writeable else a.copy() for a in modes)
+        self.modes = modes
         self.busy = 0.0
         self.diagnosis: str | None = None
 

@@ -759,23 +759,31 @@ NEWTON = True
 
 
 @njit(cache=True, _nrt=False, inline="always")
-def _newton_load(P, out, y1, g_new, hh, im0, im2):
-    """Turn the fixed-point update of the load, G(y1), into a Newton update with the contacts'
-    stiffness: (I - dG/dy) delta = G(y1) - y1, g_new <- y1 + delta (load rows only).
+def _newton_load(P, out, y1, g_new, hh, im0, im2, rate, sigma, u0, u1, u2):
+    """Turn the fixed-point update of the load, G(y1), into a Newton update: solve
+    (I - dG/dy) delta = G(y1) - y1 and set g_new <- y1 + delta (load rows only).
 
-    With v_new = v0 + hh M^-1 (F0 + F(q, v)) and q_new = q0 + hh (v0 + v_new), and law (16)'s
-    N = b D' D^2 + k_p D^4 acting along J = (n, r x n) with dD/dq = dD'/dv = -J^T (geometric
-    terms of the contact point dropped), dG/dy reduces to the 3 x 3 system
-    (I + hh M^-1 sum c_k u_k J_k^T) dv = r_v, dq = hh dv + (r_q - hh r_v), with
-    c_k = hh (4 k_p D^3 + 2 b D D') + b D^2 and u_k = J_k + (ft / N) T_k for a sliding contact
-    (|ft| = mu2 N: friction proportional to N), J_k otherwise. The belt's own implicit solve and
-    a sticking contact's friction (already a Newton step on the slip) are left to the iteration.
+    G: v_new = Phi(v*), v* = v0 + hh M^-1 (F0 + lambda0 + Q(q, v)), q_new = q0 + hh (v0 + v_new),
+    with Q the contacts' generalized force and Phi the belt's implicit slip map. Each contact
+    pushes N = b D' D^2 + k_p D^4 along J = (n, r x n) with friction ft along T = (t, r x t)
+    (sliding: ft = +-mu2 N; sticking: ft = f_prev - slide / w_eff, a Newton step on the slip
+    already, left out); dD/dq = dD'/dv = -J^T, and dD'/dq, dJ/dq, dT/dq from the contact's
+    geometry: a corner on the rigid fence or the border (D' = rate s - v_p . n, so dD'/dq =
+    rate T + omega (r . n) e_phi; J, T turn with phi through r) or the fence tip in a face of the
+    load (the face normal turns with phi; dD'/dq = omega (n_y, -n_x, 0) + slide e_phi). With
+    delta_q = hh delta_v + (r_q - hh r_v) this is the 3 x 3 system
+    (I + DPhi hh M^-1 [sum (J + s T)(c J - hh b D^2 dD'/dq)^T - hh (N dJ/dq + ft dT/dq)]) dv = r_v
+    with c = hh (4 k_p D^3 + 2 b D D') + b D^2, s = ft / N sliding (0 sticking) and, slipping on
+    the belt (``sigma`` > 0, u = v* - belt), DPhi = diag(sigma / (sigma + c_i)) + g h^T
+    (c_i = W_i P_i, g_i = u_i c_i / (sigma + c_i)^2, h_i = P_i u_i / (sigma + c_i)^2 / s3),
+    identity off the belt. This is the exact Jacobian of G (to the finite-difference check's
+    1e-9), so the iteration converges quadratically.
     """
     b = P[P_BEFF]
     kp = P[P_KP]
     mu2 = P[P_MU2]
-    x, y = y1[0], y1[1]
-    m00 = m11 = m22 = 1.0
+    x, y, vx, vy, om = y1[0], y1[1], y1[3], y1[4], y1[5]
+    m00 = m11 = m22 = 0.0
     m01 = m02 = m10 = m12 = m20 = m21 = 0.0
     active = False
     for k in range(N_SLOTS):
@@ -791,29 +799,73 @@ def _newton_load(P, out, y1, g_new, hh, im0, im2):
             continue
         active = True
         nx, ny = row[C_NX], row[C_NY]
+        tx, ty = ny, -nx
         rx, ry = row[C_PX] - x, row[C_PY] - y
-        j0, j1, j2 = nx, ny, rx * ny - ry * nx
-        u0, u1, u2 = j0, j1, j2
+        j2 = rx * ny - ry * nx
+        t2 = rx * ty - ry * tx
+        u0_, u1_, u2_ = nx, ny, j2
         ft = row[C_FT]
         if ft != 0.0 and abs(ft) >= mu2 * nn * (1.0 - 1e-12):
-            s = ft / nn
-            tx, ty = ny, -nx
-            u0 += s * tx
-            u1 += s * ty
-            u2 += s * (rx * ty - ry * tx)
-        c *= hh
-        a0, a1, a2 = c * im0 * u0, c * im0 * u1, c * im2 * u2
-        m00 += a0 * j0
-        m01 += a0 * j1
-        m02 += a0 * j2
-        m10 += a1 * j0
-        m11 += a1 * j1
-        m12 += a1 * j2
-        m20 += a2 * j0
-        m21 += a2 * j1
-        m22 += a2 * j2
+            sf = ft / nn
+            u0_ += sf * tx
+            u1_ += sf * ty
+            u2_ += sf * t2
+        cd = hh * b * d * d
+        # e: hh (dN/dq hh + dN/dv)-like row (with the sign of -dQ/dy); geo: -hh^2 (N dJ/dq +
+        # ft dT/dq) per column
+        e0, e1, e2 = c * nx, c * ny, c * j2
+        if SLOT_TIP <= k < SLOT_BORDER:  # the fence tip in a face: the face normal turns
+            vpx, vpy = vx - om * ry, vy + om * rx
+            slide = (vpx - row[C_VSX]) * tx + (vpy - row[C_VSY]) * ty
+            e0 -= cd * om * ny
+            e1 += cd * om * nx
+            e2 -= cd * slide
+            g0x = g1x = g0y = g1y = 0.0
+            g2x = -nn * ny + ft * nx
+            g2y = nn * nx + ft * ny
+            g0p = -nn * tx + ft * nx
+            g1p = -nn * ty + ft * ny
+            g2p = -nn * t2 + ft * j2
+        else:  # a corner on the rigid fence (rate: its angular speed) or on the border (0)
+            rate_k = rate if k < SLOT_TIP else 0.0
+            rn = rx * nx + ry * ny
+            e0 -= cd * rate_k * tx
+            e1 -= cd * rate_k * ty
+            e2 -= cd * (rate_k * t2 + om * rn)
+            g0x = g1x = g0y = g1y = g2x = g2y = g0p = g1p = 0.0
+            g2p = -nn * rn - ft * (rx * tx + ry * ty)
+        a0, a1, a2 = hh * im0, hh * im0, hh * im2
+        m00 += a0 * (u0_ * e0 - hh * g0x)
+        m01 += a0 * (u0_ * e1 - hh * g0y)
+        m02 += a0 * (u0_ * e2 - hh * g0p)
+        m10 += a1 * (u1_ * e0 - hh * g1x)
+        m11 += a1 * (u1_ * e1 - hh * g1y)
+        m12 += a1 * (u1_ * e2 - hh * g1p)
+        m20 += a2 * (u2_ * e0 - hh * g2x)
+        m21 += a2 * (u2_ * e1 - hh * g2y)
+        m22 += a2 * (u2_ * e2 - hh * g2p)
     if not active:
         return False
+    if sigma > 0.0:
+        # slipping on the belt: M <- DPhi M (M here is the contact part, I + M the matrix)
+        fm2 = P[P_FMAX] * P[P_FMAX]
+        tm2 = P[P_TMAX] * P[P_TMAX]
+        c0, c1, c2 = hh * im0 * fm2, hh * im0 * fm2, hh * im2 * tm2
+        i0, i1, i2 = 1.0 / (sigma + c0), 1.0 / (sigma + c1), 1.0 / (sigma + c2)
+        s3 = fm2 * (u0 * u0 * i0 * i0 * i0 + u1 * u1 * i1 * i1 * i1) + tm2 * u2 * u2 * i2**3
+        if s3 > 0.0:
+            g0, g1, g2 = u0 * c0 * i0 * i0, u1 * c1 * i1 * i1, u2 * c2 * i2 * i2
+            h0, h1, h2 = fm2 * u0 * i0 * i0 / s3, fm2 * u1 * i1 * i1 / s3, tm2 * u2 * i2 * i2 / s3
+            d0, d1, d2 = sigma * i0, sigma * i1, sigma * i2
+            k0 = h0 * m00 + h1 * m10 + h2 * m20
+            k1 = h0 * m01 + h1 * m11 + h2 * m21
+            k2 = h0 * m02 + h1 * m12 + h2 * m22
+            m00, m01, m02 = d0 * m00 + g0 * k0, d0 * m01 + g0 * k1, d0 * m02 + g0 * k2
+            m10, m11, m12 = d1 * m10 + g1 * k0, d1 * m11 + g1 * k1, d1 * m12 + g1 * k2
+            m20, m21, m22 = d2 * m20 + g2 * k0, d2 * m21 + g2 * k1, d2 * m22 + g2 * k2
+    m00 += 1.0
+    m11 += 1.0
+    m22 += 1.0
     r0, r1, r2 = g_new[3] - y1[3], g_new[4] - y1[4], g_new[5] - y1[5]
     e0 = g_new[0] - y1[0] - hh * r0
     e1 = g_new[1] - y1[1] - hh * r1
@@ -996,7 +1048,13 @@ def trapezoidal_step(
             break
         # a stiff fence (no modes): Newton with the contacts' stiffness (the Anderson history
         # is not needed then); a stuck belt holds v1 fixed, where the plain update is exact
-        if NEWTON and m == 0 and not stuck and _newton_load(P, out, y1, g_new, hh, im0, im2):
+        slip = sigma if on_belt else 0.0
+        if (
+            NEWTON
+            and m == 0
+            and not stuck
+            and _newton_load(P, out, y1, g_new, hh, im0, im2, rate1, slip, vf0 - belt, vf1, vf2)
+        ):
             for k in range(n):
                 y1[k] = g_new[k]
             continue

@@ -48,15 +48,16 @@ def _distance(y, ref, h):
     return float(d[:3].max() + h * d[3:6].max())
 
 
-@pytest.mark.parametrize("t", [0.2, 0.4])
-def test_newton_contact_iteration_reaches_the_fixed_point_of_the_plain_iteration(
+@pytest.mark.parametrize("t", [0.1, 0.2, 0.4])
+def test_newton_contact_iteration_converges_quadratically_to_the_plain_fixed_point(
     t, monkeypatch
 ) -> None:
-    """Mid-push, the load pressed on the fence at one or two contacts, sliding on the belt:
-    Newton with the contacts' stiffness and the Anderson-accelerated fixed point converge to the
-    same end state (to round-off at a tolerance of 1e-14 m), and Newton's error falls by at
-    least 100x per iteration (linear with a small constant: the belt's and the contact points'
-    own motion are left out of its matrix) where the fixed point contracts by ~10x."""
+    """Mid-push, sliding on the belt, the load pressed on the fence at two corners (t = 0.1,
+    0.2 s) or at a corner and the fence tip in a face (0.4 s): Newton with the exact Jacobian
+    (contacts' stiffness and damping, their geometry, the belt's slip map) and the
+    Anderson-accelerated fixed point converge to the same end state (to round-off at a
+    tolerance of 1e-14 m), Newton quadratically (e_2 <= 1e4 / m e_1^2, down to round-off),
+    the fixed point linearly."""
     md, cs, a = _state_at(t)
     assert cs.RES[a, K.R_FENCE_N] > 10.0  # pushing
     h = STIFF.solver.dt_max
@@ -67,17 +68,16 @@ def test_newton_contact_iteration_reaches_the_fixed_point_of_the_plain_iteration
         status, ref, iterations = _step(md, cs, a, h, 50, False)
         assert status == K.STEP_OK and iterations < 10
         ends[newton] = ref
-        errors[newton] = [_distance(_step(md, cs, a, h, k, True)[1], ref, h) for k in (1, 2, 3)]
+        errors[newton] = [_distance(_step(md, cs, a, h, k, True)[1], ref, h) for k in (1, 2)]
     assert _distance(ends[True], ends[False], h) < 1e-13
-    e = errors[True]
-    assert e[1] < 1e-2 * e[0] and e[2] < 1e-2 * e[1], e
-    assert e[0] < 0.2 * errors[False][0], (e, errors[False])
-    assert e[1] < 1e-2 * errors[False][1], (e, errors[False])
+    e, plain = errors[True], errors[False]
+    assert e[1] <= 1e4 * e[0] ** 2 + 1e-15, e
+    assert e[0] < 0.2 * plain[0] and e[1] < 1e-3 * plain[1], (e, plain)
 
 
 def test_newton_iteration_needs_fewer_force_evaluations_per_step(monkeypatch) -> None:
-    """At the solver's tolerance (1e-9 m) a mid-push step converges in at most 3 evaluations
-    with Newton, and no faster without it."""
+    """At the solver's tolerance (1e-9 m) a mid-push step converges in at most 2 evaluations
+    with Newton (its second update is within round-off), 3-4 without it."""
     md, cs, a = _state_at(0.3)
     h = STIFF.solver.dt_max
     count = {}
@@ -85,7 +85,7 @@ def test_newton_iteration_needs_fewer_force_evaluations_per_step(monkeypatch) ->
         monkeypatch.setattr(K, "NEWTON", newton)
         status, _, count[newton] = _step(md, cs, a, h, 50, False, tol=STIFF.solver.tolerance)
         assert status == K.STEP_OK
-    assert count[True] <= 3 and count[True] <= count[False], count
+    assert count[True] <= 2 < count[False], count
 
 
 def _secular(u, w, f_max, t_max, sigma):
