@@ -326,6 +326,10 @@ class Integrator:
         # (unless the corner is already within the contact iteration's tolerance of the tip:
         # then it slides off in this step; another step before it would only creep up on it)
         keep_before = kind == K.EVENT_SLIDE_OFF and g0 > sch.tol
+        # ... and a corner within it is stepped just past the tip (2x the secant's step, not
+        # clamped to 1e-3 of the bracket: that took ~5 trial steps to end 1e-9 m past it),
+        # done once the step ends within tol past the tip
+        cross = kind == K.EVENT_SLIDE_OFF and not keep_before
         before = None
         # Illinois variant: the end kept twice in a row has its value halved in the secant, so
         # the bracket shrinks from both sides (plain regula falsi stalls on a curved event
@@ -336,8 +340,13 @@ class Integrator:
                 break
             if before is not None and g_lo <= sch.tol:
                 break  # the step before the slide-off ends within tolerance of the tip
+            if cross and best is not None and -g_hi <= sch.tol:
+                break  # the step across it ends within tolerance past the tip
             h_loc = lo + (hi - lo) * (f_lo / (f_lo - f_hi))
-            h_loc = min(max(h_loc, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
+            if cross and last == 0:
+                h_loc = min(2.0 * h_loc, hi)
+            else:
+                h_loc = min(max(h_loc, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
             st = sch.step(h_loc, a, self.loc, jump, on_belt, False)
             if st == K.STEP_REJECTED:
                 break

@@ -2066,7 +2066,9 @@ def _locate(
     jump = _jump_at(P, T[a])
     best = 0.0
     have_best = False
-    keep_before = kind == EVENT_SLIDE_OFF and g0 > cfg[G_TOL]
+    tol = cfg[G_TOL]
+    keep_before = kind == EVENT_SLIDE_OFF and g0 > tol
+    cross = kind == EVENT_SLIDE_OFF and not keep_before
     g_lo = g0
     before = 0.0
     have_before = False
@@ -2074,10 +2076,13 @@ def _locate(
     for _ in range(60):
         if hi - lo <= 1e-7 * h or (onset and g_hi <= EVENT_TOL):
             break
-        if have_before and g_lo <= cfg[G_TOL]:
+        if (have_before and g_lo <= tol) or (cross and have_best and -g_hi <= tol):
             break
         h_loc = lo + (hi - lo) * (f_lo / (f_lo - f_hi))
-        h_loc = min(max(h_loc, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
+        if cross and last == 0:
+            h_loc = min(2.0 * h_loc, hi)  # the tip is within tol: step just past it
+        else:
+            h_loc = min(max(h_loc, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
         st = _trap(
             P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT, RES,
             MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h_loc, a, S_LOC, jump,
