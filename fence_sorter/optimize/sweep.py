@@ -796,12 +796,16 @@ def repair_nesting(
     tol: float = 0.005,
     rounds: int = 8,
     progress: bool = False,
+    runs: Iterable[str] | None = None,
 ) -> tuple[int, set[str]]:
     """Re-solve every looser problem whose optimum lies below a tighter neighbour's, starting
     the search from the tighter optima (feasible for the looser problem, so the answer cannot
     be lower); the new rows are appended (the last row of a key wins) and name the points they
     started from (``started_from``). Repeated while a repair moves a point above its own
-    looser neighbour, at most ``rounds`` times. Returns (points re-solved, runs changed)."""
+    looser neighbour, at most ``rounds`` times. Only the rows of ``runs`` (CSV names; None:
+    every run) are re-solved; the tighter neighbours may come from any CSV present. Returns
+    (points re-solved, runs changed)."""
+    only = None if runs is None else set(runs)
     out_dir = Path(out_dir)
 
     def rows_of(name: str) -> list[dict]:
@@ -812,6 +816,8 @@ def repair_nesting(
         todo: dict[str, tuple[str, dict, list[dict]]] = {}
         for _tag, tight, loose, run in nested_pairs(rows_of):
             tried = set(loose["started_from"].split())
+            if only is not None and run not in only:
+                continue
             if _w(tight) > _w(loose) * (1.0 + tol) and tight["key"] not in tried:
                 todo.setdefault(loose["key"], (run, loose, []))[2].append(tight)
         if not todo:
@@ -958,7 +964,8 @@ def main(args) -> int:
         ) as executor:
             run_sweeps(sweeps, out, executor, resume=resume, max_points=max_points)
             if repair:
-                n_solved, changed = repair_nesting(out, executor, progress=True)
+                runs = {s.run for s in sweeps}
+                n_solved, changed = repair_nesting(out, executor, progress=True, runs=runs)
                 if n_solved:
                     print(
                         f"nesting repair: {n_solved} looser problem(s) re-solved from their "
@@ -973,8 +980,6 @@ def main(args) -> int:
     except Exception as exc:
         print(f"fence-sorter: sweep failed: {type(exc).__name__}: {exc}", file=sys.stderr)
         status = EXIT_FAILED
-    # the sweeps asked for, and any other whose run the repair changed
-    names += [n for n in SWEEPS if n not in names and get_sweep(n).run in changed]
     for sweep in [get_sweep(n) for n in names]:
         for line in finish(sweep, out, table_path):
             print(line)

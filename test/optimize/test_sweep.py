@@ -353,7 +353,10 @@ def test_nesting_repair_restarts_the_looser_problem_from_the_tighter_optimum(
         return sw._order(sw.get_sweep(name), sw.read_rows(sw._csv(tmp_path, name)))
 
     assert len(sw.nesting_violations(rows_of)[1]) == 2
-    solved, changed = sw.repair_nesting(tmp_path, SyncExecutor())
+    # a repair of other runs leaves fig6 alone (a --sweep fig7 does not rewrite fig6.csv)
+    assert sw.repair_nesting(tmp_path, SyncExecutor(), runs={"fig7"}) == (0, set())
+    assert calls == []
+    solved, changed = sw.repair_nesting(tmp_path, SyncExecutor(), runs={"fig6", "fig7"})
     assert (solved, changed) == (1, {"fig6"})
     ((inputs, starts, started_from),) = calls
     assert {k: inputs[k] for k in miss} == miss and inputs["constraints"] == sw.C_POS
