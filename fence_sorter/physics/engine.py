@@ -393,15 +393,26 @@ class CompiledSolve:
         ``time.perf_counter()`` the run started at."""
         from .simulate import EnergyAudit, make_result
 
-        t, diagnosis, steps, rejected = self.outcome()
         ctl, fc = self.ctl.tolist(), self.fc.tolist()  # Python numbers, read once each
         stages = self._stages(ctl)
-        audit = EnergyAudit()
-        self._audit(fc, audit)
+        audit = EnergyAudit(
+            max_residual=fc[K.F_MAX_RES],
+            min_residual=fc[K.F_MIN_RES],
+            flow=fc[K.F_FLOW],
+            e0=fc[K.F_E0],
+            t_max=fc[K.F_T_MAX],
+            t_min=fc[K.F_T_MIN],
+            max_rise=fc[K.F_MAX_RISE],
+            t_rise=(fc[K.F_T_RISE0], fc[K.F_T_RISE1]),
+            run_min=fc[K.F_RUN_MIN],
+            t_run_min=fc[K.F_T_RUN_MIN],
+        )
         md = self.model
+        diagnosis = self.diagnosis or (None if ctl[K.I_DIAG] == K.DIAG_NONE else self._diagnosis())
         return make_result(
-            md, t, diagnosis, steps, rejected, time.perf_counter() - wall0, ctl[K.I_FORCED],
-            ctl[K.I_EVENTS], sorted_=bool(ctl[K.I_SORTED]), touched=bool(ctl[K.I_TOUCHED]),
+            md, float(self.T[ctl[K.I_CUR]]), diagnosis, ctl[K.I_STEPS], ctl[K.I_REJECTED],
+            time.perf_counter() - wall0, ctl[K.I_FORCED], ctl[K.I_EVENTS],
+            sorted_=bool(ctl[K.I_SORTED]), touched=bool(ctl[K.I_TOUCHED]),
             exit_speed=fc[K.F_EXIT_SPEED], impact_speed=fc[K.F_IMPACT_SPEED],
             impacts=[(t, w, p) for t, w, p in self.IMP[: ctl[K.I_N_IMPACTS]].tolist()],
             peak_n=fc[K.F_PEAK_N], peak_tip=fc[K.F_PEAK_TIP], max_depth=fc[K.F_MAX_DEPTH],
@@ -411,26 +422,26 @@ class CompiledSolve:
 
     def series(self, want, stages=None) -> dict[str, np.ndarray]:
         """The recorded series, keyed as ``Observer._record`` keys them (each its own array: a
-        row of the loop's REC or a copy of its time row); ``stages``: the run's stage list, if
-        known (the recorded stage names are the names in it)."""
+        row of the loop's REC, which records the time once per group); ``stages``: the run's
+        stage list, if known (the recorded stage names are the names in it)."""
         if not want:
             return {}
         cols = self.REC[:, : self.ctl[K.I_N_REC]]  # one row per recorded quantity, contiguous
         out: dict[str, np.ndarray] = {}
         if "trajectory" in want:
-            out["t"] = cols[K.REC_T].copy()
+            out["t"] = cols[K.REC_T]
             for k, key in enumerate(("x", "y", "phi", "vx", "vy", "phidot")):
                 out[key] = cols[K.REC_Y + k]
         if "fence" in want:
-            out["t_fence"] = cols[K.REC_T].copy()
+            out["t_fence"] = cols[K.REC_T_FENCE]
             out["alpha_w"] = cols[K.REC_ALPHA]
             out["tip_deflection"] = cols[K.REC_TIP_W]
         if "forces" in want:
-            out["t_forces"] = cols[K.REC_T].copy()
+            out["t_forces"] = cols[K.REC_T_FORCES]
             out["normal_force"] = cols[K.REC_FENCE_N]
             out["deformation"] = cols[K.REC_MAX_D]
         if "stages" in want:
-            out["t_stage"] = cols[K.REC_T].copy()
+            out["t_stage"] = cols[K.REC_T_STAGE]
             codes = cols[K.REC_STAGE].astype(np.intp)
             # the dtype np.asarray gives the Python loop's list of names: the longest present
             # (every stage the run entered was recorded at the point it was entered)

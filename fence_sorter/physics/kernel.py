@@ -1899,7 +1899,12 @@ REC_TIP_W = 8
 REC_FENCE_N = 9
 REC_MAX_D = 10
 REC_STAGE = 11
-N_REC_COLS = 12
+# the time again, once per series group that has its own time array (fence, forces, stages), so
+# each recorded array is a row of REC of its own
+REC_T_FENCE = 12
+REC_T_FORCES = 13
+REC_T_STAGE = 14
+N_REC_COLS = 15
 N_PROP_CACHE = 256
 # a trace row: an accepted point as the Python observer sees it (``integrators.State``) and the
 # on_belt flag it was observed with: [t, on_belt, y, lam, out (row-major), res, modal, acc]
@@ -2231,6 +2236,9 @@ def _observe(P, normals, cfg, ctl, fc, T, Y, LAM, OUT, RES, IMP, STG, REC, i, on
     if cfg[G_RECORD] != 0.0:
         n_rec = ctl[I_N_REC]
         REC[REC_T, n_rec] = t
+        REC[REC_T_FENCE, n_rec] = t
+        REC[REC_T_FORCES, n_rec] = t
+        REC[REC_T_STAGE, n_rec] = t
         for k in range(6):
             REC[REC_Y + k, n_rec] = y[k]
         REC[REC_ALPHA, n_rec] = res[R_ALPHA]
