@@ -11,8 +11,9 @@ generator) and test/physics/test_engine.py checks the two agree to round-off.
 This module builds the arrays, calls ``kernel.solve`` in chunks of step attempts (between them it
 checks ``solver.max_wall_time``, which compiled code cannot read, and grows the output buffers),
 and turns the figures into the :class:`SimulationResult` the Python loop would have produced
-(through ``Observer.result``, so every text is the same). ``generalized_alpha`` has no compiled
-loop and always runs the Python one.
+(through ``simulate.make_result``, which ``Observer.result`` calls too, so every text is the
+same). A one-shot solve (``run_compiled``) reuses the arrays of the previous solve of the same
+shape. ``generalized_alpha`` has no compiled loop and always runs the Python one.
 """
 
 from __future__ import annotations
