@@ -321,14 +321,12 @@ class Integrator:
         jump = self.jump_at(a.t)
         best = None
         # a corner sliding off the tip drops its force from N(D) to zero: end that step just
-        # before the slide-off (the force there is the peak the step would otherwise skip);
-        # the next step then crosses it with a bracket of ~1e-7 of a step
-        # (unless the corner is already within the contact iteration's tolerance of the tip:
-        # then it slides off in this step; another step before it would only creep up on it)
+        # before the slide-off, within the contact iteration's tolerance of the tip (the force
+        # there is the peak the step would otherwise skip); the next step starts within the
+        # tolerance, and another step before the tip would only creep up on it: it is stepped
+        # just past the tip instead (2x the secant's step, not clamped to 1e-3 of the bracket,
+        # which took ~5 trial steps), done once it ends within the tolerance past the tip
         keep_before = kind == K.EVENT_SLIDE_OFF and g0 > sch.tol
-        # ... and a corner within it is stepped just past the tip (2x the secant's step, not
-        # clamped to 1e-3 of the bracket: that took ~5 trial steps to end 1e-9 m past it),
-        # done once the step ends within tol past the tip
         cross = kind == K.EVENT_SLIDE_OFF and not keep_before
         before = None
         # Illinois variant: the end kept twice in a row has its value halved in the secant, so
