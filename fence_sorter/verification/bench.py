@@ -451,11 +451,15 @@ def search_rungs(
     Descent: each method runs down the ladder to its first rung that is :func:`ladder_done`
     (or to a capped run). Confirmation: a rung may reach the error by a cancellation of errors
     and lose it at the next tighter tolerance (LSODA on positioned_stiff: rtol 1e-3 within
-    1e-5 of the reference, rtol 1e-4 off by 8e-4), so the fastest candidate, the loosest done
-    rung of a method whose next tighter rung did not refute it, has its next rung run; a
-    refuted method descends on to its next done rung. It ends when the fastest candidate is
-    confirmed (its next rung also done, failed, or beyond the ladder). Slower candidates stay
-    unconfirmed: they cannot be the baseline the default is compared with.
+    1e-5 of the reference, rtol 1e-4 off by 8e-4), so each candidate (the loosest done rung of
+    a method whose next tighter rung did not refute it) within RETIME_FACTOR of the fastest
+    candidate's search run, fastest first, has its next rung run; a refuted method descends on
+    to its next done rung. It ends when every such candidate is confirmed (its next rung also
+    done, failed, or beyond the ladder). Slower candidates stay unconfirmed: they are not
+    re-timed and cannot be the baseline the default is compared with. (Confirming only the
+    fastest search run was not enough: single runs of a few ms are noisy, RK45 rtol 1e-2 came
+    out 1 ms faster than LSODA rtol 1e-3 in one, and the re-timed medians then chose LSODA's
+    unconfirmed rung.)
     """
     runs: list[LadderRun] = []
 
@@ -473,13 +477,21 @@ def search_rungs(
         cands = [c for m in methods if (c := _candidate(runs, m, error, gap)) is not None]
         if not cands:
             return runs
-        best = min(cands, key=lambda r: r.wall)
-        nxt = [r for r in runs if r.method == best.method and r.rtol < best.rtol]
-        i = list(ladder).index(best.rtol) + 1
-        if nxt or i >= len(ladder):
+        fastest = min(c.wall for c in cands)
+        # every candidate that will be re-timed (within RETIME_FACTOR of the fastest) must be
+        # confirmed: the re-timed medians, not these single search runs, pick the baseline
+        open_ = [
+            c
+            for c in cands
+            if c.wall <= RETIME_FACTOR * fastest
+            and not any(r.method == c.method and r.rtol < c.rtol for r in runs)
+            and list(ladder).index(c.rtol) + 1 < len(ladder)
+        ]
+        if not open_:
             return runs
+        c = min(open_, key=lambda r: r.wall)
         collect()
-        descend(best.method, i)
+        descend(c.method, list(ladder).index(c.rtol) + 1)
 
 
 def _candidate(runs: Sequence[LadderRun], method: str, error: float, gap: float):
