@@ -274,7 +274,7 @@ def summary(d: dict) -> str:
         )
     if len(d.get("restarts") or ()) > 1:
         lines.append(
-            "restarts reached (before the final compass search): "
+            "restarts reached: "
             + ", ".join("none feasible" if w is None else f"{w:.0f}" for w in d["restarts"])
             + " pcs/h"
         )

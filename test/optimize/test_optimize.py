@@ -250,3 +250,11 @@ def test_restarts_are_independent_searches_and_the_best_counts(reduced):
     reached = [w for w in reduced.restarts if math.isfinite(w)]
     assert reached and reduced.W_t >= max(reached) - 1e-9
     assert evaluate_point(REDUCED, reduced.X)["W_t"] == pytest.approx(reduced.W_t, rel=1e-12)
+
+
+def test_the_first_restart_is_the_single_search_and_more_restarts_never_lose(reduced, pool):
+    """Restart 0 runs exactly as a one-restart search (same seed, same budget, its own compass
+    search), so three restarts can only add to it."""
+    single = optimize(replace(REDUCED, restarts=1), pool)
+    assert reduced.restarts[0] == pytest.approx(single.W_t, rel=1e-12)
+    assert reduced.W_t >= single.W_t
