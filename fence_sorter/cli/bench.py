@@ -59,7 +59,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=int,
         default=None,
         metavar="N",
-        help="timed calls of the default configuration per scene (default 7; --quick: 2)",
+        help="timed calls of the default configuration per scene (default 15; --quick: 2)",
     )
     parser.add_argument(
         "--scipy-cap",
@@ -112,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
         scenes = list(dict.fromkeys(names))
     else:
         scenes = list(B.QUICK_SCENES if args.quick else B.SCENES)
-    repeats = args.repeats if args.repeats is not None else (2 if args.quick else 7)
+    repeats = args.repeats if args.repeats is not None else (2 if args.quick else 15)
     if repeats < 1:
         return _error(f"--repeats must be at least 1, got {repeats}")
     cap = args.scipy_cap if args.scipy_cap is not None else B.SCIPY_CAP_S

@@ -24,7 +24,7 @@ memory of one event). Per scene:
   (``atol = rtol * ATOL_FACTOR``), loosest first, each run capped by ``solver.max_wall_time``;
   the loosest rung whose peak-force error is at most the default's ("the same error"; if no
   method reaches it, the 1e-3 target, and the report says so) and stays so at the next tighter
-  rung (the fastest candidates are confirmed, :func:`search_rungs`) is timed again (median of 3,
+  rung (the fastest candidates are confirmed, :func:`search_rungs`) is timed again (median of 5,
   interleaved with the default's timed runs) and the fastest such method is compared with the
   default. The error is measured two ways: against our reference, and against the SciPy
   reference (the accuracy of a solver on the model it integrates).
@@ -84,7 +84,7 @@ QUICK_SCIPY_METHODS = ("scipy:LSODA", "scipy:BDF")
 RTOL_LADDER = (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9)
 QUICK_RTOL_LADDER = (1e-3, 1e-5, 1e-7)
 ATOL_FACTOR = 1e-2  # atol = rtol * ATOL_FACTOR for every SciPy run
-BASELINE_REPEATS = 3
+BASELINE_REPEATS = 5
 PARTS_ROUNDS = 3  # model-parts rounds per repeat (the runs are cheap, the noise is not)
 RETIME_FACTOR = 5.0  # chosen SciPy rungs slower than this x the fastest one are not re-timed
 SCIPY_CAP_S = 120.0  # solver.max_wall_time of every SciPy run
@@ -321,7 +321,7 @@ class LadderRun:
 
 @dataclass
 class Choice:
-    """A method's loosest ladder rung reaching a threshold, timed (median of 3)."""
+    """A method's loosest ladder rung reaching a threshold, timed (median of BASELINE_REPEATS)."""
 
     method: str
     run: LadderRun | None  # None: no rung reached the threshold
@@ -1083,7 +1083,7 @@ def evaluate_targets(scenes: Sequence[SceneBench]) -> list[TargetCheck]:
 
 def run_bench(
     scenes: Sequence[str] = SCENES,
-    repeats: int = 7,
+    repeats: int = 15,
     methods: Sequence[str] = SCIPY_METHODS,
     ladder: Sequence[float] = RTOL_LADDER,
     cap: float = SCIPY_CAP_S,
