@@ -1102,8 +1102,17 @@ def trapezoidal_step(
     # tol = 1e-9 m) end the step, as any fixed-point solve stops on its last evaluation; one
     # evaluation less per step (positioned_stiff 914 -> 712 per event). A single iteration
     # evaluated its friction without a previous iterate (prev = nan: the first guess of the
-    # stick/slip branch), so that step is evaluated again at its end as before
-    if not converged or iterations < 2:
+    # stick/slip branch), so that step is evaluated again at its end as before, unless no
+    # contact acted at the iterate and no fence corner was within 10 tol of the fence: its
+    # forces do not depend on the state then (the same end state to round-off), and only the
+    # corners' D, Ddot, s (event values) are left at the iterate, within the tolerance
+    again = not converged
+    if converged and iterations < 2:
+        again = res[R_ACTIVE_MASK] != 0.0
+        for k in range(SLOT_TIP):
+            if out[k, C_GAP] != 0.0 and out[k, C_D] > -10.0 * tol:
+                again = True
+    if again:
         _evaluate(
             P, corners, normals, phi, rigid_modal, alpha1, rate1, accel1, ca1, sa1, y1, lam0, hh,
             prev, out, res, modal1, w, wdot, nodes,

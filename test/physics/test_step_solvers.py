@@ -148,3 +148,53 @@ def test_a_slide_off_is_located_once_before_and_once_across() -> None:
     assert g0_across == pytest.approx(g_before, abs=1e-15)
     assert -STIFF.solver.tolerance <= g_across < 0.0  # ends just past it
     assert math.isfinite(r.peak_contact_force)
+
+
+def _free_step(gap):
+    """positioned_stiff at t = 0 with the load moved ``gap`` off the fence, riding at the belt's
+    speed: one compiled step of dt_max; its (y1, out, res) and an evaluation at its end."""
+    md, cs, a = _state_at(0.0)
+    cs.Y[a, 1] += gap  # the long face along the fence (D = 0 at t = 0), moved off it
+    h = STIFF.solver.dt_max
+    y1, lam1 = np.zeros(md.n_state), np.zeros(3)
+    out, res = np.zeros((K.N_SLOTS, K.N_COLS)), np.zeros(K.N_RES)
+    props = (np.zeros((0, 2, 2)), np.zeros((0, 2)), np.zeros((0, 2)))
+    status = K.trapezoidal_step(
+        md.P, md.corners, md.normals, cs.modes[0], cs.modes[1], props, h, cs.T[a], cs.Y[a],
+        cs.RES[a], cs.LAM[a], cs.MODAL[a], cs.OUT[a], 0.0, True, STIFF.solver.tolerance, 50,
+        False, y1, lam1, out, res, np.zeros(0), cs.w, cs.wdot, cs.nodes, cs.prev, cs.work,
+    )  # fmt: skip
+    assert status == K.STEP_OK and res[K.R_ITERATIONS] == 1
+    out2, res2 = np.zeros((K.N_SLOTS, K.N_COLS)), np.zeros(K.N_RES)
+    K.evaluate(
+        md.P, md.corners, md.normals, cs.modes[0], cs.modes[1], cs.T[a] + h, 0.0, y1, cs.LAM[a],
+        0.5 * h, np.full(K.N_SLOTS, math.nan), out2, res2, np.zeros(0), cs.w, cs.wdot, cs.nodes,
+    )  # fmt: skip
+    return out, res, out2, res2
+
+
+@pytest.mark.parametrize("near", [False, True])
+def test_a_contact_free_step_ends_on_the_forces_at_its_end_state(near) -> None:
+    """The load off the fence, riding at the belt's speed: the step converges in one
+    evaluation. Its end forces (no contact: the state does not enter) equal an evaluation at
+    the end state; its corners' D, the onset event's values, are within the tolerance of it
+    when the load ends far off (5 cm: the step keeps its one evaluation) and exact when a
+    corner ends within 10 tolerances of the fence (5e-9 m: the end state is evaluated again)."""
+    tol = STIFF.solver.tolerance
+    gap = 0.05
+    if near:  # the gap that leaves the nearest corner 5e-9 m off the fence at the step end
+        out2 = _free_step(gap)[2]
+        gap += out2[:4, K.C_D][out2[:4, K.C_GAP] != 0.0].max() + 5e-9
+    out, res, out2, res2 = _free_step(gap)
+    assert res2[K.R_ACTIVE_MASK] == 0.0
+    fields = [K.R_FX, K.R_FY, K.R_MZ, K.R_FENCE_N, K.R_ACTIVE_MASK]
+    assert np.array_equal(res[fields], res2[fields])
+    d, d2 = out[:4, K.C_D], out2[:4, K.C_D]
+    assert np.array_equal(out[:4, K.C_GAP], out2[:4, K.C_GAP])
+    end_gap = -d2[out2[:4, K.C_GAP] != 0.0].max()
+    if near:
+        assert 0.0 < end_gap < 10 * tol
+        assert np.array_equal(d, d2)
+    else:
+        assert end_gap > 0.04
+        assert np.max(np.abs(d - d2)) <= 3 * tol
