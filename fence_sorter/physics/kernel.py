@@ -2040,6 +2040,8 @@ def _jump_at(P, t):
 @njit(cache=True, _nrt=False)
 def _snap(h_nom, h):
     """``Integrator._snap``: round a step down onto the ladder dt_max 2^(-k/4)."""
+    if h == h_nom:  # k = 0 (most steps: no log2 and pow calls)
+        return h_nom
     k = math.ceil(4.0 * math.log2(h_nom / h) - 1e-9)
     return h_nom * 2.0 ** (-k / 4.0)
 
@@ -2455,12 +2457,22 @@ def solve(
                 fc[F_H] = _snap(h_nom, h_taken * max(0.2, 0.9 * err ** (-1.0 / order)))
                 continue
             if not located:
-                grow = min(4.0, 0.9 * max(err, 1e-12) ** (-1.0 / order))
                 ctl[I_CLEAN] += 1
                 if ctl[I_CLEAN] >= 4 and fc[F_H_CAP] < h_nom:
                     fc[F_H_CAP] = fc[F_H_CAP] * cfg[G_UP]
                     ctl[I_CLEAN] = 0
-                fc[F_H] = _snap(h_nom, min(h_nom, fc[F_H_CAP], h_taken * grow))
+                cap = min(h_nom, fc[F_H_CAP])
+                # h_taken grow >= cap when err <= (0.9 h_taken / cap)^order (and cap <= 4
+                # h_taken); with a 1 % margin for pow's rounding that decides without the pow
+                # call (most steps: at the cap with a small error); the same step otherwise
+                ratio = 0.9 * h_taken / cap
+                bound = ratio * ratio * ratio if order == 3.0 else ratio * ratio
+                if cap <= 4.0 * h_taken and err <= 0.99 * bound:
+                    h_next = cap
+                else:
+                    grow = min(4.0, 0.9 * max(err, 1e-12) ** (-1.0 / order))
+                    h_next = min(cap, h_taken * grow)
+                fc[F_H] = _snap(h_nom, h_next)
         else:
             fc[F_H] = min(h_nom, 2.0 * h_try)
         # accept
