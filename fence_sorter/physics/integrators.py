@@ -333,6 +333,12 @@ class Integrator:
         # the bracket shrinks from both sides (plain regula falsi stalls on a curved event
         # function: 60 trial steps for one slide-off or onset)
         f_lo, f_hi, last = g_lo, g_hi, 0
+        # the slide-off end position jumps where a friction branch switches inside the trial
+        # step (~1.6e-6 m on positioned_stiff), and the Illinois secant across that jump crept
+        # up on the tip from below (10 trial steps); the lo side is smooth: after a lo end its
+        # secant through the last two lo ends, aimed at tol / 2 before the tip, when it lands
+        # inside the bracket
+        lo_prev, g_lo_prev = lo, g_lo
         for _ in range(60):
             if hi - lo <= 1e-7 * h or (onset and g_hi <= EVENT_TOL):
                 break
@@ -345,6 +351,10 @@ class Integrator:
                 h_loc = min(2.0 * h_loc, hi)
             else:
                 h_loc = min(max(h_loc, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
+            if keep_before and last == -1 and g_lo_prev > g_lo:
+                h_sec = lo + (g_lo - 0.5 * sch.tol) * (lo - lo_prev) / (g_lo_prev - g_lo)
+                if lo < h_sec < hi:
+                    h_loc = h_sec
             st = sch.step(h_loc, a, self.loc, jump, on_belt, False)
             if st == K.STEP_REJECTED:
                 break
@@ -362,6 +372,7 @@ class Integrator:
                 best = h_loc
                 self.trial.copy_from(self.loc)
             else:
+                lo_prev, g_lo_prev = lo, g_lo
                 lo, g_lo, f_lo = h_loc, g, g
                 if last == -1:
                     f_hi *= 0.5

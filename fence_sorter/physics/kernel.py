@@ -2112,6 +2112,7 @@ def _locate(
     before = 0.0
     have_before = False
     f_lo, f_hi, last = g0, g1, 0
+    lo_prev, g_lo_prev = 0.0, g0  # the lo end before the last (Integrator._locate)
     for _ in range(60):
         if hi - lo <= 1e-7 * h or (onset and g_hi <= EVENT_TOL):
             break
@@ -2122,6 +2123,10 @@ def _locate(
             h_loc = min(2.0 * h_loc, hi)  # the tip is within tol: step just past it
         else:
             h_loc = min(max(h_loc, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
+        if keep_before and last == -1 and g_lo_prev > g_lo:
+            h_sec = lo + (g_lo - 0.5 * tol) * (lo - lo_prev) / (g_lo_prev - g_lo)
+            if lo < h_sec < hi:
+                h_loc = h_sec
         st = _trap(
             P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT, RES,
             MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h_loc, a, S_LOC, jump,
@@ -2144,6 +2149,7 @@ def _locate(
             have_best = True
             _copy_state(T, Y, LAM, OUT, RES, MODAL, ACC, trial, S_LOC)
         else:
+            lo_prev, g_lo_prev = lo, g_lo
             lo, g_lo, f_lo = h_loc, g, g
             if last == -1:
                 f_hi *= 0.5

@@ -124,24 +124,38 @@ def test_a_slide_off_is_located_once_before_and_once_across() -> None:
     """A corner sliding off the fence tip: one location ends the step just before it (within
     the iteration tolerance of the tip, so the force there is not skipped), the next ends just
     past it (within the tolerance); no further steps creep up on the tip (positioned_stiff
-    slides one corner off)."""
+    slides one corner off). The end position jumps at a friction switch inside the trial
+    step just past the tip; the secant on the smooth side before it reaches the tolerance in
+    at most 5 trial steps (the Illinois secant across the jump took 10)."""
     sc = dc.replace(STIFF, solver=dc.replace(STIFF.solver, engine="python"))
     seen = []
+    trials = []
     orig = I.Integrator._locate
+    orig_step = I.Scheme.step
 
     def spy(self, h, on_belt, slot, kind, g0, g1):
+        trials.append(0)
         taken = orig(self, h, on_belt, slot, kind, g0, g1)
         if kind == K.EVENT_SLIDE_OFF:
-            seen.append((g0, K.event_value(self.model.P, self.trial.out, slot, kind)))
+            seen.append((g0, K.event_value(self.model.P, self.trial.out, slot, kind), trials[-1]))
         return taken
 
+    def step(self, *args):
+        if trials:
+            trials[-1] += 1
+        return orig_step(self, *args)
+
     I.Integrator._locate = spy
+    I.Scheme.step = step
     try:
         r = simulate(sc)
     finally:
         I.Integrator._locate = orig
+        I.Scheme.step = orig_step
     assert r.success
     assert len(seen) == 2, seen
+    assert seen[0][2] <= 5, seen
+    seen = [x[:2] for x in seen]
     (g0_before, g_before), (g0_across, g_across) = seen
     assert g0_before > STIFF.solver.tolerance
     assert 0.0 < g_before <= STIFF.solver.tolerance  # ends just before the tip
