@@ -110,6 +110,40 @@ def clock_values(bag: Path) -> list[int]:
     ]
 
 
+def wait_received(node, proc, counts: dict[str, int], timeout=60.0) -> None:
+    """Spin ``node`` until the recorder's heartbeat reports at least ``counts`` received per
+    topic ("received.clock": 1500, ...): a reliable message is only the recorder's to lose
+    once it has taken it (a fixed sleep was too short on a loaded CI machine: 1499 of 1500)."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.executors import SingleThreadedExecutor
+
+    from fence_sorter.nodes.base import DIAGNOSTICS_TOPIC
+    from fence_sorter.nodes.qos import RELIABLE_QOS
+
+    seen: dict[str, int] = {}
+
+    def on_diag(msg) -> None:
+        for st in msg.status:
+            if "recorder" in st.name:
+                for kv in st.values:
+                    if kv.key.startswith("received."):
+                        seen[kv.key] = int(kv.value)
+
+    sub = node.create_subscription(DiagnosticArray, DIAGNOSTICS_TOPIC, on_diag, RELIABLE_QOS)
+    executor = SingleThreadedExecutor(context=node.context)  # the fixture's own context
+    executor.add_node(node)
+    try:
+        deadline = time.monotonic() + timeout
+        while not all(seen.get(k, -1) >= n for k, n in counts.items()):
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline, f"recorder reported {seen}, expected {counts}"
+            executor.spin_once(timeout_sec=0.1)
+    finally:
+        executor.remove_node(node)
+        executor.shutdown()
+        node.destroy_subscription(sub)
+
+
 @pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
 def test_sigint_closes_the_bag_with_every_message(ros_node, env, tmp_path, storage):
     bag = tmp_path / "bag"
@@ -117,7 +151,7 @@ def test_sigint_closes_the_bag_with_every_message(ros_node, env, tmp_path, stora
         pubs = publishers(ros_node)
         wait_matched(pubs, proc)
         publish(pubs, CLOCKS)
-        time.sleep(1.0)
+        wait_received(ros_node, proc, {"received.clock": CLOCKS, "received.parcels": PARCELS})
         proc.send_signal(signal.SIGINT)
         proc.wait(timeout=30)
         assert proc.returncode == 0, proc.communicate()
