@@ -346,6 +346,8 @@ class Integrator:
                 break  # the step before the slide-off ends within tolerance of the tip
             if cross and best is not None and -g_hi <= sch.tol:
                 break  # the step across it ends within tolerance past the tip
+            if kind == EVENT_SORT and best is not None and -g_hi <= sch.tol:
+                break  # the sort crossing: within tolerance past the sorting line
             h_loc = lo + (hi - lo) * (f_lo / (f_lo - f_hi))
             if cross and last == 0:
                 h_loc = min(2.0 * h_loc, hi)

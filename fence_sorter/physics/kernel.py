@@ -2108,6 +2108,7 @@ def _locate(
     tol = cfg[G_TOL]
     keep_before = kind == EVENT_SLIDE_OFF and g0 > tol
     cross = kind == EVENT_SLIDE_OFF and not keep_before
+    sort = kind == EVENT_SORT
     g_lo = g0
     before = 0.0
     have_before = False
@@ -2116,7 +2117,7 @@ def _locate(
     for _ in range(60):
         if hi - lo <= 1e-7 * h or (onset and g_hi <= EVENT_TOL):
             break
-        if (have_before and g_lo <= tol) or (cross and have_best and -g_hi <= tol):
+        if (have_before and g_lo <= tol) or ((cross or sort) and have_best and -g_hi <= tol):
             break
         h_loc = lo + (hi - lo) * (f_lo / (f_lo - f_hi))
         if cross and last == 0:
