@@ -310,7 +310,8 @@ class Integrator:
         """Shorten the step to end just past the sign change of ``slot``'s event function.
 
         Regula falsi (Illinois) until an onset step ends within ``EVENT_TOL`` m of D = 0 (so
-        w_n is read at the onset) or a release / slide-off bracket is below 1e-7 of the step.
+        w_n is read at the onset), a slide-off or sort crossing step ends within the iteration
+        tolerance of its line, or a bracket is below 1e-7 of the step.
         The located trial is left in ``self.trial``; returns the step taken.
         """
         a, sch = self.cur, self.scheme
