@@ -1,4 +1,4 @@
-"""Helpers for tests that start fence_sorter processes (nodes, CLI) over real DDS.
+"""Building blocks for tests that start fence_sorter processes (nodes, CLI) over real DDS.
 
 Each process gets its own process group, so a test can always end it and everything it
 started (no orphan processes), and an environment that keeps test runs apart: one

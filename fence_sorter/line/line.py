@@ -788,7 +788,7 @@ class SortingLine:
             alpha, rate, accel, rest, c * rest, sn * rest, zeros, zeros, 0.0, pid, from_solve
         )
 
-    # -- helpers ------------------------------------------------------------------------------
+    # -- internals ----------------------------------------------------------------------------
     def _planned(self) -> list[_Parcel]:
         return [p for p in self.parcels.values() if p.command is not None] + [
             s.parcel for s in self.strokes if s.parcel.spec.parcel_id not in self.parcels

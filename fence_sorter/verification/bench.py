@@ -99,7 +99,7 @@ NOJIT_REPEATS = 3
 Log = Callable[[str], None]
 
 
-# -- small helpers --------------------------------------------------------------------------------
+# -- small functions ------------------------------------------------------------------------------
 def _median(xs: Sequence[float]) -> float:
     return statistics.median(xs) if xs else math.nan
 

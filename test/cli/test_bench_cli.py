@@ -139,7 +139,7 @@ def test_bench_keeps_the_node_suite_section_of_the_file(tmp_path):
 
 
 def test_a_rung_that_meets_the_error_by_cancellation_is_not_chosen() -> None:
-    """DOP853 on arbitrary_stiff (session 6): rtol 1e-2 lands within 2.5e-4 of our reference
+    """DOP853 on arbitrary_stiff (docs/numerics.md): rtol 1e-2 lands within 2.5e-4 of our reference
     by a cancellation of errors, rtol 1e-3 and 1e-4 are off by ~1e-2; rtol 1e-5 and 1e-6 hold.
     The loosest *sustained* rung is chosen; a rung whose next one did not run stands."""
     from types import SimpleNamespace
@@ -172,10 +172,10 @@ LADDER = (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7)
 
 
 def test_the_fastest_candidate_is_confirmed_at_the_next_rung() -> None:
-    """positioned_stiff (docs/accuracy, session 7): LSODA meets 3.2e-4 at rtol 1e-3 (8.3e-6)
+    """positioned_stiff (docs/accuracy): LSODA meets 3.2e-4 at rtol 1e-3 (8.3e-6)
     but not at 1e-4 (8.2e-4); rtol 1e-5 and tighter hold. RK45 holds from 1e-2 on but is
     slower. The search must run LSODA's 1e-4 rung, go on to 1e-5, confirm it at 1e-6, and the
-    choice is LSODA rtol 1e-5; with a SciPy reference the refuted rung used to be chosen."""
+    choice is LSODA rtol 1e-5, with or without a SciPy reference."""
     errors = {
         "scipy:RK45": {1e-2: 2.4e-5, 1e-3: 1.2e-4, 1e-4: 6.2e-5, 1e-5: 4.3e-5},
         "scipy:LSODA": {1e-2: 8.3e-4, 1e-3: 8.3e-6, 1e-4: 8.2e-4, 1e-5: 1.1e-4, 1e-6: 9e-7},
@@ -193,9 +193,9 @@ def test_the_fastest_candidate_is_confirmed_at_the_next_rung() -> None:
 
 
 def test_every_candidate_that_will_be_re_timed_is_confirmed() -> None:
-    """H1's bench run (session 8): the search runs of RK45 rtol 1e-2 (12 ms) and LSODA
-    rtol 1e-3 (13 ms) were within noise of each other; confirming only the faster search run
-    left LSODA's lucky rung unconfirmed, and the re-timed medians then chose it. Both are
+    """Search runs of RK45 rtol 1e-2 (12 ms) and LSODA rtol 1e-3 (13 ms) within noise of each
+    other: confirming only the faster search run would leave LSODA's lucky rung unconfirmed,
+    and the re-timed medians would then choose it. Both are
     within RETIME_FACTOR of the fastest, so both must be confirmed."""
     errors = {
         "scipy:RK45": {1e-2: 2.4e-5, 1e-3: 1.2e-4, 1e-4: 6.2e-5},

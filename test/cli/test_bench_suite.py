@@ -18,15 +18,15 @@ from fence_sorter.verification.bench_suite import (
 
 def test_section_is_appended_then_replaced_in_place(tmp_path: Path) -> None:
     doc = tmp_path / "benchmarks.md"
-    doc.write_text("# Benchmarks\n\nthe lead's tables\n")
+    doc.write_text("# Benchmarks\n\nhand-written tables\n")
     write_section(doc, f"{BEGIN}\nfirst\n{END}")
-    assert doc.read_text() == f"# Benchmarks\n\nthe lead's tables\n\n{BEGIN}\nfirst\n{END}\n"
-    doc.write_text(doc.read_text() + "\n## after\nmore of the lead's\n")
+    assert doc.read_text() == f"# Benchmarks\n\nhand-written tables\n\n{BEGIN}\nfirst\n{END}\n"
+    doc.write_text(doc.read_text() + "\n## after\nmore hand-written text\n")
     write_section(doc, f"{BEGIN}\nsecond\n{END}")
     text = doc.read_text()
     assert "first" not in text and text.count(BEGIN) == 1
-    assert text.startswith("# Benchmarks\n\nthe lead's tables\n\n" + BEGIN + "\nsecond\n" + END)
-    assert text.endswith("## after\nmore of the lead's\n")
+    assert text.startswith("# Benchmarks\n\nhand-written tables\n\n" + BEGIN + "\nsecond\n" + END)
+    assert text.endswith("## after\nmore hand-written text\n")
 
 
 def test_lost_messages_counts_every_subscriber_short() -> None:
