@@ -11,12 +11,42 @@ import os
 import signal
 import subprocess
 import sys
-from collections.abc import Iterator, Mapping, Sequence
+import time
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
+from typing import TypeVar
+
+T = TypeVar("T")
 
 #: Fast DDS accepts domain ids 0..232; stay away from 0 (the default) and 1..99.
 DOMAIN_ID_RANGE = (100, 200)
+
+
+def wait_until(
+    predicate: Callable[[], T],
+    timeout: float,
+    what: str,
+    poll: Callable[[], object] | None = None,
+    interval: float = 0.01,
+) -> T:
+    """Return ``predicate()``'s first truthy value, polled until ``timeout`` seconds have
+    passed; then fail with an AssertionError naming ``what`` was awaited.
+
+    ``poll`` does the work between two checks (for example ``lambda: rclpy.spin_once(node,
+    timeout_sec=0.05)``); without it the wait is ``interval`` seconds. Tests wait on a
+    condition this way, never sleep for a guessed time and then assert."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
+        if poll is not None:
+            poll()
+        else:
+            time.sleep(interval)
 
 
 def run_domain_id() -> int:
