@@ -137,7 +137,10 @@ class Gauges:
 
     CYCLES, MISSES, SLIPS, SIM_TIME, LATENESS_MAX, WORK_MAX, ON_LINE, PUBLISHED = range(8)
     SCAN_LIMIT = 8
-    HEADER = 9
+    WAITING = 9
+    HEADER = 10
+    #: values of header[WAITING]: what an unpaced loop is blocked on (0: stepping)
+    WAIT_READER, WAIT_NODE, WAIT_COMMAND = 1.0, 2.0, 3.0
 
     def __init__(self, fd: int | None = None) -> None:
         bins = LatenessHistogram.BINS + 1
@@ -149,7 +152,8 @@ class Gauges:
         self._mm = mmap.mmap(fd, size)
         #: cycles, misses, slips, sim time [s], lateness and work max [s], parcels on line,
         #: and (written by the node) the sim time of the last snapshot it published [s] and
-        #: the sim time an unpaced loop may not pass (the scanner's progress; inf: no limit)
+        #: the sim time an unpaced loop may not pass (the scanner's progress; inf: no limit);
+        #: what an unpaced loop is waiting for (WAIT_*, 0 while it steps)
         self.header = np.ndarray((self.HEADER,), np.float64, self._mm, 0)
         #: lateness and work histogram counts (LatenessHistogram bins)
         self.counts = np.ndarray((2, bins), np.int64, self._mm, 8 * self.HEADER)
@@ -409,6 +413,7 @@ class PacedLoop:
                 self.counts["command_waits_given_up"] += 1
                 self.counters_changed = True
                 continue
+            self.gauges.header[Gauges.WAITING] = Gauges.WAIT_COMMAND
             self.out.drain(0, self.inbox)  # the node publishes what it holds meanwhile
             select.select([self.inbox.fd], [], [], 1e-3)
             self.take_inputs()
@@ -424,6 +429,7 @@ class PacedLoop:
         while (
             g[Gauges.PUBLISHED] < line.t - lead or line.t >= g[Gauges.SCAN_LIMIT]
         ) and not self.stop:
+            g[Gauges.WAITING] = Gauges.WAIT_NODE
             self.out.drain(0, inbox)
             if select.select([inbox.fd], [], [], 2e-4)[0]:
                 inbox.read()
@@ -512,8 +518,11 @@ class PacedLoop:
                     clock,
                 )
             elif rtf == 0.0:  # unpaced: the reader sets the pace
+                if len(out.buf) > UNPACED_BACKLOG:
+                    g[Gauges.WAITING] = Gauges.WAIT_READER
                 out.drain(UNPACED_BACKLOG, self.inbox)
                 self.wait_for_node()
+                g[Gauges.WAITING] = 0.0
             if len(out.buf) > PACED_BACKLOG:
                 raise RuntimeError(f"{len(out.buf)} bytes unsent: the node stopped reading")
             if self.trace is not None and rtf > 0.0:
