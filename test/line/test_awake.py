@@ -6,17 +6,27 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
-import time
 
 from fence_sorter.line.awake import start_spinners, stop_spinners
+from fence_sorter.testing import wait_until
 
 
 def _policy(pid: int) -> int:
-    for _ in range(100):  # the child sets its policy right after starting
-        if os.sched_getscheduler(pid) == os.SCHED_IDLE:
-            break
-        time.sleep(0.05)
+    """The spinner's scheduling policy once it is SCHED_IDLE (the child sets it right after
+    starting), or whatever it has after 5 s."""
+    try:
+        wait_until(lambda: os.sched_getscheduler(pid) == os.SCHED_IDLE, 5.0, "SCHED_IDLE")
+    except AssertionError:
+        pass
     return os.sched_getscheduler(pid)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
 
 
 def test_one_idle_spinner_per_cpu_pinned_and_stopped():
@@ -46,11 +56,4 @@ def test_spinners_die_with_their_parent():
     assert _policy(spinner) == os.SCHED_IDLE
     parent.kill()
     parent.wait()
-    for _ in range(100):
-        try:
-            os.kill(spinner, 0)
-        except ProcessLookupError:
-            break
-        time.sleep(0.05)
-    else:
-        raise AssertionError(f"spinner {spinner} outlived its parent")
+    wait_until(lambda: not _alive(spinner), 10.0, f"spinner {spinner} to end with its parent")
