@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from fence_sorter.testing import run_cli
+from fence_sorter.testing import run_cli, wait_until
 
 
 @pytest.mark.parametrize(
@@ -68,12 +68,12 @@ def test_process_group_keeps_its_nodes_on_the_cpus_it_is_given(tmp_path: Path) -
     code = "import threading, time; threading.Thread(target=time.sleep, args=(30,)).start()"
     node = group.start("sleeper", [sys.executable, "-c", code])
     try:
-        for _ in range(100):  # the thread it starts inherits the mask
+
+        def threads() -> list[str] | None:
             tids = os.listdir(f"/proc/{node.proc.pid}/task")
-            if len(tids) > 1:
-                break
-            __import__("time").sleep(0.05)
-        assert len(tids) > 1
+            return tids if len(tids) > 1 else None
+
+        tids = wait_until(threads, 5.0, "the node's second thread")  # it inherits the mask
         assert all(os.sched_getaffinity(int(t)) == cpus for t in tids)
     finally:
         group.stop()
