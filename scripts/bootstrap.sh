@@ -6,6 +6,7 @@
 #   3. messages    build msg_defs/ (fence_sorter_msgs) with cmake + rosidl, install into .venv
 #   4. package     pip install -e . (editable fence_sorter)
 #   5. ament       lib/fence_sorter/<executables>, ament index marker, share/fence_sorter
+#   6. kernel      compile the Numba physics kernel into its on-disk cache (about a minute once)
 #
 # Every step is skipped when the sha256 of its inputs matches the stamp it left behind in
 # .venv/.fence_sorter_stamps/, so a rerun with nothing changed takes a second or two.
@@ -182,6 +183,19 @@ step_ament() {
   stamp_write ament "$key"
 }
 
+# -- 6. kernel ---------------------------------------------------------------------------------
+# Keyed on the physics sources: the first simulate after set-up then loads cached machine code.
+step_kernel() {
+  local key sources
+  mapfile -t sources < <(find "$ROOT/fence_sorter/physics" -name '*.py' | sort)
+  key="$(inputs_hash "${sources[@]}" -s "$(<"$STAMPS/package")")"
+  if stamp_ok kernel "$key"; then return 0; fi
+  WORKED=1
+  log "compiling the physics kernel (about a minute of CPU, once per change of the physics)"
+  "$PY" -m fence_sorter.physics.warmup
+  stamp_write kernel "$key"
+}
+
 main() {
   local start=$SECONDS
   cd "$ROOT"
@@ -190,6 +204,7 @@ main() {
   timed messages step_messages
   timed package step_package
   timed "ament layout" step_ament
+  timed kernel step_kernel
   log "ready in $((SECONDS - start)) s (venv $VENV; shell: source scripts/env.sh)"
 }
 
