@@ -78,7 +78,14 @@ def bag(
 
 def test_msg_defs_are_the_registered_types(typestore: Typestore) -> None:
     names = message_names()
-    assert names == ["FenceCommand", "FenceState", "LoadState", "Parcel", "SortOutcome"]
+    assert names == [
+        "FenceCommand",
+        "FenceState",
+        "LoadState",
+        "Parcel",
+        "SortEvent",
+        "SortOutcome",
+    ]
     for name in names:
         assert msgtype_name(name) in typestore.types
     assert find_msg_dir() == REPO_MSG_DIR  # the checkout wins over installed copies
