@@ -9,13 +9,12 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
 
 from fence_sorter.runner.processes import leftovers
-from fence_sorter.testing import run_cli
+from fence_sorter.testing import run_cli, wait_until
 
 pytestmark = pytest.mark.ros
 
@@ -64,37 +63,26 @@ def test_interrupted_run_stops_every_node(tmp_path: Path, sig: int) -> None:
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(repo), env.get("PYTHONPATH")]))
     cmd = [sys.executable, "-m", "fence_sorter.cli.main", "run", "--parcels", "40", "--json"]
-    proc = subprocess.Popen(
-        cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=repo, env=env
-    )
-    try:
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline and proc.poll() is None:
-            time.sleep(0.5)
-            # the first parcel is out once the nodes are up ("running" on stderr)
-            if Path(f"/proc/{proc.pid}").exists() and _children(proc.pid) >= 3:
-                break
-        time.sleep(3.0)
-        proc.send_signal(sig)
-        out, err = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
+    err_file = tmp_path / "stderr.txt"
+    with err_file.open("w") as err_out:
+        proc = subprocess.Popen(
+            cmd, stdout=subprocess.PIPE, stderr=err_out, text=True, cwd=repo, env=env
+        )
+        try:
+            # mid-run: the nodes are up and the stream is flowing
+            wait_until(
+                lambda: "; running" in err_file.read_text() or proc.poll() is not None,
+                120.0,
+                "the run's nodes to be up",
+            )
+            assert proc.poll() is None, err_file.read_text()
+            proc.send_signal(sig)
+            out, _ = proc.communicate(timeout=60)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+    err = err_file.read_text()
     assert proc.returncode == 130, err
     s = json.loads(out)
     assert s["message"].startswith("interrupted")
     assert len(s["process_groups"]) == 3 and leftovers(s["process_groups"]) == []
-
-
-def _children(pid: int) -> int:
-    """Processes whose parent is ``pid`` (/proc)."""
-    n = 0
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                stat = (entry / "stat").read_text()
-            except OSError:
-                continue
-            if int(stat[stat.rfind(")") + 2 :].split()[1]) == pid:
-                n += 1
-    return n
