@@ -138,7 +138,8 @@ class Gauges:
     CYCLES, MISSES, SLIPS, SIM_TIME, LATENESS_MAX, WORK_MAX, ON_LINE, PUBLISHED = range(8)
     SCAN_LIMIT = 8
     WAITING = 9
-    HEADER = 10
+    RTF = 10
+    HEADER = 11
     #: values of header[WAITING]: what an unpaced loop is blocked on (0: stepping)
     WAIT_READER, WAIT_NODE, WAIT_COMMAND = 1.0, 2.0, 3.0
 
@@ -153,7 +154,8 @@ class Gauges:
         #: cycles, misses, slips, sim time [s], lateness and work max [s], parcels on line,
         #: and (written by the node) the sim time of the last snapshot it published [s] and
         #: the sim time an unpaced loop may not pass (the scanner's progress; inf: no limit);
-        #: what an unpaced loop is waiting for (WAIT_*, 0 while it steps)
+        #: what an unpaced loop is waiting for (WAIT_*, 0 while it steps); the real-time
+        #: factor the loop paces with (0: unpaced)
         self.header = np.ndarray((self.HEADER,), np.float64, self._mm, 0)
         #: lateness and work histogram counts (LatenessHistogram bins)
         self.counts = np.ndarray((2, bins), np.int64, self._mm, 8 * self.HEADER)
@@ -504,6 +506,7 @@ class PacedLoop:
                     flags |= CycleTrace.MISS
             g[Gauges.CYCLES], g[Gauges.MISSES], g[Gauges.SLIPS] = cycles, misses, pacer.slips
             g[Gauges.SIM_TIME], g[Gauges.ON_LINE] = line.t, line.parcels_on_line
+            g[Gauges.RTF] = rtf
             g[Gauges.LATENESS_MAX], g[Gauges.WORK_MAX] = self.hist.max, self.work.max
             if self.counters_changed and (slack or rtf == 0.0):
                 self.send_stats()
