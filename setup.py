@@ -1,7 +1,8 @@
 """ament_python set-up of the fence_sorter package (colcon on ROS 2, pip -e . elsewhere)."""
 
+import importlib.util
 import re
-from glob import glob
+from collections import defaultdict
 from pathlib import Path
 
 from setuptools import find_packages, setup
@@ -19,6 +20,19 @@ def read_version() -> str:
     return match.group(1)
 
 
+def share_data_files() -> list[tuple[str, list[str]]]:
+    """(share/fence_sorter/<dir>, [files]) for every run-time file: the files under the
+    directories of fence_sorter/resources.py's SHARE_DIRS, the one list of them."""
+    source = HERE / PACKAGE_NAME / "resources.py"
+    spec = importlib.util.spec_from_file_location("resources", source)
+    resources = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(resources)
+    by_dir: dict[str, list[str]] = defaultdict(list)
+    for rel in resources.installed_files():
+        by_dir[str(Path(rel).parent)].append(rel)
+    return [(f"share/{PACKAGE_NAME}/{d}", files) for d, files in sorted(by_dir.items())]
+
+
 setup(
     name=PACKAGE_NAME,
     version=read_version(),
@@ -26,9 +40,7 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE_NAME}"]),
         (f"share/{PACKAGE_NAME}", ["package.xml"]),
-        (f"share/{PACKAGE_NAME}/config", sorted(glob("config/*.yaml"))),
-        (f"share/{PACKAGE_NAME}/config/scenes", sorted(glob("config/scenes/*.yaml"))),
-        (f"share/{PACKAGE_NAME}/launch", sorted(glob("launch/*.py"))),
+        *share_data_files(),
     ],
     install_requires=["setuptools"],
     zip_safe=True,

@@ -7,8 +7,8 @@ Every problem (unknown key, wrong type, value out of range, bad ``--set`` overri
 file, YAML syntax error) raises :class:`SceneError` (a :class:`ParameterError`) with the message
 ``scene <file>: <dotted.key> ...``, so the command line can print one line and exit.
 
-This module is ROS-free; ``ament_index_python`` is imported only to find installed scenes when
-the source checkout's ``config/scenes`` does not exist.
+This module is ROS-free; a bare scene name is looked up in ``config/scenes`` of the checkout or
+of the installed share directory (:mod:`fence_sorter.resources`).
 """
 
 from __future__ import annotations
@@ -32,6 +32,7 @@ from fence_sorter.physics.params import (
     SolverParams,
 )
 from fence_sorter.physics.simulate import RECORDABLE, Scenario
+from fence_sorter.resources import ResourceNotFound, data_path, find_data
 
 __all__ = [
     "LoadedScene",
@@ -41,9 +42,6 @@ __all__ = [
     "resolve_scene",
     "scene_dirs",
 ]
-
-PACKAGE = "fence_sorter"
-REPO_SCENES = Path(__file__).resolve().parent.parent / "config" / "scenes"
 
 
 class SceneError(ParameterError):
@@ -129,14 +127,10 @@ class LoadedScene:
 
 # -- locating scene files ----------------------------------------------------------------------
 def scene_dirs() -> list[Path]:
-    """Directories searched for a bare scene name: the checkout's, else the installed share."""
-    if REPO_SCENES.is_dir():
-        return [REPO_SCENES]
+    """Directories searched for a bare scene name: config/scenes of the checkout or the share."""
     try:
-        from ament_index_python.packages import get_package_share_directory
-
-        return [Path(get_package_share_directory(PACKAGE)) / "config" / "scenes"]
-    except Exception:  # not installed with ament, or ament_index_python missing
+        return [data_path("config", "scenes")]
+    except ResourceNotFound:
         return []
 
 
@@ -152,22 +146,12 @@ def available_scenes() -> list[str]:
 def resolve_scene(path_or_name: str | Path) -> Path:
     """The scene file for a path, or for a bare name in the scene directories."""
     text = str(path_or_name)
-    p = Path(text).expanduser()
-    looks_like_path = (
-        isinstance(path_or_name, Path)
-        or p.suffix in (".yaml", ".yml")
-        or "/" in text
-        or "\\" in text
-    )
-    if p.is_file():
-        return p
-    if looks_like_path:
+    found = find_data("config/scenes", path_or_name, (".yaml", ".yml"))
+    if found is not None:
+        return found
+    p = Path(text)
+    if isinstance(path_or_name, Path) or p.suffix in (".yaml", ".yml") or "/" in text:
         raise SceneError(f"scene {text}: file not found")
-    for d in scene_dirs():
-        for ext in (".yaml", ".yml"):
-            candidate = d / f"{text}{ext}"
-            if candidate.is_file():
-                return candidate
     where = ", ".join(str(d) for d in scene_dirs()) or "no scene directory found"
     avail = ", ".join(available_scenes()) or "none"
     raise SceneError(

@@ -3,7 +3,8 @@
 #
 #   1. venv        create .venv with CPython 3.11 if missing
 #   2. requirements pip install requirements/{ros,python}.txt under requirements/constraints.txt
-#   3. messages    build msg_defs/ (fence_sorter_msgs) with cmake + rosidl, install into .venv
+#   3. messages    build msg_defs/ (fence_sorter_msgs) and msg_defs_tf2/ (tf2_msgs) with
+#                  cmake + rosidl, install into .venv
 #   4. package     pip install -e . (editable fence_sorter)
 #   5. ament       lib/fence_sorter/<executables>, ament index marker, share/fence_sorter
 #   6. kernel      compile the Numba physics kernel into its on-disk cache (about a minute once)
@@ -22,8 +23,6 @@ set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 VENV="${FENCE_SORTER_VENV:-$ROOT/.venv}"
 STAMPS="$VENV/.fence_sorter_stamps"
-MSG_SRC="$ROOT/msg_defs"
-MSG_BUILD="$ROOT/.build/fence_sorter_msgs"
 JOBS="${JOBS:-$(nproc 2>/dev/null || echo 2)}"
 
 log() { echo "bootstrap: $*"; }
@@ -106,12 +105,16 @@ step_requirements() {
     -c "$ROOT/requirements/constraints.txt"
   stamp_write requirements "$key"
   # New ROS libraries or generators: rebuild the messages.
-  rm -f "$STAMPS/messages"
+  rm -f "$STAMPS"/messages-*
 }
 
 # -- 3. messages -------------------------------------------------------------------------------
+# Interface packages built with rosidl into the venv: name and source directory. tf2_msgs: the
+# ROS 2 wheels carry no tf2_msgs, so its messages are built from their .msg definitions.
+MESSAGE_PACKAGES=("fence_sorter_msgs:$ROOT/msg_defs" "tf2_msgs:$ROOT/msg_defs_tf2")
+
 uninstall_messages() {
-  local manifest="$MSG_BUILD/install_manifest.txt" file
+  local manifest="$1/install_manifest.txt" file
   [[ -f "$manifest" ]] || return 0
   while IFS= read -r file; do
     # Only ever remove files under the venv this build installed into.
@@ -119,39 +122,50 @@ uninstall_messages() {
   done <"$manifest"
 }
 
-step_messages() {
-  command -v cmake >/dev/null 2>&1 || die "cmake not found (apt-get install cmake)"
-  local files=("$MSG_SRC/CMakeLists.txt" "$MSG_SRC/package.xml")
+# build_messages NAME SRC: cmake + rosidl build of one interface package, installed into the venv
+build_messages() {
+  local name="$1" src="$2" build="$ROOT/.build/$1"
+  local files=("$src/CMakeLists.txt" "$src/package.xml" "$ROOT/msg_defs/cmake/wheel_python_includes.cmake")
   local msg
-  for msg in "$MSG_SRC"/msg/*.msg; do files+=("$msg"); done
+  for msg in "$src"/msg/*.msg; do files+=("$msg"); done
   local key
   key="$(inputs_hash "${files[@]}" -s "$VENV" -s "$(<"$STAMPS/requirements")")"
-  if stamp_ok messages "$key"; then return 0; fi
+  if stamp_ok "messages-$name" "$key"; then return 0; fi
   WORKED=1
-  log "building fence_sorter_msgs (cmake + rosidl, about 30 s)"
+  log "building $name (cmake + rosidl, about 30 s)"
   # A cache from another venv or source path cannot be reused.
-  if [[ -f "$MSG_BUILD/CMakeCache.txt" ]] &&
-    ! grep -qxF "CMAKE_INSTALL_PREFIX:PATH=$VENV" "$MSG_BUILD/CMakeCache.txt"; then
-    rm -rf "$MSG_BUILD"
+  if [[ -f "$build/CMakeCache.txt" ]] &&
+    ! grep -qxF "CMAKE_INSTALL_PREFIX:PATH=$VENV" "$build/CMakeCache.txt"; then
+    rm -rf "$build"
   fi
-  uninstall_messages
-  local log_file="$ROOT/.build/fence_sorter_msgs.log"
-  mkdir -p "$MSG_BUILD"
+  uninstall_messages "$build"
+  local log_file="$ROOT/.build/$name.log"
+  mkdir -p "$build"
   if ! (
     export AMENT_PREFIX_PATH="$VENV"
-    cmake -S "$MSG_SRC" -B "$MSG_BUILD" \
+    cmake -S "$src" -B "$build" \
       -DCMAKE_PREFIX_PATH="$VENV" \
       -DCMAKE_INSTALL_PREFIX="$VENV" \
       -DPython3_EXECUTABLE="$PY" \
       -DCMAKE_BUILD_TYPE=Release \
       -DBUILD_TESTING=OFF &&
-      cmake --build "$MSG_BUILD" --parallel "$JOBS" &&
-      cmake --install "$MSG_BUILD"
+      cmake --build "$build" --parallel "$JOBS" &&
+      cmake --install "$build"
   ) >"$log_file" 2>&1; then
     tail -n 40 "$log_file" >&2
-    die "building fence_sorter_msgs failed; full log: $log_file"
+    die "building $name failed; full log: $log_file"
   fi
-  stamp_write messages "$key"
+  stamp_write "messages-$name" "$key"
+}
+
+step_messages() {
+  command -v cmake >/dev/null 2>&1 || die "cmake not found (apt-get install cmake)"
+  local entry worked=0
+  for entry in "${MESSAGE_PACKAGES[@]}"; do
+    build_messages "${entry%%:*}" "${entry#*:}"
+    ((WORKED)) && worked=1
+  done
+  WORKED=$worked
 }
 
 # -- 4. package --------------------------------------------------------------------------------
@@ -171,8 +185,7 @@ step_package() {
 step_ament() {
   local key
   key="$(inputs_hash "$ROOT/scripts/ament_layout.py" "$ROOT/package.xml" \
-    "$ROOT/resource/fence_sorter" -s "$(<"$STAMPS/package")" \
-    -s "$(cd "$ROOT" && ls -d config launch 2>/dev/null || true)")"
+    "$ROOT/resource/fence_sorter" "$ROOT/fence_sorter/resources.py" -s "$(<"$STAMPS/package")")"
   if stamp_ok ament "$key" &&
     [[ -x "$VENV/lib/fence_sorter/simulator" && -f "$VENV/share/fence_sorter/package.xml" &&
       -f "$VENV/share/ament_index/resource_index/packages/fence_sorter" ]]; then

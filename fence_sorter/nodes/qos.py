@@ -31,4 +31,12 @@ LATCHED_QOS = QoSProfile(
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
 
-__all__ = ["LATCHED_QOS", "RELIABLE_QOS", "SENSOR_QOS"]
+# /tf: reliable, volatile, depth 100 (what tf2's TransformListener asks for).
+TF_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=100,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
+
+__all__ = ["LATCHED_QOS", "RELIABLE_QOS", "SENSOR_QOS", "TF_QOS"]

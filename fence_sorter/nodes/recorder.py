@@ -44,7 +44,7 @@ from rosbags.interfaces import (
 )
 
 from fence_sorter.nodes.base import FenceSorterNode, ParamSpec, run_node
-from fence_sorter.recording.topics import TOPIC_TYPES
+from fence_sorter.recording.topics import LATCHED_TOPICS, TOPIC_TYPES
 
 DEFAULT_TOPICS = list(TOPIC_TYPES)
 #: set when a recorder of this process failed to write or close its bag (exit status 1)
@@ -53,23 +53,25 @@ _WRITE_FAILED: list[str] = []
 SUBSCRIPTION_DEPTH = 1000
 
 
-def rclpy_qos(reliable: bool) -> QoSProfile:
+def rclpy_qos(reliable: bool, latched: bool = False) -> QoSProfile:
+    """Subscription QoS; ``latched`` topics transient local (the last message of a publisher
+    that started earlier arrives too)."""
     return QoSProfile(
         history=HistoryPolicy.KEEP_LAST,
         depth=SUBSCRIPTION_DEPTH,
         reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
-        durability=DurabilityPolicy.VOLATILE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
     )
 
 
-def bag_qos(reliable: bool) -> Qos:
+def bag_qos(reliable: bool, latched: bool = False) -> Qos:
     """The QoS stored with a topic in the bag (what replay offers again)."""
     zero = QosTime(0, 0)
     return Qos(
         QosHistory.KEEP_LAST,
         100 if reliable else 5,
         QosReliability.RELIABLE if reliable else QosReliability.BEST_EFFORT,
-        QosDurability.VOLATILE,
+        QosDurability.TRANSIENT_LOCAL if latched else QosDurability.VOLATILE,
         zero,
         zero,
         QosLiveliness.AUTOMATIC,
@@ -174,7 +176,8 @@ class RecorderNode(FenceSorterNode):
                     f"({', '.join(TOPIC_TYPES)})"
                 )
             msgtype, reliable = TOPIC_TYPES[name]
-            handle = self.writer.add_topic(name, msgtype, [bag_qos(reliable)])
+            latched = name in LATCHED_TOPICS
+            handle = self.writer.add_topic(name, msgtype, [bag_qos(reliable, latched)])
             topic = _Topic(
                 name, msgtype, handle, starts_with_header(self.writer.typestore, msgtype)
             )
@@ -183,7 +186,7 @@ class RecorderNode(FenceSorterNode):
                 message_class(msgtype),
                 name,
                 self._callback(topic),
-                rclpy_qos(reliable),
+                rclpy_qos(reliable, latched),
                 raw=True,
             )
         self._stop = threading.Event()

@@ -53,6 +53,7 @@ from fence_sorter.nodes import convert
 from fence_sorter.nodes.base import FenceSorterNode, ParamSpec, spin_node
 from fence_sorter.nodes.qos import RELIABLE_QOS, SENSOR_QOS
 from fence_sorter.nodes.scanner import SCAN_PROGRESS_TOPIC
+from fence_sorter.nodes.tf_publisher import TfPublisher
 from fence_sorter.scene import load_scene
 from fence_sorter_msgs.msg import FenceCommand, FenceState, LoadState, Parcel, SortOutcome
 
@@ -329,6 +330,8 @@ class SimulatorNode(FenceSorterNode):
         self.pub_loads = self.create_publisher(LoadState, "/load_states", SENSOR_QOS)
         self.pub_markers = self.create_publisher(MarkerArray, "/markers", VIEWER_QOS)
         self.pub_outcomes = self.create_publisher(SortOutcome, "/sort_outcomes", RELIABLE_QOS)
+        self.tf = TfPublisher(self, self.line_config, self.frame_id)  # /tf, /tf_static, URDF
+        self.tf.publish_static(line.t)
 
         belt_x = (min(-3.0, self.line_config.r_s_range[0]), self.line_config.line_end_x)
         self._markers = convert.MarkerBuilder(
@@ -540,6 +543,7 @@ class SimulatorNode(FenceSorterNode):
             self.pub_loads.publish(
                 convert.fill_load_state(self._load_msg, parcel, snap.t, self.frame_id)
             )
+        self.tf.publish(snap)
         if self.rerun is not None:
             self.rerun.offer(snap)  # packed, piped to the Rerun child
 

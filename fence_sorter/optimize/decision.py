@@ -23,6 +23,7 @@ from pathlib import Path
 import yaml
 
 from fence_sorter.physics.params import ParameterError
+from fence_sorter.resources import find_data
 
 #: load lengths A of the table [m] (the default stream draws 0.2-0.5 m; 0.7 m is the paper's
 #: limiting load)
@@ -189,8 +190,9 @@ class DecisionTable:
 
     @classmethod
     def load(cls, path: str | Path, prefix: str = "controller.decision_table") -> DecisionTable:
-        """Read a table file; ParameterError naming the file and what is wrong."""
-        p = Path(path)
+        """Read a table file (a path, or one of the package's as "config/decision_table.yaml");
+        ParameterError naming the file and what is wrong."""
+        p = find_data("config", path, (".yaml",)) or Path(path)
         try:
             doc = yaml.safe_load(p.read_text())["decision_table"]
             entries = tuple(

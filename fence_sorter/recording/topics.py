@@ -15,5 +15,10 @@ TOPIC_TYPES: dict[str, tuple[str, bool]] = {
     "/joint_states": ("sensor_msgs/msg/JointState", True),
     "/markers": ("visualization_msgs/msg/MarkerArray", True),
     "/diagnostics": ("diagnostic_msgs/msg/DiagnosticArray", True),
+    "/tf": ("tf2_msgs/msg/TFMessage", True),
+    "/tf_static": ("tf2_msgs/msg/TFMessage", True),
+    "/robot_description": ("std_msgs/msg/String", True),
 }
+#: published once, transient local: subscribed transient local so a late recorder gets them
+LATCHED_TOPICS = frozenset({"/tf_static", "/robot_description"})
 SUITE_TOPICS = list(TOPIC_TYPES)

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from fence_sorter.physics.params import ParameterError
+from fence_sorter.resources import data_path
 from fence_sorter.runner.processes import (
     ProcessGroup,
     leftovers,
@@ -25,7 +26,6 @@ from fence_sorter.runner.processes import (
 )
 from fence_sorter.runner.summary import summarise
 
-REPO_CONFIG = Path(__file__).resolve().parents[2] / "config"
 DEFAULT_SCENE = "impact_flexible"
 DEFAULT_STREAM = "default"
 DEFAULT_PARCELS = 20
@@ -143,7 +143,7 @@ def prepare(opts: RunOptions) -> Plan:
 
 def _ros_args(node: str, plan: Plan, opts: RunOptions, extra: list[str]) -> list[str]:
     args: list[str] = []
-    params_file = REPO_CONFIG / f"{node}.yaml"
+    params_file = data_path("config", f"{node}.yaml")
     if params_file.is_file():
         args += ["--params-file", str(params_file)]
     overrides = [f"heartbeat_period:={opts.heartbeat_period}", *extra]
@@ -172,7 +172,7 @@ def loop_cpu(plan: Plan, rtf: float, cpus: set[int]) -> tuple[int, bool]:
     try:
         import yaml
 
-        doc = yaml.safe_load((REPO_CONFIG / "simulator.yaml").read_text()) or {}
+        doc = yaml.safe_load(data_path("config", "simulator.yaml").read_text()) or {}
         configured = int(doc["simulator"]["ros__parameters"].get("loop_cpu", -1))
     except (OSError, KeyError, TypeError, ValueError):
         configured = -1

@@ -16,6 +16,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
 
+from fence_sorter.resources import checkout_root
+
 #: Domain ids of `fence-sorter run` (the tests use 100..199); Fast DDS accepts up to 232.
 RUN_DOMAIN_RANGE = (201, 232)
 #: Stop escalation: (signal, seconds to wait for the group to end).
@@ -38,8 +40,8 @@ def node_env(
     env["ROS_LOG_DIR"] = str(log_dir)
     env["PYTHONUNBUFFERED"] = "1"
     env.pop("RMW_IMPLEMENTATION", None)
-    repo = Path(__file__).resolve().parents[2]
-    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(repo), env.get("PYTHONPATH")]))
+    repo = checkout_root()  # None in an install: its PYTHONPATH finds the package already
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [repo and str(repo), env.get("PYTHONPATH")]))
     if extra:
         env.update(extra)
     return env

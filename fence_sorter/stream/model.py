@@ -20,8 +20,7 @@ import numpy as np
 import yaml
 
 from fence_sorter.physics.params import ParameterError, ParcelParams
-
-REPO_STREAMS = Path(__file__).resolve().parents[2] / "config" / "streams"
+from fence_sorter.resources import find_data
 
 
 class StreamError(ParameterError):
@@ -309,15 +308,11 @@ class StreamConfig:
 
 
 def resolve_stream(path: str | Path) -> Path:
-    """A stream file by path, or by bare name in config/streams/."""
-    p = Path(path).expanduser()
-    if p.is_file():
-        return p
-    for ext in (".yaml", ".yml", ".csv"):
-        cand = REPO_STREAMS / f"{path}{ext}"
-        if cand.is_file():
-            return cand
-    raise StreamError(f"stream {path}: file not found (nor config/streams/{path}.yaml)")
+    """A stream file by path, or by bare name in config/streams/ (checkout or share)."""
+    found = find_data("config/streams", path, (".yaml", ".yml", ".csv"))
+    if found is None:
+        raise StreamError(f"stream {path}: file not found (nor config/streams/{path}.yaml)")
+    return found
 
 
 def _sample_parcel(cfg: StreamConfig, rng: np.random.Generator, pid: int, t: float) -> ParcelSpec:

@@ -10,7 +10,10 @@ import pytest
 
 from fence_sorter.physics.params import ParameterError
 from fence_sorter.physics.simulate import simulate
-from fence_sorter.scene import REPO_SCENES, SceneError, available_scenes, load_scene
+from fence_sorter.resources import data_path
+from fence_sorter.scene import SceneError, available_scenes, load_scene
+
+REPO_SCENES = data_path("config", "scenes")
 
 SHIPPED = ("impact_flexible", "slide_flexible", "positioned_stiff", "arbitrary_stiff")
 FREE_FALL_SPEED = math.sqrt(2.0 * 9.81 * 0.3)  # 2.43 m/s, a 0.3 m free fall
