@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import shlex
 import sys
+from pathlib import Path
 
 EXIT_OK = 0
 EXIT_BAD_ARGS = 2
@@ -66,6 +67,11 @@ def register(subparsers) -> None:
         help="reduced grid: one scene, 2-3 settings per method, fewer SciPy methods",
     )
     parser.add_argument(
+        "--plots-only",
+        action="store_true",
+        help="redraw the diagrams in --out from its results.json, run nothing",
+    )
+    parser.add_argument(
         "--max-wall",
         type=float,
         default=30.0,
@@ -92,6 +98,13 @@ def run(args: argparse.Namespace) -> int:
     from fence_sorter.scene import available_scenes
     from fence_sorter.verification import accuracy
 
+    if args.plots_only:
+        results = Path(args.out) / "results.json"
+        if not results.is_file():
+            return error(f"--out: no {results} to plot from")
+        for path in accuracy.replot(args.out):
+            print(path)
+        return 0
     known = available_scenes()
     for name in args.scenes or ():
         if name not in known:

@@ -175,6 +175,11 @@ def register(subparsers) -> None:
         help="stop a sweep after N new points (resume later)",
     )
     p.add_argument(
+        "--plots-only",
+        action="store_true",
+        help="with --sweep: redraw the sweeps' figures from their CSVs in --out, solve nothing",
+    )
+    p.add_argument(
         "--table",
         default=None,
         metavar="PATH",
@@ -290,6 +295,8 @@ def run(args: argparse.Namespace) -> int:
             return error(f"--max-points must be in [1, inf), got {args.max_points}")
         from fence_sorter.optimize import sweep
 
+        if args.plots_only:
+            return sweep.replot(args)
         return int(sweep.main(args) or 0)
     from fence_sorter.optimize.executor import make_executor
     from fence_sorter.optimize.solve import grid_search, optimize

@@ -596,9 +596,9 @@ def get_sweep(name: str) -> SweepDef:
     if name == "decision-table":
         return SweepDef(
             "decision-table",
-            "controller",
-            "controller's starting candidates: R_s, t1 per load class at the configured "
-            "alpha_k and belt speed",
+            "Decision table",
+            "the controller's starting candidates, R_s and t1 per load class at the "
+            "configured alpha_k and belt speed",
             "decision-table",
             _decision_points(),
             "load_length",
@@ -848,46 +848,81 @@ def repair_nesting(
 
 
 # -- plots --------------------------------------------------------------------------------------
+#: share of a panel's height kept free at its top for the "no feasible X" band
+INFEASIBLE_BAND = 0.12
+
+
 def plot_sweep(sweep: SweepDef, rows: Sequence[dict], path: str | Path) -> Path:
-    """The figure's panels (one curve per series value; infeasible optima left out)."""
+    """The figure's panels (one curve per series value). A point with no feasible optimum has
+    no value: it is marked with a cross in a grey band at the top of each panel, above every
+    value (a real value such as R_s = 0 is never taken for it). One legend, outside the
+    panels; the title wrapped to the figure's width."""
+    import textwrap
+
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.patches import Rectangle
+    from matplotlib.transforms import blended_transform_factory
 
     n = len(sweep.panels)
     ncols = 3 if n > 4 else n
     nrows = math.ceil(n / ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(4.2 * ncols, 3.4 * nrows), squeeze=False)
+    width = 4.2 * ncols + 1.6  # the legend's column on the right
+    fig, axes = plt.subplots(nrows, ncols, figsize=(width, 3.4 * nrows + 0.4), squeeze=False)
     levels = sorted({r[sweep.series] for r in rows}, key=lambda s: (str(type(s)), s))
     letters = "abcdefgh"
+    any_bad = any(not r["feasible"] for r in rows)
     for i, panel in enumerate(sweep.panels):
         ax = axes[i // ncols][i % ncols]
-        for lev in levels:
+        band = blended_transform_factory(ax.transData, ax.transAxes)
+        values = []
+        for k, lev in enumerate(levels):
             pts = sorted((r[sweep.x], r) for r in rows if r[sweep.series] == lev)
             xs = [x for x, _ in pts]
             ys = [r[panel.column] * panel.scale if r["feasible"] else math.nan for _, r in pts]
+            values += [y for y in ys if math.isfinite(y)]
+            color = f"C{k}"
             ax.plot(
                 xs,
                 ys,
                 marker="o",
                 ms=3.5,
+                color=color,
                 label=f"{lev:g}" if isinstance(lev, float) else str(lev),
             )
             bad = [x for x, r in pts if not r["feasible"]]
             if bad:
-                ax.plot(bad, [0.0] * len(bad), "x", color="grey", label="_infeasible")
-        if any(not r["feasible"] for r in rows):
-            ax.plot([], [], "x", color="grey", label="no feasible X")
+                ax.plot(bad, [1.0 - 0.5 * INFEASIBLE_BAND] * len(bad), "x", color=color,
+                        ms=6, mew=1.5, transform=band, clip_on=False)  # fmt: skip
+        if any_bad:
+            ax.add_patch(Rectangle((0.0, 1.0 - INFEASIBLE_BAND), 1.0, INFEASIBLE_BAND,
+                                   transform=ax.transAxes, color="0.9", zorder=0))  # fmt: skip
+            if values:  # the values stay below the band
+                lo, hi = min(values), max(values)
+                pad = 0.05 * (hi - lo) if hi > lo else 0.1 * max(abs(hi), 1.0)
+                top = hi + pad
+                bottom = lo - pad
+                ax.set_ylim(bottom, bottom + (top - bottom) / (1.0 - INFEASIBLE_BAND))
+                ax.set_yticks([t for t in ax.get_yticks() if bottom <= t <= top])
+            ax.text(0.01, 1.0 - 0.5 * INFEASIBLE_BAND, "no feasible X", transform=ax.transAxes,
+                    fontsize=7, color="0.4", va="center", style="italic")  # fmt: skip
         ax.set_xlabel(sweep.x_label)
         ax.set_ylabel(panel.label)
         ax.set_title(f"{letters[i]})", loc="left", fontsize=10)
         ax.grid(True, alpha=0.3)
     for j in range(n, nrows * ncols):
         axes[j // ncols][j % ncols].axis("off")
-    axes[0][0].legend(title=sweep.series_label, fontsize=8, title_fontsize=8)
-    fig.suptitle(f"{sweep.figure}: {sweep.title}", fontsize=10)
-    fig.tight_layout()
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    if any_bad:
+        handles.append(plt.Line2D([], [], ls="", marker="x", color="0.3", mew=1.5))
+        labels.append("no feasible X\n(grey band)")
+    fig.legend(handles, labels, title=sweep.series_label, fontsize=8, title_fontsize=8,
+               loc="upper right", bbox_to_anchor=(1.0, 0.9))  # fmt: skip
+    title = textwrap.fill(f"{sweep.figure}: {sweep.title}", width=int(13 * width))
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout(rect=(0.0, 0.0, 1.0 - 1.5 / width, 1.0))
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
@@ -929,6 +964,26 @@ def finish(sweep: SweepDef, out: Path, table_path: Path) -> list[str]:
         n_classes = len(table["decision_table"]["classes"])
         lines.append(f"decision table: {n_classes} load classes -> {table_path}")
     return lines
+
+
+def replot(args) -> int:
+    """``fence-sorter optimize --sweep NAME --plots-only``: the figures from the CSVs in
+    ``args.out`` (no solve, no table written). Exit 0, or 2 for an unknown sweep or a missing
+    CSV."""
+    try:
+        names = parse_names(str(args.sweep))
+    except KeyError as exc:
+        print(f"fence-sorter: error: --sweep: {exc.args[0]}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    out = Path(getattr(args, "out", None) or "docs/paper")
+    for name in names:
+        sw = get_sweep(name)
+        csv_path = out / f"{sw.run}.csv"
+        if not csv_path.is_file():
+            print(f"fence-sorter: error: --out: no {csv_path} to plot {name}", file=sys.stderr)
+            return EXIT_BAD_INPUT
+        print(plot_sweep(sw, _order(sw, read_rows(csv_path)), out / f"{sw.name}.png"))
+    return EXIT_OK
 
 
 def main(args) -> int:
@@ -1008,6 +1063,7 @@ __all__ = [
     "point_key",
     "read_rows",
     "repair_nesting",
+    "replot",
     "result_row",
     "run_sweep",
     "run_sweeps",

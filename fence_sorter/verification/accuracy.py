@@ -655,72 +655,116 @@ def _measures(sr: SceneResult) -> tuple[str, ...]:
 
 def plot_scene(sr: SceneResult, out_dir: Path) -> list[str]:
     """``<scene>_<measure>.png``: error against wall time, one curve per method, default star."""
+    ref = sr.reference
+    files = []
+    for measure in _measures(sr):
+        name = f"{sr.scene}_{measure}.png"
+        plot_measure(
+            sr.scene, measure, sr.points, ref.uncertainty(measure), ref.ode_gap(measure),
+            out_dir / name,
+        )  # fmt: skip
+        files.append(name)
+    return files
+
+
+def plot_measure(
+    scene: str,
+    measure: str,
+    points: Sequence[RunPoint],
+    uncertainty: float,
+    ode_gap: float,
+    path: Path,
+) -> Path:
+    """One work-precision diagram: error in ``measure`` against wall time, one curve per
+    method, the default as a star, the reference's own error and the ODE form's gap as lines;
+    the legend beside the axes (never over the data)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    files = []
-    methods = list(dict.fromkeys(p.method for p in sr.points if not p.is_default))
-    for measure in _measures(sr):
-        fig, ax = plt.subplots(figsize=(7.0, 5.0))
-        for method in methods:
-            pts = [
-                p
-                for p in sr.points
-                if p.method == method and not p.is_default and p.status == "ok"
-            ]
-            pts = [p for p in pts if p.errors.get(measure, math.nan) > 0]
-            if not pts:
-                continue
-            (line,) = ax.loglog(
-                [p.wall * 1e3 for p in pts],
-                [p.errors[measure] for p in pts],
-                marker=MARKERS.get(method, "o"),
-                linestyle="--" if method.startswith("scipy:") else "-",
-                label=method,
+    methods = list(dict.fromkeys(p.method for p in points if not p.is_default))
+    fig, ax = plt.subplots(figsize=(9.0, 5.0))
+    for method in methods:
+        pts = [p for p in points if p.method == method and not p.is_default and p.status == "ok"]
+        pts = [p for p in pts if p.errors.get(measure, math.nan) > 0]
+        if not pts:
+            continue
+        (line,) = ax.loglog(
+            [p.wall * 1e3 for p in pts],
+            [p.errors[measure] for p in pts],
+            marker=MARKERS.get(method, "o"),
+            linestyle="--" if method.startswith("scipy:") else "-",
+            label=method,
+        )
+        for p in {id(q): q for q in (pts[0], pts[-1])}.values():
+            ax.annotate(
+                _value(p).split(" ", 1)[1],
+                (p.wall * 1e3, p.errors[measure]),
+                textcoords="offset points",
+                xytext=(4, 3),
+                fontsize=6,
+                color=line.get_color(),
             )
-            for p in {id(q): q for q in (pts[0], pts[-1])}.values():
-                ax.annotate(
-                    _value(p).split(" ", 1)[1],
-                    (p.wall * 1e3, p.errors[measure]),
-                    textcoords="offset points",
-                    xytext=(4, 3),
-                    fontsize=6,
-                    color=line.get_color(),
-                )
-        for p in sr.points:
-            e = p.errors.get(measure, math.nan)
-            if p.is_default and p.status == "ok" and e > 0:
-                ax.loglog(
-                    [p.wall * 1e3],
-                    [e],
-                    marker="*",
-                    markersize=18,
-                    color="gold",
-                    markeredgecolor="black",
-                    linestyle="none",
-                    label=f"default ({describe(p.method, p.value)})",
-                    zorder=5,
-                )
-        unc = sr.reference.uncertainty(measure)
-        if unc > 0:
-            ax.axhline(unc, color="grey", linestyle=":", label="reference vs its halved step")
-        gap = sr.reference.ode_gap(measure)
-        if gap > 0 and any(m.startswith("scipy:") for m in methods):
-            ax.axhline(gap, color="tab:red", linestyle="-.", lw=1, label="ODE form vs reference")
-        title, unit = MEASURE_TEXT[measure]
-        ax.set_title(f"{sr.scene}: {title}")
-        ax.set_xlabel("wall time per solve [ms] (median)")
-        ax.set_ylabel(unit)
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=7, loc="best")
-        fig.tight_layout()
-        name = f"{sr.scene}_{measure}.png"
-        fig.savefig(out_dir / name, dpi=110)
-        plt.close(fig)
-        files.append(name)
-    return files
+    for p in points:
+        e = p.errors.get(measure, math.nan)
+        if p.is_default and p.status == "ok" and e > 0:
+            ax.loglog(
+                [p.wall * 1e3],
+                [e],
+                marker="*",
+                markersize=18,
+                color="gold",
+                markeredgecolor="black",
+                linestyle="none",
+                label=f"default ({describe(p.method, p.value)})",
+                zorder=5,
+            )
+    if uncertainty > 0:
+        ax.axhline(uncertainty, color="grey", linestyle=":", label="reference vs its halved step")
+    if ode_gap > 0 and any(m.startswith("scipy:") for m in methods):
+        ax.axhline(ode_gap, color="tab:red", linestyle="-.", lw=1, label="ODE form vs reference")
+    title, unit = MEASURE_TEXT[measure]
+    ax.set_title(f"{scene}: {title}")
+    ax.set_xlabel("wall time per solve [ms] (median)")
+    ax.set_ylabel(unit)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.margins(x=0.08)  # room for the setting labels at the last points
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _nan(value):
+    """A value of results.json back in Python: null -> NaN, also inside dicts."""
+    if value is None:
+        return math.nan
+    if isinstance(value, dict):
+        return {k: _nan(v) for k, v in value.items()}
+    return value
+
+
+def replot(out_dir: Path | str) -> list[Path]:
+    """Redraw every ``<scene>_<measure>.png`` in ``out_dir`` from its ``results.json`` (the
+    plots alone: no solve runs)."""
+    out = Path(out_dir)
+    data = json.loads((out / "results.json").read_text(encoding="utf-8"))
+    done = []
+    names = set(RunPoint.__dataclass_fields__)
+    for sc in data["scenes"]:
+        points = [
+            RunPoint(**{k: _nan(v) for k, v in p.items() if k in names}) for p in sc["points"]
+        ]
+        checks = [ReferenceCheck(**_nan(c)) for c in sc["reference"]["checks"]]
+        ref = Reference(sc["scene"], None, None, checks)
+        for measure in MEASURES:
+            path = out / f"{sc['scene']}_{measure}.png"
+            if path.exists():
+                unc, gap = ref.uncertainty(measure), ref.ode_gap(measure)
+                done.append(plot_measure(sc["scene"], measure, points, unc, gap, path))
+    return done
 
 
 def save_reference(sr: SceneResult, out_dir: Path) -> str:

@@ -387,3 +387,42 @@ def test_a_csv_from_before_started_from_is_read_and_migrated(tmp_path) -> None:
     assert _strip(sw.read_rows(path, repair=True)) == _strip(rows)
     assert path.read_text().splitlines()[0].split(",") == list(sw.COLUMNS)
     assert _strip(sw.read_rows(path)) == _strip(rows)
+
+
+def test_infeasible_points_are_drawn_apart_from_every_value(tmp_path, monkeypatch) -> None:
+    """decision-table.csv has points with no feasible optimum; R_s = 0 would be a real value,
+    so their crosses sit in a band above every value (axes coordinates), none at y = 0."""
+    from pathlib import Path
+
+    from matplotlib.figure import Figure
+
+    figures = []
+    save = Figure.savefig
+
+    def keep(fig, *args, **kwargs):
+        figures.append(fig)
+        return save(fig, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", keep)
+    sweep = sw.get_sweep("decision-table")
+    csv = Path(__file__).resolve().parents[2] / "docs" / "paper" / "decision-table.csv"
+    rows = sw._order(sweep, sw.read_rows(csv))
+    infeasible = sum(not r["feasible"] for r in rows)
+    assert infeasible > 0
+    sw.plot_sweep(sweep, rows, tmp_path / "table.png")
+    (fig,) = figures
+    panels = [ax for ax in fig.axes if ax.has_data()]
+    assert len(panels) == len(sweep.panels)
+    for ax in panels:
+        lo, hi = ax.get_ylim()
+        band = lo + (hi - lo) * (1.0 - sw.INFEASIBLE_BAND)
+        crosses = [ln for ln in ax.lines if ln.get_marker() == "x"]
+        assert sum(len(ln.get_xdata()) for ln in crosses) == infeasible
+        for ln in crosses:
+            assert ln.get_transform() != ax.transData
+            assert set(ln.get_ydata()) == {1.0 - 0.5 * sw.INFEASIBLE_BAND}
+        values = [y for ln in ax.lines if ln.get_marker() == "o" for y in ln.get_ydata()]
+        finite = [y for y in values if math.isfinite(y)]
+        assert finite and max(finite) < band and min(finite) >= lo
+    title = fig.texts[0].get_text() if fig.texts else fig._suptitle.get_text()
+    assert "controller: controller" not in title and title.startswith("Decision table")
