@@ -24,6 +24,7 @@ from fence_sorter.capacity.constraints import (
     footprint_length,
     margin_working_time,
 )
+from fence_sorter.capacity.decision_table import DecisionTable
 from fence_sorter.capacity.evaluate import StrokeEvaluation, evaluate_stroke, planning_scenario
 from fence_sorter.capacity.formulas import scraping_time
 from fence_sorter.physics.params import ParameterError, ParcelParams, check_range
@@ -60,7 +61,7 @@ class PlannerConfig:
     quantum_yaw: float = math.radians(5.0)  # [rad]
     quantum_mu: float = 0.05
     min_exit_speed: float = 0.3  # (8) counts only if C_s crosses y0 = s at least this fast [m/s]
-    # starting strokes per load class (config/decision_table.yaml, fence_sorter.optimize.decision);
+    # starting strokes per load class (config/decision_table.yaml, capacity.decision_table);
     # empty: none, the planner works as without it
     decision_table: str = ""
 
@@ -208,8 +209,6 @@ class Planner:
         self.chosen: dict[tuple, tuple[float, float]] = {}
         self.table = None
         if config.decision_table:
-            from fence_sorter.optimize.decision import DecisionTable
-
             self.table = DecisionTable.load(config.decision_table).check(
                 config.alpha_k, self.v, "controller.decision_table"
             )

@@ -7,11 +7,14 @@ Both are ``concurrent.futures.Executor``s; the optimiser only calls ``submit`` a
 from __future__ import annotations
 
 import concurrent.futures
+import math
 import multiprocessing
 import os
 from collections.abc import Iterator
 from contextlib import contextmanager
 
+from fence_sorter.optimize.problem import OptimizeSpec
+from fence_sorter.optimize.solve import evaluate_point
 from fence_sorter.physics.params import ParameterError
 
 
@@ -40,7 +43,7 @@ def make_executor(
             f"scheduler must be a Dask scheduler address such as tcp://127.0.0.1:8786, "
             f"got {scheduler!r}"
         )
-    try:
+    try:  # optional: only a --scheduler run needs dask, and it takes seconds to import
         from dask.distributed import Client
     except ImportError as exc:  # pragma: no cover - dask is a listed requirement
         raise ParameterError(f"scheduler needs dask[distributed] installed: {exc}") from None
@@ -56,10 +59,5 @@ def make_executor(
 
 def _warm_up() -> None:
     """Compile (or load) the kernel and read the scenes in this process before forking."""
-    import math
-
-    from fence_sorter.optimize.problem import OptimizeSpec
-    from fence_sorter.optimize.solve import evaluate_point
-
     spec = OptimizeSpec(case="positioned", alpha_k=math.radians(40.0), constraints=(8,))
     evaluate_point(spec, {"R_s": 0.7, "v": 2.0, "t1": 0.5, "R_z": 1.2})

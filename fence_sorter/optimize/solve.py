@@ -23,6 +23,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy.optimize import differential_evolution
 
 from fence_sorter.capacity.constraints import CONSTRAINT_TEXT, violated
 from fence_sorter.capacity.evaluate import evaluate_stroke, planning_scenario
@@ -30,6 +31,7 @@ from fence_sorter.capacity.formulas import pitch
 from fence_sorter.jsonsafe import json_safe
 from fence_sorter.optimize.problem import UNITS, VARIABLES, OptimizeSpec
 from fence_sorter.physics.params import ParameterError
+from fence_sorter.scene import load_scene
 
 #: normalisation of each constraint's violation in the energy (its natural scale)
 SCALES = {7: 1.0, 8: 0.7, 9: 1.0}
@@ -52,8 +54,6 @@ AT_BOUND_TOL = 0.01
 def _base_scenario(fence: str):
     """The planning scenario (stiff fence, loose tolerances, stop when sorted) of the
     positioned_stiff scene, or of it with the flexible PA6 fence of impact_flexible."""
-    from fence_sorter.scene import load_scene
-
     base = load_scene("positioned_stiff").scenario
     if fence == "flexible":
         flex = load_scene("impact_flexible").scenario
@@ -291,8 +291,6 @@ def optimize(
     executor. Raises ParameterError for an invalid spec or a start outside the ranges or off
     a fixed value; an infeasible problem returns ``feasible=False`` with the reason.
     """
-    from scipy.optimize import differential_evolution
-
     spec.validate()
     t0 = time.perf_counter()
     ev = _Evaluator(spec, executor)

@@ -22,11 +22,19 @@ import json
 import math
 import os
 import sys
+import textwrap
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import Executor, Future, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
+
+from fence_sorter.capacity.decision_table import build_table, write_table
+from fence_sorter.optimize import solve
+from fence_sorter.optimize.decision import decision_points
+from fence_sorter.optimize.executor import make_executor
+from fence_sorter.optimize.points import INPUT_COLUMNS, point
+from fence_sorter.optimize.problem import OptimizeSpec
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -56,22 +64,6 @@ A_NDOP_LEVELS = (15.0, 50.0, 150.0, 300.0)
 LENGTHS = (0.1, 0.3, 0.5, 0.7, 0.9, 1.2)
 
 # -- CSV schema ---------------------------------------------------------------------------------
-#: the inputs of one point (one optimisation), scalar columns of the CSV; SI but alpha_k in deg
-INPUT_COLUMNS: dict[str, type] = {
-    "case": str,  # arbitrary | positioned
-    "alpha_k_deg": float,
-    "w_dop": float,
-    "a_ndop": float,
-    "exit_speed_limit": float,
-    "constraints": str,  # "7 8 11"
-    "mu1": float,
-    "mu2": float,
-    "load_length": float,
-    "load_width": float,
-    "fixed": str,  # "R_s=0 R_z=1.4" (empty: none)
-    "bounds": str,  # "R_s=-0.4:1 t1=0.2:1.5" (empty: the ranges (3)-(6))
-    "budget": int,  # 0: the optimiser's default
-}
 #: the outcome of one point
 RESULT_COLUMNS: dict[str, type] = {
     "feasible": bool,
@@ -100,32 +92,6 @@ RESULT_COLUMNS: dict[str, type] = {
     "started_from": str,
 }
 COLUMNS: dict[str, type] = {"key": str, **INPUT_COLUMNS, **RESULT_COLUMNS}
-
-DEFAULT_INPUTS: dict = {
-    "case": "positioned",
-    "alpha_k_deg": 40.0,
-    "w_dop": 2.4,
-    "a_ndop": 300.0,
-    "exit_speed_limit": 2.5,
-    "constraints": "7 8 9 10",
-    "mu1": 0.65,
-    "mu2": 0.35,
-    "load_length": 0.7,
-    "load_width": 0.1,
-    "fixed": "",
-    "bounds": "",
-    "budget": 0,
-}
-
-
-def point(**kw) -> dict:
-    """The inputs of one point: the defaults (paper section 3 values) updated by ``kw``."""
-    unknown = set(kw) - set(INPUT_COLUMNS)
-    if unknown:
-        raise KeyError(f"unknown point input(s) {sorted(unknown)}; allowed: {list(INPUT_COLUMNS)}")
-    out = dict(DEFAULT_INPUTS)
-    out.update(kw)
-    return {k: INPUT_COLUMNS[k](v) for k, v in out.items()}
 
 
 def point_key(inputs: Mapping) -> str:
@@ -259,8 +225,6 @@ def _pairs(text: str) -> list[tuple[str, str]]:
 
 def make_spec(inputs: Mapping):
     """The optimiser's OptimizeSpec of a point (degrees -> radians here)."""
-    from fence_sorter.optimize.problem import OptimizeSpec
-
     kw: dict = {
         "case": inputs["case"],
         "alpha_k": math.radians(inputs["alpha_k_deg"]),
@@ -333,8 +297,6 @@ def solve_point(inputs: Mapping, starts: Sequence[Mapping] = (), started_from: s
     """One optimum (serial optimiser: the sweep parallelises over points); the result columns.
     ``starts``: points X the search starts from (:func:`repair_nesting`), ``started_from``
     the keys of the points they came from."""
-    from fence_sorter.optimize import solve
-
     spec = make_spec(inputs)
     d = solve.optimize(spec, executor=None, starts=starts).to_dict()
     if d.get("feasible") and hasattr(solve, "evaluate_point"):
@@ -454,8 +416,6 @@ def _fig7_fixed_rz() -> tuple[dict, ...]:
 
 
 def _decision_points() -> tuple[dict, ...]:
-    from fence_sorter.optimize.decision import decision_points
-
     return decision_points()
 
 
@@ -617,7 +577,7 @@ def get_sweep(name: str) -> SweepDef:
 def _progress(total: int, initial: int, desc: str, enabled: bool):
     if not enabled:
         return None
-    try:
+    try:  # optional: a progress bar where tqdm is installed
         from tqdm import tqdm
     except ImportError:  # plain lines instead of a bar
         return _LineProgress(total, initial, desc)
@@ -857,8 +817,7 @@ def plot_sweep(sweep: SweepDef, rows: Sequence[dict], path: str | Path) -> Path:
     no value: it is marked with a cross in a grey band at the top of each panel, above every
     value (a real value such as R_s = 0 is never taken for it). One legend, outside the
     panels; the title wrapped to the figure's width."""
-    import textwrap
-
+    # matplotlib takes ~0.5 s to import and only the plots need it (workers never plot)
     import matplotlib
 
     matplotlib.use("Agg")
@@ -957,8 +916,6 @@ def finish(sweep: SweepDef, out: Path, table_path: Path) -> list[str]:
         f"{out / (sweep.run + '.csv')}, plot {png}"
     ]
     if sweep.name == "decision-table" and len(rows) == len(sweep.points):
-        from fence_sorter.optimize.decision import build_table, write_table
-
         table = build_table(rows, source=str(out / f"{sweep.run}.csv"))
         write_table(table, table_path)
         n_classes = len(table["decision_table"]["classes"])
@@ -1007,8 +964,6 @@ def main(args) -> int:
     except Exception as exc:  # e.g. the decision table's config cannot be read
         print(f"fence-sorter: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    from fence_sorter.optimize.executor import make_executor
-
     repair = bool(getattr(args, "repair", True))
     changed: set[str] = set()
     wall0 = time.perf_counter()

@@ -14,9 +14,9 @@ from dataclasses import replace
 import pytest
 
 from fence_sorter.capacity import LoadRequest, Planner, PlannerConfig
+from fence_sorter.capacity.decision_table import DecisionTable, build_table, write_table
 from fence_sorter.capacity.formulas import pitch
 from fence_sorter.optimize import sweep as sw
-from fence_sorter.optimize.decision import DecisionTable, build_table, write_table
 from fence_sorter.physics.params import ParameterError
 from fence_sorter.scene import load_scene
 
