@@ -27,6 +27,8 @@ SUBCOMMAND_MODULES: tuple[str, ...] = (
     "run",
     "replay",
     "analyze",
+    "bag",
+    "topic",
     "rrd",
     "bench_suite",
     "optimize",

@@ -1,0 +1,43 @@
+"""``fence-sorter bag info BAG``: a stand-in for ``ros2 bag info`` (no rosbag2 CLI in the ROS 2
+wheels): files, size, storage, duration, start and end, messages per topic with their types,
+compression, and the health of each segment.
+
+Exit codes: 0 every segment healthy; 1 a segment or metadata.yaml has a problem (named, the
+rest is counted); 2 not a bag.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "bag",
+        help="bag tools standing in for `ros2 bag` (info)",
+        description="Stand-ins for `ros2 bag` subcommands, without rosbag2.",
+    )
+    commands = parser.add_subparsers(dest="bag_command", metavar="COMMAND", required=True)
+    info = commands.add_parser(
+        "info",
+        help="what `ros2 bag info` shows, plus the health of each segment",
+        description=__doc__.splitlines()[0],
+    )
+    info.add_argument("bag", help="bag directory (or one .mcap/.db3 file)")
+    info.add_argument("--json", action="store_true", help="print it as one JSON object")
+    info.set_defaults(func=run_info)
+
+
+def run_info(args: argparse.Namespace) -> int:
+    from fence_sorter.recording.baginfo import bag_info, format_info
+    from fence_sorter.recording.bagread import BagReadError
+
+    try:
+        info = bag_info(args.bag)
+    except BagReadError as exc:
+        print(f"fence-sorter bag info: error: {exc}", file=sys.stderr)
+        return 2
+    print(json.dumps(info.to_json(), indent=1) if args.json else format_info(info))
+    return 0 if info.healthy else 1
