@@ -2,9 +2,11 @@
 as separate processes on an isolated ROS domain; stops when every parcel has its outcome or on
 Ctrl-C, then prints a summary.
 
-Exit codes: 0 a clean run, 1 a node failed or the run timed out, 2 bad input (one line naming
-the option and its range), 130 interrupted. ``--rrd FILE``: the simulator saves a Rerun recording
-of the run (logged live in a child process, fence_sorter.visualisation.rerun_live).
+Exit codes: 0 a clean run, 1 a node failed or the run could not start, 2 bad input (one line
+naming the option and its range), 3 a divert parcel of the run's stream got no outcome, 4
+foreign traffic (another run's parcels or commands) was seen, 130 interrupted (README table).
+``--rrd FILE``: the simulator saves a Rerun recording of the run (logged live in a child
+process, fence_sorter.visualisation.rerun_live).
 """
 
 from __future__ import annotations

@@ -1,8 +1,15 @@
 """The sorting line with many parcels at once, ROS-free (the simulator node's model).
 
 See :class:`SortingLine`; data types in :mod:`fence_sorter.line.types`, input checks in
-:mod:`fence_sorter.line.validate`. Nothing here imports rclpy.
+:mod:`fence_sorter.inputs`. Nothing here imports rclpy.
 """
+
+from fence_sorter.inputs import (
+    PARCEL_REASONS,
+    InputError,
+    validate_command,
+    validate_parcel,
+)
 
 from .line import LineConfig, SortingLine, in_swept_sector
 from .pacing import LatenessHistogram, Pacer, Tick
@@ -22,7 +29,6 @@ from .types import (
     StrokeCommand,
     StrokeStarted,
 )
-from .validate import PARCEL_REASONS, InputError, validate_command, validate_parcel
 
 __all__ = [
     "PARCEL_REASONS",

@@ -26,6 +26,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from fence_sorter.inputs import SCAN_LINE_TOLERANCE, validate_command, validate_parcel
 from fence_sorter.physics import kernel as K
 from fence_sorter.physics.contacts import STAGE_E1, STAGE_E2, STAGE_E3, STAGE_E4, STAGE_SORTED
 from fence_sorter.physics.drive import drive_state
@@ -58,7 +59,6 @@ from .types import (
     StrokeCommand,
     StrokeStarted,
 )
-from .validate import validate_command, validate_parcel
 
 STAGES = {
     STAGE_E1: Stage.E1,
@@ -79,7 +79,9 @@ class LineConfig:
 
     ``r_s_range``: R_s a command may ask for (paper range (3)); its upper end is the point of no
     return of a divert parcel (front passing it with no accepted command: NO_COMMAND).
-    ``line_end_x``: a parcel whose rear passes it leaves the line.
+    ``line_end_x``: a parcel whose rear passes it leaves the line. ``scan_line_x``: where the
+    scanner measures (a parcel's scan_position_x must lie within ``scan_line_tolerance`` of
+    it); None: any scan_position_x within the position bound.
     """
 
     conveyor: ConveyorParams = ConveyorParams()
@@ -90,6 +92,8 @@ class LineConfig:
     fence_modes: int | None = None
     r_s_range: tuple[float, float] = (-0.5, 2.0)
     line_end_x: float = 3.0
+    scan_line_x: float | None = None
+    scan_line_tolerance: float = SCAN_LINE_TOLERANCE
 
     @classmethod
     def from_scenario(cls, sc: Scenario, **line: object) -> LineConfig:
@@ -118,6 +122,13 @@ class LineConfig:
         lo, hi = self.r_s_range
         if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
             raise ValueError(f"r_s_range must be finite with min < max, got {self.r_s_range}")
+        if self.scan_line_x is not None and not (
+            math.isfinite(self.scan_line_x) and self.scan_line_tolerance >= 0.0
+        ):
+            raise ValueError(
+                f"scan_line_x must be finite and scan_line_tolerance in [0, inf), got "
+                f"{self.scan_line_x!r} and {self.scan_line_tolerance!r}"
+            )
         if not math.isfinite(self.line_end_x) or self.line_end_x <= hi:
             raise ValueError(
                 f"line_end_x must exceed the point of no return r_s_range[1] = {hi:g} m, "
@@ -393,13 +404,21 @@ class SortingLine:
     def add_parcel(self, spec: ParcelSpec, t: float | None = None) -> None:
         """Put a scanned parcel on the belt; raises InputError (a ValueError) naming the field.
 
-        ``t`` (the line time the message arrived) only moves the clock when it is ahead; the
-        parcel's position follows its own scan_time and scan_position_x.
+        The parcel's scan_time must lie in the window around the line's time (``t``, the line
+        time the message arrived, when it is ahead) of :func:`fence_sorter.inputs.
+        validate_parcel`; its position follows its own scan_time and scan_position_x.
         """
-        del t
-        validate_parcel(spec, self.config.conveyor.width, self.parcels.keys() | self.done_ids)
+        now = self.t if t is None else max(self.t, t)
+        validate_parcel(
+            spec,
+            self.config.conveyor.width,
+            self.parcels.keys() | self.done_ids,
+            now=now,
+            scan_line_x=self.config.scan_line_x,
+            scan_line_tolerance=self.config.scan_line_tolerance,
+        )
         conv = self._conveyor(spec)
-        body = parcel_body(_physics(spec), conv)
+        body = parcel_body(spec.to_parcel_params(), conv)
         p = _Parcel(spec, body, self.v)
         p.t_enter = p.time_front_at(0.0)
         self.parcels[spec.parcel_id] = p
@@ -457,6 +476,15 @@ class SortingLine:
                 f"the command came at t = {now:.4f} s ({now - t_start:.4f} s late)"
             )
             return CommandResult(False, "late", p.late)
+        t_leave = p.rear_end_time(self.config.line_end_x)
+        if t_start + cmd.t1 > t_leave + 1e-9:
+            reason = (
+                f"outside its parcel's window: the working motion would end at "
+                f"t = {t_start + cmd.t1:.4f} s, after parcel {cmd.parcel_id} leaves the line "
+                f"(t = {t_leave:.4f} s); t1 must be in [0.02, {max(t_leave - t_start, 0.0):.4g}] s"
+            )
+            p.rejected = f"invalid command: {reason}"
+            return CommandResult(False, "outside_window", reason)
         t_end = t_start + 2.0 * cmd.t1
         for other in self._planned():
             if other is p:
@@ -607,7 +635,7 @@ class SortingLine:
         cmd = p.command
         return Scenario(
             conveyor=self._conveyor(p.spec),
-            parcel=_physics(p.spec),
+            parcel=p.spec.to_parcel_params(),
             # the commanded R_s exactly (START_AT_TIME: the front at start_time)
             drive=DriveParams(alpha_k=cmd.alpha_k, t1=cmd.t1, r_s=p.r_s),
             contact=self._contact(p.spec),
@@ -816,12 +844,6 @@ class SortingLine:
     @property
     def parcels_on_line(self) -> int:
         return len(self.parcels)
-
-
-def _physics(spec: ParcelSpec):
-    from .validate import physics_parcel
-
-    return physics_parcel(spec)
 
 
 def in_swept_sector(

@@ -1,4 +1,5 @@
-"""Plain data of the sorting line: parcels, stroke commands, outcomes, snapshots (no ROS types).
+"""Plain data of the sorting line: outcomes, snapshots (no ROS types); its inputs, parcels and
+stroke commands, are :mod:`fence_sorter.inputs`.
 
 Frame "sorter" is the paper's O x0 y0: origin on the fence rotation axis at the fence-side belt
 border, x0 along the belt motion, y0 across the belt towards the chute (belt 0 <= y0 <= s).
@@ -14,50 +15,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fence_sorter.codes import OutcomeCode, Stage, StartMode
+from fence_sorter.inputs import ParcelSpec, StrokeCommand
 
 NAN = math.nan
-
-
-@dataclass(frozen=True)
-class ParcelSpec:
-    """A scanned parcel (fence_sorter_msgs/Parcel without the header).
-
-    ``mu_belt``/``mu_fence`` NaN: use the line's configured mu1 / mu2. ``scan_position_x`` is the
-    front's x0 at ``scan_time`` (sim time [s]); the belt carries the front on at speed v.
-    """
-
-    parcel_id: int
-    length_a: float = 0.4  # A [m]
-    width_b: float = 0.3  # B [m]
-    height: float = 0.3  # [m] (visuals only)
-    mass: float = 15.0  # m_p [kg]
-    cog_offset_x: float = 0.0  # x_p [m]
-    cog_offset_y: float = 0.0  # y_p [m]
-    lateral_gap: float = 0.0  # Delta_s [m]
-    yaw: float = 0.0  # phi [rad]
-    mu_belt: float = NAN
-    mu_fence: float = NAN
-    divert: bool = False
-    scan_time: float = 0.0  # [s]
-    scan_position_x: float = -2.0  # [m]
-
-
-@dataclass(frozen=True)
-class StrokeCommand:
-    """A fence stroke for one parcel (fence_sorter_msgs/FenceCommand without header/predictions).
-
-    ``feasible`` False: the controller found no stroke meeting the constraints; ``reason`` says
-    why and the parcel passes unsorted (outcome NO_FEASIBLE_COMMAND).
-    """
-
-    parcel_id: int
-    start_mode: StartMode = StartMode.AT_RS
-    r_s: float = 0.0  # R_s [m] (AT_RS)
-    start_time: float = 0.0  # [s] (AT_TIME)
-    t1: float = 0.5  # working time [s]
-    alpha_k: float = math.radians(40.0)  # [rad]
-    feasible: bool = True
-    reason: str = ""
 
 
 @dataclass(frozen=True)
@@ -66,7 +26,7 @@ class CommandResult:
 
     ``code`` is one of ``accepted``, ``infeasible`` (accepted as the controller's "no stroke"),
     ``unknown_parcel``, ``duplicate``, ``parcel_done``, ``not_divert``, ``invalid``, ``late``,
-    ``fence_busy``.
+    ``fence_busy``, ``outside_window`` (the stroke would outlast its parcel on the line).
     """
 
     accepted: bool
@@ -175,3 +135,21 @@ class LineSnapshot:
     t: float
     fence: FenceSnapshot
     parcels: list[ParcelSnapshot] = field(default_factory=list)
+
+
+__all__ = [
+    "CommandResult",
+    "FenceSnapshot",
+    "LineEvent",
+    "LineSnapshot",
+    "Outcome",
+    "OutcomeCode",
+    "OverlapWarning",
+    "ParcelSnapshot",
+    "ParcelSpec",
+    "SolverWarning",
+    "Stage",
+    "StartMode",
+    "StrokeCommand",
+    "StrokeStarted",
+]

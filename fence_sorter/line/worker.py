@@ -44,14 +44,15 @@ import time
 import traceback
 from collections import Counter, deque
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
+
+from fence_sorter.inputs import InputError
 
 from .line import LineConfig, SortingLine
 from .pacing import CycleTrace, LatenessHistogram, Pacer
 from .types import ParcelSpec, StrokeCommand
-from .validate import InputError
 
 #: sim time a command for a not-yet-known parcel waits for its parcel message [s]
 COMMAND_HOLD = 0.5
@@ -552,7 +553,7 @@ class PacedLoop:
 def warm_up(config: LineConfig, scenario) -> None:
     """One short stroke on a scratch line so the kernel's compiled code is loaded before the
     pacing loop starts (loading it inside the loop would stall it by a few hundred ms)."""
-    line = SortingLine(config)
+    line = SortingLine(replace(config, scan_line_x=None))  # its parcel starts at R_s
     pp = scenario.parcel
     spec = ParcelSpec(
         0,

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections import deque
+from collections import Counter, deque
 from collections.abc import Sequence
 
 import numpy as np
@@ -22,8 +22,11 @@ from rclpy.parameter import Parameter
 from rclpy.time import Time
 
 from fence_sorter.capacity.planner import LoadRequest, Plan, Planner, PlannerConfig
-from fence_sorter.nodes.base import FenceSorterNode, ParamSpec, run_node
-from fence_sorter.nodes.qos import RELIABLE_QOS
+from fence_sorter.inputs import InputError, ParcelSpec, validate_parcel
+from fence_sorter.nodes.base import RUN_ID_PARAMETER, FenceSorterNode, ParamSpec, run_node
+from fence_sorter.nodes.convert import parcel_from_msg
+from fence_sorter.nodes.intake import TopicIntake
+from fence_sorter.nodes.qos import INPUT_QOS, RELIABLE_QOS
 from fence_sorter.physics.params import ParameterError, ParcelParams
 
 DEFAULT_SCENE = "impact_flexible"
@@ -36,39 +39,15 @@ def time_to_sec(stamp) -> float:
     return stamp.sec + 1e-9 * stamp.nanosec
 
 
-class ParcelRejected(ValueError):
-    """A parcel message the controller cannot plan for (the message says why)."""
-
-
-def request_from_msg(msg, belt_width: float) -> LoadRequest:
-    """fence_sorter_msgs/Parcel -> LoadRequest; ParcelRejected names the bad field."""
-    values = {
-        "length_a": msg.length_a,
-        "width_b": msg.width_b,
-        "height": msg.height,
-        "mass": msg.mass,
-        "cog_offset_x": msg.cog_offset_x,
-        "cog_offset_y": msg.cog_offset_y,
-        "lateral_gap": msg.lateral_gap,
-        "yaw": msg.yaw,
-        "scan_position_x": msg.scan_position_x,
-    }
-    for name, v in values.items():
-        if not math.isfinite(v):
-            raise ParcelRejected(f"parcel {msg.parcel_id}: {name} is not finite ({v})")
-    values.pop("scan_position_x")
-    parcel = ParcelParams(**values)
-    try:
-        parcel.validate(prefix=f"parcel {msg.parcel_id}", belt_width=belt_width)
-    except ParameterError as exc:
-        raise ParcelRejected(str(exc)) from None
+def request_from_spec(spec: ParcelSpec) -> LoadRequest:
+    """A validated parcel -> the planner's LoadRequest."""
     return LoadRequest(
-        parcel_id=int(msg.parcel_id),
-        parcel=parcel,
-        scan_time=time_to_sec(msg.scan_time),
-        scan_position_x=float(msg.scan_position_x),
-        mu_belt=float(msg.mu_belt),
-        mu_fence=float(msg.mu_fence),
+        parcel_id=int(spec.parcel_id),
+        parcel=spec.to_parcel_params(),
+        scan_time=spec.scan_time,
+        scan_position_x=spec.scan_position_x,
+        mu_belt=spec.mu_belt,
+        mu_fence=spec.mu_fence,
     )
 
 
@@ -127,6 +106,7 @@ class ControllerStats:
         self.lead = deque(maxlen=window)  # command sim time before the front reaches R_s [s]
         self.received = self.commands = self.infeasible = self.late = 0
         self.rejected = self.not_diverted = self.evaluations = self.replans = 0
+        self.rejected_by_key: Counter[str] = Counter()  # InputError.key -> parcels
 
     def percentile(self, q: float) -> float:
         return float(np.percentile(self.latency, q)) if self.latency else math.nan
@@ -145,6 +125,7 @@ class ControllerStats:
             "latency_p99_ms": f"{1e3 * self.percentile(99):.3f}",
             "latency_max_ms": f"{1e3 * max(self.latency, default=math.nan):.3f}",
             "min_lead_s": f"{min(self.lead, default=math.nan):.4f}",
+            **{f"rejected_parcels.{k}": str(v) for k, v in sorted(self.rejected_by_key.items())},
         }
 
 
@@ -204,8 +185,26 @@ class ControllerNode(FenceSorterNode):
     STATUS = "planning fence strokes"
     STATUS_LEVEL = DiagnosticStatus.OK
     PARAMETERS = (
+        RUN_ID_PARAMETER,
         ParamSpec("scene", "", "Scene YAML (belt, fence, contact); empty: default", True),
         ParamSpec("frame_id", "sorter", "Fixed frame of the sorter (REP-103, z up)", True),
+        ParamSpec(
+            "scan_line_x",
+            -3.0,
+            "The scanner's scan line [m]: a parcel's scan_position_x must lie within "
+            "scan_line_tolerance of it",
+            True,
+            -100.0,
+            100.0,
+        ),
+        ParamSpec(
+            "scan_line_tolerance",
+            0.5,
+            "Largest distance of a parcel's scan_position_x from scan_line_x [m]",
+            True,
+            0.0,
+            200.0,
+        ),
         *PLANNER_PARAMETERS,
         ParamSpec("warmup_stream", "", "Stream whose parcel classes warm the cache", True),
         ParamSpec("warmup_parcels", 400, "Parcels drawn for the warm-up", True, 0, 100000),
@@ -249,6 +248,10 @@ class ControllerNode(FenceSorterNode):
         self.config = PlannerConfig.from_mapping(p)
         self.planner = Planner(self.base, self.config)
         self.frame_id = p["frame_id"]
+        self.scan_line_x = float(p["scan_line_x"])
+        self.scan_line_tolerance = float(p["scan_line_tolerance"])
+        self.run_id = int(p["run_id"])
+        self.parcel_intake = TopicIntake("parcels", self.run_id)
         self.stats = ControllerStats()
         self.rtf = RateEstimate()
         # sampled on the steady clock, so the estimate follows the sim clock between parcels
@@ -307,8 +310,8 @@ class ControllerNode(FenceSorterNode):
         if self._pub.get_subscription_count() < self._min_subscribers:
             return
         self._listen_timer.cancel()
-        self._sub = self.create_subscription(
-            self._parcel_class, PARCELS_TOPIC, self.on_parcel, RELIABLE_QOS
+        self._sub = self.create_intake_subscription(
+            self._parcel_class, PARCELS_TOPIC, self.on_parcel, INPUT_QOS, self.parcel_intake
         )
         self.get_logger().info("listening on /parcels")
 
@@ -329,6 +332,7 @@ class ControllerNode(FenceSorterNode):
         # this subscription is lost to it (volatile QoS), whatever "listening" says
         values["parcel_publishers"] = str(self._sub.get_publisher_count() if self._sub else 0)
         values["real_time_factor_seen"] = f"{self.rtf.value:.3f}"
+        values.update(self.parcel_intake.values())
         status.values.extend(KeyValue(key=k, value=v) for k, v in values.items())
         return status
 
@@ -338,22 +342,28 @@ def handle_parcel(node: ControllerNode, msg):
     stats = node.stats
     stats.received += 1
     log = node.get_logger()
-    if msg.parcel_id in node.seen:
-        stats.rejected += 1
-        log.warning(f"parcel {msg.parcel_id}: duplicate id, ignored")
-        return None
-    node.seen.add(msg.parcel_id)
-    if not msg.divert:
-        stats.not_diverted += 1
-        return None
-    try:
-        req = request_from_msg(msg, node.base.conveyor.width)
-    except ParcelRejected as exc:
-        stats.rejected += 1
-        log.warning(f"rejected: {exc}")
-        return None
     now = node.get_clock().now()
     t_now = now.nanoseconds * 1e-9
+    spec = parcel_from_msg(msg)
+    try:
+        validate_parcel(
+            spec,
+            node.base.conveyor.width,
+            node.seen,
+            now=t_now,
+            scan_line_x=node.scan_line_x,
+            scan_line_tolerance=node.scan_line_tolerance,
+        )
+    except InputError as exc:
+        stats.rejected += 1
+        stats.rejected_by_key[exc.key] += 1
+        log.warning(f"parcel {msg.parcel_id} rejected ({exc.key}): {exc}")
+        return None
+    node.seen.add(spec.parcel_id)
+    if not spec.divert:
+        stats.not_diverted += 1
+        return None
+    req = request_from_spec(spec)
     rtf = node.rtf.update(time.monotonic(), t_now)
     evals0 = node.planner.evaluations
     # the stroke must start after the command is out: DELIVERY_ALLOWANCE of wall time (times
@@ -378,6 +388,7 @@ def handle_parcel(node: ControllerNode, msg):
     cmd.header.stamp = now.to_msg()
     cmd.header.frame_id = node.frame_id
     fill_command(cmd, plan, node.config.alpha_k)
+    cmd.run_id = node.run_id
     stats.commands += 1
     if plan.feasible:
         stats.lead.append(plan.start_time - now.nanoseconds * 1e-9)

@@ -126,7 +126,7 @@ def clock_msg(t: float) -> Clock:
 
 
 def parcel_from_msg(msg: Parcel) -> ParcelSpec:
-    """fence_sorter_msgs/Parcel -> ParcelSpec (no checks: see fence_sorter.line.validate)."""
+    """fence_sorter_msgs/Parcel -> ParcelSpec (no checks: see fence_sorter.inputs)."""
     return ParcelSpec(
         parcel_id=int(msg.parcel_id),
         length_a=float(msg.length_a),
@@ -145,11 +145,12 @@ def parcel_from_msg(msg: Parcel) -> ParcelSpec:
     )
 
 
-def parcel_to_msg(p: ParcelSpec, frame_id: str = FRAME_ID) -> Parcel:
-    """ParcelSpec -> fence_sorter_msgs/Parcel stamped with its scan time."""
+def parcel_to_msg(p: ParcelSpec, frame_id: str = FRAME_ID, run_id: int = 0) -> Parcel:
+    """ParcelSpec -> fence_sorter_msgs/Parcel of run ``run_id`` stamped with its scan time."""
     return Parcel(
         header=header(p.scan_time, frame_id),
         parcel_id=int(p.parcel_id),
+        run_id=int(run_id),
         length_a=float(p.length_a),
         width_b=float(p.width_b),
         height=float(p.height),
@@ -186,12 +187,15 @@ def command_to_msg(
     stamp: float,
     predicted: dict[str, float] | None = None,
     frame_id: str = FRAME_ID,
+    run_id: int = 0,
 ) -> FenceCommand:
-    """StrokeCommand -> FenceCommand; ``predicted`` fills the predicted_* fields by their
-    names without the prefix (capacity_pcs_h, impact_speed, peak_accel, exit_speed, peak_force)."""
+    """StrokeCommand -> FenceCommand of run ``run_id``; ``predicted`` fills the predicted_*
+    fields by their names without the prefix (capacity_pcs_h, impact_speed, peak_accel,
+    exit_speed, peak_force)."""
     msg = FenceCommand(
         header=header(stamp, frame_id),
         parcel_id=int(cmd.parcel_id),
+        run_id=int(run_id),
         start_mode=int(cmd.start_mode),
         r_s=float(cmd.r_s),
         start_time=sec_to_time(cmd.start_time),

@@ -23,6 +23,16 @@ RELIABLE_QOS = QoSProfile(
     durability=DurabilityPolicy.VOLATILE,
 )
 
+# What the nodes take in from outside (/parcels, /fence_commands): reliable, and a history deep
+# enough for a burst far beyond any stream, so a flood is refused and counted by the node
+# (fence_sorter.nodes.intake) instead of overwriting real messages in the history unseen.
+INPUT_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=5000,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
+
 # Static descriptions (scene, fence geometry markers): late joiners get the last one.
 LATCHED_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
@@ -39,4 +49,4 @@ TF_QOS = QoSProfile(
     durability=DurabilityPolicy.VOLATILE,
 )
 
-__all__ = ["LATCHED_QOS", "RELIABLE_QOS", "SENSOR_QOS", "TF_QOS"]
+__all__ = ["INPUT_QOS", "LATCHED_QOS", "RELIABLE_QOS", "SENSOR_QOS", "TF_QOS"]

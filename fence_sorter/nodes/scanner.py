@@ -18,7 +18,7 @@ from rclpy.exceptions import ParameterException
 from rclpy.time import Time
 from rosgraph_msgs.msg import Clock
 
-from fence_sorter.nodes.base import FenceSorterNode, ParamSpec, run_node
+from fence_sorter.nodes.base import RUN_ID_PARAMETER, FenceSorterNode, ParamSpec, run_node
 from fence_sorter.nodes.convert import fill_clock
 from fence_sorter.nodes.qos import RELIABLE_QOS
 from fence_sorter.physics.params import ParameterError
@@ -31,12 +31,16 @@ PARCELS_TOPIC = "/parcels"
 SCAN_PROGRESS_TOPIC = "/scan_progress"
 
 
-def fill_parcel(msg, spec: ParcelSpec, scan_time: float, scan_x: float, frame_id: str) -> None:
-    """Copy a ParcelSpec into a Parcel message scanned at ``scan_time`` at x = ``scan_x``."""
+def fill_parcel(
+    msg, spec: ParcelSpec, scan_time: float, scan_x: float, frame_id: str, run_id: int = 0
+) -> None:
+    """Copy a ParcelSpec into a Parcel message of run ``run_id`` scanned at ``scan_time`` at
+    x = ``scan_x``."""
     stamp = Time(nanoseconds=int(round(scan_time * 1e9))).to_msg()
     msg.header.stamp = stamp
     msg.header.frame_id = frame_id
     msg.parcel_id = spec.parcel_id
+    msg.run_id = run_id
     msg.length_a = spec.length_a
     msg.width_b = spec.width_b
     msg.height = spec.height
@@ -74,6 +78,7 @@ class ScannerNode(FenceSorterNode):
     STATUS = "scanning"
     STATUS_LEVEL = DiagnosticStatus.OK
     PARAMETERS = (
+        RUN_ID_PARAMETER,
         ParamSpec("frame_id", "sorter", "Fixed frame of the sorter (REP-103, z up)", True),
         ParamSpec("scene", "", "Scene YAML (belt speed and width); empty: default", True),
         ParamSpec("stream", "", "Stream config (YAML) or CSV manifest; empty: default", True),
@@ -136,6 +141,7 @@ class ScannerNode(FenceSorterNode):
         self.start_delay = float(p["start_delay"])
         self.wait_for_subscribers = int(p["wait_for_subscribers"])
         self.frame_id = p["frame_id"]
+        self.run_id = int(p["run_id"])
         self.t0: float | None = None
         self.next_index = 0
         # sim time from a parcel's scan time to its publication (the tick, and how late the
@@ -187,7 +193,7 @@ class ScannerNode(FenceSorterNode):
         for spec in self.stream[self.next_index : end]:
             msg = self._parcel_class()
             stamp = self.t0 + spec.arrival_time
-            fill_parcel(msg, spec, stamp, self.scan_x, self.frame_id)
+            fill_parcel(msg, spec, stamp, self.scan_x, self.frame_id, self.run_id)
             self._pub.publish(msg)
             self.scan_lag_max = max(self.scan_lag_max, now - stamp)
             if now - stamp > SCAN_LAG_WARN:

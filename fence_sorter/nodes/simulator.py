@@ -50,8 +50,9 @@ from fence_sorter.line import (
 from fence_sorter.line.awake import start_spinners, stop_spinners
 from fence_sorter.line.worker import Gauges, LineProcess, LoopSettings, LoopStartError, LoopStats
 from fence_sorter.nodes import convert
-from fence_sorter.nodes.base import FenceSorterNode, ParamSpec, spin_node
-from fence_sorter.nodes.qos import RELIABLE_QOS, SENSOR_QOS
+from fence_sorter.nodes.base import RUN_ID_PARAMETER, FenceSorterNode, ParamSpec, spin_node
+from fence_sorter.nodes.intake import TopicIntake
+from fence_sorter.nodes.qos import INPUT_QOS, RELIABLE_QOS, SENSOR_QOS
 from fence_sorter.nodes.scanner import SCAN_PROGRESS_TOPIC
 from fence_sorter.nodes.tf_publisher import TfPublisher
 from fence_sorter.scene import load_scene
@@ -82,6 +83,7 @@ class SimulatorNode(FenceSorterNode):
     STATUS = "running"
     STATUS_LEVEL = DiagnosticStatus.OK
     PARAMETERS = (
+        RUN_ID_PARAMETER,
         ParamSpec(
             "scene",
             DEFAULT_SCENE,
@@ -187,6 +189,23 @@ class SimulatorNode(FenceSorterNode):
             max_value=10.0,
         ),
         ParamSpec(
+            "scan_line_x",
+            -3.0,
+            "The scanner's scan line [m]: a parcel's scan_position_x must lie within "
+            "scan_line_tolerance of it",
+            read_only=True,
+            min_value=-100.0,
+            max_value=100.0,
+        ),
+        ParamSpec(
+            "scan_line_tolerance",
+            0.5,
+            "Largest distance of a parcel's scan_position_x from scan_line_x [m]",
+            read_only=True,
+            min_value=0.0,
+            max_value=200.0,
+        ),
+        ParamSpec(
             "realtime_priority",
             50,
             "SCHED_FIFO priority of the pacing thread, the process's other threads one below "
@@ -283,6 +302,8 @@ class SimulatorNode(FenceSorterNode):
             loaded.scenario,
             r_s_range=(float(p["r_s_min"]), float(p["r_s_max"])),
             line_end_x=float(p["line_end_x"]),
+            scan_line_x=float(p["scan_line_x"]),
+            scan_line_tolerance=float(p["scan_line_tolerance"]),
         )
         # ValueError: exit 2 in main(). The loop's own line is in its process; this copy
         # renders the loop's captures into snapshots (it has the same fence geometry)
@@ -315,11 +336,14 @@ class SimulatorNode(FenceSorterNode):
         self.scan_lead = float(p["scan_lead"])
         self._scan_limit = -math.inf  # the scanner's progress + scan_lead (sim s)
 
-        self._parcel_sub = self.create_subscription(
-            Parcel, "/parcels", self._on_parcel, RELIABLE_QOS
+        run_id = int(p["run_id"])
+        self.parcel_intake = TopicIntake("parcels", run_id)
+        self.command_intake = TopicIntake("commands", run_id)
+        self._parcel_sub = self.create_intake_subscription(
+            Parcel, "/parcels", self._on_parcel, INPUT_QOS, self.parcel_intake
         )
-        self._command_sub = self.create_subscription(
-            FenceCommand, "/fence_commands", self._on_command, RELIABLE_QOS
+        self._command_sub = self.create_intake_subscription(
+            FenceCommand, "/fence_commands", self._on_command, INPUT_QOS, self.command_intake
         )
         self._progress_sub = self.create_subscription(
             Clock, SCAN_PROGRESS_TOPIC, self._on_scan_progress, RELIABLE_QOS
@@ -656,6 +680,8 @@ class SimulatorNode(FenceSorterNode):
             "parcel_publishers": str(self._parcel_sub.get_publisher_count()),
             "command_publishers": str(self._command_sub.get_publisher_count()),
         }
+        values.update(self.parcel_intake.values())
+        values.update(self.command_intake.values())
         if self.rerun is not None:
             values["rerun_frames_sent"] = str(self.rerun.sent)
             values["rerun_frames_dropped"] = str(self.rerun.dropped)

@@ -56,7 +56,8 @@ def main(argv: list[str] | None = None) -> int:
     from fence_sorter.nodes import convert
     from fence_sorter.nodes.simulator import SimulatorNode
 
-    params = [f"real_time_factor:={a.rtf}", "heartbeat_period:=60.0", *a.p]
+    # its parcels are "scanned" at x0 = -2 m
+    params = [f"real_time_factor:={a.rtf}", "heartbeat_period:=60.0", "scan_line_x:=-2.0", *a.p]
     rclpy.init(args=["--ros-args", *[x for p in params for x in ("-p", p)]])
     node = SimulatorNode()
     executor = SingleThreadedExecutor()

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import os
+import secrets
 import signal
 import tempfile
 import threading
@@ -24,7 +25,7 @@ from fence_sorter.runner.processes import (
     run_domain_id,
     wait_until,
 )
-from fence_sorter.runner.summary import summarise
+from fence_sorter.runner.summary import summarise, verdict
 
 DEFAULT_SCENE = "impact_flexible"
 DEFAULT_STREAM = "default"
@@ -34,6 +35,8 @@ START_DELAY = 0.5
 #: sim time a parcel needs after its scan to leave the line (line end ~3 m) plus margin [s]
 LINE_END_X = 3.0
 STOP_ORDER = ("scanner", "controller", "simulator", "recorder")
+#: the nodes that share the run's id (parameter run_id) on /parcels and /fence_commands
+RUN_ID_NODES = ("scanner", "controller", "simulator")
 #: wall time after the scanner's start without any parcel on /parcels before the run gives up
 NO_PARCEL_TIMEOUT = 60.0
 
@@ -83,6 +86,9 @@ class Plan:
     expected_ids: list[int]
     sim_duration: float  # expected sim time until the last parcel leaves the line [s]
     node_params: dict[str, list[str]]
+    divert_ids: list[int] = field(default_factory=list)
+    #: the run's identity on the wire (drawn per run; messages with another are foreign)
+    run_id: int = field(default_factory=lambda: 1 + secrets.randbelow(2**63 - 1))
 
 
 def prepare(opts: RunOptions) -> Plan:
@@ -138,6 +144,7 @@ def prepare(opts: RunOptions) -> Plan:
         [s.parcel_id for s in stream],
         sim_duration,
         node_params,
+        [s.parcel_id for s in stream if s.divert],
     )
 
 
@@ -147,6 +154,8 @@ def _ros_args(node: str, plan: Plan, opts: RunOptions, extra: list[str]) -> list
     if params_file.is_file():
         args += ["--params-file", str(params_file)]
     overrides = [f"heartbeat_period:={opts.heartbeat_period}", *extra]
+    if node in RUN_ID_NODES:
+        overrides.append(f"run_id:={plan.run_id}")
     overrides += plan.node_params.get(node, [])
     for o in overrides:
         args += ["-p", o]
@@ -218,8 +227,9 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None]) -> RunResult:
         os.sched_setaffinity(0, cpus)
     from fence_sorter.runner.monitor import Monitor
 
-    monitor = Monitor(domain)
+    monitor = Monitor(domain, run_id=plan.run_id)
     code, message = EXIT_OK, "done"
+    stalled = False  # the nodes ran on, but outcomes stayed missing (stall or timeout)
     count = len(plan.expected_ids)
     scene = f"scene:={plan.scene_path}"
     say(
@@ -343,6 +353,7 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None]) -> RunResult:
                 and rec.sim_time - sim_start > plan.sim_duration + 30.0
                 and time.monotonic() - last_outcome > STALL_TIMEOUT
             ):
+                stalled = True
                 code, message = (
                     EXIT_FAILED,
                     (
@@ -352,6 +363,7 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None]) -> RunResult:
                 )
                 break
             if time.monotonic() > deadline:
+                stalled = True
                 code, message = (
                     EXIT_FAILED,
                     (
@@ -370,13 +382,17 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None]) -> RunResult:
     finally:
         exit_codes = group.stop(STOP_ORDER)
         left = leftovers(group.pgids)
-        summary = summarise(monitor.records, plan.belt_speed, plan.expected_ids)
+        summary = summarise(monitor.records, plan.belt_speed, plan.expected_ids, plan.divert_ids)
         monitor.close()
     bad_exit = {n: c for n, c in exit_codes.items() if c not in (0, None)}
     if code == EXIT_OK and bad_exit:
         code, message = EXIT_FAILED, f"nodes did not exit cleanly: {bad_exit}"
     if left:
         code, message = EXIT_FAILED, f"processes left behind: {left}"
+    # the run's own stream: a divert parcel without an outcome (3), foreign traffic (4)
+    own = verdict(summary)
+    if own is not None and (code == EXIT_OK or stalled) and not bad_exit and not left:
+        code, message = own
     summary["wall_time_s"] = time.monotonic() - wall0
     summary["exit_codes"] = exit_codes
     summary["log_dir"] = str(log_dir)

@@ -1,5 +1,8 @@
 """The run's own rclpy node: listens to /parcels, /fence_commands, /sort_outcomes, /diagnostics
-and /scan_progress, and keeps plain records for :mod:`fence_sorter.runner.summary`."""
+and /scan_progress, and keeps plain records for :mod:`fence_sorter.runner.summary`.
+
+With a ``run_id``, parcels and commands of another run (another ``run_id`` on the message) are
+counted apart as foreign and never enter the records the figures come from."""
 
 from __future__ import annotations
 
@@ -21,6 +24,8 @@ class Records:
     sim_time: float = 0.0
     parcels: dict[int, dict] = field(default_factory=dict)
     parcel_messages: int = 0
+    foreign_parcel_messages: int = 0
+    foreign_command_messages: int = 0
     commands: dict[int, dict] = field(default_factory=dict)
     command_messages: int = 0
     outcomes: dict[int, dict] = field(default_factory=dict)
@@ -32,7 +37,7 @@ class Records:
 class Monitor:
     """An rclpy context and node of its own (no signal handlers: the job handles Ctrl-C)."""
 
-    def __init__(self, domain_id: int, name: str = "fence_sorter_run"):
+    def __init__(self, domain_id: int, name: str = "fence_sorter_run", run_id: int = 0):
         import rclpy
         from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -40,7 +45,7 @@ class Monitor:
         from rosgraph_msgs.msg import Clock
 
         from fence_sorter.nodes.base import make_executor
-        from fence_sorter.nodes.qos import RELIABLE_QOS
+        from fence_sorter.nodes.qos import INPUT_QOS, RELIABLE_QOS
         from fence_sorter.nodes.scanner import SCAN_PROGRESS_TOPIC
         from fence_sorter_msgs.msg import FenceCommand, Parcel, SortOutcome
 
@@ -54,9 +59,10 @@ class Monitor:
         )
         self.node = rclpy.create_node(name, context=self.context)
         self.records = Records()
+        self.run_id = int(run_id)
         n = self.node
-        n.create_subscription(Parcel, "/parcels", self._on_parcel, RELIABLE_QOS)
-        n.create_subscription(FenceCommand, "/fence_commands", self._on_command, RELIABLE_QOS)
+        n.create_subscription(Parcel, "/parcels", self._on_parcel, INPUT_QOS)
+        n.create_subscription(FenceCommand, "/fence_commands", self._on_command, INPUT_QOS)
         n.create_subscription(SortOutcome, "/sort_outcomes", self._on_outcome, RELIABLE_QOS)
         n.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, RELIABLE_QOS)
         # sim time from the scanner's progress (5 per sim second), the simulator's heartbeat and
@@ -80,8 +86,14 @@ class Monitor:
     def _on_progress(self, msg) -> None:
         self._seen(stamp_sec(msg.clock))
 
+    def _foreign(self, msg) -> bool:
+        return bool(self.run_id) and int(msg.run_id) != self.run_id
+
     def _on_parcel(self, msg) -> None:
         r = self.records
+        if self._foreign(msg):
+            r.foreign_parcel_messages += 1
+            return
         r.parcel_messages += 1
         r.parcels.setdefault(
             int(msg.parcel_id),
@@ -98,6 +110,9 @@ class Monitor:
 
     def _on_command(self, msg) -> None:
         r = self.records
+        if self._foreign(msg):
+            r.foreign_command_messages += 1
+            return
         r.command_messages += 1
         r.commands.setdefault(
             int(msg.parcel_id),

@@ -1,9 +1,18 @@
-"""The figures of one run (ROS-free): from the monitor's records to a summary dict and text."""
+"""The figures of one run (ROS-free): from the monitor's records to a summary dict and text,
+and the run's exit status as far as its own stream decides it (:func:`verdict`)."""
 
 from __future__ import annotations
 
 import math
 from collections import Counter
+
+#: exit status: a divert parcel of the run's own stream got no outcome
+EXIT_INCOMPLETE = 3
+#: exit status: every divert parcel has its outcome, but foreign traffic (parcels or commands
+#: of another run) was seen on the run's domain: refused and counted, never in the figures
+EXIT_FOREIGN = 4
+#: the diagnostics counters of messages a node dropped (where, and why)
+DROP_COUNTERS = (".foreign", ".rate_limited", ".lost", "take_errors", "_dropped_")
 
 
 def _num(text: str | None) -> float:
@@ -39,10 +48,26 @@ def command_leads(records, belt_speed: float) -> list[float]:
     return leads
 
 
-def summarise(records, belt_speed: float, expected_ids=None) -> dict:
-    """Summary of a run: parcels, outcomes by reason, capacity, peaks, timing, node figures."""
+def dropped(diagnostics: dict[str, dict[str, str]]) -> dict[str, dict[str, int]]:
+    """Per node: the messages it dropped, by counter (non-zero ones only)."""
+    out: dict[str, dict[str, int]] = {}
+    for name, values in diagnostics.items():
+        node = name.rpartition("/")[2]
+        for k, v in values.items():
+            if any(c in k for c in DROP_COUNTERS):
+                n = int(_num(v)) if math.isfinite(_num(v)) else 0
+                if n:
+                    out.setdefault(node, {})[k] = n
+    return out
+
+
+def summarise(records, belt_speed: float, expected_ids=None, divert_ids=None) -> dict:
+    """Summary of a run: parcels, outcomes by reason, capacity, peaks, timing, node figures,
+    foreign traffic and dropped messages. ``expected_ids``/``divert_ids``: the run's stream."""
     outcomes = records.outcomes
     divert = {pid for pid, p in records.parcels.items() if p["divert"]}
+    if divert_ids is not None:
+        divert |= set(divert_ids)
     by_reason = Counter(o["reason_name"] for o in outcomes.values())
     missed = Counter(
         o["reason_name"] for pid, o in outcomes.items() if not o["sorted"] and pid in divert
@@ -71,6 +96,13 @@ def summarise(records, belt_speed: float, expected_ids=None) -> dict:
         "missing_outcomes": (
             [pid for pid in expected if pid not in outcomes] if expected is not None else []
         ),
+        "divert_without_outcome": sorted(pid for pid in divert if pid not in outcomes),
+        "no_command": sum(
+            1 for pid, o in outcomes.items() if pid in divert and o["reason_name"] == "NO_COMMAND"
+        ),
+        "foreign_parcel_messages": getattr(records, "foreign_parcel_messages", 0),
+        "foreign_command_messages": getattr(records, "foreign_command_messages", 0),
+        "dropped": dropped(records.diagnostics),
         "divert": len(divert),
         "sorted": len(sorted_ids),
         "sorted_divert": len([pid for pid in sorted_ids if pid in divert]),
@@ -102,6 +134,21 @@ def summarise(records, belt_speed: float, expected_ids=None) -> dict:
     }
 
 
+def verdict(s: dict) -> tuple[int, str] | None:
+    """The exit status the run's own stream calls for, with its reason; None: clean."""
+    if s["divert_without_outcome"]:
+        ids = s["divert_without_outcome"]
+        return EXIT_INCOMPLETE, f"{len(ids)} divert parcels of the run got no outcome: {ids[:20]}"
+    foreign = s["foreign_parcel_messages"] + s["foreign_command_messages"]
+    if foreign:
+        return EXIT_FOREIGN, (
+            f"foreign traffic on the run's domain: {s['foreign_parcel_messages']} parcels, "
+            f"{s['foreign_command_messages']} commands of another run (refused, not in the "
+            "figures)"
+        )
+    return None
+
+
 def format_summary(s: dict) -> str:
     """Human-readable summary."""
 
@@ -126,6 +173,21 @@ def format_summary(s: dict) -> str:
         lines.append(f"sorted by mistake {s['wrongly_sorted']}")
     if s["missing_outcomes"]:
         lines.append(f"no outcome        {s['missing_outcomes'][:20]}")
+    if s["no_command"]:
+        lines.append(
+            f"without command   {s['no_command']} divert parcels got NO_COMMAND (no command "
+            "before the point of no return: a controller outage costs these)"
+        )
+    foreign = s["foreign_parcel_messages"] + s["foreign_command_messages"]
+    if foreign:
+        lines.append(
+            f"foreign traffic   {s['foreign_parcel_messages']} parcels, "
+            f"{s['foreign_command_messages']} commands of another run (refused, not counted)"
+        )
+    for node, counts in sorted(s["dropped"].items()):
+        lines.append(
+            f"dropped ({node:<9}) " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items()))
+        )
     sim = s["simulator"]
     deadline = pick(sim, "deadline") or pick(sim, "miss")
     lateness = pick(sim, "late")

@@ -12,14 +12,15 @@ from __future__ import annotations
 import csv
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import yaml
 
-from fence_sorter.physics.params import ParameterError, ParcelParams
+from fence_sorter.inputs import InputError, ParcelSpec, validate_parcel
+from fence_sorter.physics.params import ParameterError
 from fence_sorter.resources import find_data
 
 
@@ -27,55 +28,14 @@ class StreamError(ParameterError):
     """A stream config, manifest or parcel is invalid; the message names where and why."""
 
 
-@dataclass(frozen=True)
-class ParcelSpec:
-    """One parcel of a stream (SI units, yaw in rad)."""
-
-    parcel_id: int
-    arrival_time: float  # front crosses the scan line, s after the stream start
-    length_a: float
-    width_b: float
-    height: float
-    mass: float
-    cog_offset_x: float = 0.0
-    cog_offset_y: float = 0.0
-    lateral_gap: float = 0.0
-    yaw: float = 0.0
-    mu_belt: float = math.nan  # NaN: the scene's mu1
-    mu_fence: float = math.nan  # NaN: the scene's mu2
-    divert: bool = True
-
-    def validate(self, belt_width: float = 0.7, where: str = "parcel") -> ParcelSpec:
-        """Raise StreamError naming the field and its range; return self."""
-        if not (isinstance(self.parcel_id, int) and 0 <= self.parcel_id < 2**32):
-            raise StreamError(
-                f"{where}: parcel_id must be in [0, 4294967295], got {self.parcel_id!r}"
-            )
-        if not (math.isfinite(self.arrival_time) and self.arrival_time >= 0.0):
-            raise StreamError(
-                f"{where}: arrival_time must be in [0, inf) s, got {self.arrival_time!r}"
-            )
-        for name in ("mu_belt", "mu_fence"):
-            mu = getattr(self, name)
-            if not math.isnan(mu) and not 0.0 <= mu <= 2.0:
-                raise StreamError(f"{where}: {name} must be in [0, 2] or empty, got {mu!r}")
-        try:
-            self.to_parcel_params().validate(prefix=where, belt_width=belt_width)
-        except ParameterError as exc:
-            raise StreamError(str(exc)) from None
-        return self
-
-    def to_parcel_params(self) -> ParcelParams:
-        return ParcelParams(
-            length_a=self.length_a,
-            width_b=self.width_b,
-            height=self.height,
-            mass=self.mass,
-            cog_offset_x=self.cog_offset_x,
-            cog_offset_y=self.cog_offset_y,
-            lateral_gap=self.lateral_gap,
-            yaw=self.yaw,
-        )
+def check_parcel(spec: ParcelSpec, belt_width: float, where: str) -> ParcelSpec:
+    """The one parcel validation (:func:`fence_sorter.inputs.validate_parcel`) as a
+    StreamError that says where; returns ``spec``."""
+    try:
+        validate_parcel(spec, belt_width)
+    except InputError as exc:
+        raise StreamError(f"{where}.{exc}") from None
+    return spec
 
 
 # -- distributions -----------------------------------------------------------------------------
@@ -328,18 +288,17 @@ def _sample_parcel(cfg: StreamConfig, rng: np.random.Generator, pid: int, t: flo
     yaw = math.radians(get("yaw_deg", 0.0))
     spec = ParcelSpec(
         pid,
-        t,
-        a,
-        b,
-        height,
-        mass,
-        xp,
-        yp,
-        0.0,
-        yaw,
-        get("mu_belt", math.nan),
-        get("mu_fence", math.nan),
-        bool(rng.random() < cfg.divert_share),
+        length_a=a,
+        width_b=b,
+        height=height,
+        mass=mass,
+        cog_offset_x=xp,
+        cog_offset_y=yp,
+        yaw=yaw,
+        mu_belt=get("mu_belt", math.nan),
+        mu_fence=get("mu_fence", math.nan),
+        divert=bool(rng.random() < cfg.divert_share),
+        arrival_time=t,
     )
     room = max(cfg.belt_width - spec.to_parcel_params().footprint_width(), 0.0)
     return replace(spec, lateral_gap=min(max(get("lateral_gap", 0.0), 0.0), room))
@@ -386,8 +345,8 @@ def generate(
             t = max(t + h, prev.arrival_time + (extent + cfg.min_gap) / belt_speed)
         if duration is not None and t > duration:
             break
-        spec = replace(spec, arrival_time=t).validate(
-            cfg.belt_width, f"stream {cfg.source}: parcel {pid}"
+        spec = check_parcel(
+            replace(spec, arrival_time=t), cfg.belt_width, f"stream {cfg.source}: parcel {pid}"
         )
         out.append(spec)
         prev = spec
@@ -469,20 +428,10 @@ def read_manifest(path: str | Path, belt_width: float = 0.7) -> list[ParcelSpec]
         yaw = math.radians(vals.pop("yaw_deg", 0.0))
         spec = ParcelSpec(yaw=yaw, **vals)
         try:
-            spec.validate(belt_width, where)
-        except StreamError as exc:
-            msg = str(exc)
-            col = next(
-                (
-                    f.name
-                    for f in fields(ParcelSpec)
-                    if f".{f.name}" in msg or f" {f.name} " in msg
-                ),
-                None,
-            )
-            raise StreamError(
-                msg if col is None else msg.replace(where, f"{where} column {col!r}", 1)
-            ) from None
+            validate_parcel(spec, belt_width)
+        except InputError as exc:
+            col = "yaw_deg" if exc.field == "yaw" else exc.field
+            raise StreamError(f"{where} column {col!r}: {exc}") from None
         out.append(spec)
     out.sort(key=lambda s: s.arrival_time)
     return out

@@ -177,8 +177,8 @@ def test_malformed_parcels_are_rejected_and_counted(suite) -> None:
         _parcel(Parcel, 102, now, mass=-1.0),
         _parcel(Parcel, 103, now, width_b=0.9),  # wider than the 0.7 m belt
     ]
-    good = _parcel(Parcel, 104, now, divert=False, scan_position_x=1.0)
-    dup = _parcel(Parcel, 104, now, divert=False, scan_position_x=1.0)
+    good = _parcel(Parcel, 104, now, divert=False)
+    dup = _parcel(Parcel, 104, now, divert=False)
     for msg in [*bad, good, dup]:
         pub.publish(msg)
     wait(monitor, lambda: 104 in rec.outcomes, 30, "the valid parcel's outcome")
@@ -191,3 +191,108 @@ def test_malformed_parcels_are_rejected_and_counted(suite) -> None:
     assert group.nodes["simulator"].proc.poll() is None
     assert group.nodes["controller"].proc.poll() is None
     wait(monitor, lambda: rec.sim_time > 3.0, 20, "sim time still advancing")
+
+
+RUN = 4242  # the run id the nodes of these tests share
+
+
+def _start_pair(group, monitor, *extra: str) -> None:
+    """Controller and simulator of run RUN (no scanner: the test publishes the parcels)."""
+    # no warm-up: every candidate may be evaluated (a stiff-fence evaluation takes ms)
+    ctrl = ros_args(
+        "controller",
+        "warmup_parcels:=0",
+        "max_evaluations:=1000",
+        "use_sim_time:=true",
+        f"run_id:={RUN}",
+        *extra,
+    )
+    group.start("controller", node_command("controller", ctrl))
+    group.start("simulator", node_command("simulator", ros_args("simulator", f"run_id:={RUN}")))
+    monitor.run_id = RUN
+    wait(
+        monitor,
+        lambda: (
+            (heartbeat(monitor, "controller") or {}).get("listening") == "true"
+            and heartbeat(monitor, "simulator")
+        ),
+        90,
+        "controller and simulator",
+    )
+
+
+def _command(msg_class, pid: int, run_id: int, **fields):
+    msg = msg_class()
+    msg.header.frame_id = "sorter"
+    msg.parcel_id, msg.run_id = pid, run_id
+    msg.r_s, msg.t1, msg.alpha_k, msg.feasible = 0.4, 0.35, math.radians(40.0), True
+    for k, v in fields.items():
+        setattr(msg, k, v)
+    return msg
+
+
+@pytest.mark.faults
+def test_hostile_parcels_and_commands_are_refused_counted_and_kept_out(suite) -> None:
+    """The issue's plausible-but-wrong messages: a scan_time 1e5 s ahead (it booked the fence
+    to t = 100009.9 s), scan_position_x = 1e9 (the simulator took it), mu_fence = 5 (the
+    controller took it); another run's parcel and its forged feasible:false for a real id
+    (the real parcel went NO_FEASIBLE_COMMAND); a 20 s stroke for the real parcel. Each is
+    refused and counted under its reason by both nodes, and the real parcel is sorted."""
+    from rclpy.time import Time
+
+    from fence_sorter.nodes.qos import INPUT_QOS
+    from fence_sorter_msgs.msg import FenceCommand, Parcel
+
+    group, monitor = suite
+    _start_pair(group, monitor)
+    pub = monitor.node.create_publisher(Parcel, "/parcels", INPUT_QOS)
+    cpub = monitor.node.create_publisher(FenceCommand, "/fence_commands", INPUT_QOS)
+    wait(
+        monitor,
+        lambda: pub.get_subscription_count() >= 3 and cpub.get_subscription_count() >= 2,
+        20,
+        "subscribers of /parcels and /fence_commands",
+    )
+    rec = monitor.records
+    wait(monitor, lambda: rec.sim_time > 0.5, 20, "sim time")
+    t = rec.sim_time
+    now = Time(nanoseconds=int(t * 1e9)).to_msg()
+    ahead = Time(nanoseconds=int((t + 1e5) * 1e9)).to_msg()
+    hostile = [
+        _parcel(Parcel, 201, now, run_id=RUN, mass=math.nan),
+        _parcel(Parcel, 202, now, run_id=RUN, mu_fence=5.0),
+        _parcel(Parcel, 203, ahead, run_id=RUN),
+        _parcel(Parcel, 204, now, run_id=RUN, scan_position_x=1e9),
+        _parcel(Parcel, 205, now, run_id=999),  # another run's, valid otherwise
+    ]
+    for msg in hostile:
+        pub.publish(msg)
+    pub.publish(_parcel(Parcel, 206, now, run_id=RUN))  # the real divert parcel
+    cpub.publish(_command(FenceCommand, 206, 999, feasible=False, reason="forged"))
+    cpub.publish(_command(FenceCommand, 206, RUN, t1=10.0))  # a 20 s stroke
+    pub.publish(_parcel(Parcel, 207, now, run_id=RUN, divert=False))
+    wait(monitor, lambda: {206, 207} <= rec.outcomes.keys(), 40, "the real parcels' outcomes")
+    assert rec.outcomes[206]["reason_name"] == "SORTED", rec.outcomes[206]
+    assert rec.outcomes[207]["reason_name"] == "NOT_DIVERTED"
+    assert not ({201, 202, 203, 204, 205} & rec.outcomes.keys())
+    assert rec.foreign_parcel_messages == 1 and rec.foreign_command_messages == 1
+    assert 205 not in rec.parcels and rec.commands[206]["reason"] != "forged"
+
+    def counted() -> bool:
+        sim, ctl = heartbeat(monitor, "simulator"), heartbeat(monitor, "controller")
+        return sim.get("bad_parcels") == "4" and ctl.get("rejected_parcels") == "4"
+
+    wait(monitor, counted, 10, "the refusals in the heartbeats")
+    sim, ctl = heartbeat(monitor, "simulator"), heartbeat(monitor, "controller")
+    for key in ("non_finite", "friction", "scan_time", "scan_position"):
+        assert sim[f"bad_parcels.{key}"] == "1", sim
+        assert ctl[f"rejected_parcels.{key}"] == "1", ctl
+    assert sim["parcels.foreign"] == "1" and ctl["parcels.foreign"] == "1"
+    assert sim["commands.foreign"] == "1"
+    # the 20 s stroke: outside its parcel's window if first, a duplicate after the real one
+    rejected = {k: v for k, v in sim.items() if k.startswith("commands_rejected.")}
+    assert set(rejected) <= {"commands_rejected.outside_window", "commands_rejected.duplicate"}
+    assert sum(int(v) for v in rejected.values()) == 1, sim
+    assert sim["parcels.received"] == "7" and sim["commands.received"] == "3"
+    assert group.nodes["simulator"].proc.poll() is None
+    assert group.nodes["controller"].proc.poll() is None

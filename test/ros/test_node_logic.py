@@ -28,9 +28,10 @@ def parcel_msg(**fields):
 
 
 def test_parcel_message_to_request() -> None:
-    from fence_sorter.nodes.controller import request_from_msg
+    from fence_sorter.nodes.controller import request_from_spec
+    from fence_sorter.nodes.convert import parcel_from_msg
 
-    req = request_from_msg(parcel_msg(), belt_width=0.7)
+    req = request_from_spec(parcel_from_msg(parcel_msg()))
     assert req.parcel_id == 7 and req.scan_time == pytest.approx(12.5)
     assert req.parcel.mass == 5.0 and math.isnan(req.mu_belt)
 
@@ -38,17 +39,21 @@ def test_parcel_message_to_request() -> None:
 @pytest.mark.parametrize(
     ("fields", "match"),
     [
-        ({"length_a": math.nan}, "length_a is not finite"),
-        ({"scan_position_x": math.inf}, "scan_position_x is not finite"),
-        ({"mass": -1.0}, r"parcel 7.mass must be in \[0.01, 500\] kg"),
-        ({"width_b": 0.9}, "exceeds the belt width"),
+        ({"length_a": math.nan}, "length_a must be a finite number"),
+        ({"scan_position_x": math.inf}, "scan_position_x must be a finite number"),
+        ({"mass": -1.0}, r"mass must be in \[0.01, 500\] kg"),
+        ({"width_b": 0.9}, "exceeds the belt"),
+        ({"mu_fence": 5.0}, r"mu_fence must be in \[0, 2\]"),
+        ({"scan_position_x": 1e9}, r"scan_position_x must be in \[-100, 100\] m"),
     ],
 )
-def test_malformed_parcel_is_rejected_naming_the_field(fields, match) -> None:
-    from fence_sorter.nodes.controller import ParcelRejected, request_from_msg
+def test_malformed_parcel_message_is_rejected_naming_the_field(fields, match) -> None:
+    """The controller's path: message -> ParcelSpec -> the one validation."""
+    from fence_sorter.inputs import InputError, validate_parcel
+    from fence_sorter.nodes.convert import parcel_from_msg
 
-    with pytest.raises(ParcelRejected, match=match):
-        request_from_msg(parcel_msg(**fields), belt_width=0.7)
+    with pytest.raises(InputError, match=match):
+        validate_parcel(parcel_from_msg(parcel_msg(**fields)), 0.7, now=12.5)
 
 
 def test_infeasible_plan_becomes_a_command_with_its_reason() -> None:
@@ -77,11 +82,15 @@ def test_scanner_publishes_what_has_crossed_the_line() -> None:
     from fence_sorter.stream import ParcelSpec
     from fence_sorter_msgs.msg import Parcel
 
-    stream = [ParcelSpec(i, 1.5 * (i - 1), 0.4, 0.3, 0.2, 5.0) for i in (1, 2, 3)]
+    stream = [
+        ParcelSpec(i, 0.4, 0.3, 0.2, 5.0, divert=True, arrival_time=1.5 * (i - 1))
+        for i in (1, 2, 3)
+    ]
     assert due(stream, 0, t0=10.0, now=9.9) == 0
     assert due(stream, 0, t0=10.0, now=11.5) == 2  # 10.0 and 11.5 are due
     assert due(stream, 2, t0=10.0, now=20.0) == 3
     msg = Parcel()
-    fill_parcel(msg, stream[1], 11.5, -3.0, "sorter")
+    fill_parcel(msg, stream[1], 11.5, -3.0, "sorter", run_id=42)
     assert msg.scan_time.sec == 11 and msg.scan_time.nanosec == 500_000_000
     assert msg.scan_position_x == -3.0 and msg.parcel_id == 2 and msg.header.frame_id == "sorter"
+    assert msg.run_id == 42

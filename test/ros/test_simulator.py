@@ -89,6 +89,8 @@ def test_simulator_sorts_reports_and_survives_bad_parcels(env, tmp_path: Path, p
     params = tmp_path / "sim.yaml"
     params.write_text(
         "simulator:\n  ros__parameters:\n    heartbeat_period: 0.3\n    physics_rate: 500.0\n"
+        # the parcels below are "scanned" anywhere from x0 = -1.5 to 1 m
+        "    scan_line_x: 0.0\n    scan_line_tolerance: 2.0\n"
         f"    cycle_trace: {tmp_path / 'cycles.npz'}\n"
     )
     cmd = ["simulator", "--ros-args", "--params-file", str(params)]
