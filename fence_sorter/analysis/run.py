@@ -22,6 +22,7 @@ import numpy as np
 
 from fence_sorter.codes import OutcomeCode, Stage, code_name
 from fence_sorter.recording.bagread import BagContents
+from fence_sorter.stamps import time_to_sec
 
 NAN = math.nan
 #: LoadState stages while the fence works on the parcel (E1 .. E4)
@@ -33,10 +34,6 @@ DEFAULT_BELT_WIDTH = 0.7  # [m] impact_flexible, used only when the bag has no /
 PEAK_RTOL = 0.02  # sampled peaks may not exceed the live peak by more than this
 EXIT_SPEED_RTOL, EXIT_SPEED_ATOL = 0.05, 0.03  # [-], [m/s]
 TIME_WS_ATOL_PERIODS = 1.5  # time in the working space, in publish periods
-
-
-def stamp_s(stamp) -> float:
-    return stamp.sec + stamp.nanosec * 1e-9
 
 
 @dataclass
@@ -106,16 +103,16 @@ def load_run(bag: BagContents) -> RecordedRun:
     parcels, commands, outcomes = {}, {}, {}
     for m in bag.by_topic("/parcels"):
         d = _fields(m.msg, PARCEL_FIELDS)
-        d["scan_time"] = stamp_s(m.msg.scan_time)
+        d["scan_time"] = time_to_sec(m.msg.scan_time)
         d["divert"] = bool(d["divert"])
         parcels[int(d["parcel_id"])] = d
     for m in bag.by_topic("/fence_commands"):
         d = _fields(m.msg, COMMAND_FIELDS)
-        d["stamp"] = stamp_s(m.msg.header.stamp)
+        d["stamp"] = time_to_sec(m.msg.header.stamp)
         commands[int(d["parcel_id"])] = d
     for m in bag.by_topic("/sort_outcomes"):
         d = _fields(m.msg, OUTCOME_FIELDS)
-        d["t"] = stamp_s(m.msg.header.stamp)
+        d["t"] = time_to_sec(m.msg.header.stamp)
         d["sorted"] = bool(d["sorted"])
         d["reason_name"] = code_name(OutcomeCode, d["reason_code"])
         outcomes[int(d["parcel_id"])] = d
@@ -127,7 +124,7 @@ def load_run(bag: BagContents) -> RecordedRun:
         yaw = 2.0 * math.atan2(s.pose.orientation.z, s.pose.orientation.w)
         rows.setdefault(int(s.parcel_id), []).append(
             (
-                stamp_s(s.header.stamp), s.stage, p.x, p.y, yaw, v.x, v.y,
+                time_to_sec(s.header.stamp), s.stage, p.x, p.y, yaw, v.x, v.y,
                 s.contact_normal_force, s.contact_normal_force_stiff,
                 s.contact_point.x, s.contact_point.y,
             )
@@ -138,9 +135,9 @@ def load_run(bag: BagContents) -> RecordedRun:
         series[pid] = Series(*(a[:, k] for k in range(11)))
 
     fence_msgs = bag.by_topic("/fence_state")
-    fence_msgs.sort(key=lambda m: stamp_s(m.msg.header.stamp))
+    fence_msgs.sort(key=lambda m: time_to_sec(m.msg.header.stamp))
     fence = FenceSeries(
-        np.array([stamp_s(m.msg.header.stamp) for m in fence_msgs]),
+        np.array([time_to_sec(m.msg.header.stamp) for m in fence_msgs]),
         np.array([m.msg.drive_angle for m in fence_msgs]),
         np.array([m.msg.drive_rate for m in fence_msgs]),
         np.array([m.msg.tip_deflection for m in fence_msgs]),

@@ -23,6 +23,8 @@ import os
 import sys
 import time
 
+from fence_sorter.stamps import time_to_sec
+
 #: seconds without a change of the graph after which `list` takes it as discovered
 SETTLE = 0.5
 
@@ -280,7 +282,7 @@ def run_hz(args: argparse.Namespace) -> int:
             arrivals.append(time.monotonic())
             header = getattr(msg, "header", None)
             if header is not None:
-                stamps.append(header.stamp.sec + 1e-9 * header.stamp.nanosec)
+                stamps.append(time_to_sec(header.stamp))
             del arrivals[: -args.window - 1], stamps[: -args.window - 1]
 
         s.subscribe(args.topic, msgtype, tick)

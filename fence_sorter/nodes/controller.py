@@ -34,11 +34,6 @@ PARCELS_TOPIC = "/parcels"
 COMMANDS_TOPIC = "/fence_commands"
 
 
-def time_to_sec(stamp) -> float:
-    """builtin_interfaces/Time -> seconds."""
-    return stamp.sec + 1e-9 * stamp.nanosec
-
-
 def request_from_spec(spec: ParcelSpec) -> LoadRequest:
     """A validated parcel -> the planner's LoadRequest."""
     return LoadRequest(

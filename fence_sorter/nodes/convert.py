@@ -35,6 +35,7 @@ from fence_sorter.line.types import (
     StartMode,
     StrokeCommand,
 )
+from fence_sorter.stamps import time_to_sec
 from fence_sorter_msgs.msg import (
     FenceCommand,
     FenceState,
@@ -104,11 +105,6 @@ def dict_to_msg(msg_class: type, values: MessageDict) -> Any:
 # -- line dataclasses <-> fence_sorter messages ------------------------------------------------
 FRAME_ID = "sorter"
 JOINT_NAME = "fence_drive"
-
-
-def time_to_sec(stamp: Time) -> float:
-    """builtin_interfaces/Time -> seconds."""
-    return stamp.sec + stamp.nanosec * 1e-9
 
 
 def sec_to_time(t: float) -> Time:

@@ -56,6 +56,7 @@ from fence_sorter.nodes.qos import INPUT_QOS, RELIABLE_QOS, SENSOR_QOS
 from fence_sorter.nodes.scanner import SCAN_PROGRESS_TOPIC
 from fence_sorter.nodes.tf_publisher import TfPublisher
 from fence_sorter.scene import load_scene
+from fence_sorter.stamps import time_to_sec
 from fence_sorter_msgs.msg import FenceCommand, FenceState, LoadState, Parcel, SortOutcome
 
 DEFAULT_SCENE = "impact_flexible"
@@ -456,7 +457,7 @@ class SimulatorNode(FenceSorterNode):
         it (Gauges.SCAN_LIMIT; a paced loop does not look)."""
         loop = self.loop
         if loop is not None and self.scan_lead > 0.0:
-            t = msg.clock.sec + 1e-9 * msg.clock.nanosec
+            t = time_to_sec(msg.clock)
             self._scan_limit = max(self._scan_limit, t + self.scan_lead)
             loop.gauges.header[Gauges.SCAN_LIMIT] = self._scan_limit
 

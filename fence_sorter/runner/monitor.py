@@ -11,10 +11,7 @@ import time
 from dataclasses import dataclass, field
 
 from fence_sorter.codes import OutcomeCode, code_name
-
-
-def stamp_sec(stamp) -> float:
-    return stamp.sec + 1e-9 * stamp.nanosec
+from fence_sorter.stamps import time_to_sec
 
 
 @dataclass
@@ -84,7 +81,7 @@ class Monitor:
             self.records.sim_time = t
 
     def _on_progress(self, msg) -> None:
-        self._seen(stamp_sec(msg.clock))
+        self._seen(time_to_sec(msg.clock))
 
     def _foreign(self, msg) -> bool:
         return bool(self.run_id) and int(msg.run_id) != self.run_id
@@ -98,7 +95,7 @@ class Monitor:
         r.parcels.setdefault(
             int(msg.parcel_id),
             {
-                "scan_time": stamp_sec(msg.scan_time),
+                "scan_time": time_to_sec(msg.scan_time),
                 "scan_position_x": msg.scan_position_x,
                 "divert": bool(msg.divert),
                 "length_a": msg.length_a,
@@ -122,7 +119,7 @@ class Monitor:
                 "r_s": msg.r_s,
                 "t1": msg.t1,
                 "alpha_k": msg.alpha_k,
-                "stamp": stamp_sec(msg.header.stamp),
+                "stamp": time_to_sec(msg.header.stamp),
                 "received_sim": r.sim_time,
                 "wall": time.monotonic(),
                 "predicted_capacity_pcs_h": msg.predicted_capacity_pcs_h,
@@ -140,7 +137,7 @@ class Monitor:
                 "reason": msg.reason,
                 "reason_code": int(msg.reason_code),
                 "reason_name": code_name(OutcomeCode, msg.reason_code),
-                "time": stamp_sec(msg.header.stamp),
+                "time": time_to_sec(msg.header.stamp),
                 "peak_normal_force": msg.peak_normal_force,
                 "peak_normal_force_stiff": msg.peak_normal_force_stiff,
                 "peak_normal_accel": msg.peak_normal_accel,
@@ -148,7 +145,7 @@ class Monitor:
                 "exit_speed_y": msg.exit_speed_y,
             },
         )
-        self._seen(stamp_sec(msg.header.stamp))
+        self._seen(time_to_sec(msg.header.stamp))
 
     def _on_diag(self, msg) -> None:
         r = self.records

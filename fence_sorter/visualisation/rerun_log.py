@@ -27,6 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
+from fence_sorter.stamps import time_to_sec
+
 APP_ID = "fence_sorter"
 TIMELINE = "sim_time"
 TOP = "top"  # root of the 2D top-view entities
@@ -473,10 +475,6 @@ def frames_from_snapshot(snap) -> tuple[FenceFrame, list[ParcelFrame]]:
 
 
 # -- frames from a recorded bag ------------------------------------------------------------------
-def _stamp(h) -> float:
-    return h.stamp.sec + h.stamp.nanosec * 1e-9
-
-
 def scene_from_bag(contents) -> SceneGeometry:
     """Belt, chute (from /markers) and scan line (from /parcels) as the bag shows them."""
     from fence_sorter.analysis.run import DEFAULT_BELT_WIDTH
@@ -501,8 +499,10 @@ def bag_frames(contents) -> Iterable[tuple[float, FenceFrame | None, list[Parcel
     specs = {m.msg.parcel_id: m.msg for m in contents.by_topic("/parcels")}
     loads: dict[float, list] = {}
     for m in contents.by_topic("/load_states"):
-        loads.setdefault(round(_stamp(m.msg.header), 9), []).append(m.msg)
-    fences = {round(_stamp(m.msg.header), 9): m.msg for m in contents.by_topic("/fence_state")}
+        loads.setdefault(round(time_to_sec(m.msg.header.stamp), 9), []).append(m.msg)
+    fences = {
+        round(time_to_sec(m.msg.header.stamp), 9): m.msg for m in contents.by_topic("/fence_state")
+    }
     for t in sorted(set(loads) | set(fences)):
         fm = fences.get(t)
         fence = (
@@ -541,7 +541,7 @@ def log_bag(contents, rec) -> RerunLogger:
     rr = logger.rr
     for m in contents.by_topic("/sort_outcomes"):
         o = m.msg
-        rec.set_time(TIMELINE, duration=_stamp(o.header))
+        rec.set_time(TIMELINE, duration=time_to_sec(o.header.stamp))
         rec.log("events/outcomes", rr.TextLog(f"parcel {o.parcel_id}: {o.reason}",
                                               level="INFO" if o.sorted else "WARN"))  # fmt: skip
     for t, fence, parcels in bag_frames(contents):
