@@ -298,14 +298,14 @@ def run(args: argparse.Namespace) -> int:
         if args.plots_only:
             return sweep.replot(args)
         return int(sweep.main(args) or 0)
-    from fence_sorter.optimize.executor import make_executor
+    from fence_sorter.optimize.executor import evaluation_pool
     from fence_sorter.optimize.solve import grid_search, optimize
 
     try:
         spec = spec_from_args(args)
         if args.workers is not None and not 1 <= args.workers <= 1024:
             raise ParameterError(f"--workers must be in [1, 1024], got {args.workers}")
-        with make_executor(args.scheduler, args.workers) as executor:
+        with evaluation_pool(args.scheduler, args.workers) as executor:
             if args.grid:
                 return _print_grid(grid_search(spec, args.grid_steps, executor), spec, args)
             result = optimize(spec, executor)

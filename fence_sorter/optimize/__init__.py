@@ -1,7 +1,7 @@
 """Capacity optimisation of sections 3-4 (ROS-free): max W_t (1) over X = [R_s, v, t1, R_z]
 subject to (7)-(12) on the twin, for the arbitrary and positioned cases of section 4."""
 
-from fence_sorter.optimize.executor import make_executor
+from fence_sorter.optimize.executor import evaluation_pool
 from fence_sorter.optimize.problem import PAPER_RANGES, VARIABLES, OptimizeSpec
 from fence_sorter.optimize.solve import OptimumResult, evaluate_point, grid_search, optimize
 
@@ -12,6 +12,6 @@ __all__ = [
     "OptimumResult",
     "evaluate_point",
     "grid_search",
-    "make_executor",
+    "evaluation_pool",
     "optimize",
 ]

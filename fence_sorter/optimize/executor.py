@@ -19,7 +19,7 @@ from fence_sorter.physics.params import ParameterError
 
 
 @contextmanager
-def make_executor(
+def evaluation_pool(
     scheduler: str | None = None, workers: int | None = None
 ) -> Iterator[concurrent.futures.Executor]:
     """A process pool of ``workers`` (default: the CPU count) processes, or, with a scheduler

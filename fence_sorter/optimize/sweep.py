@@ -32,7 +32,7 @@ from pathlib import Path
 from fence_sorter.capacity.decision_table import build_table, write_table
 from fence_sorter.optimize import solve
 from fence_sorter.optimize.decision import decision_points
-from fence_sorter.optimize.executor import make_executor
+from fence_sorter.optimize.executor import evaluation_pool
 from fence_sorter.optimize.points import INPUT_COLUMNS, point
 from fence_sorter.optimize.problem import OptimizeSpec
 
@@ -969,7 +969,7 @@ def main(args) -> int:
     wall0 = time.perf_counter()
     status = EXIT_OK
     try:
-        with make_executor(
+        with evaluation_pool(
             scheduler=getattr(args, "scheduler", None), workers=getattr(args, "workers", None)
         ) as executor:
             run_sweeps(sweeps, out, executor, resume=resume, max_points=max_points)

@@ -13,8 +13,8 @@ from fence_sorter.cli.main import main as cli_main
 from fence_sorter.optimize import (
     OptimizeSpec,
     evaluate_point,
+    evaluation_pool,
     grid_search,
-    make_executor,
     optimize,
 )
 from fence_sorter.optimize.problem import PAPER_RANGES
@@ -34,7 +34,7 @@ REDUCED = OptimizeSpec(
 
 @pytest.fixture(scope="module")
 def pool():
-    with make_executor(workers=2) as ex:
+    with evaluation_pool(workers=2) as ex:
         yield ex
 
 
@@ -203,7 +203,7 @@ def test_dask_cluster_gives_the_process_pool_optimum(reduced):
     with distributed.LocalCluster(
         n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0"
     ) as cluster:
-        with make_executor(cluster.scheduler_address) as ex:
+        with evaluation_pool(cluster.scheduler_address) as ex:
             on_dask = optimize(REDUCED, ex)
     assert on_dask.X == reduced.X
     assert on_dask.W_t == reduced.W_t
