@@ -19,7 +19,8 @@ def register(subparsers) -> None:
         help="bag tools standing in for `ros2 bag` (info)",
         description="Stand-ins for `ros2 bag` subcommands, without rosbag2.",
     )
-    commands = parser.add_subparsers(dest="bag_command", metavar="COMMAND", required=True)
+    parser.set_defaults(func=lambda args: _usage(parser))
+    commands = parser.add_subparsers(dest="bag_command", metavar="COMMAND")
     info = commands.add_parser(
         "info",
         help="what `ros2 bag info` shows, plus the health of each segment",
@@ -28,6 +29,11 @@ def register(subparsers) -> None:
     info.add_argument("bag", help="bag directory (or one .mcap/.db3 file)")
     info.add_argument("--json", action="store_true", help="print it as one JSON object")
     info.set_defaults(func=run_info)
+
+
+def _usage(parser: argparse.ArgumentParser) -> int:
+    parser.print_help(sys.stderr)
+    return 2
 
 
 def run_info(args: argparse.Namespace) -> int:

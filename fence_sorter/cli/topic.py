@@ -35,7 +35,8 @@ def register(subparsers) -> None:
         help="topic tools standing in for `ros2 topic` (list, echo, hz) over rclpy",
         description=__doc__.splitlines()[0],
     )
-    commands = parser.add_subparsers(dest="topic_command", metavar="COMMAND", required=True)
+    parser.set_defaults(func=lambda args: _usage(parser))
+    commands = parser.add_subparsers(dest="topic_command", metavar="COMMAND")
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument(
         "--domain",
@@ -79,6 +80,11 @@ def register(subparsers) -> None:
     )
     p_hz.add_argument("--json", action="store_true", help="print the figures as JSON")
     p_hz.set_defaults(func=run_hz)
+
+
+def _usage(parser: argparse.ArgumentParser) -> int:
+    parser.print_help(sys.stderr)
+    return 2
 
 
 class TopicError(RuntimeError):
