@@ -10,8 +10,13 @@ from fence_sorter.testing import ros_env, run_domain_id
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    """Register the ``ros`` marker (also in setup.cfg) in case another config file wins."""
+    """Register the markers (also in setup.cfg) in case another config file wins."""
     config.addinivalue_line("markers", "ros: needs a working ROS 2 environment (rclpy, DDS)")
+    config.addinivalue_line(
+        "markers",
+        "slow: takes seconds (processes, DDS, bags, full solves); "
+        'pytest -m "not slow" is the quick run',
+    )
     config.addinivalue_line(
         "markers", "faults: fault injection (hostile, malformed and flooding input) over DDS"
     )

@@ -31,6 +31,7 @@ def example() -> Path:
     return EXAMPLE
 
 
+@pytest.mark.slow
 def test_example_bag_analysis_agrees_with_the_live_outcomes(example, tmp_path):
     report = analyze_bag(example, tmp_path)
     assert report.issues == []
@@ -61,6 +62,7 @@ def test_example_bag_analysis_agrees_with_the_live_outcomes(example, tmp_path):
     assert data["summary"]["agrees_with_live"] is True
 
 
+@pytest.mark.slow
 def test_analyze_cli_json_and_exit_codes(example, tmp_path):
     out = run_cli("analyze", str(example), "--json", "--no-plots", "--out", str(tmp_path / "a"))
     assert out.returncode == 0, out.stderr
@@ -72,6 +74,7 @@ def test_analyze_cli_json_and_exit_codes(example, tmp_path):
     assert bad.returncode == 2 and "nope: no such bag" in bad.stderr
 
 
+@pytest.mark.slow
 def test_truncated_bag_reports_the_file_and_analyses_the_rest(example, tmp_path):
     bag = tmp_path / "bag"
     shutil.copytree(example, bag)
@@ -182,6 +185,7 @@ def test_top_view_footprints_are_the_rotated_boxes():
     assert _footprints([]).shape == (0, 5, 2)
 
 
+@pytest.mark.slow
 def test_rerun_full_check_accepts_the_example_bag(example):
     """The committed bag as Rerun's MCAP loader sees it: every topic ok, header stamps
     (ros2_timestamp) decoded and in the same order as the log times."""
@@ -199,6 +203,7 @@ def test_rerun_full_check_accepts_the_example_bag(example):
         assert table and all(x.startswith("ok") for x in table), out.stdout
 
 
+@pytest.mark.slow
 def test_rrd_from_the_example_bag(example, tmp_path):
     out = tmp_path / "run.rrd"
     res = run_cli("rrd", str(example), "--out", str(out))
@@ -240,6 +245,7 @@ def test_rrd_from_the_example_bag(example, tmp_path):
     assert rows["/events/outcomes"] == counts["/sort_outcomes"]
 
 
+@pytest.mark.slow
 def test_logger_from_line_snapshots(tmp_path):
     from fence_sorter.line import LineConfig, ParcelSpec, SortingLine, StrokeCommand
     from fence_sorter.scene import load_scene
@@ -272,6 +278,7 @@ def test_logger_from_line_snapshots(tmp_path):
     assert "/top/chute" not in static and "/top/scan_line" in static
 
 
+@pytest.mark.slow
 def test_rerun_child_process_logs_what_the_loop_offers(tmp_path):
     from fence_sorter.line import LineConfig, ParcelSpec, SortingLine
     from fence_sorter.scene import load_scene

@@ -32,6 +32,7 @@ def quick(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict, str]:
     return out, results, buf.getvalue()
 
 
+@pytest.mark.slow
 def test_quick_report_has_the_command_plots_and_reference_check(quick) -> None:
     out, results, stdout = quick
     readme = (out / "README.md").read_text()
@@ -47,6 +48,7 @@ def test_quick_report_has_the_command_plots_and_reference_check(quick) -> None:
     assert "report:" in stdout
 
 
+@pytest.mark.slow
 def test_reference_is_far_more_accurate_than_the_runs(quick) -> None:
     _, results, _ = quick
     (scene,) = results["scenes"]
@@ -63,6 +65,7 @@ def test_reference_is_far_more_accurate_than_the_runs(quick) -> None:
     )
 
 
+@pytest.mark.slow
 def test_trapezoidal_converges_as_dt_shrinks(quick) -> None:
     """Physics: the errors fall as the step halves (second order in the peak force)."""
     _, results, _ = quick
@@ -77,6 +80,7 @@ def test_trapezoidal_converges_as_dt_shrinks(quick) -> None:
     assert peak[0] / peak[-1] > 4.0  # dt / 4: at least 4x (second order: 16x)
 
 
+@pytest.mark.slow
 def test_default_point_is_marked_and_timed(quick) -> None:
     _, results, _ = quick
     (scene,) = results["scenes"]
@@ -90,6 +94,7 @@ def fence_sorter(*args: str) -> subprocess.CompletedProcess:
     return run_cli(*args, timeout=120)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("args", "named", "allowed"),
     [

@@ -12,6 +12,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from fence_sorter.cli import bench as bench_cli
 from fence_sorter.verification import bench as B
 
@@ -54,6 +56,7 @@ def test_register_adds_the_bench_subcommand() -> None:
     assert parser.parse_args(["bench"]).out == "docs/benchmarks.md"
 
 
+@pytest.mark.slow
 def test_quick_writes_the_report(tmp_path: Path) -> None:
     md_path, json_path = tmp_path / "docs" / "benchmarks.md", tmp_path / "bench.json"
     r = bench("--quick", "--out", str(md_path), "--json", str(json_path))
@@ -171,6 +174,7 @@ def _fake_rungs(errors: dict[str, dict[float, float]], walls: dict[str, float]):
 LADDER = (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7)
 
 
+@pytest.mark.slow
 def test_the_fastest_candidate_is_confirmed_at_the_next_rung() -> None:
     """positioned_stiff (docs/accuracy): LSODA meets 3.2e-4 at rtol 1e-3 (8.3e-6)
     but not at 1e-4 (8.2e-4); rtol 1e-5 and tighter hold. RK45 holds from 1e-2 on but is
@@ -192,6 +196,7 @@ def test_the_fastest_candidate_is_confirmed_at_the_next_rung() -> None:
         assert len(called) == len(set(called))  # no rung run twice
 
 
+@pytest.mark.slow
 def test_every_candidate_that_will_be_re_timed_is_confirmed() -> None:
     """Search runs of RK45 rtol 1e-2 (12 ms) and LSODA rtol 1e-3 (13 ms) within noise of each
     other: confirming only the faster search run would leave LSODA's lucky rung unconfirmed,
@@ -208,6 +213,7 @@ def test_every_candidate_that_will_be_re_timed_is_confirmed() -> None:
     assert picks["scipy:LSODA"].rtol == 1e-5 and picks["scipy:RK45"].rtol == 1e-2
 
 
+@pytest.mark.slow
 def test_a_confirmed_fastest_candidate_ends_the_search() -> None:
     """A fastest candidate whose next rung holds ends the search at once; a refuted method
     that never reaches the error again drops out and the next fastest is confirmed."""

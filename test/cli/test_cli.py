@@ -23,6 +23,7 @@ def run_cli(args: list[str], env: dict[str, str]) -> subprocess.CompletedProcess
     return subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
 
 
+@pytest.mark.slow
 def test_version_console_script(env: dict[str, str]) -> None:
     result = run_cli(["--version"], env)
     assert result.returncode == 0
@@ -69,6 +70,7 @@ def test_no_subcommand_prints_help(capsys: pytest.CaptureFixture[str]) -> None:
     assert "check" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 @pytest.mark.ros
 def test_check_passes_in_the_bootstrapped_env(env: dict[str, str]) -> None:
     result = run_cli(["check"], env)
@@ -98,6 +100,7 @@ def _assert_fails_cleanly(result: subprocess.CompletedProcess, failing: str, *wo
     return line
 
 
+@pytest.mark.slow
 @pytest.mark.ros
 def test_check_names_unbuilt_messages(env: dict[str, str], tmp_path: Path) -> None:
     # A fence_sorter_msgs without its generated msg module, as after a failed build.
@@ -108,6 +111,7 @@ def test_check_names_unbuilt_messages(env: dict[str, str], tmp_path: Path) -> No
     assert "OK   rclpy:" in result.stdout  # the other checks still run
 
 
+@pytest.mark.slow
 @pytest.mark.ros
 def test_check_names_broken_rclpy(env: dict[str, str], tmp_path: Path) -> None:
     body = "raise ImportError('librmw_fastrtps_cpp.so: cannot open shared object file')\n"
@@ -117,6 +121,7 @@ def test_check_names_broken_rclpy(env: dict[str, str], tmp_path: Path) -> None:
     _assert_fails_cleanly(result, "rmw")
 
 
+@pytest.mark.slow
 @pytest.mark.ros
 def test_check_names_missing_ament_prefix(env: dict[str, str]) -> None:
     env.pop("AMENT_PREFIX_PATH", None)
@@ -124,6 +129,7 @@ def test_check_names_missing_ament_prefix(env: dict[str, str]) -> None:
     _assert_fails_cleanly(result, "ament index", "AMENT_PREFIX_PATH")
 
 
+@pytest.mark.slow
 @pytest.mark.ros
 def test_check_names_package_missing_from_index(env: dict[str, str], tmp_path: Path) -> None:
     env["AMENT_PREFIX_PATH"] = str(tmp_path)
@@ -131,6 +137,7 @@ def test_check_names_package_missing_from_index(env: dict[str, str], tmp_path: P
     _assert_fails_cleanly(result, "ament index", "fence_sorter", "not in the ament index")
 
 
+@pytest.mark.slow
 @pytest.mark.ros
 def test_check_names_foreign_rmw(env: dict[str, str]) -> None:
     env["RMW_IMPLEMENTATION"] = "rmw_cyclonedds_cpp"
@@ -138,6 +145,7 @@ def test_check_names_foreign_rmw(env: dict[str, str]) -> None:
     _assert_fails_cleanly(result, "rmw", "RMW_IMPLEMENTATION=rmw_cyclonedds_cpp")
 
 
+@pytest.mark.slow
 @pytest.mark.ros
 def test_demo_roundtrip(env: dict[str, str]) -> None:
     result = run_cli(["demo-roundtrip", "--timeout", "45"], env)

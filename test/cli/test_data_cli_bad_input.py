@@ -5,6 +5,7 @@ import pytest
 from fence_sorter.testing import run_cli
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("args", "named"),
     [
@@ -22,6 +23,7 @@ def test_bad_input_exits_2_naming_it(args, named):
     assert "Traceback" not in done.stderr
 
 
+@pytest.mark.slow
 def test_plots_only_redraws_from_the_saved_results(tmp_path):
     """`optimize --sweep NAME --plots-only` and `accuracy --plots-only`: the figures from the
     committed CSV / results.json, nothing solved; a missing input is exit 2 naming it."""

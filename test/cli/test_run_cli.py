@@ -9,6 +9,7 @@ import pytest
 from fence_sorter.testing import run_cli, wait_until
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("args", "message"),
     [
@@ -32,6 +33,7 @@ def test_bad_input_exits_2_with_one_line(args: list[str], message: str) -> None:
     assert message in lines[0]
 
 
+@pytest.mark.slow
 def test_bad_manifest_names_line_and_column(tmp_path: Path) -> None:
     bad = tmp_path / "bad.csv"
     bad.write_text(
@@ -56,6 +58,7 @@ def test_loop_cpu_comes_from_the_override_the_config_or_the_run(tmp_path: Path) 
     assert loop_cpu(prepare(off), 1.0, {0, 1}) == (-1, False)
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(len(__import__("os").sched_getaffinity(0)) < 2, reason="needs 2 CPUs")
 def test_process_group_keeps_its_nodes_on_the_cpus_it_is_given(tmp_path: Path) -> None:
     import os

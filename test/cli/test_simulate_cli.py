@@ -34,6 +34,7 @@ def fence_sorter(*args: str) -> subprocess.CompletedProcess:
     return run_cli(*args, timeout=TIMEOUT)
 
 
+@pytest.mark.slow
 def test_simulate_json() -> None:
     r = fence_sorter("simulate", "positioned_stiff", "--json")
     assert r.returncode == 0, r.stderr
@@ -47,6 +48,7 @@ def test_simulate_json() -> None:
     assert out["steps"] > 0 and out["sim_time_s"] > 0
 
 
+@pytest.mark.slow
 def test_simulate_impact_flexible_json() -> None:
     r = fence_sorter("simulate", "impact_flexible", "--json")
     assert r.returncode == 0, r.stderr
@@ -56,6 +58,7 @@ def test_simulate_impact_flexible_json() -> None:
     assert 0.0 < out["peak_contact_force_N"] < out["peak_contact_force_stiff_N"]
 
 
+@pytest.mark.slow
 def test_simulate_human_summary_and_set() -> None:
     r = fence_sorter("simulate", "positioned_stiff", "--set", "parcel.mass=6")
     assert r.returncode == 0, r.stderr
@@ -64,6 +67,7 @@ def test_simulate_human_summary_and_set() -> None:
     assert "steps" in r.stdout
 
 
+@pytest.mark.slow
 def test_simulate_warning_on_stderr() -> None:
     r = fence_sorter("simulate", "positioned_stiff", "--json", "--set", "conveyor.belt_speed=2.6")
     assert r.returncode in (0, 3)
@@ -71,6 +75,7 @@ def test_simulate_warning_on_stderr() -> None:
     assert len(json.loads(r.stdout)["warnings"]) == 1
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("args", "needle"),
     [
@@ -89,6 +94,7 @@ def test_simulate_bad_scene_exits_2(args: list[str], needle: str) -> None:
     assert len(r.stderr.strip().splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_simulate_bad_file_exits_2(tmp_path: Path) -> None:
     bad = tmp_path / "bad.yaml"
     bad.write_text("fence: {type: stiff\nparcel: [")
@@ -103,6 +109,7 @@ def test_simulate_bad_file_exits_2(tmp_path: Path) -> None:
     assert r.returncode == 2 and "drive.omega" in r.stderr
 
 
+@pytest.mark.slow
 def test_modes_json() -> None:
     r = fence_sorter("modes", "impact_flexible", "--json")
     assert r.returncode == 0, r.stderr
@@ -118,6 +125,7 @@ def test_modes_json() -> None:
     assert out["elements"] == 10 and out["mass_kg"] > 0
 
 
+@pytest.mark.slow
 def test_modes_options_and_uniform() -> None:
     r = fence_sorter(
         "modes", "impact_flexible", "--json", "--count", "3", "--tip-load", "50",
@@ -131,6 +139,7 @@ def test_modes_options_and_uniform() -> None:
     assert r.returncode == 0 and "Hz" in r.stdout and "closed form" in r.stdout
 
 
+@pytest.mark.slow
 def test_modes_stiff_scene_exits_2() -> None:
     r = fence_sorter("modes", "positioned_stiff")
     assert r.returncode == 2
@@ -138,6 +147,7 @@ def test_modes_stiff_scene_exits_2() -> None:
     assert "Traceback" not in r.stderr
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("override", "named", "allowed"),
     [

@@ -7,6 +7,8 @@ import json
 import subprocess
 from pathlib import Path
 
+import pytest
+
 from fence_sorter.testing import run_cli
 from fence_sorter.verification import stability as S
 
@@ -19,6 +21,7 @@ def fence_sorter(*args: str) -> subprocess.CompletedProcess:
     return run_cli(*args, timeout=TIMEOUT)
 
 
+@pytest.mark.slow
 def test_quick_writes_the_report(tmp_path: Path) -> None:
     out = tmp_path / "stability"
     r = fence_sorter("stability", "--quick", "--out", str(out))
@@ -48,6 +51,7 @@ def test_quick_writes_the_report(tmp_path: Path) -> None:
     assert any("outside the paper's range" in w for w in by_name["belt_5"]["warnings"])
 
 
+@pytest.mark.slow
 def test_selected_cases_exit_zero(tmp_path: Path) -> None:
     r = fence_sorter(
         "stability", "--cases", "mass_1,diverging_trapezoidal", "--out", str(tmp_path)
@@ -58,6 +62,7 @@ def test_selected_cases_exit_zero(tmp_path: Path) -> None:
     assert "| `mass_1` |" in readme and "| `diverging_trapezoidal` |" in readme
 
 
+@pytest.mark.slow
 def test_unknown_case_exits_2() -> None:
     r = fence_sorter("stability", "--cases", "mass_1", "no_such_case")
     assert r.returncode == 2
@@ -67,11 +72,13 @@ def test_unknown_case_exits_2() -> None:
     assert "allowed: " in lines[0] and "mass_1" in lines[0] and "grazing_exact" in lines[0]
 
 
+@pytest.mark.slow
 def test_quick_and_cases_are_exclusive() -> None:
     r = fence_sorter("stability", "--quick", "--cases", "mass_1")
     assert r.returncode == 2 and "not allowed with argument" in r.stderr
 
 
+@pytest.mark.slow
 def test_list() -> None:
     r = fence_sorter("stability", "--list")
     assert r.returncode == 0

@@ -7,6 +7,8 @@ import os
 import subprocess
 import sys
 
+import pytest
+
 from fence_sorter.line.awake import start_spinners, stop_spinners
 from fence_sorter.testing import wait_until
 
@@ -43,6 +45,7 @@ def test_one_idle_spinner_per_cpu_pinned_and_stopped():
     assert all(p.returncode is not None for p in procs)
 
 
+@pytest.mark.slow
 def test_spinners_die_with_their_parent():
     code = (
         "import sys, time\n"

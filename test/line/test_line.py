@@ -410,6 +410,7 @@ def _snap_key(s):
     return ids, np.array(nums)
 
 
+@pytest.mark.slow
 def test_prefetch_steps_ahead_without_changing_anything():
     """Soft real time steps the solves ahead of the line clock in spare wall time (prefetch):
     the running ones past the sort crossing, the planned ones before their stroke starts. The

@@ -70,6 +70,7 @@ def test_frames_reassemble_from_any_split():
         assert out == items and not buf.buf
 
 
+@pytest.mark.slow
 def test_loop_process_sorts_like_the_line_in_process_and_stops_cleanly():
     # the same parcel and command on a line stepped here, in 2 ms chunks
     line = SortingLine(CONFIG)
@@ -113,6 +114,7 @@ def test_loop_process_sorts_like_the_line_in_process_and_stops_cleanly():
     assert lp.proc.returncode == 0
 
 
+@pytest.mark.slow
 def test_bad_parcel_is_counted_and_logged_and_the_loop_runs_on():
     lp = LineProcess(CONFIG, None, FAST)
     try:
@@ -132,6 +134,7 @@ def test_bad_parcel_is_counted_and_logged_and_the_loop_runs_on():
     assert _last_stats(frames).bad_parcels == {"non_finite": 1, "wider_than_belt": 1}
 
 
+@pytest.mark.slow
 def test_unpaced_loop_waits_for_its_reader():
     """rtf 0: the loop runs as fast as it can until the pipe is full and UNPACED_BACKLOG
     bytes wait beyond it; then it blocks until the reader reads again."""
@@ -166,6 +169,7 @@ def _nread(fd: int) -> int:
     return struct.unpack("i", fcntl.ioctl(fd, termios.FIONREAD, b"\0\0\0\0"))[0]
 
 
+@pytest.mark.slow
 def test_settings_are_checked_and_a_failing_set_up_is_reported():
     with pytest.raises(ValueError, match="period"):
         LoopSettings(period=0.0, rtf=1.0)
@@ -181,6 +185,7 @@ def test_settings_are_checked_and_a_failing_set_up_is_reported():
         lp.close()
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="needs 2 CPUs")
 def test_loop_process_pins_itself_to_loop_cpu():
     cpu = max(os.sched_getaffinity(0))
@@ -195,6 +200,7 @@ def test_loop_process_pins_itself_to_loop_cpu():
         lp.close()
 
 
+@pytest.mark.slow
 def test_loop_process_ignores_ctrl_c_and_dies_with_its_parent():
     lp = LineProcess(CONFIG, None, FAST)
     try:
@@ -238,6 +244,7 @@ def _alive(pid: int) -> bool:
     return True
 
 
+@pytest.mark.slow
 def test_unpaced_lockstep_holds_a_parcel_to_divert_for_its_command():
     """rtf 0: the line does not let a parcel to divert reach the lowest R_s (r_s_min, -0.5 m
     by default) before its command came, for up to command_wait of wall time; a command that
@@ -278,6 +285,7 @@ def test_unpaced_lockstep_holds_a_parcel_to_divert_for_its_command():
         lp.close()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "gauge, lead",
     [(Gauges.PUBLISHED, 0.1), (Gauges.SCAN_LIMIT, 0.0)],
@@ -314,6 +322,7 @@ def test_unpaced_loop_waits_for_the_node(gauge: int, lead: float):
         lp.close()
 
 
+@pytest.mark.slow
 def test_no_scan_limit_unless_one_is_given():
     lp = LineProcess(CONFIG, None, LoopSettings(period=1e-3, rtf=0.0, warm_up=False))
     try:
@@ -322,6 +331,7 @@ def test_no_scan_limit_unless_one_is_given():
         lp.close()
 
 
+@pytest.mark.slow
 def test_worker_started_by_hand_with_bad_arguments_exits_2_with_usage():
     proc = subprocess.run(
         [sys.executable, "-m", "fence_sorter.line.worker", "3", "four"],

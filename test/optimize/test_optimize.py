@@ -43,6 +43,7 @@ def reduced(pool):
     return optimize(REDUCED, pool)
 
 
+@pytest.mark.slow
 def test_reduced_optimum_is_feasible_within_ranges_and_re_evaluates(reduced):
     assert reduced.feasible and reduced.infeasible is None
     assert reduced.X["v"] == 2.0 and reduced.X["R_z"] == 1.2
@@ -101,12 +102,14 @@ def test_capacity_and_pitch_follow_1_and_2_exactly(reduced):
     assert r7["margins"][7] == pytest.approx(0.7 / 2.0 - 0.2, rel=1e-12)
 
 
+@pytest.mark.slow
 def test_longer_load_gives_lower_capacity(reduced, pool):
     short = optimize(replace(REDUCED, load_length=0.3), pool)
     assert short.feasible
     assert short.W_t > 1.1 * reduced.W_t
 
 
+@pytest.mark.slow
 def test_constraint_12_lowers_capacity(reduced, pool):
     with12 = optimize(replace(REDUCED, constraints=(7, 8, 11, 12)), pool)
     assert with12.feasible
@@ -114,6 +117,7 @@ def test_constraint_12_lowers_capacity(reduced, pool):
     assert with12.W_t < 0.9 * reduced.W_t
 
 
+@pytest.mark.slow
 def test_lower_friction_gives_higher_capacity(pool):
     """Fig. 4's set-up: arbitrary placement, R_s = 0, R_z = 1.4 m, alpha_k = 40 deg, (7)-(10)."""
     base = dict(
@@ -198,6 +202,7 @@ def test_cli_infeasible_is_exit_0_with_json(capsys):
     assert d["feasible"] is False and d["infeasible"].startswith("infeasible: (7)")
 
 
+@pytest.mark.slow
 def test_dask_cluster_gives_the_process_pool_optimum(reduced):
     distributed = pytest.importorskip("dask.distributed")
     with distributed.LocalCluster(

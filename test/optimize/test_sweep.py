@@ -389,6 +389,7 @@ def test_a_csv_from_before_started_from_is_read_and_migrated(tmp_path) -> None:
     assert _strip(sw.read_rows(path)) == _strip(rows)
 
 
+@pytest.mark.slow
 def test_infeasible_points_are_drawn_apart_from_every_value(tmp_path, monkeypatch) -> None:
     """decision-table.csv has points with no feasible optimum; R_s = 0 would be a real value,
     so their crosses sit in a band above every value (axes coordinates), none at y = 0."""

@@ -47,6 +47,7 @@ def test_every_baseline_sorts_like_our_scheme(positioned_ours, method):
     assert r.energy_excess < 1e-3
 
 
+@pytest.mark.slow
 def test_radau_on_a_flexible_fence_agrees_on_the_modes():
     ours = simulate(scene("slide_flexible", method="trapezoidal", dt=2.5e-4))
     r = simulate(scene("slide_flexible", method="scipy:Radau", rtol=1e-6, atol=1e-8))

@@ -120,6 +120,7 @@ def test_pure_spin_torque_of_a_square_and_rectangle_integral():
     assert polar_distance_integral(-0.3, 0.5, -0.1, 0.25) == pytest.approx(quad, rel=1e-5)
 
 
+@pytest.mark.slow
 def test_coupled_slip_wrench_lies_on_the_limit_ellipse():
     f_max, t_max = 10.0, 1.0
     fx, fy, t = karnopp_belt_wrench(0.3, -0.4, 2.0, 0, 0, 0, f_max, t_max, 1e-6, 1e-6)

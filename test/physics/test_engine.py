@@ -86,6 +86,7 @@ def _both(sc):
     return simulate(_engine(sc, "python")), simulate(_engine(sc, "compiled"))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scene", SCENES)
 def test_compiled_loop_is_the_python_loop_on_every_scene(scene: str) -> None:
     sc = load_scene(scene).scenario
@@ -269,6 +270,7 @@ def test_stepping_generator_replays_the_compiled_loop(scene: str, sets: list[str
     assert_same_solve(simulate(sc), cc)  # and the same as the one-call compiled solve
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("b_p", [0.0, 3.3e5, 3.3e6])
 @pytest.mark.parametrize("mass", [0.1, 5.0, 60.0])
 def test_impact_peak_stops_past_the_deepest_compression_with_the_same_peak(mass, b_p) -> None:

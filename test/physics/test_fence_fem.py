@@ -152,6 +152,7 @@ def test_tapered_static_tip_converges_to_constant_strength_closed_form():
 # --------------------------------------------------------------------------- mass, inertia
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("n", [1, 6, 25])
 def test_mass_is_integral_of_piecewise_section(n):
     p = FenceParams(elements=n)

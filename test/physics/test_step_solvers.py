@@ -48,6 +48,7 @@ def _distance(y, ref, h):
     return float(d[:3].max() + h * d[3:6].max())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("t", [0.1, 0.2, 0.4])
 def test_newton_contact_iteration_converges_quadratically_to_the_plain_fixed_point(
     t, monkeypatch

@@ -9,10 +9,13 @@ import shutil
 from collections import Counter
 from pathlib import Path
 
+import pytest
 from mcap.reader import make_reader
 
 from fence_sorter.recording.baginfo import bag_info, format_info
 from fence_sorter.testing import run_cli
+
+pytestmark = pytest.mark.slow  # bag readers and the CLI in a process: seconds each
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "bags" / "example_4_parcels"
 

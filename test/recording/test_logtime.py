@@ -66,6 +66,7 @@ def pairs_agree(rows: list[tuple[int, int]]) -> bool:
     return all(a[1] <= b[1] for a, b in zip(rows, rows[1:], strict=False))
 
 
+@pytest.mark.slow
 def test_header_topics_and_stamp_bytes(typestore):
     headed = {t for t, (m, _) in TOPIC_TYPES.items() if starts_with_header(typestore, m)}
     assert headed == set(TOPIC_TYPES) - {"/clock", "/scan_progress", "/markers"}
@@ -151,6 +152,7 @@ def rerun_check_full(path: Path) -> subprocess.CompletedProcess:
     )  # fmt: skip
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("ordered", [False, True])
 def test_rerun_full_check_on_a_racing_diagnostics_topic(tmp_path, typestore, ordered):
     """The same race written with reception times (Rerun reports the /diagnostics row-order

@@ -67,6 +67,7 @@ def write_suite(path: Path, typestore, storage: str = "mcap", per_topic: int = 4
     return expected, segments
 
 
+@pytest.mark.slow
 def test_segments_rotate_by_duration_and_every_one_is_a_complete_bag(tmp_path, typestore):
     bag = tmp_path / "bag"
     expected, closed_before_close = write_suite(bag, typestore)
@@ -88,6 +89,7 @@ def test_segments_rotate_by_duration_and_every_one_is_a_complete_bag(tmp_path, t
             assert reader.message_count > 0
 
 
+@pytest.mark.slow
 def test_segments_rotate_by_size(tmp_path, typestore):
     bag = tmp_path / "bag"
     write_suite(bag, typestore, max_segment_bytes=2000)
@@ -100,6 +102,7 @@ def test_segments_rotate_by_size(tmp_path, typestore):
     assert len(sizes) > 4 and sum(sizes) == 4 * len(TOPIC_TYPES)
 
 
+@pytest.mark.slow
 def test_independent_mcap_reader_decodes_the_embedded_schemas(tmp_path, typestore):
     bag = tmp_path / "bag"
     expected, _ = write_suite(bag, typestore)
@@ -114,6 +117,7 @@ def test_independent_mcap_reader_decodes_the_embedded_schemas(tmp_path, typestor
     assert diff_values(expected, got) == []
 
 
+@pytest.mark.slow
 def test_sqlite3_storage(tmp_path, typestore):
     bag = tmp_path / "bag"
     expected, _ = write_suite(bag, typestore, storage="sqlite3")
@@ -123,6 +127,7 @@ def test_sqlite3_storage(tmp_path, typestore):
     assert contents.counts() == {t: 4 for t in TOPIC_TYPES}
 
 
+@pytest.mark.slow
 def test_metadata_is_valid_while_the_bag_is_open(tmp_path, typestore):
     clock = FakeClock()
     writer = SegmentedBagWriter(
@@ -166,6 +171,7 @@ def suite_bag(tmp_path, typestore) -> Path:
     return bag
 
 
+@pytest.mark.slow
 def test_truncated_segment_is_named_and_the_rest_is_read(suite_bag):
     seg = suite_bag / "bag_2.mcap"
     data = seg.read_bytes()
@@ -180,6 +186,7 @@ def test_truncated_segment_is_named_and_the_rest_is_read(suite_bag):
     assert issue.recovered > 0
 
 
+@pytest.mark.slow
 def test_corrupted_and_missing_segments(suite_bag):
     seg = suite_bag / "bag_1.mcap"
     data = bytearray(seg.read_bytes())
@@ -194,6 +201,7 @@ def test_corrupted_and_missing_segments(suite_bag):
     assert 0 < sum(contents.counts().values()) < total
 
 
+@pytest.mark.slow
 def test_garbage_metadata_and_no_bag(tmp_path, suite_bag):
     (suite_bag / "metadata.yaml").write_text("rosbag2_bagfile_information: [1, 2\n")
     contents = read_bag(suite_bag)
@@ -232,6 +240,7 @@ KILLED_WRITER = textwrap.dedent(
 )
 
 
+@pytest.mark.slow
 def test_sigkill_leaves_every_closed_segment_readable(tmp_path):
     bag = tmp_path / "bag"
     env = dict(os.environ, PYTHONPATH=str(REPO))
@@ -267,6 +276,7 @@ def test_sigkill_leaves_every_closed_segment_readable(tmp_path):
     assert contents.counts()["/load_states"] >= n
 
 
+@pytest.mark.slow
 def test_rerun_accepts_the_bag(tmp_path, typestore):
     if shutil.which("rerun") is None and not _has_rerun():
         pytest.skip("rerun-sdk not installed")

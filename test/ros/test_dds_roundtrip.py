@@ -13,7 +13,7 @@ from fence_sorter.recording.msgtypes import make_typestore, message_names, msgty
 from fence_sorter.recording.samples import diff_values, sample_values
 from fence_sorter.testing import managed_process
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 TIMEOUT = 60.0  # s; a round trip normally takes 1-3 s
 

@@ -18,7 +18,7 @@ import pytest
 
 from fence_sorter.runner.processes import ProcessGroup, leftovers, node_command
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 REPO = Path(__file__).resolve().parents[2]
 

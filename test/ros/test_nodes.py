@@ -11,7 +11,7 @@ import pytest
 
 from fence_sorter.testing import managed_process
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 NODES = {
     # node: signal that ends it (both must give a clean exit)

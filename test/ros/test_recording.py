@@ -22,7 +22,7 @@ from fence_sorter.recording.bagread import read_bag
 from fence_sorter.recording.topics import TOPIC_TYPES
 from fence_sorter.testing import managed_process, run_cli, wait_until
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 CLOCKS = 1500  # /clock messages published at ~1 kHz (reliable: none may be missing)
 LOADS = 300  # /load_states (best effort)

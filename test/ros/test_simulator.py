@@ -16,7 +16,7 @@ import pytest
 
 from fence_sorter.testing import managed_process, wait_until
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 TIMEOUT = 40.0
 

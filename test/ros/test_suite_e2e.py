@@ -16,7 +16,7 @@ import pytest
 from fence_sorter.runner.processes import leftovers
 from fence_sorter.testing import run_cli, wait_until
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 MANIFEST = """parcel_id,arrival_time,length_a,width_b,height,mass,lateral_gap,yaw_deg,divert
 11,0.0,0.40,0.30,0.30,8.0,0.10,0.0,true

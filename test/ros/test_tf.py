@@ -16,7 +16,7 @@ from mcap_ros2.decoder import DecoderFactory
 
 from fence_sorter.testing import run_cli
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 PARCELS = 3
 TOLERANCE = 1e-9  # m and rad: the frames carry the very numbers of the state messages

@@ -11,7 +11,7 @@ import pytest
 
 from fence_sorter.testing import managed_process
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 TOPIC = "/test_joint"
 PERIOD = 0.02  # the header stamps' spacing [s]: 50 Hz in stamp time, whatever the wall rate
