@@ -23,6 +23,7 @@ from typing import Any
 import yaml
 
 from fence_sorter.physics.fence import MAX_ELEMENTS, PROFILES, FenceParams
+from fence_sorter.physics.model import RECORDABLE, Scenario
 from fence_sorter.physics.params import (
     ContactParams,
     ConveyorParams,
@@ -31,7 +32,6 @@ from fence_sorter.physics.params import (
     ParcelParams,
     SolverParams,
 )
-from fence_sorter.physics.simulate import RECORDABLE, Scenario
 from fence_sorter.resources import ResourceNotFound, data_path, find_data
 
 __all__ = [

@@ -3,7 +3,7 @@
 ``solver.method = scipy:<name>`` (RK45, DOP853, Radau, BDF, LSODA; ``params.SCIPY_METHODS``)
 integrates the compiled right-hand side ``kernel.rhs`` (the same forces as the steppers, with
 explicit Karnopp friction) with SciPy's ``OdeSolver`` class of that name, stepped one accepted
-step at a time so the run is observed exactly like ours (``simulate.Observer``: peaks, impacts,
+step at a time so the run is observed exactly like ours (``result.Observer``: peaks, impacts,
 stages, sorting, recorded series) and stopped by the same divergence checks.
 
 What the baseline does and does not do, on purpose:
@@ -35,6 +35,7 @@ from scipy.optimize import brentq
 from . import kernel as K
 from .integrators import Integrator, State
 from .params import SCIPY_METHODS
+from .result import Observer
 
 
 def solver_class(method: str):
@@ -122,8 +123,6 @@ def end_time(sc) -> float:
 
 def run_solve_ivp(model):
     """Integrate one sorting event with a SciPy OdeSolver; returns a SimulationResult."""
-    from .simulate import Observer
-
     wall0 = time.perf_counter()
     sc = model.sc
     sv = sc.solver

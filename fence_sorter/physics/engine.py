@@ -2,7 +2,7 @@
 
 ``kernel.solve`` runs the control loop of :class:`integrators.Integrator` (adaptive step-size
 control with Milne's device, event location by Illinois regula falsi, drive breakpoints, step
-halving and the divergence checks) together with the reductions of :class:`simulate.Observer`
+halving and the divergence checks) together with the reductions of :class:`result.Observer`
 (energy audit, peak N with its parabola, impacts with N_stiff, stages E1-E4, recorded series)
 on flat arrays, so an accepted step costs no Python at all. Same algorithm, same answers: the
 Python loop stays (``solver.engine = python``, and the soft-real-time line steps it as a
@@ -11,7 +11,7 @@ generator) and test/physics/test_engine.py checks the two agree to round-off.
 This module builds the arrays, calls ``kernel.solve`` in chunks of step attempts (between them it
 checks ``solver.max_wall_time``, which compiled code cannot read, and grows the output buffers),
 and turns the figures into the :class:`SimulationResult` the Python loop would have produced
-(through ``simulate.make_result``, which ``Observer.result`` calls too, so every text is the
+(through ``result.make_result``, which ``Observer.result`` calls too, so every text is the
 same). A one-shot solve (``run_compiled``) reuses the arrays of the previous solve of the same
 shape. ``generalized_alpha`` has no compiled loop and always runs the Python one.
 """
@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import gc
 import math
-import os
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -37,6 +36,7 @@ from .contacts import (
     STAGE_ON_BELT,
     STAGE_SORTED,
 )
+from .result import EnergyAudit, make_result
 
 COMPILED_METHODS = ("adaptive", "trapezoidal")
 STAGE_NAMES = (STAGE_ON_BELT, STAGE_E1, STAGE_E2, STAGE_E3, STAGE_E4, STAGE_SORTED)
@@ -370,7 +370,7 @@ class CompiledSolve:
         audit.run_min, audit.t_run_min = fc[K.F_RUN_MIN], fc[K.F_T_RUN_MIN]
 
     def fill(self, obs) -> None:
-        """Copy the loop's reductions into a ``simulate.Observer`` (for ``Observer.result``)."""
+        """Copy the loop's reductions into a ``result.Observer`` (for ``Observer.result``)."""
         ctl, fc = self.ctl.tolist(), self.fc.tolist()  # Python numbers, read once each
         obs.sorted = bool(ctl[K.I_SORTED])
         obs.touched = bool(ctl[K.I_TOUCHED])
@@ -390,10 +390,8 @@ class CompiledSolve:
 
     def result(self, wall0: float):
         """The ``SimulationResult`` of the finished solve: ``Observer.result`` of :meth:`fill`
-        without the observer (``simulate.make_result`` on the loop's figures); ``wall0``: the
+        without the observer (``result.make_result`` on the loop's figures); ``wall0``: the
         ``time.perf_counter()`` the run started at."""
-        from .simulate import EnergyAudit, make_result
-
         ctl, fc = self.ctl.tolist(), self.fc.tolist()  # Python numbers, read once each
         stages = self._stages(ctl)
         audit = EnergyAudit(
@@ -478,93 +476,3 @@ def collector_off() -> Iterator[None]:
     finally:
         if enabled:
             gc.enable()
-
-
-BENCH_SCENES = ("impact_flexible", "slide_flexible", "positioned_stiff", "arbitrary_stiff")
-
-
-def compare_engines(scenes=BENCH_SCENES, repeats: int = 7) -> list[dict]:
-    """Wall time per event of each scene (as ``fence-sorter bench`` times it: ``simulate`` on a
-    freshly built model, the garbage collector off during the call and a collection before the
-    repeats), python and compiled loop interleaved, medians of ``repeats``."""
-    import dataclasses as dc
-    import statistics
-
-    from fence_sorter.scene import load_scene
-
-    from .simulate import SortingModel, simulate
-
-    rows = []
-    for name in scenes:
-        sc = load_scene(name).scenario
-        runs = {
-            e: dc.replace(sc, solver=dc.replace(sc.solver, engine=e))
-            for e in ("python", "compiled")
-        }
-        walls: dict[str, list[float]] = {e: [] for e in runs}
-        cpus: dict[str, list[float]] = {e: [] for e in runs}
-        results = {e: simulate(s) for e, s in runs.items()}  # warm-up (loads the JIT cache)
-        gc.collect()  # before the block of repeats; the collector is off during each call
-        for _ in range(repeats):
-            for e, s in runs.items():
-                with collector_off():
-                    c0 = time.process_time()
-                    t0 = time.perf_counter()
-                    results[e] = simulate(s, SortingModel(s))
-                    walls[e].append(time.perf_counter() - t0)
-                    cpus[e].append(time.process_time() - c0)
-        med = {e: statistics.median(w) for e, w in walls.items()}
-        cpu = {e: statistics.median(c) for e, c in cpus.items()}
-        sim = results["compiled"].sim_time
-        rows.append(
-            {
-                "scene": name,
-                "sim_time": float(sim),
-                "steps": int(results["compiled"].steps),
-                "python_ms": 1e3 * med["python"],
-                "compiled_ms": 1e3 * med["compiled"],
-                "python_rtf": sim / med["python"],
-                "compiled_rtf": sim / med["compiled"],
-                "speedup": med["python"] / med["compiled"],
-                "python_cpu_ms": 1e3 * cpu["python"],
-                "compiled_cpu_ms": 1e3 * cpu["compiled"],
-                "same_peak": bool(
-                    results["python"].peak_contact_force == results["compiled"].peak_contact_force
-                ),
-            }
-        )
-    return rows
-
-
-def main(argv=None) -> int:
-    """``python -m fence_sorter.physics.engine [--repeats N] [scene ...]``: the side-by-side
-    timing of the two loops."""
-    import argparse
-
-    ap = argparse.ArgumentParser(description=main.__doc__)
-    ap.add_argument("scenes", nargs="*", default=list(BENCH_SCENES))
-    ap.add_argument("--repeats", type=int, default=7)
-    args = ap.parse_args(argv)
-    if args.repeats < 1:
-        ap.error(f"--repeats must be >= 1, got {args.repeats}")
-    print(
-        f"median of {args.repeats}, model build included, python and compiled interleaved; "
-        f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}"
-    )
-    print(
-        f"{'scene':18s} {'sim [s]':>8s} {'steps':>6s} {'python [ms]':>12s} "
-        f"{'compiled [ms]':>14s} {'python RTF':>11s} {'compiled RTF':>13s} {'speed-up':>9s} "
-        f"{'CPU python/compiled [ms]':>25s}"
-    )
-    for r in compare_engines(args.scenes, args.repeats):
-        print(
-            f"{r['scene']:18s} {r['sim_time']:8.3f} {r['steps']:6d} {r['python_ms']:12.2f} "
-            f"{r['compiled_ms']:14.2f} {r['python_rtf']:10.1f}x {r['compiled_rtf']:12.1f}x "
-            f"{r['speedup']:8.2f}x {r['python_cpu_ms']:12.2f} / {r['compiled_cpu_ms']:<10.2f}"
-            + ("" if r["same_peak"] else "  (peak N differs!)")
-        )
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

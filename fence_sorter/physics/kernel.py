@@ -1801,7 +1801,7 @@ def oscillation_step(P, out, rtol):
 
 # -- the compiled solve loop --------------------------------------------------------------------
 # ``integrators.Integrator.stepping`` (adaptive and fixed-step trapezoidal) and the reductions of
-# ``simulate.Observer`` as one compiled loop over flat arrays; ``engine.py`` builds the arrays,
+# ``result.Observer`` as one compiled loop over flat arrays; ``engine.py`` builds the arrays,
 # calls :func:`solve` in chunks (wall-time limit, growing the output buffers) and turns the
 # figures into a ``SimulationResult``. It lives in this module so that Numba's on-disk cache of
 # the loop is invalidated with the kernels it inlines (the cache only tracks the defining file).
@@ -1890,7 +1890,7 @@ F_LAST_N1 = 24
 F_LAST_N2 = 25
 F_LAST_T1 = 26
 F_LAST_T2 = 27
-F_MAX_RES = 28  # energy audit (simulate.EnergyAudit)
+F_MAX_RES = 28  # energy audit (result.EnergyAudit)
 F_MIN_RES = 29
 F_FLOW = 30
 F_E0 = 31
@@ -2168,7 +2168,7 @@ def _locate(
 
 @njit(cache=True, _nrt=False)
 def _audit(fc, t, r):
-    """``simulate.EnergyAudit.update``."""
+    """``result.EnergyAudit.update``."""
     if not math.isfinite(r):
         fc[F_MAX_RES] = r
         fc[F_MIN_RES] = r
@@ -2192,7 +2192,7 @@ def _audit(fc, t, r):
 
 @njit(cache=True, _nrt=False)
 def _observe(P, normals, cfg, ctl, fc, T, Y, LAM, OUT, RES, IMP, STG, REC, i, on_belt):
-    """``simulate.Observer.__call__`` at state row i; returns (stop, on_belt)."""
+    """``result.Observer.__call__`` at state row i; returns (stop, on_belt)."""
     t = T[i]
     y = Y[i]
     res = RES[i]

@@ -37,7 +37,7 @@ memory of one event). Per scene:
   ``NUMBA_DISABLE_JIT=1``, on a shortened ``impact_flexible``; and the first call with a cold
   Numba cache (compilation).
 - **Solve loop**: the default ``solver.engine = compiled`` against ``python`` on each scene,
-  interleaved (``physics.engine.compare_engines``).
+  interleaved (``verification.engines.compare_engines``).
 
 Functions return plain dataclasses; :func:`render_markdown` turns a :class:`BenchReport` into
 ``docs/benchmarks.md``.
@@ -829,7 +829,7 @@ class BenchReport:
     process_max_rss_kib: int
     total_wall: float
     targets: list[TargetCheck] = field(default_factory=list)
-    # solver.engine python against compiled per scene (physics.engine.compare_engines)
+    # solver.engine python against compiled per scene (verification.engines.compare_engines)
     engines: list[dict] = field(default_factory=list)
 
 
@@ -1098,7 +1098,7 @@ def run_bench(
     results = []
     for name in scenes:
         results.append(bench_scene(name, repeats, methods, ladder, cap, log))
-    from fence_sorter.physics.engine import compare_engines
+    from fence_sorter.verification.engines import compare_engines
 
     log("solve loop: solver.engine python against compiled")
     engines = compare_engines(scenes, repeats)
