@@ -14,7 +14,7 @@ from fence_sorter.recording.bagread import BagIssue, read_bag
 
 ANALYSIS_TOPICS = (
     "/parcels", "/fence_commands", "/sort_outcomes", "/load_states", "/fence_state",
-    "/markers", "/diagnostics",
+    "/markers", "/diagnostics", "/sort_events",
 )  # fmt: skip
 
 
@@ -70,10 +70,22 @@ def analyze_bag(bag: Path | str, out_dir: Path | str | None = None, plots: bool 
             writer.writerow({k: _csv(row[k]) for k in TABLE_COLUMNS})
     report.files["parcels.csv"] = str(csv_path)
     if plots:
-        from fence_sorter.analysis.plots import plot_overview, plot_parcel
+        from fence_sorter.analysis.plots import (
+            plot_damage_risk,
+            plot_impact,
+            plot_overview,
+            plot_parcel,
+        )
 
         if run.series:
             report.files["trajectories.png"] = str(plot_overview(run, out / "trajectories.png"))
+        if report.summary["damage_risk"]["parcels_with_impact"]:
+            path = plot_damage_risk(rows, out / "damage_risk.png")
+            report.files[path.name] = str(path)
+        for pid in sorted(run.events):
+            made = plot_impact(run, pid, out / f"impact_{pid}.png")
+            if made is not None:
+                report.files[made.name] = str(made)
         for pid in sorted(run.series):
             made = plot_parcel(run, pid, out / f"parcel_{pid}.png")
             if made is not None:
@@ -101,7 +113,8 @@ def format_report(report: AnalysisReport) -> str:
     lines = [f"bag {report.bag}: " + ", ".join(f"{k} {v}" for k, v in report.counts.items())]
     head = (
         f"{'id':>4} {'divert':>6} {'sorted':>6} {'reason':<20} {'w_n':>6} {'N':>7} "
-        f"{'N_stiff':>7} {'a_N':>6} {'v_exit':>6} {'t_ws':>6}  check"
+        f"{'N_stiff':>7} {'a_N':>6} {'v_exit':>6} {'t_ws':>6} {'m_w':>6} {'m_a':>6} "
+        f"{'h':>6}  check"
     )
     lines += [head, "-" * len(head)]
     for r in report.rows:
@@ -110,17 +123,39 @@ def format_report(report: AnalysisReport) -> str:
             f"{r['parcel_id']:>4} {f(r['divert']):>6} {f(r['sorted']):>6} {r['reason']:<20} "
             f"{f(r['impact_speed_mps']):>6} {f(r['peak_N']):>7} {f(r['peak_N_stiff']):>7} "
             f"{f(r['peak_accel_mps2']):>6} {f(r['exit_speed_mps']):>6} "
-            f"{f(r['time_in_ws_s']):>6}  {check[r['agrees']]}"
+            f"{f(r['time_in_ws_s']):>6} {f(r['impact_speed_margin'], '+.2f'):>6} "
+            f"{f(r['accel_margin'], '+.2f'):>6} {f(r['drop_height_m'], '.3f'):>6}  "
+            f"{check[r['agrees']]}"
         )
     s = report.summary
     lines += [
         "units: w_n impact speed [m/s], N, N_stiff peak forces [N], a_N peak acceleration "
-        "[m/s^2], v_exit exit speed [m/s], t_ws time in the working space [s] (live figures)",
+        "[m/s^2], v_exit exit speed [m/s], t_ws time in the working space [s] (live figures); "
+        "m_w = 1 - w_n/w_dop and m_a = 1 - a_N/a_Ndop the margins against the limits (< 0: "
+        "over), h = w_n^2/(2 g) the drop height of the impact [m]",
         f"stream: {s['parcels']} parcels, {s['divert']} to divert, {s['sorted_divert']} sorted "
         f"(share {f(s['share_sorted'], '.0%')}), throughput {f(s['throughput_pcs_h'], '.0f')} "
         f"pcs/h, sorted {f(s['sorted_pcs_h'], '.0f')} pcs/h, planned capacity (min) "
         f"{f(s['planned_capacity_pcs_h_min'], '.0f')} pcs/h",
     ]
+    risk = s["damage_risk"]
+    if risk["parcels_with_impact"]:
+        worst = ", ".join(
+            f"{w['parcel_id']} (m_w {w['impact_speed_margin']:+.2f}, m_a "
+            f"{w['accel_margin']:+.2f}, h {w['drop_height_m']:.3f} m)"
+            for w in risk["worst_parcels"]
+        )
+        lines.append(
+            f"damage risk: {risk['parcels_with_impact']} parcels with an impact, "
+            f"{f(risk['share_over_w_dop'], '.0%')} over w_dop "
+            f"{risk['parcels_over_w_dop'] or ''}, {f(risk['share_over_a_ndop'], '.0%')} over "
+            f"a_Ndop {risk['parcels_over_a_ndop'] or ''}; worst: {worst}"
+        )
+    if s["sort_events"]:
+        lines.append(
+            f"full-rate events: {s['sort_events']} /sort_events messages, peaks checked against "
+            "the live outcomes (within 0.5 %)"
+        )
     agree = s["agrees_with_live"]
     lines.append(
         "recorded states vs live outcomes: "

@@ -20,6 +20,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from fence_sorter.analysis.events import (
+    SortEventData,
+    check_event,
+    event_figures,
+    risk_of,
+    risk_summary,
+)
 from fence_sorter.codes import OutcomeCode, Stage, code_name
 from fence_sorter.recording.bagread import BagContents
 from fence_sorter.stamps import time_to_sec
@@ -77,10 +84,11 @@ class RecordedRun:
     belt_speed: float
     diagnostics: dict[str, dict[str, str]] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    events: dict[int, SortEventData] = field(default_factory=dict)  # /sort_events by parcel
 
 
 def _fields(msg, names) -> dict:
-    return {n: getattr(msg, n) for n in names}
+    return {n: getattr(msg, n, NAN) for n in names}  # NaN: a bag from before the field
 
 
 PARCEL_FIELDS = (
@@ -89,7 +97,8 @@ PARCEL_FIELDS = (
 ).split()
 OUTCOME_FIELDS = (
     "parcel_id sorted reason reason_code peak_normal_force peak_normal_force_stiff "
-    "peak_normal_accel impact_normal_speed exit_speed_y y_max time_in_working_space"
+    "peak_normal_accel impact_normal_speed exit_speed_y y_max time_in_working_space w_dop a_ndop "
+    "impact_speed_margin accel_margin drop_height"
 ).split()
 COMMAND_FIELDS = (
     "parcel_id start_mode r_s t1 alpha_k predicted_capacity_pcs_h predicted_impact_speed "
@@ -116,6 +125,11 @@ def load_run(bag: BagContents) -> RecordedRun:
         d["sorted"] = bool(d["sorted"])
         d["reason_name"] = code_name(OutcomeCode, d["reason_code"])
         outcomes[int(d["parcel_id"])] = d
+
+    events = {}
+    for m in bag.by_topic("/sort_events"):
+        ev = SortEventData.from_msg(m.msg)
+        events[ev.parcel_id] = ev
 
     rows: dict[int, list] = {}
     for m in bag.by_topic("/load_states"):
@@ -177,7 +191,7 @@ def load_run(bag: BagContents) -> RecordedRun:
             diagnostics[st.name] = {kv.key: kv.value for kv in st.values}
     return RecordedRun(
         belt_width, belt_x, chute, parcels, commands, outcomes, series, fence, period,
-        belt_speed, diagnostics, notes,
+        belt_speed, diagnostics, notes, events,
     )  # fmt: skip
 
 
@@ -244,7 +258,10 @@ TABLE_COLUMNS = [
     "parcel_id", "divert", "sorted", "reason", "reason_text", "source", "impact_speed_mps",
     "peak_N", "peak_N_stiff", "peak_accel_mps2", "exit_speed_mps", "time_in_ws_s", "y_max_m",
     "sampled_sorted", "sampled_peak_N", "sampled_peak_N_stiff", "sampled_peak_accel_mps2",
-    "sampled_exit_speed_mps", "sampled_time_in_ws_s", "samples", "agrees", "disagreements",
+    "sampled_exit_speed_mps", "sampled_time_in_ws_s", "samples", "event_steps",
+    "event_impact_speed_mps", "event_peak_N", "event_peak_N_stiff", "event_peak_accel_mps2",
+    "w_dop_mps", "a_ndop_mps2", "impact_speed_margin", "accel_margin", "drop_height_m",
+    "agrees", "disagreements",
 ]  # fmt: skip
 
 
@@ -278,7 +295,30 @@ def parcel_table(run: RecordedRun) -> list[dict]:
             "sampled_time_in_ws_s": smp["time_in_working_space"],
             "samples": smp["samples"],
         }
+        ev = run.events.get(pid)
+        fig = event_figures(ev) if ev is not None else None
+        row.update(
+            event_steps=fig["steps"] if fig else 0,
+            event_impact_speed_mps=fig["impact_normal_speed"] if fig else NAN,
+            event_peak_N=fig["peak_normal_force"] if fig else NAN,
+            event_peak_N_stiff=fig["peak_normal_force_stiff"] if fig else NAN,
+            event_peak_accel_mps2=fig["peak_normal_accel"] if fig else NAN,
+        )
+        risk = risk_of(o) if o else None
+        row.update(
+            w_dop_mps=risk["w_dop"] if risk else NAN,
+            a_ndop_mps2=risk["a_ndop"] if risk else NAN,
+            impact_speed_margin=risk["impact_speed_margin"] if risk else NAN,
+            accel_margin=risk["accel_margin"] if risk else NAN,
+            drop_height_m=risk["drop_height"] if risk else NAN,
+        )
         problems = check_row(row, o, run.publish_period)
+        if fig is not None and o is not None:
+            problems += check_event(fig, o)
+        elif run.events and o is not None and _num(o["impact_normal_speed"]):
+            problems.append("no /sort_events message for the parcel's stroke")
+        if o is not None and risk is not None:
+            problems += check_risk(o, risk)
         row["agrees"] = not problems if o is not None else None
         row["disagreements"] = "; ".join(problems)
         rows.append(row)
@@ -314,6 +354,16 @@ def check_row(row: dict, outcome: dict | None, period: float) -> list[str]:
     if outcome["sorted"] and _num(smp) and _num(live) and _num(period):
         if abs(smp - live) > TIME_WS_ATOL_PERIODS * period:
             out.append(f"time in working space: sampled {smp:.4g} s, live {live:.4g} s")
+    return out
+
+
+def check_risk(outcome: dict, risk: dict) -> list[str]:
+    """Where the outcome's published margins and drop height differ from the closed forms."""
+    out = []
+    for key in ("impact_speed_margin", "accel_margin", "drop_height"):
+        live, ref = outcome.get(key, NAN), risk[key]
+        if _num(live) and _num(ref) and abs(live - ref) > 1e-9 * max(1.0, abs(ref)):
+            out.append(f"{key}: published {live:.6g}, closed form {ref:.6g}")
     return out
 
 
@@ -355,4 +405,6 @@ def stream_summary(run: RecordedRun, rows: list[dict]) -> dict:
         "parcels_checked": len(checked),
         "parcels_disagreeing": [r["parcel_id"] for r in checked if not r["agrees"]],
         "parcels_without_outcome": [r["parcel_id"] for r in rows if r["agrees"] is None],
+        "sort_events": len(run.events),
+        "damage_risk": risk_summary(rows),
     }

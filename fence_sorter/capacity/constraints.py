@@ -19,7 +19,7 @@ import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
-from fence_sorter.physics.params import ParameterError, ParcelParams, check_range
+from fence_sorter.physics.params import GRAVITY, ParameterError, ParcelParams, check_range
 
 CONSTRAINT_IDS = (7, 8, 9, 10, 11, 12)
 CONSTRAINT_TEXT = {
@@ -153,3 +153,29 @@ def violated(margin: Mapping[int, float], active: Iterable[int]) -> tuple[int, .
         if not m <= 0.0:
             bad.append(c)
     return tuple(bad)
+
+
+@dataclass(frozen=True)
+class DamageRisk:
+    """How close one impact came to the drop-test limits of (10) and (11).
+
+    A margin is the share of the limit left, 1 - value / limit: 0 at the limit, < 0 over it
+    (-0.5: 50 % over). ``drop_height`` h = w_n^2 / (2 g) is the height
+    of the free fall that hits the ground at the impact's normal speed w_n (the drop test the
+    limits come from: w_dop = 2.4 m/s is h = 0.294 m). NaN where the figure is NaN (no
+    stroke, or no contact).
+    """
+
+    impact_speed_margin: float  # 1 - w_n / w_dop [-]
+    accel_margin: float  # 1 - a_N / a_Ndop [-]
+    drop_height: float  # [m]
+
+
+def damage_risk(impact_speed: float, peak_accel: float, profile: ConstraintProfile) -> DamageRisk:
+    """Margins of an impact at normal speed w_n with peak acceleration a_N (NaN: no stroke)
+    against ``profile``'s w_dop and a_Ndop, and its equivalent drop height."""
+    return DamageRisk(
+        1.0 - impact_speed / profile.w_dop,
+        1.0 - peak_accel / profile.a_ndop,
+        impact_speed * impact_speed / (2.0 * GRAVITY),
+    )

@@ -15,6 +15,7 @@ from .line import LineConfig, SortingLine, in_swept_sector
 from .pacing import LatenessHistogram, Pacer, Tick
 from .types import (
     CommandResult,
+    EventTrace,
     FenceSnapshot,
     LineEvent,
     LineSnapshot,
@@ -33,6 +34,7 @@ from .types import (
 __all__ = [
     "PARCEL_REASONS",
     "CommandResult",
+    "EventTrace",
     "FenceSnapshot",
     "InputError",
     "LatenessHistogram",

@@ -44,7 +44,9 @@ from fence_sorter.physics.simulate import Observer, Scenario, SimulationResult, 
 
 from .types import (
     NAN,
+    TRACE_COLUMNS,
     CommandResult,
+    EventTrace,
     FenceSnapshot,
     LineEvent,
     LineSnapshot,
@@ -164,12 +166,15 @@ class _Tap:
     ones) and :meth:`at` interpolates between the two around the time asked for.
     """
 
-    __slots__ = ("obs", "ts", "points", "t_sorted", "width", "on_sorted")
+    __slots__ = ("obs", "ts", "points", "t_sorted", "width", "on_sorted", "trace", "n_sorted")
 
     def __init__(self, obs: Observer, width: float):
         self.obs = obs
         self.ts: list[float] = []
         self.points: list[tuple[np.ndarray, np.ndarray]] = []
+        # every accepted point, never trimmed: the event's SortEvent (columns TRACE_COLUMNS)
+        self.trace: list[tuple] = []
+        self.n_sorted: int | None = None  # trace points up to the crossing of y0 = s
         self.t_sorted: float | None = None  # C_s crossing y0 = s (interpolated) [s]
         self.width = width
         self.on_sorted = None  # called once, at the accepted point where C_s crossed y0 = s
@@ -211,11 +216,17 @@ class _Tap:
         prev = (self.ts[-1], self.points[-1][0]) if self.ts else None
         self.ts.append(st.t)
         self.points.append((st.y.copy(), extra))
+        y = st.y
+        self.trace.append((
+            st.t, extra[HELD], res[K.R_ACTIVE_MASK], res[K.R_FENCE_N], res[K.R_MAX_D], ddot,
+            res[K.R_TIP_W], res[K.R_ALPHA], y[0], y[1], y[2], y[3], y[4], y[5],
+        ))  # fmt: skip
         if self.obs.sorted and self.t_sorted is None:
             t0, y0 = (prev[0], prev[1][1]) if prev is not None else (st.t, 0.0)
             y1 = st.y[1]
             frac = (self.width - y0) / (y1 - y0) if y1 > y0 else 1.0
             self.t_sorted = t0 + min(max(frac, 0.0), 1.0) * (st.t - t0)
+            self.n_sorted = len(self.trace)
             if self.on_sorted is not None:
                 self.on_sorted()
         return out
@@ -315,9 +326,24 @@ class _Stroke:
         if self.integ.outcome[1] is not None and len(self.tap.ts) > 1:
             self.tap.ts.pop()
             self.tap.points.pop()
+            self.tap.trace.pop()
 
     def _sorted_now(self) -> None:
         self.sorted_result = self.result()
+
+    def trace(self, t: float) -> EventTrace:
+        """The event at every accepted step up to its parcel's outcome at line time ``t`` (a
+        sorted parcel: the steps its outcome's figures come from)."""
+        tap = self.tap
+        n = tap.n_sorted if tap.n_sorted is not None else len(tap.trace)
+        steps = np.array(tap.trace[:n], dtype=float).reshape(-1, len(TRACE_COLUMNS))
+        t_end = steps[-1, 0] if len(steps) else 0.0
+        impacts = [imp for imp in self.observer.impacts if imp[0] <= t_end]
+        contact = self.sc.contact
+        return EventTrace(
+            self.parcel.spec.parcel_id, t, self.t_start, self.model.mass, contact.b_p,
+            contact.k_p, steps, np.array(impacts, dtype=float).reshape(-1, 3),
+        )  # fmt: skip
 
     def close(self) -> None:
         self.stepper.close()
@@ -707,6 +733,8 @@ class SortingLine:
         p.outcome = Outcome(p.spec.parcel_id, t, code, reason, **fig)
         self.done_ids.add(p.spec.parcel_id)
         self.events.append(p.outcome)
+        if res is not None and p.stroke is not None:
+            self.events.append(p.stroke.trace(t))
 
     # -- overlap ------------------------------------------------------------------------------
     def _check_overlap(self) -> None:

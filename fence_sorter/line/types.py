@@ -86,7 +86,39 @@ class SolverWarning:
     diagnosis: str
 
 
-LineEvent = Outcome | OverlapWarning | StrokeStarted | SolverWarning
+#: the columns of :attr:`EventTrace.steps`, in order
+TRACE_COLUMNS = (
+    "t", "stage", "contact_set", "normal_force", "deformation", "deformation_rate",
+    "tip_deflection", "drive_angle", "x", "y", "yaw", "vx", "vy", "yaw_rate",
+)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class EventTrace:
+    """One sorting event at the solver's resolution (SortEvent), sent with its parcel's outcome.
+
+    ``steps``: one row per accepted step of the stroke's solve from the stroke start up to the
+    outcome (a sorted parcel: the step where C_s crossed y0 = s), columns
+    :data:`TRACE_COLUMNS` (t since the stroke start [s], LoadState stage, the contact set as
+    bits, N [N], D [m], dD/dt [m/s], tip deflection [m], alpha_w [rad], C_s pose and velocity).
+    ``impacts``: one row per impact, (onset since the stroke start [s], w_n [m/s], peak
+    N_stiff [N]). ``b_p``, ``k_p``: contact law (16) of the stroke, for the N_stiff course.
+    """
+
+    parcel_id: int
+    t: float  # sim time of the outcome [s]
+    start_time: float  # sim time of the stroke start [s]
+    mass: float  # m_p [kg]
+    b_p: float
+    k_p: float
+    steps: np.ndarray  # (n, len(TRACE_COLUMNS))
+    impacts: np.ndarray  # (k, 3)
+
+    def column(self, name: str) -> np.ndarray:
+        return self.steps[:, TRACE_COLUMNS.index(name)]
+
+
+LineEvent = Outcome | OverlapWarning | StrokeStarted | SolverWarning | EventTrace
 
 
 @dataclass(frozen=True)

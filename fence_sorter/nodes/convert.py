@@ -25,7 +25,9 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
+from fence_sorter.capacity.constraints import ConstraintProfile, damage_risk
 from fence_sorter.line.types import (
+    EventTrace,
     FenceSnapshot,
     LineSnapshot,
     Outcome,
@@ -35,12 +37,15 @@ from fence_sorter.line.types import (
     StartMode,
     StrokeCommand,
 )
+from fence_sorter.physics.contact import stiff_course
+from fence_sorter.physics.params import ContactParams
 from fence_sorter.stamps import time_to_sec
 from fence_sorter_msgs.msg import (
     FenceCommand,
     FenceState,
     LoadState,
     Parcel,
+    SortEvent,
     SortOutcome,
 )
 
@@ -105,6 +110,8 @@ def dict_to_msg(msg_class: type, values: MessageDict) -> Any:
 # -- line dataclasses <-> fence_sorter messages ------------------------------------------------
 FRAME_ID = "sorter"
 JOINT_NAME = "fence_drive"
+#: the damage limits of an outcome when the node is given none (the paper's (10), (11))
+DEFAULT_LIMITS = ConstraintProfile()
 
 
 def sec_to_time(t: float) -> Time:
@@ -205,8 +212,12 @@ def command_to_msg(
     return msg
 
 
-def outcome_to_msg(o: Outcome, frame_id: str = FRAME_ID) -> SortOutcome:
-    """Outcome -> SortOutcome (NaN figures stay NaN: the parcel met no stroke)."""
+def outcome_to_msg(
+    o: Outcome, frame_id: str = FRAME_ID, limits: ConstraintProfile = DEFAULT_LIMITS
+) -> SortOutcome:
+    """Outcome -> SortOutcome with its damage risk against ``limits`` (w_dop, a_Ndop; NaN
+    figures stay NaN: the parcel met no stroke)."""
+    risk = damage_risk(o.impact_normal_speed, o.peak_normal_accel, limits)
     return SortOutcome(
         header=header(o.t, frame_id),
         parcel_id=int(o.parcel_id),
@@ -220,7 +231,39 @@ def outcome_to_msg(o: Outcome, frame_id: str = FRAME_ID) -> SortOutcome:
         exit_speed_y=float(o.exit_speed_y),
         y_max=float(o.y_max),
         time_in_working_space=float(o.time_in_working_space),
+        w_dop=float(limits.w_dop),
+        a_ndop=float(limits.a_ndop),
+        impact_speed_margin=float(risk.impact_speed_margin),
+        accel_margin=float(risk.accel_margin),
+        drop_height=float(risk.drop_height),
     )
+
+
+#: SortEvent's per-step arrays and the EventTrace columns they come from
+EVENT_STEP_FIELDS = (
+    "t", "normal_force", "deformation", "deformation_rate", "tip_deflection", "drive_angle",
+    "x", "y", "yaw", "vx", "vy", "yaw_rate",
+)  # fmt: skip
+
+
+def event_to_msg(e: EventTrace, frame_id: str = FRAME_ID) -> SortEvent:
+    """EventTrace -> SortEvent: the per-step arrays as they are, a_N = N / m_p, and the
+    N_stiff course of every impact (:func:`fence_sorter.physics.contact.stiff_course`)."""
+    msg = SortEvent(header=header(e.t, frame_id), parcel_id=int(e.parcel_id), mass=e.mass)
+    msg.start_time = sec_to_time(e.start_time)
+    for name in EVENT_STEP_FIELDS:
+        setattr(msg, name, np.ascontiguousarray(e.column(name), dtype=np.float64))
+    msg.normal_accel = np.ascontiguousarray(e.column("normal_force") / e.mass)
+    msg.stage = e.column("stage").astype(np.uint8)
+    msg.contact_set = e.column("contact_set").astype(np.uint32)
+    msg.impact_t = np.ascontiguousarray(e.impacts[:, 0])
+    msg.impact_speed = np.ascontiguousarray(e.impacts[:, 1])
+    msg.impact_force_stiff = np.ascontiguousarray(e.impacts[:, 2])
+    contact = ContactParams(b_p=e.b_p, k_p=e.k_p)
+    courses = [stiff_course(e.mass, w_n, contact, t0) for t0, w_n, _ in e.impacts]
+    msg.stiff_t = np.concatenate([c[0] for c in courses]) if courses else np.zeros(0)
+    msg.stiff_force = np.concatenate([c[1] for c in courses]) if courses else np.zeros(0)
+    return msg
 
 
 def outcome_from_msg(msg: SortOutcome) -> Outcome:

@@ -37,7 +37,10 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
+from fence_sorter.analysis.events import SortEventData, risk_of
+from fence_sorter.capacity.constraints import ConstraintProfile
 from fence_sorter.line import (
+    EventTrace,
     LatenessHistogram,
     LineConfig,
     Outcome,
@@ -51,13 +54,21 @@ from fence_sorter.line.awake import start_spinners, stop_spinners
 from fence_sorter.line.worker import Gauges, LineProcess, LoopSettings, LoopStartError, LoopStats
 from fence_sorter.nodes import convert
 from fence_sorter.nodes.base import RUN_ID_PARAMETER, FenceSorterNode, ParamSpec, spin_node
+from fence_sorter.nodes.convert import DEFAULT_LIMITS
 from fence_sorter.nodes.intake import TopicIntake
 from fence_sorter.nodes.qos import INPUT_QOS, RELIABLE_QOS, SENSOR_QOS
 from fence_sorter.nodes.scanner import SCAN_PROGRESS_TOPIC
 from fence_sorter.nodes.tf_publisher import TfPublisher
 from fence_sorter.scene import load_scene
 from fence_sorter.stamps import time_to_sec
-from fence_sorter_msgs.msg import FenceCommand, FenceState, LoadState, Parcel, SortOutcome
+from fence_sorter_msgs.msg import (
+    FenceCommand,
+    FenceState,
+    LoadState,
+    Parcel,
+    SortEvent,
+    SortOutcome,
+)
 
 DEFAULT_SCENE = "impact_flexible"
 #: unpaced, the loop waits for this node to publish up to this much sim time behind it [s]
@@ -284,6 +295,24 @@ class SimulatorNode(FenceSorterNode):
             read_only=True,
         ),
         ParamSpec(
+            "w_dop",
+            DEFAULT_LIMITS.w_dop,
+            "(10) admissible impact speed w_dop each outcome's impact_speed_margin is taken "
+            "against [m/s] (as the controller's)",
+            read_only=True,
+            min_value=1e-6,
+            max_value=100.0,
+        ),
+        ParamSpec(
+            "a_ndop",
+            DEFAULT_LIMITS.a_ndop,
+            "(11) admissible acceleration a_Ndop each outcome's accel_margin is taken against "
+            "[m/s^2] (as the controller's)",
+            read_only=True,
+            min_value=1e-6,
+            max_value=1e5,
+        ),
+        ParamSpec(
             "rrd_scan_line_x",
             -3.0,
             "x0 of the scan line drawn in the Rerun view [m] (drawing only)",
@@ -297,6 +326,8 @@ class SimulatorNode(FenceSorterNode):
         super().__init__(**kwargs)
         p = {spec.name: self.get_parameter(spec.name).value for spec in self.PARAMETERS}
         self.frame_id = str(p["frame_id"])
+        self.limits = ConstraintProfile(w_dop=float(p["w_dop"]), a_ndop=float(p["a_ndop"]))
+        self._risks: dict[int, dict] = {}  # damage risk of an outcome until its EventTrace
         loaded = load_scene(p["scene"] or DEFAULT_SCENE)  # SceneError: exit 2 in main()
         self.scene_name = loaded.name
         self.line_config = LineConfig.from_scenario(
@@ -355,6 +386,7 @@ class SimulatorNode(FenceSorterNode):
         self.pub_loads = self.create_publisher(LoadState, "/load_states", SENSOR_QOS)
         self.pub_markers = self.create_publisher(MarkerArray, "/markers", VIEWER_QOS)
         self.pub_outcomes = self.create_publisher(SortOutcome, "/sort_outcomes", RELIABLE_QOS)
+        self.pub_events = self.create_publisher(SortEvent, "/sort_events", RELIABLE_QOS)
         self.tf = TfPublisher(self, self.line_config, self.frame_id)  # /tf, /tf_static, URDF
         self.tf.publish_static(line.t)
 
@@ -577,7 +609,17 @@ class SimulatorNode(FenceSorterNode):
         log = self.get_logger()
         for e in events:
             if isinstance(e, Outcome):
-                self.pub_outcomes.publish(convert.outcome_to_msg(e, self.frame_id))
+                self.pub_outcomes.publish(convert.outcome_to_msg(e, self.frame_id, self.limits))
+                if self.rerun is not None and math.isfinite(e.peak_normal_force):
+                    # its EventTrace follows in the same list: the damage colours of the view
+                    self._risks[e.parcel_id] = risk_of(
+                        {
+                            "impact_normal_speed": e.impact_normal_speed,
+                            "peak_normal_accel": e.peak_normal_accel,
+                            "w_dop": self.limits.w_dop,
+                            "a_ndop": self.limits.a_ndop,
+                        }
+                    )
                 with self._lock:
                     self.outcome_counts[e.code.name] += 1
                 text = f"parcel {e.parcel_id}: {e.code.name} at t = {e.t:.3f} s: {e.reason}"
@@ -601,6 +643,14 @@ class SimulatorNode(FenceSorterNode):
                 with self._lock:
                     self.counts["solver_failures_after_outcome"] += 1
                 log.error(f"stroke for parcel {e.parcel_id}: solver failure: {e.diagnosis}")
+            elif isinstance(e, EventTrace):
+                msg = convert.event_to_msg(e, self.frame_id)
+                self.pub_events.publish(msg)
+                with self._lock:
+                    self.counts["sort_events"] += 1
+                if self.rerun is not None:  # the same curves as a bag's (fence-sorter rrd)
+                    risk = self._risks.pop(e.parcel_id, None)
+                    self.rerun.sort_event(SortEventData.from_msg(msg), risk)
             elif isinstance(e, StrokeStarted):
                 with self._lock:
                     self.counts["strokes"] += 1

@@ -112,6 +112,24 @@ def stiff_impact(
     )
 
 
+#: fewest points of :func:`stiff_course` per impact, and their largest spacing [s] (4 kHz)
+STIFF_COURSE_POINTS = 200
+STIFF_COURSE_DT = 2.5e-4
+
+
+def stiff_course(
+    mass: float, approach_speed: float, contact: ContactParams, onset: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """N_stiff(t) through one impact (Fig. 11c, 12c): times from ``onset`` [s] and forces [N]
+    of :func:`stiff_impact` on at least STIFF_COURSE_POINTS points at most STIFF_COURSE_DT
+    apart (a slow, long impact gets more), ending with the force back at 0."""
+    imp = stiff_impact(mass, approach_speed, contact, samples=STIFF_COURSE_POINTS)
+    needed = math.ceil(imp.duration / STIFF_COURSE_DT) + 1
+    if needed > STIFF_COURSE_POINTS:
+        imp = stiff_impact(mass, approach_speed, contact, samples=needed)
+    return onset + imp.time, imp.force
+
+
 def elastic_impact_closed_form(mass: float, approach_speed: float, k_p: float) -> dict:
     """b_p = 0 closed forms: maximum deformation, peak force and contact duration."""
     d_max = (5.0 * mass * approach_speed**2 / (2.0 * k_p)) ** 0.2

@@ -12,6 +12,7 @@ TOPIC_TYPES: dict[str, tuple[str, bool]] = {
     "/fence_state": ("fence_sorter_msgs/msg/FenceState", False),
     "/load_states": ("fence_sorter_msgs/msg/LoadState", False),
     "/sort_outcomes": ("fence_sorter_msgs/msg/SortOutcome", True),
+    "/sort_events": ("fence_sorter_msgs/msg/SortEvent", True),
     "/joint_states": ("sensor_msgs/msg/JointState", True),
     "/markers": ("visualization_msgs/msg/MarkerArray", True),
     "/diagnostics": ("diagnostic_msgs/msg/DiagnosticArray", True),

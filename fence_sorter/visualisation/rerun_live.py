@@ -19,6 +19,7 @@ import argparse
 import errno
 import fcntl
 import os
+import pickle
 import select
 import signal
 import struct
@@ -31,7 +32,7 @@ import numpy as np
 
 from fence_sorter.visualisation.rerun_log import FenceFrame, ParcelFrame, SceneGeometry
 
-KIND_FRAME, KIND_EVENT = 1, 2
+KIND_FRAME, KIND_EVENT, KIND_SORT_EVENT = 1, 2, 3
 _HEAD = struct.Struct("<IB")  # payload length, kind
 _FRAME = struct.Struct("<dddII")  # t, alpha, tip deflection, nodes, parcels
 PARCEL_COLUMNS = 17
@@ -67,6 +68,13 @@ def pack_snapshot(snap) -> bytes:
 def pack_event(t: float, text: str, ok: bool) -> bytes:
     payload = struct.pack("<d?", t, ok) + text.encode("utf-8")
     return _HEAD.pack(len(payload), KIND_EVENT) + payload
+
+
+def pack_sort_event(ev, risk: dict | None) -> bytes:
+    """A :class:`fence_sorter.analysis.events.SortEventData` and its damage risk for the child
+    (pickled: a few hundred kB at most, once per stroke, in the node's process)."""
+    payload = pickle.dumps((ev, risk), protocol=pickle.HIGHEST_PROTOCOL)
+    return _HEAD.pack(len(payload), KIND_SORT_EVENT) + payload
 
 
 def unpack_frame(payload: bytes) -> tuple[float, FenceFrame, list[ParcelFrame]]:
@@ -136,6 +144,10 @@ class RerunProcess:
 
     def event(self, t: float, text: str, ok: bool = True) -> None:
         self._send(pack_event(t, text, ok))
+
+    def sort_event(self, ev, risk: dict | None = None) -> None:
+        """Queue one full-rate sorting event (logged by :meth:`RerunLogger.log_event`)."""
+        self._send(pack_sort_event(ev, risk))
 
     def _send(self, message: bytes) -> None:
         if self.broken:
@@ -236,6 +248,8 @@ def child_main(argv: list[str] | None = None) -> int:
             rec.set_time(TIMELINE, duration=t)
             text = payload[9:].decode("utf-8", "replace")
             rec.log("events/outcomes", rr.TextLog(text, level="INFO" if ok else "WARN"))
+        elif kind == KIND_SORT_EVENT:
+            logger.log_event(*pickle.loads(payload))
     logger.close()
     print(f"[rerun_live] {logger.frames} frames logged", file=sys.stderr, flush=True)
     return 0

@@ -11,10 +11,16 @@ bag (:func:`log_bag`, ``fence-sorter rrd``). Entity paths:
 - ``top/...``: the same in 2D for the top view (parcels as their rotated footprints), in view
   coordinates ``(x, -y)`` (a 2D view draws y downwards; so y0, towards the chute, points up);
 - ``plots/contact/<id>/N`` and ``.../N_stiff`` [N], ``plots/fence/tip_deflection`` [m],
-  ``plots/fence/alpha_w`` [rad], ``plots/speed/<id>`` [m/s].
+  ``plots/fence/alpha_w`` [rad], ``plots/speed/<id>`` [m/s] at the publish rate;
+- per sorting event at the solver's resolution (:meth:`RerunLogger.log_event`):
+  ``plots/contact/<id>/N_steps``, ``.../N_stiff_course`` [N],
+  ``plots/fence/tip_deflection/steps/<id>`` [m]; ``damage/w_n``, ``damage/a_N``, ``damage/N``
+  (``value`` and ``limit``): each parcel's impact against the limits at its outcome time.
 
 Frame "sorter" (REP-103, z up): x0 along the belt, y0 across it towards the chute. The default
-blueprint opens on the top view with the time series beside it (the 3D view in a tab behind).
+blueprint opens on the top view with the time series beside it (the 3D view in a tab behind,
+the damage-risk plots in a tab behind the time series). Parcels are coloured by their damage
+margin once their outcome is known (from the start in a bag's recording).
 """
 
 from __future__ import annotations
@@ -37,6 +43,12 @@ FORCE_SCALE = 1.0 / 1000.0  # contact arrow length per newton [m/N]
 DIVERT_COLOR = (230, 150, 50)
 PASS_COLOR = (150, 150, 150)
 SORTED_COLOR = (60, 180, 75)
+#: the speed plot's axis runs from 0 to this (the parcels' speeds stay below) [m/s]
+SPEED_AXIS_MAX = 3.0
+#: damage-risk colours of the top view: the margin (1 - value / limit, the smaller of w_n's
+#: and a_N's) from MARGIN_COLORS[0] at MARGIN_RANGE[0] (over the limit) to [2] at [1]
+MARGIN_COLORS = ((220, 40, 40), (240, 200, 40), (60, 180, 75))
+MARGIN_RANGE = (-0.25, 0.5)
 
 
 @dataclass(frozen=True)
@@ -100,14 +112,22 @@ def top_view_bounds(scene: SceneGeometry, margin: float = 0.3) -> tuple[tuple, t
 
 def blueprint(scene: SceneGeometry | None = None):
     """Default layout: the top view (2D, framed on the belt and chute when ``scene`` is given)
-    on the left with the 3D scene in a tab behind it, force / fence / speed series on the
-    right."""
+    on the left with the 3D scene in a tab behind it; on the right the time series (forces,
+    tip deflection, alpha_w, speeds) with the damage-risk plots in a tab behind them. Every
+    plot's time axis is linked to the others (one instant at one x position)."""
     import rerun.blueprint as rrb
 
     bounds = None
     if scene is not None:
         x_range, y_range = top_view_bounds(scene)
         bounds = rrb.VisualBounds2D(x_range=x_range, y_range=y_range)
+
+    def plot(name: str, origin: str, y_from_zero: float | None = None):
+        axis_y = rrb.ScalarAxis(range=(0.0, y_from_zero)) if y_from_zero else None
+        return rrb.TimeSeriesView(
+            name=name, origin=origin, axis_x=rrb.TimeAxis(link="LinkToGlobal"), axis_y=axis_y
+        )
+
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Tabs(
@@ -115,16 +135,26 @@ def blueprint(scene: SceneGeometry | None = None):
                 rrb.Spatial3DView(name="sorter 3D", origin="world"),
                 active_tab=0,
             ),
-            rrb.Vertical(
-                rrb.TimeSeriesView(name="contact force N, N_stiff [N]", origin="plots/contact"),
-                rrb.TimeSeriesView(name="fence tip deflection [m], alpha_w [rad]",
-                                   origin="plots/fence"),
-                rrb.TimeSeriesView(name="parcel speed [m/s]", origin="plots/speed"),
+            rrb.Tabs(
+                rrb.Vertical(
+                    plot("contact force N, N_stiff [N]", "plots/contact"),
+                    plot("fence tip deflection [m]", "plots/fence/tip_deflection"),
+                    plot("drive angle alpha_w [rad]", "plots/fence/alpha_w"),
+                    plot("parcel speed [m/s]", "plots/speed", SPEED_AXIS_MAX),
+                    name="time series",
+                ),
+                rrb.Vertical(
+                    plot("impact speed w_n against w_dop [m/s]", "damage/w_n"),
+                    plot("peak acceleration a_N against a_Ndop [m/s^2]", "damage/a_N"),
+                    plot("peak force N against a_Ndop m_p [N]", "damage/N"),
+                    name="damage risk",
+                ),
+                active_tab=0,
             ),
             column_shares=[3, 2],
         ),
         collapse_panels=True,
-    )  # fmt: skip
+    )
 
 
 def open_recording(
@@ -174,6 +204,8 @@ class RerunLogger:
         self.scene_every = max(int(scene_every), 1)
         self._series_ids: set[int] = set()
         self._series: dict[str, tuple[list[float], list[float]]] = {}
+        self.margins: dict[int, float] = {}  # parcel id -> damage margin, once known
+        self._damage_styled: set[str] = set()
         self._frames = _SceneColumns()
         self._log_static()
 
@@ -283,7 +315,9 @@ class RerunLogger:
         self._log_static_top()
         self._log_static_styles()
         rec.log(
-            "plots/fence/tip_deflection", rr.SeriesLines(names="tip deflection [m]"), static=True
+            "plots/fence/tip_deflection",
+            rr.SeriesLines(names="tip deflection, sampled [m]"),
+            static=True,
         )
         rec.log("plots/fence/alpha_w", rr.SeriesLines(names="alpha_w [rad]"), static=True)
 
@@ -363,8 +397,7 @@ class RerunLogger:
             b.half_sizes.append((0.5 * p.length_a, 0.5 * p.width_b, 0.5 * p.height))
             b.quats.append((0.0, 0.0, math.sin(0.5 * p.yaw), math.cos(0.5 * p.yaw)))
             b.labels.append(str(p.parcel_id))
-            b.colors.append(SORTED_COLOR if p.stage == 5 else (DIVERT_COLOR if p.divert
-                                                                else PASS_COLOR))  # fmt: skip
+            b.colors.append(self._color(p))
             if p.n > 0.0 and math.isfinite(p.contact_x) and fence is not None:
                 normal = _fence_normal(fence, p.contact_x, p.contact_y, p.center_x, p.center_y)
                 b.origins.append((p.contact_x, p.contact_y, FENCE_Z))
@@ -395,10 +428,78 @@ class RerunLogger:
         elif self.frames % self.scene_every == 0:
             self._flush_scene()
 
+    def _color(self, p: ParcelFrame) -> tuple[int, int, int]:
+        """The parcel's damage margin once known (green safe, yellow near, red over a limit),
+        else sorted / divert / pass."""
+        margin = self.margins.get(p.parcel_id)
+        if margin is not None and math.isfinite(margin):
+            return margin_color(margin)
+        return SORTED_COLOR if p.stage == 5 else (DIVERT_COLOR if p.divert else PASS_COLOR)
+
+    def log_event(self, ev, risk: dict | None = None) -> None:
+        """One sorting event at the solver's resolution
+        (:class:`fence_sorter.analysis.events.SortEventData`): N at every step and the
+        N_stiff course (``plots/contact/<id>/N_steps``, ``.../N_stiff_course``), the tip
+        deflection at every step (``plots/fence/tip_deflection/steps/<id>``); with ``risk``
+        (:func:`fence_sorter.analysis.events.risk_of` of its outcome) the damage-risk points
+        at the outcome time and the parcel's colour in the views."""
+        rr, rec, pid = self.rr, self.rec, ev.parcel_id
+        series = (
+            (f"plots/contact/{pid}/N_steps", f"N {pid} (solver steps)", ev.t, ev.normal_force),
+            (f"plots/contact/{pid}/N_stiff_course", f"N_stiff {pid} (stiff obstacle)",
+             ev.stiff_t, ev.stiff_force),
+            (f"plots/fence/tip_deflection/steps/{pid}", f"tip deflection, stroke {pid} [m]",
+             ev.t, ev.tip_deflection),
+        )  # fmt: skip
+        for entity, name, t, values in series:
+            rec.log(entity, rr.SeriesLines(names=name), static=True)
+            if len(t):
+                rec.send_columns(
+                    entity,
+                    indexes=[rr.TimeColumn(TIMELINE, duration=np.asarray(t, dtype=float))],
+                    columns=rr.Scalars.columns(scalars=np.asarray(values, dtype=float)),
+                )
+        if risk is None:
+            return
+        self.margins[pid] = min(risk["impact_speed_margin"], risk["accel_margin"])
+        w_n = ev.impact_speed[0] if len(ev.impact_speed) else math.nan
+        peak_n = (1.0 - risk["accel_margin"]) * risk["a_ndop"] * ev.mass
+        points = (
+            ("damage/w_n/value", "w_n", w_n),
+            ("damage/w_n/limit", "w_dop", risk["w_dop"]),
+            ("damage/a_N/value", "a_N", (1.0 - risk["accel_margin"]) * risk["a_ndop"]),
+            ("damage/a_N/limit", "a_Ndop", risk["a_ndop"]),
+            ("damage/N/value", "peak N", peak_n),
+            ("damage/N/limit", "a_Ndop m_p", risk["a_ndop"] * ev.mass),
+        )
+        rec.set_time(TIMELINE, duration=float(ev.t_outcome))
+        for entity, name, value in points:
+            if entity not in self._damage_styled:
+                self._damage_styled.add(entity)
+                style = rr.SeriesPoints(
+                    names=name,
+                    markers="cross" if entity.endswith("limit") else "circle",
+                    colors=[MARGIN_COLORS[0]] if entity.endswith("limit") else None,
+                    marker_sizes=4.0,
+                )
+                rec.log(entity, style, static=True)
+            if math.isfinite(value):
+                rec.log(entity, rr.Scalars(float(value)))
+
     def close(self) -> None:
         self.flush()
         self.rec.flush()
         self.rec.disconnect()
+
+
+def margin_color(margin: float) -> tuple[int, int, int]:
+    """Colour of a damage margin: MARGIN_COLORS interpolated over MARGIN_RANGE (clamped)."""
+    lo, hi = MARGIN_RANGE
+    u = min(max((margin - lo) / (hi - lo), 0.0), 1.0) * (len(MARGIN_COLORS) - 1)
+    k = min(int(u), len(MARGIN_COLORS) - 2)
+    f = u - k
+    a, b = MARGIN_COLORS[k], MARGIN_COLORS[k + 1]
+    return tuple(int(round(a[j] + f * (b[j] - a[j]))) for j in range(3))
 
 
 @dataclass
@@ -537,8 +638,23 @@ def bag_frames(contents) -> Iterable[tuple[float, FenceFrame | None, list[Parcel
 
 def log_bag(contents, rec) -> RerunLogger:
     """Log a recorded run (read with :func:`fence_sorter.recording.bagread.read_bag`)."""
+    from fence_sorter.analysis.events import SortEventData, risk_of
+    from fence_sorter.analysis.run import OUTCOME_FIELDS
+
     logger = RerunLogger(rec, scene_from_bag(contents), series_every=1000, scene_every=1000)
     rr = logger.rr
+    outcomes = {}
+    for m in contents.by_topic("/sort_outcomes"):
+        outcomes[int(m.msg.parcel_id)] = {n: getattr(m.msg, n, math.nan) for n in OUTCOME_FIELDS}
+    for m in contents.by_topic("/sort_events"):
+        ev = SortEventData.from_msg(m.msg)
+        o = outcomes.get(ev.parcel_id)
+        logger.log_event(ev, risk_of(o) if o is not None else None)
+    for pid, o in outcomes.items():  # a bag without /sort_events: the margins alone
+        risk = risk_of(o)
+        margin = min(risk["impact_speed_margin"], risk["accel_margin"])
+        if pid not in logger.margins and math.isfinite(margin):
+            logger.margins[pid] = margin
     for m in contents.by_topic("/sort_outcomes"):
         o = m.msg
         rec.set_time(TIMELINE, duration=time_to_sec(o.header.stamp))

@@ -163,6 +163,70 @@ def blueprint_views(path: Path) -> dict[str, tuple[str, dict | None]]:
     return out
 
 
+def blueprint_axes(path: Path) -> dict[str, dict[str, object]]:
+    """Per time-series view name: its TimeAxis link and its ScalarAxis range, as stored."""
+    from rerun.chunk import RrdReader
+
+    reader = RrdReader(path)
+    (store,) = reader.blueprints()
+    names, link, y_range = {}, {}, {}
+    for chunk in reader.stream(store=store):
+        parts = chunk.entity_path.split("/")
+        if len(parts) < 3 or parts[1] != "view":
+            continue
+        batch = chunk.to_record_batch()
+        cols = batch.schema.names
+        if "ViewBlueprint:display_name" in cols:
+            names[parts[2]] = batch.column("ViewBlueprint:display_name").to_pylist()[0][0]
+        if "TimeAxis:link" in cols:
+            link[parts[2]] = batch.column("TimeAxis:link").to_pylist()[0][0]
+        if "ScalarAxis:range" in cols:
+            y_range[parts[2]] = batch.column("ScalarAxis:range").to_pylist()[0][0]
+    return {
+        "time_link": {names[k]: v for k, v in link.items()},
+        "y_range": {names[k]: v for k, v in y_range.items()},
+    }
+
+
+def test_damage_colours_and_the_logged_event(tmp_path):
+    """A parcel's colour follows its damage margin once its event is logged (green with room
+    to spare, red over a limit); the event's curves go in at full rate."""
+    from fence_sorter.analysis.events import SortEventData
+    from fence_sorter.visualisation.rerun_log import (
+        MARGIN_COLORS,
+        MARGIN_RANGE,
+        ParcelFrame,
+        RerunLogger,
+        SceneGeometry,
+        margin_color,
+        open_recording,
+    )
+
+    assert margin_color(MARGIN_RANGE[0] - 1.0) == MARGIN_COLORS[0]
+    assert margin_color(MARGIN_RANGE[1] + 1.0) == MARGIN_COLORS[-1]
+    mid = 0.5 * (MARGIN_RANGE[0] + MARGIN_RANGE[1])
+    assert margin_color(mid) == MARGIN_COLORS[1]
+    out = tmp_path / "event.rrd"
+    logger = RerunLogger(open_recording(out), SceneGeometry(0.7))
+    frame = ParcelFrame(3, 0, 0, 0, 0, 0, 0, 0, 0.4, 0.3, 0.3, divert=True)
+    before = logger._color(frame)
+    t = np.linspace(1.0, 1.2, 101)
+    ev = SortEventData(
+        3, 1.3, 1.0, 15.0, t, np.zeros(101, np.uint8), np.ones(101, np.int64),
+        np.sin(np.pi * (t - 1.0) / 0.2), t, t, t, t, t, t, t, t, t, np.array([1.0]),
+        np.array([2.0]), np.array([5.0]), t[:50], t[:50],
+    )  # fmt: skip
+    risk = {"w_dop": 2.4, "a_ndop": 300.0, "impact_speed_margin": -0.2, "accel_margin": 0.5,
+            "drop_height": 0.2}  # fmt: skip
+    logger.log_event(ev, risk)
+    assert before != logger._color(frame) == margin_color(-0.2)
+    logger.close()
+    rows, static = rrd_rows(out)
+    assert rows["/plots/contact/3/N_steps"] == 101 == rows["/plots/fence/tip_deflection/steps/3"]
+    assert rows["/plots/contact/3/N_stiff_course"] == 50
+    assert rows["/damage/w_n/value"] == rows["/damage/a_N/limit"] == 1
+
+
 def test_top_view_footprints_are_the_rotated_boxes():
     from fence_sorter.visualisation.rerun_log import ParcelFrame, _footprints
 
@@ -228,7 +292,15 @@ def test_rrd_from_the_example_bag(example, tmp_path):
     )
     views = blueprint_views(out)
     kinds = sorted(kind for kind, _, _ in views.values())
-    assert kinds == ["2D", "3D", "TimeSeries", "TimeSeries", "TimeSeries"], views
+    assert kinds == ["2D", "3D"] + ["TimeSeries"] * 7, views
+    # alpha_w and the tip deflection on plots of their own, with units; every plot's time
+    # axis linked to the others; the speed axis from 0
+    assert views["fence tip deflection [m]"][1] == "plots/fence/tip_deflection"
+    assert views["drive angle alpha_w [rad]"][1] == "plots/fence/alpha_w"
+    axes = blueprint_axes(out)
+    assert sorted(axes["time_link"]) == sorted(n for n, v in views.items() if v[0] == "TimeSeries")
+    assert set(axes["time_link"].values()) == {2}  # LinkAxis.LinkToGlobal
+    assert axes["y_range"] == {"parcel speed [m/s]": [0.0, 3.0]}
     kind, origin, bounds = views["top view"]
     assert (kind, origin) == ("2D", "top")
     # framed on the bag's scene: belt x -3 .. 3 m, chute up to y0 = 1.3 m (view y = -1.3)

@@ -169,3 +169,20 @@ def test_config_file_and_bad_values() -> None:
         PlannerConfig.from_mapping({"t1_min": 1.0, "t1_max": 0.5})
     with pytest.raises(ParameterError, match=r"fence_model must be one of"):
         PlannerConfig.from_mapping({"fence_model": "rubber"})
+
+
+def test_damage_risk_margins_and_drop_height():
+    """Margins 1 - value / limit and the drop height w_n^2 / (2 g) (a free fall from h lands
+    at w_n): at the paper's w_dop = 2.4 m/s, h = 0.294 m."""
+    from fence_sorter.capacity.constraints import ConstraintProfile, damage_risk
+
+    limits = ConstraintProfile(w_dop=2.4, a_ndop=300.0)
+    r = damage_risk(1.2, 450.0, limits)
+    assert r.impact_speed_margin == pytest.approx(0.5)
+    assert r.accel_margin == pytest.approx(-0.5)  # 50 % over a_Ndop
+    at_limit = damage_risk(2.4, 300.0, limits)
+    assert at_limit.impact_speed_margin == 0.0 == at_limit.accel_margin
+    assert at_limit.drop_height == pytest.approx(0.2936, abs=1e-4)
+    assert math.sqrt(2 * 9.81 * r.drop_height) == pytest.approx(1.2)
+    none = damage_risk(math.nan, math.nan, limits)
+    assert math.isnan(none.impact_speed_margin) and math.isnan(none.drop_height)

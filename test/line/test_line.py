@@ -509,3 +509,31 @@ def test_a_capture_renders_the_snapshot_of_its_time_after_the_line_moved_on():
         line.advance((k + 0.5) * DT)
         _same_snapshot(line.render(cap), snap)
     assert seen_stroke  # the check covered a stroke in contact, not just the belt
+
+
+def test_event_trace_holds_every_step_up_to_the_sorting_and_its_peaks():
+    """The EventTrace sent with a SORTED outcome: the stroke's accepted steps from its start
+    to the step where C_s crossed y0 = s, from which the outcome's peaks follow again."""
+    from fence_sorter.analysis.events import refined_peak
+    from fence_sorter.line import EventTrace
+
+    line = make_line()
+    line.add_parcel(heavy(1))
+    assert line.command(stroke(1)).accepted
+    events = run(line, 3.0)
+    (out,) = [e for e in events if isinstance(e, Outcome)]
+    (trace,) = [e for e in events if isinstance(e, EventTrace)]
+    assert out.code is OutcomeCode.SORTED
+    assert events.index(trace) == events.index(out) + 1 and trace.t == out.t
+    t = trace.column("t")
+    assert t[0] == 0.0 and np.all(np.diff(t) > 0.0) and len(t) > 50
+    assert trace.start_time + t[-1] <= out.t + 1e-9
+    y = trace.column("y")
+    assert y[-1] >= SCENE.conveyor.width > y[-2]
+    n = trace.column("normal_force")
+    peak = refined_peak(t, n, trace.column("contact_set"))
+    assert peak == pytest.approx(out.peak_normal_force, rel=1e-12)
+    assert peak / trace.mass == pytest.approx(out.peak_normal_accel, rel=1e-12)
+    assert trace.impacts[0, 1] == out.impact_normal_speed
+    assert np.max(trace.impacts[:, 2]) == out.peak_normal_force_stiff
+    assert np.all(trace.column("deformation")[n > 0.0] > 0.0)  # force only in contact
