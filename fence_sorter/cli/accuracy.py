@@ -69,7 +69,7 @@ def register(subparsers) -> None:
     parser.add_argument(
         "--plots-only",
         action="store_true",
-        help="redraw the diagrams in --out from its results.json, run nothing",
+        help="redraw the diagrams and README.md in --out from its results.json, run nothing",
     )
     parser.add_argument(
         "--max-wall",
@@ -104,6 +104,7 @@ def run(args: argparse.Namespace) -> int:
             return error(f"--out: no {results} to plot from")
         for path in accuracy.replot(args.out):
             print(path)
+        print(accuracy.rerender(args.out))
         return 0
     known = available_scenes()
     for name in args.scenes or ():

@@ -47,7 +47,7 @@ import json
 import math
 import statistics
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
@@ -58,6 +58,7 @@ from fence_sorter.jsonsafe import json_safe
 from fence_sorter.physics.params import OUR_METHODS, SCIPY_METHODS
 from fence_sorter.physics.simulate import Scenario, SimulationResult, SortingModel, simulate
 from fence_sorter.verification import machine
+from fence_sorter.verification.report import table
 
 SCENES = ("impact_flexible", "slide_flexible", "positioned_stiff", "arbitrary_stiff")
 METHODS = OUR_METHODS + SCIPY_METHODS
@@ -752,13 +753,8 @@ def replot(out_dir: Path | str) -> list[Path]:
     out = Path(out_dir)
     data = json.loads((out / "results.json").read_text(encoding="utf-8"))
     done = []
-    names = set(RunPoint.__dataclass_fields__)
     for sc in data["scenes"]:
-        points = [
-            RunPoint(**{k: _nan(v) for k, v in p.items() if k in names}) for p in sc["points"]
-        ]
-        checks = [ReferenceCheck(**_nan(c)) for c in sc["reference"]["checks"]]
-        ref = Reference(sc["scene"], None, None, checks)
+        points, ref, _ = scene_data(sc)
         for measure in MEASURES:
             path = out / f"{sc['scene']}_{measure}.png"
             if path.exists():
@@ -788,48 +784,31 @@ def save_reference(sr: SceneResult, out_dir: Path) -> str:
     return str(path.relative_to(out_dir))
 
 
-def _reference_section(campaign: Campaign) -> list[str]:
-    lines = [
-        "## Reference solutions and their check",
-        "",
-        "Each row compares a second solve with the reference, in the same measures as the runs "
-        "below. The halved-step row estimates the reference's own error; it must lie far below "
-        "the errors reported for the runs. The generalized_alpha row is an independent scheme "
-        "on the same model. The ODE-form row is the SciPy form of the model (`kernel.rhs`, "
-        "explicit Karnopp friction) solved tightly: the answer the SciPy baselines converge to; "
-        "its last row checks that answer against a ten times tighter tolerance.",
-        "",
-    ]
-    for sr in campaign.scenes:
-        ref = sr.reference
-        ms = _measures(sr)
+def _reference_section(scenes: Sequence[dict]) -> list[str]:
+    lines = ["## Reference solutions and their check", ""]
+    for sc in scenes:
+        points, ref, ms = scene_data(sc)
+        main = sc["reference"]
         lines += [
-            f"### {sr.scene}",
+            f"### {sc['scene']}",
             "",
-            f"Reference: {ref.main.label}, {ref.main.steps} steps, "
-            f"{ref.main.sim_time:.4f} s simulated, peak N = {ref.main.peak:.6g} N, "
-            f"wall {ref.main.wall:.1f} s.",
+            f"Reference: {main['label']}, {main['steps']} steps, "
+            f"{main['sim_time']:.4f} s simulated, peak N = {main['peak_contact_force']:.6g} N, "
+            f"wall {main['wall']:.1f} s.",
             "",
-            "| compared with the reference | "
-            + " | ".join(MEASURE_TEXT[m][0] for m in ms)
-            + " | wall [s] |",
-            "|---|" + "---|" * (len(ms) + 1),
         ]
+        rows = []
         for c in ref.checks:
             cells = (
                 [_e(c.errors.get(m, math.nan)) for m in ms]
                 if c.status == "ok"
                 else ([c.status + ": " + c.note] + [""] * (len(ms) - 1))
             )
-            lines.append(f"| {c.label} | " + " | ".join(cells) + f" | {c.wall:.1f} |")
+            rows.append([c.label, *cells, f"{c.wall:.1f}"])
+        head = ["compared with the reference", *(MEASURE_TEXT[m][0] for m in ms), "wall [s]"]
+        lines += table(head, rows)
         lines.append("")
-        smallest = {
-            m: min(
-                (p.errors.get(m, math.inf) for p in sr.points if p.status == "ok"),
-                default=math.nan,
-            )
-            for m in ms
-        }
+        smallest = {m: _smallest(points, m) for m in ms}
         lines.append(
             "Smallest error reported below, per measure: "
             + ", ".join(f"{MEASURE_TEXT[m][0]} {_e(smallest[m])}" for m in ms)
@@ -841,22 +820,21 @@ def _reference_section(campaign: Campaign) -> list[str]:
     return lines
 
 
-def _scene_table(sr: SceneResult) -> list[str]:
-    ms = _measures(sr)
-    head = (
-        "| method | setting | wall [ms] | RTF | steps | "
-        + " | ".join(MEASURE_TEXT[m][0] for m in ms)
-        + " | peak N vs ODE form | note |"
-    )
-    lines = [head, "|---|---|---|---|---|" + "---|" * len(ms) + "---|---|"]
-    for p in sr.points:
+def _smallest(points: Sequence[RunPoint], measure: str) -> float:
+    """The smallest error of the finished runs in ``measure`` (NaN if none)."""
+    errs = [p.errors.get(measure, math.inf) for p in points if p.status == "ok"]
+    small = min(errs, default=math.inf)
+    return small if math.isfinite(small) else math.nan
+
+
+def _scene_table(points: Sequence[RunPoint], ms: Sequence[str]) -> list[str]:
+    head = ["method", "setting", "wall [ms]", "RTF", "steps"]
+    head += [MEASURE_TEXT[m][0] for m in ms] + ["peak N vs ODE form", "note"]
+    rows = []
+    for p in points:
         name = f"**default** ({p.method})" if p.is_default else p.method
         if p.status == "skipped":
-            lines.append(
-                f"| {name} | {_value(p)} | | | | "
-                + " | ".join("" for _ in ms)
-                + f" | | {p.note} |"
-            )
+            rows.append([name, _value(p), "", "", "", *("" for _ in ms), "", p.note])
             continue
         errs = [_e(p.errors.get(m, math.nan)) if p.status == "ok" else "-" for m in ms]
         rtf = f"{p.rtf:.3g}"
@@ -871,142 +849,203 @@ def _scene_table(sr: SceneResult) -> list[str]:
         if len(p.walls) > 1:
             note = (note + "; " if note else "") + f"median of {len(p.walls)}"
         ode = _e(p.errors_ode.get("peak_force", math.nan)) if p.errors_ode else ""
-        lines.append(
-            f"| {name} | {_value(p)} | {p.wall * 1e3:.1f} | {rtf} | {p.steps} | "
-            + " | ".join(errs)
-            + f" | {ode} | {note} |"
-        )
-    return lines
+        rows.append([name, _value(p), f"{p.wall * 1e3:.1f}", rtf, str(p.steps), *errs, ode, note])
+    return table(head, rows)
 
 
 def _unfinished_after(points: Sequence[RunPoint], hit: RunPoint) -> str:
-    """ " (its tighter settings ... did not finish)" when some of them were not ok."""
+    """ "; tighter settings ... did not finish" when some of them were not ok."""
     same = [p for p in points if p.method == hit.method and not p.is_default]
     later = same[same.index(hit) + 1 :]
     bad = [p for p in later if p.status != "ok"]
     if not bad:
         return ""
     return (
-        f" (its tighter settings {', '.join(_value(p) for p in bad)} did not finish: "
-        f"{', '.join(sorted({p.status for p in bad}))})"
+        f"; tighter {', '.join(_value(p) for p in bad)}: "
+        f"{', '.join(sorted({p.status for p in bad}))}"
     )
 
 
-def findings(sr: SceneResult) -> list[str]:
-    """Sentences computed from the numbers of one scene (for "What this shows")."""
-    out = []
-    ref = sr.reference
-    default = next((p for p in sr.points if p.is_default), None)
-    scipy_pts = [p for p in sr.points if p.method.startswith("scipy:")]
+def _run(p: RunPoint, default: RunPoint, points: Sequence[RunPoint]) -> str:
+    """ "LSODA rtol 1e-04: 180.0 ms, 97x the default, error 2.1e-05" of a run."""
+    return (
+        f"{describe(p.method, p.value)}: {p.wall * 1e3:.1f} ms, {p.wall / default.wall:.3g}x "
+        f"the default, error {_e(p.errors['peak_force'])}{_unfinished_after(points, p)}"
+    )
+
+
+def summary(points: Sequence[RunPoint], ref: Reference, ms: Sequence[str]) -> list[list[str]]:
+    """The figures a scene's results come down to, as (figure, value) rows: the default, the
+    fastest runs at its peak-force error, observed orders, the adaptive scheme over rtol, the
+    reference's limits. How to read them: docs/verification.md."""
+    rows: list[list[str]] = []
+    default = next((p for p in points if p.is_default), None)
+    scipy_pts = [p for p in points if p.method.startswith("scipy:")]
     if default is not None and default.status == "ok":
         e = default.errors["peak_force"]
-        out.append(
-            f"The default ({describe(default.method, default.value)}) solves the event in "
-            f"{default.wall * 1e3:.1f} ms (RTF {default.rtf:.3g}) with a peak-force error of "
-            f"{_e(e)}, a trajectory RMS error of {_e(default.errors['trajectory'])} m and a "
-            f"final-pose error of {_e(default.errors['final_pose'])} m."
-        )
+        rows += [
+            ["default", describe(default.method, default.value)],
+            ["default: wall, RTF", f"{default.wall * 1e3:.1f} ms, {default.rtf:.3g}"],
+            [
+                "default: peak-force, trajectory, final-pose error",
+                f"{_e(e)}, {_e(default.errors['trajectory'])} m, "
+                f"{_e(default.errors['final_pose'])} m",
+            ],
+        ]
         hit = fastest_reaching(scipy_pts, "peak_force", e)
-        if scipy_pts and hit is not None:
-            out.append(
-                f"The fastest SciPy baseline with a peak-force error at most that is "
-                f"{describe(hit.method, hit.value)}: {hit.wall * 1e3:.1f} ms "
-                f"({hit.wall / default.wall:.3g} times the default's wall time, error "
-                f"{_e(hit.errors['peak_force'])}){_unfinished_after(sr.points, hit)}."
-            )
+        if hit is not None:
+            rows.append(["fastest SciPy run at that error", _run(hit, default, points)])
         elif scipy_pts:
-            best = [p for p in scipy_pts if p.status == "ok"]
-            if best:
-                b = min(best, key=lambda p: p.errors["peak_force"])
-                out.append(
-                    f"No SciPy run reached that peak-force error; the closest was "
-                    f"{describe(b.method, b.value)} with {_e(b.errors['peak_force'])} in "
-                    f"{b.wall * 1e3:.1f} ms."
-                )
-        b = fastest_reaching(scipy_pts, "peak_force", e, ode=True)
-        if b is not None:
-            out.append(
-                f"Measured against their own converged ODE form instead, the fastest SciPy run "
-                f"within that error is {describe(b.method, b.value)}: {b.wall * 1e3:.1f} ms "
-                f"({b.wall / default.wall:.3g} times the default's)"
-                f"{_unfinished_after(sr.points, b)}."
-            )
-        ours = [p for p in sr.points if p.method in OUR_METHODS and not p.is_default]
+            ok = [p for p in scipy_pts if p.status == "ok"]
+            if ok:
+                b = min(ok, key=lambda p: p.errors["peak_force"])
+                closest = f"none; closest {_run(b, default, points)}"
+                rows.append(["fastest SciPy run at that error", closest])
+        hit = fastest_reaching(scipy_pts, "peak_force", e, ode=True)
+        if hit is not None:
+            what = "fastest SciPy run at that error of its own ODE form"
+            rows.append([what, _run(hit, default, points)])
+        ours = [p for p in points if p.method in OUR_METHODS and not p.is_default]
         hit = fastest_reaching(ours, "peak_force", e)
         if hit is not None and hit.wall < default.wall / 1.5:
-            out.append(
-                f"Among our methods, {describe(hit.method, hit.value)} reaches it faster: "
-                f"{hit.wall * 1e3:.1f} ms."
-            )
+            rows.append(["faster of ours at that error", _run(hit, default, points)])
         whole = default.errors.get("trajectory", math.nan)
         to_sort = default.errors.get("trajectory_to_sort", math.nan)
-        if whole > 10.0 * to_sort:
-            out.append(
-                f"Up to the sort crossing the default's trajectory error is {_e(to_sort)} m; over "
-                f"the whole run, which goes on off the belt, it is {_e(whole)} m: past the "
-                "crossing (a located event) the load flies on without belt friction, so the "
-                "velocity error it carries there grows into a position error with the flight "
-                "time."
-            )
+        if math.isfinite(to_sort):
+            what = "default: trajectory error to the sort, whole run"
+            rows.append([what, f"{_e(to_sort)} m, {_e(whole)} m"])
     elif default is not None:
-        out.append(f"The default run did not finish: {default.status}, {default.note}.")
+        rows.append(["default", f"did not finish: {default.status}, {default.note}"])
     for method in ("trapezoidal", "generalized_alpha"):
-        pts = [p for p in sr.points if p.method == method]
-        ms = [m for m in _measures(sr) if m != "final_pose"]
-        orders = {m: observed_order(pts, m, ref.uncertainty(m)) for m in ms}
+        pts = [p for p in points if p.method == method]
+        order_ms = [m for m in ms if m != "final_pose"]
+        orders = {m: observed_order(pts, m, ref.uncertainty(m)) for m in order_ms}
         if any(math.isfinite(v) for v in orders.values()):
-            out.append(
-                f"{method}: observed order in dt "
-                + ", ".join(f"{_f(orders[m])} ({MEASURE_TEXT[m][0]})" for m in ms)
-                + "."
+            rows.append(
+                [
+                    f"{method}: observed order in dt",
+                    ", ".join(f"{_f(orders[m])} ({MEASURE_TEXT[m][0]})" for m in order_ms),
+                ]
             )
-    ad = [
-        p
-        for p in sr.points
-        if p.method == "adaptive" and p.status == "ok" and p.errors and not p.is_default
-    ]
+    ad = [p for p in points if p.method == "adaptive" and p.status == "ok" and not p.is_default]
+    ad = [p for p in ad if p.errors]
     if len(ad) >= 2:
         lo, hi = ad[0], ad[-1]
-        out.append(
-            f"adaptive: from rtol {lo.value:.0e} to {hi.value:.0e} the trajectory error goes "
-            f"from {_e(lo.errors['trajectory'])} to {_e(hi.errors['trajectory'])} m and the "
-            f"peak-force error from {_e(lo.errors['peak_force'])} to "
-            f"{_e(hi.errors['peak_force'])}, at {lo.wall * 1e3:.1f} to {hi.wall * 1e3:.1f} ms"
-            + (
-                " (not monotone in rtol: a tighter rtol gives a more than twice larger error)"
-                if any(non_monotone(ad, m) for m in ("peak_force", "trajectory"))
-                else ""
-            )
-            + "."
-        )
+        monotone = not any(non_monotone(ad, m) for m in ("peak_force", "trajectory"))
+        rows += [
+            [
+                f"adaptive rtol {lo.value:.0e} to {hi.value:.0e}: peak-force error",
+                f"{_e(lo.errors['peak_force'])} to {_e(hi.errors['peak_force'])}",
+            ],
+            [
+                f"adaptive rtol {lo.value:.0e} to {hi.value:.0e}: trajectory error",
+                f"{_e(lo.errors['trajectory'])} to {_e(hi.errors['trajectory'])} m",
+            ],
+            [
+                f"adaptive rtol {lo.value:.0e} to {hi.value:.0e}: wall",
+                f"{lo.wall * 1e3:.1f} to {hi.wall * 1e3:.1f} ms",
+            ],
+            ["adaptive: errors monotone in rtol (within 2x)", "yes" if monotone else "no"],
+        ]
     gap = ref.ode_gap("peak_force")
-    if math.isfinite(gap) and gap > 10.0 * max(ref.uncertainty("peak_force"), 0.0):
-        out.append(
-            f"The ODE form the SciPy baselines integrate converges to a different answer: its "
-            f"tight solve differs from the reference by {_e(gap)} in peak force and "
-            f"{_e(ref.ode_gap('trajectory'))} m in trajectory, far more than the reference's "
-            f"own error ({_e(ref.uncertainty('peak_force'))}, "
-            f"{_e(ref.uncertainty('trajectory'))} m); SciPy errors against the reference cannot "
-            "fall below it."
+    if math.isfinite(gap):
+        rows.append(
+            [
+                "ODE form vs reference: peak force, trajectory",
+                f"{_e(gap)}, {_e(ref.ode_gap('trajectory'))} m "
+                f"(reference vs halved step: {_e(ref.uncertainty('peak_force'))}, "
+                f"{_e(ref.uncertainty('trajectory'))} m)",
+            ]
         )
-    for m in _measures(sr):
+    unresolved = []
+    for m in ms:
         unc = ref.uncertainty(m)
-        small = min(
-            (p.errors.get(m, math.inf) for p in sr.points if p.status == "ok"), default=math.inf
-        )
+        small = _smallest(points, m)
         if math.isfinite(unc) and math.isfinite(small) and unc > 0.1 * small:
-            out.append(
-                f"Reference caveat: in {MEASURE_TEXT[m][0]} the reference differs from its "
-                f"halved-step twin by {_e(unc)}, not far below the smallest error reported "
-                f"({_e(small)}); errors of that size in this measure are not resolved."
-            )
-    capped = sorted({p.method for p in scipy_pts if p.status == "capped"})
-    failed = sorted({p.method for p in scipy_pts if p.status == "failed"})
-    if capped:
-        out.append(f"Hit the wall-time cap: {', '.join(capped)}.")
-    if failed:
-        out.append(f"Failed: {', '.join(failed)}.")
-    return out
+            unresolved.append(f"{MEASURE_TEXT[m][0]} (reference {_e(unc)}, smallest {_e(small)})")
+    if unresolved:
+        rows.append(["errors not resolved by the reference", "; ".join(unresolved)])
+    for status in ("capped", "failed"):
+        methods = sorted({p.method for p in scipy_pts if p.status == status})
+        if methods:
+            rows.append([f"SciPy methods {status}", ", ".join(methods)])
+    return rows
+
+
+def scene_data(sc: Mapping) -> tuple[list[RunPoint], Reference, tuple[str, ...]]:
+    """One scene of results.json as run points, the reference's checks and the measures that
+    apply to it (those with a finite error somewhere)."""
+    names = set(RunPoint.__dataclass_fields__)
+    points = [RunPoint(**{k: _nan(v) for k, v in p.items() if k in names}) for p in sc["points"]]
+    checks = [ReferenceCheck(**_nan(c)) for c in sc["reference"]["checks"]]
+    ms = tuple(
+        m for m in MEASURES if any(math.isfinite(p.errors.get(m, math.nan)) for p in points)
+    )
+    return points, Reference(sc["scene"], None, None, checks), ms
+
+
+def _settings(data: Mapping) -> list[str]:
+    """The campaign's settings as a table, from the data."""
+
+    def values(method: str) -> list[float]:
+        return sorted(
+            {
+                p["value"]
+                for sc in data["scenes"]
+                for p in sc["points"]
+                if p["method"] == method and not p["is_default"]
+            },
+            reverse=True,
+        )
+
+    scipy = {v for m in data["methods"] if m.startswith("scipy:") for v in values(m)}
+    scipy = sorted(scipy, reverse=True)
+    rows = [
+        ["scenes", ", ".join(sc["scene"] for sc in data["scenes"])],
+        ["methods", ", ".join(data["methods"])],
+        ["adaptive rtol", ", ".join(f"{v:.0e}" for v in values("adaptive"))],
+        ["fixed-step dt [ms]", ", ".join(f"{v * 1e3:.4g}" for v in values("trapezoidal"))],
+        ["SciPy rtol", ", ".join(f"{v:.0e}" for v in scipy)],
+        ["timed runs per setting (median)", str(data["repeats"])],
+        ["wall-time cap per solve [s]", f"{data['max_wall_s']:g}"],
+        ["reduced grid (--quick)", "yes" if data["quick"] else "no"],
+    ]
+    return table(["setting", "value"], rows)
+
+
+def render_readme(data: Mapping) -> str:
+    """README.md of a campaign from its results.json alone."""
+    scenes = data["scenes"]
+    lines = [
+        "# Accuracy: work-precision diagrams of the time integrators",
+        "",
+        "Generated by `fence-sorter accuracy` (`fence_sorter/verification/accuracy.py`) from "
+        "`results.json`; do not edit by hand. What is measured and how to read it: "
+        "[docs/verification.md](../verification.md#accuracy).",
+        "",
+        "Command:",
+        "",
+        "```",
+        data["command"] or "fence-sorter accuracy",
+        "```",
+        "",
+        f"Run {data['started']}, {data['duration_s'] / 60:.1f} min.",
+        "",
+    ]
+    lines += table(["machine", ""], data["machine"].items())
+    lines += ["", "## Settings", ""] + _settings(data) + [""]
+    lines += _reference_section(scenes)
+    lines += ["## Results", ""]
+    for sc in scenes:
+        points, ref, ms = scene_data(sc)
+        lines += [f"### {sc['scene']}", ""]
+        lines += [f"![{sc['scene']}_{m}.png]({sc['scene']}_{m}.png)" for m in ms]
+        lines += ["", f"Reference sampled on the 1 ms grid: `reference/{sc['scene']}.npz`.", ""]
+        lines += _scene_table(points, ms)
+        lines += ["", "Summary:", ""]
+        lines += table(["figure", "value"], summary(points, ref, ms))
+        lines += [""]
+    return "\n".join(lines)
 
 
 def results_dict(campaign: Campaign) -> dict:
@@ -1046,93 +1085,24 @@ def results_dict(campaign: Campaign) -> dict:
 
 
 def write_report(campaign: Campaign, out_dir: Path | str) -> Path:
-    """README.md, results.json and the PNGs into ``out_dir``; returns the README's path."""
+    """results.json, the PNGs, the sampled references and README.md (rendered from
+    results.json) into ``out_dir``; returns the README's path."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    lines = [
-        "# Accuracy: work-precision diagrams of the time integrators",
-        "",
-        "Generated by `fence-sorter accuracy` (`fence_sorter/verification/accuracy.py`); do not "
-        "edit by hand. The numbers are also in `results.json`.",
-        "",
-        "Command:",
-        "",
-        "```",
-        campaign.command or "fence-sorter accuracy",
-        "```",
-        "",
-        f"Run {campaign.started}, {campaign.duration / 60:.1f} min"
-        + (" (--quick: reduced grid)" if campaign.quick else "")
-        + ".",
-        "",
-        "Machine:",
-        "",
-    ]
-    lines += [f"- {k}: {v}" for k, v in campaign.machine.items()]
-    lines += [
-        "",
-        "Timings are medians on a shared machine with other jobs running; treat ratios below "
-        "about 1.5 as noise.",
-        "",
-        "## How",
-        "",
-        f"- Scenes: {', '.join(sr.scene for sr in campaign.scenes)} (`config/scenes/`), "
-        f"recording {', '.join(RECORD)}.",
-        f"- Methods and settings: adaptive over rtol "
-        f"{', '.join(f'{v:.0e}' for v in grid('adaptive', campaign.quick))}; trapezoidal and "
-        f"generalized_alpha over dt "
-        f"{', '.join(f'{v * 1e3:.4g}' for v in grid('trapezoidal', campaign.quick))} ms; SciPy "
-        f"baselines over rtol {', '.join(f'{v:.0e}' for v in grid('scipy:RK45', campaign.quick))}"
-        f". atol = {ATOL_PER_RTOL:g} x rtol for every error-controlled method (the defaults "
-        "rtol 1e-4, atol 1e-6 have this ratio); dt_max 5 ms (also the SciPy max_step). "
-        f"Methods run: {', '.join(campaign.methods)}.",
-        "- Default: the scene as shipped (solver defaults: adaptive, rtol 1e-4, atol 1e-6, "
-        "dt_max 5 ms), the star in the plots and the **default** row in the tables.",
-        f"- Timing: one untimed warm-up solve per scene and method (JIT), then the median of "
-        f"{campaign.repeats} `perf_counter` wall times of `simulate()` (one if a solve takes "
-        f"more than {LONG_RUN:g} s). RTF = simulated time / wall time. Each solve is capped at "
-        f"{campaign.max_wall:g} s (`solver.max_wall_time`): a capped solve has no error point, "
-        "its RTF is that of the part it solved, and the method's tighter settings are skipped.",
-        "- Error measures against the reference: peak contact force (relative); trajectory of "
-        "C_s (RMS distance on a 1 ms grid over the common time span, cubic Hermite "
-        "interpolation through the accepted points' positions and velocities); fence tip "
-        "deflection (RMS on the same grid, linear interpolation; flexible fences); final pose "
-        "(largest displacement of a load corner at the common end time, which is the sort "
-        "crossing give or take one step for the scenes that stop when sorted). Duplicate times "
-        "at events are dropped before interpolating.",
-        f"- Reference: trapezoidal at dt = 2 ms / "
-        f"{round(2e-3 / (REF_DT_QUICK if campaign.quick else REF_DT))} with its contact "
-        f"iteration converged to {REF_TOLERANCE:g} (the runs keep the default 1e-9); checked "
-        "in the next section.",
-        "- The SciPy baselines (`fence_sorter/physics/baselines.py`) integrate `kernel.rhs`, "
-        "the model's ODE form with explicit Karnopp friction, with no event location; the "
-        "column *peak N vs ODE form* gives their peak-force error against the converged ODE "
-        "form, i.e. their own convergence.",
-        "- *What this shows* compares methods at the default's peak-force error: a method's "
-        "setting counts as reaching an error if it and every tighter setting of that method "
-        "that finished are at most that error (so a lucky cancellation at one loose setting "
-        "does not count). Observed orders are least-squares slopes of log error over log dt, "
-        "over the points whose error is above ten times the reference's own error.",
-        "",
-    ]
-    lines += _reference_section(campaign)
-    lines += ["## Results", ""]
+    data = results_dict(campaign)
+    (out_dir / "results.json").write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
     for sr in campaign.scenes:
-        files = plot_scene(sr, out_dir)
-        npz = save_reference(sr, out_dir)
-        lines += [f"### {sr.scene}", ""]
-        lines += [f"![{f}]({f})" for f in files]
-        lines += ["", f"Reference sampled on the 1 ms grid: `{npz}`.", ""]
-        lines += _scene_table(sr)
-        lines += [""]
-    lines += ["## What this shows", ""]
-    for sr in campaign.scenes:
-        lines += [f"**{sr.scene}.** " + " ".join(findings(sr)), ""]
+        plot_scene(sr, out_dir)
+        save_reference(sr, out_dir)
+    return rerender(out_dir)
+
+
+def rerender(out_dir: Path | str) -> Path:
+    """README.md of ``out_dir`` from its results.json (no solve runs)."""
+    out_dir = Path(out_dir)
+    data = json.loads((out_dir / "results.json").read_text(encoding="utf-8"))
     path = out_dir / "README.md"
-    path.write_text("\n".join(lines), encoding="utf-8")
-    (out_dir / "results.json").write_text(
-        json.dumps(results_dict(campaign), indent=1) + "\n", encoding="utf-8"
-    )
+    path.write_text(render_readme(data) + "\n", encoding="utf-8")
     return path
 
 
@@ -1149,6 +1119,9 @@ __all__ = [
     "error_measures",
     "grid",
     "reference",
+    "render_readme",
+    "rerender",
     "run_campaign",
+    "summary",
     "write_report",
 ]

@@ -39,7 +39,7 @@ def test_quick_report_has_the_command_plots_and_reference_check(quick) -> None:
     assert "fence-sorter accuracy --out" in readme and "--quick" in readme
     assert "## Reference solutions and their check" in readme
     assert "trapezoidal at half the reference step" in readme
-    assert "## What this shows" in readme and "**default**" in readme
+    assert "| default: wall, RTF |" in readme and "**default**" in readme
     for measure in ("peak_force", "trajectory", "final_pose"):
         png = out / f"positioned_stiff_{measure}.png"
         assert png.is_file() and png.read_bytes()[:4] == b"\x89PNG"

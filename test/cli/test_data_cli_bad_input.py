@@ -45,5 +45,6 @@ def test_plots_only_redraws_from_the_saved_results(tmp_path):
     res = run_cli("accuracy", "--plots-only", "--out", str(acc))
     assert res.returncode == 0, res.stderr
     assert (acc / "arbitrary_stiff_final_pose.png").stat().st_size > 10_000
+    assert "| default: wall, RTF |" in (acc / "README.md").read_text()  # rendered again
     res = run_cli("accuracy", "--plots-only", "--out", str(tmp_path / "none"))
     assert res.returncode == 2 and "results.json" in res.stderr
