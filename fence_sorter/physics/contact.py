@@ -44,9 +44,14 @@ class StiffImpact:
 
 
 def stiff_impact(
-    mass: float, approach_speed: float, contact: ContactParams, samples: int = 400
+    mass: float,
+    approach_speed: float,
+    contact: ContactParams,
+    samples: int = 400,
+    max_spacing: float = math.inf,
 ) -> StiffImpact:
-    """Solve m Dddot = -N(D, Ddot), D(0) = 0, Ddot(0) = w_n until the load separates.
+    """Solve m Dddot = -N(D, Ddot), D(0) = 0, Ddot(0) = w_n until the load separates; the
+    course on ``samples`` points, more where they would lie more than ``max_spacing`` apart.
 
     Tight tolerances (rtol 1e-10) make the reference independent of the caller's step size.
     With b_p = 0: D_max = (5 m w_n^2 / (2 k_p))^(1/5) and the contact lasts 2.5074 D_max / w_n.
@@ -82,6 +87,8 @@ def stiff_impact(
         first_step=d_el / approach_speed * 1e-3,
     )
     t_sep = float(sol.t_events[0][0]) if len(sol.t_events[0]) else float(sol.t[-1])
+    if math.isfinite(max_spacing):
+        samples = max(samples, math.ceil(t_sep / max_spacing) + 1)
     t = np.linspace(0.0, t_sep, samples)
     y = sol.sol(t)
     d = np.maximum(y[0], 0.0)
@@ -123,10 +130,7 @@ def stiff_course(
     """N_stiff(t) through one impact (Fig. 11c, 12c): times from ``onset`` [s] and forces [N]
     of :func:`stiff_impact` on at least STIFF_COURSE_POINTS points at most STIFF_COURSE_DT
     apart (a slow, long impact gets more), ending with the force back at 0."""
-    imp = stiff_impact(mass, approach_speed, contact, samples=STIFF_COURSE_POINTS)
-    needed = math.ceil(imp.duration / STIFF_COURSE_DT) + 1
-    if needed > STIFF_COURSE_POINTS:
-        imp = stiff_impact(mass, approach_speed, contact, samples=needed)
+    imp = stiff_impact(mass, approach_speed, contact, STIFF_COURSE_POINTS, STIFF_COURSE_DT)
     return onset + imp.time, imp.force
 
 

@@ -188,6 +188,7 @@ def blueprint_axes(path: Path) -> dict[str, dict[str, object]]:
     }
 
 
+@pytest.mark.slow
 def test_damage_colours_and_the_logged_event(tmp_path):
     """A parcel's colour follows its damage margin once its event is logged (green with room
     to spare, red over a limit); the event's curves go in at full rate."""

@@ -511,6 +511,7 @@ def test_a_capture_renders_the_snapshot_of_its_time_after_the_line_moved_on():
     assert seen_stroke  # the check covered a stroke in contact, not just the belt
 
 
+@pytest.mark.slow
 def test_event_trace_holds_every_step_up_to_the_sorting_and_its_peaks():
     """The EventTrace sent with a SORTED outcome: the stroke's accepted steps from its start
     to the step where C_s crossed y0 = s, from which the outcome's peaks follow again."""

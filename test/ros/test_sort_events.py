@@ -19,7 +19,7 @@ from fence_sorter.analysis.events import EVENT_PEAK_RTOL, SortEventData
 from fence_sorter.recording.bagread import read_bag
 from fence_sorter.testing import run_cli
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 PARCELS = 20
 G = 9.81  # the drop height's gravity [m/s^2]
