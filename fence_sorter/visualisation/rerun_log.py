@@ -206,6 +206,7 @@ class RerunLogger:
         self._series: dict[str, tuple[list[float], list[float]]] = {}
         self.margins: dict[int, float] = {}  # parcel id -> damage margin, once known
         self._damage_styled: set[str] = set()
+        self._risk_marks: dict[int, tuple] = {}  # parcel id -> (top-view point, colour, label)
         self._frames = _SceneColumns()
         self._log_static()
 
@@ -462,6 +463,21 @@ class RerunLogger:
         if risk is None:
             return
         self.margins[pid] = min(risk["impact_speed_margin"], risk["accel_margin"])
+        # where the event left the parcel, in its margin's colour: the top view keeps every
+        # parcel's damage risk in sight after it has left the belt
+        if len(ev.x):
+            self._risk_marks[pid] = (
+                (float(ev.x[-1]), -float(ev.y[-1])),
+                margin_color(self.margins[pid]),
+                f"{pid}: m_w {risk['impact_speed_margin']:+.2f}, m_a {risk['accel_margin']:+.2f}",
+            )
+            marks = list(self._risk_marks.values())
+            rec.set_time(TIMELINE, duration=float(ev.t_outcome))
+            rec.log(
+                f"{TOP}/damage_risk",
+                rr.Points2D([m[0] for m in marks], colors=[m[1] for m in marks],
+                            labels=[m[2] for m in marks], radii=0.03, draw_order=6.0),
+            )  # fmt: skip
         w_n = ev.impact_speed[0] if len(ev.impact_speed) else math.nan
         peak_n = (1.0 - risk["accel_margin"]) * risk["a_ndop"] * ev.mass
         points = (

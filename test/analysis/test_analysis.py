@@ -226,6 +226,7 @@ def test_damage_colours_and_the_logged_event(tmp_path):
     assert rows["/plots/contact/3/N_steps"] == 101 == rows["/plots/fence/tip_deflection/steps/3"]
     assert rows["/plots/contact/3/N_stiff_course"] == 50
     assert rows["/damage/w_n/value"] == rows["/damage/a_N/limit"] == 1
+    assert rows["/top/damage_risk"] == 1  # where the parcel left the belt, in its colour
 
 
 def test_top_view_footprints_are_the_rotated_boxes():
