@@ -295,8 +295,6 @@ def run(args: argparse.Namespace) -> int:
             return error(f"--max-points must be in [1, inf), got {args.max_points}")
         from fence_sorter.optimize import sweep
 
-        if args.plots_only:
-            return sweep.replot(args)
         return int(sweep.main(args) or 0)
     from fence_sorter.optimize.executor import evaluation_pool
     from fence_sorter.optimize.solve import grid_search, optimize

@@ -923,16 +923,9 @@ def finish(sweep: SweepDef, out: Path, table_path: Path) -> list[str]:
     return lines
 
 
-def replot(args) -> int:
+def replot(names: Sequence[str], out: Path) -> int:
     """``fence-sorter optimize --sweep NAME --plots-only``: the figures from the CSVs in
-    ``args.out`` (no solve, no table written). Exit 0, or 2 for an unknown sweep or a missing
-    CSV."""
-    try:
-        names = parse_names(str(args.sweep))
-    except KeyError as exc:
-        print(f"fence-sorter: error: --sweep: {exc.args[0]}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    out = Path(getattr(args, "out", None) or "docs/paper")
+    ``out`` (no solve, no table written). Exit 0, or 2 for a missing CSV."""
     for name in names:
         sw = get_sweep(name)
         csv_path = out / f"{sw.run}.csv"
@@ -948,7 +941,8 @@ def main(args) -> int:
 
     Uses ``args.sweep``, ``args.out`` (docs/paper), ``args.resume`` (True), ``args.workers``,
     ``args.scheduler`` and, when present, ``args.table`` (config/decision_table.yaml),
-    ``args.max_points``. Exit 0 done, 1 a point failed, 2 bad input, 130 interrupted.
+    ``args.max_points``, ``args.plots_only`` (True: :func:`replot` alone). Exit 0 done, 1 a
+    point failed, 2 bad input, 130 interrupted.
     """
     try:
         names = parse_names(str(args.sweep))
@@ -956,6 +950,8 @@ def main(args) -> int:
         print(f"fence-sorter: error: --sweep: {exc.args[0]}", file=sys.stderr)
         return EXIT_BAD_INPUT
     out = Path(getattr(args, "out", None) or "docs/paper")
+    if getattr(args, "plots_only", False):
+        return replot(names, out)
     resume = bool(getattr(args, "resume", True))
     max_points = getattr(args, "max_points", None)
     table_path = Path(getattr(args, "table", None) or "config/decision_table.yaml")
