@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from fence_sorter.verification import accuracy
+from fence_sorter.verification import accuracy, stability
 from fence_sorter.verification.report import fmt, table, tables
 
 DOCS = Path(__file__).resolve().parents[2] / "docs"
@@ -44,3 +44,11 @@ def test_accuracy_summary_is_computed_from_the_runs() -> None:
     assert rows["default: peak-force, trajectory, final-pose error"].startswith(
         f"{default['errors']['peak_force']:.2e}"
     )
+
+
+def test_stability_readme_tables_are_those_of_its_results_json() -> None:
+    data = json.loads((DOCS / "stability" / "results.json").read_text(encoding="utf-8"))
+    committed = tables((DOCS / "stability" / "README.md").read_text(encoding="utf-8"))
+    (rendered,) = tables(stability.render_readme(data))
+    assert len(rendered) == 2 + len(data["cases"])  # one row per case
+    assert committed == [rendered]
