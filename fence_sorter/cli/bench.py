@@ -77,7 +77,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         ),
     )
     parser.add_argument(
-        "--json", metavar="FILE", help="also write every figure as JSON to FILE (for scripts)"
+        "--json",
+        metavar="FILE",
+        help="where to write every figure as JSON (default: --out with the suffix .json)",
     )
 
 
@@ -150,10 +152,9 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(text + _suite_section(out), encoding="utf-8")
-    if args.json:
-        path = Path(args.json)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(B.report_dict(report), indent=1) + "\n", encoding="utf-8")
+    path = Path(args.json) if args.json else out.with_suffix(".json")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(B.report_dict(report), indent=1) + "\n", encoding="utf-8")
     print(text)
     failed = [f"{t.scene}: {t.target}" for t in report.targets if t.verdict == "FAIL"]
     print(f"report written to {out}")

@@ -62,6 +62,7 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime
 
 from fence_sorter.verification.machine import REPO, git_revision, load_average, machine_info
+from fence_sorter.verification.report import table
 
 SCENES = ("impact_flexible", "slide_flexible", "positioned_stiff", "arbitrary_stiff")
 QUICK_SCENES = ("positioned_stiff",)
@@ -1180,12 +1181,6 @@ def _e(x: float) -> str:
     return "n/a" if x is None or not math.isfinite(x) else f"{x:.1e}"
 
 
-def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
-    out = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
-    out += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
-    return out
-
-
 def _mib(kib: float) -> str:
     return f"{kib / 1024:.0f}"
 
@@ -1210,7 +1205,7 @@ def render_markdown(rep: BenchReport) -> str:
     rows.append(
         ("load average (1, 5, 15 min)", f"{rep.load_before} before, {rep.load_after} after")
     )
-    L += _table(("", ""), rows)
+    L += table(("", ""), rows)
     add("")
     add(
         "Wall times are `time.perf_counter` around `simulate(scenario)` (the `SortingModel` build "
@@ -1228,7 +1223,7 @@ def render_markdown(rep: BenchReport) -> str:
 
     add("## Targets")
     add("")
-    L += _table(
+    L += table(
         ("target", "scene", "measured", "limit", "verdict", "note"),
         [
             (t.target, t.scene, t.measured, t.limit, f"**{t.verdict}**", t.note)
@@ -1266,7 +1261,7 @@ def render_markdown(rep: BenchReport) -> str:
                 str(len(d.walls)),
             )
         )
-    L += _table(
+    L += table(
         (
             "scene",
             "method",
@@ -1315,7 +1310,7 @@ def render_markdown(rep: BenchReport) -> str:
                 _e(s.belt.gap) if s.belt is not None else "not run",
             )
         )
-    L += _table(
+    L += table(
         (
             "scene",
             "our reference peak N [N]",
@@ -1410,7 +1405,7 @@ def render_markdown(rep: BenchReport) -> str:
                         f"{c.wall / s.default.wall:.0f}x" + (f" ({c.note})" if c.note else ""),
                     )
                 )
-    L += _table(
+    L += table(
         (
             "scene",
             "error vs",
@@ -1448,7 +1443,7 @@ def render_markdown(rep: BenchReport) -> str:
                     state,
                 )
             )
-    L += _table(
+    L += table(
         (
             "scene",
             "method",
@@ -1486,7 +1481,7 @@ def render_markdown(rep: BenchReport) -> str:
                     "PASS" if s.default.wall <= TARGET_EVENT_S else "FAIL",
                 )
             )
-        L += _table(
+        L += table(
             (
                 "scene",
                 "ms per event (as loaded)",
@@ -1519,7 +1514,7 @@ def render_markdown(rep: BenchReport) -> str:
         )
         for s in sc
     ]
-    L += _table(
+    L += table(
         (
             "scene",
             "tracemalloc peak of one run [KiB]",
@@ -1580,7 +1575,7 @@ def render_markdown(rep: BenchReport) -> str:
                     "yes" if v.outcome.sorted else "no",
                 )
             )
-    L += _table(
+    L += table(
         (
             "scene",
             "variant",
@@ -1617,7 +1612,7 @@ def render_markdown(rep: BenchReport) -> str:
     if rows:
         add("Built against the full model (nothing left out):")
         add("")
-        L += _table(
+        L += table(
             (
                 "scene",
                 "built [ms]",
@@ -1641,7 +1636,7 @@ def render_markdown(rep: BenchReport) -> str:
         "the code unchanged). Each process makes one untimed first call, then the timed ones."
     )
     add("")
-    L += _table(
+    L += table(
         ("", "JIT (Numba)", "NUMBA_DISABLE_JIT=1"),
         [
             ("wall median [ms]", _ms(j.jit_wall), _ms(j.nojit_wall)),
@@ -1691,7 +1686,7 @@ def render_markdown(rep: BenchReport) -> str:
             "(medians); both give the same answer (test/physics/test_engine.py)."
         )
         add("")
-        L += _table(
+        L += table(
             (
                 "scene",
                 "steps",
@@ -1722,126 +1717,5 @@ def render_markdown(rep: BenchReport) -> str:
         )
         add("")
 
-    add("## Discussion")
-    add("")
-    for para in discussion(rep):
-        add(para)
-        add("")
+    add("What these figures mean: [docs/verification.md](verification.md#benchmarks).")
     return "\n".join(L).rstrip() + "\n"
-
-
-def discussion(rep: BenchReport) -> list[str]:
-    """Short factual paragraphs, each computed from the figures above."""
-    out = []
-    flex = [s for s in rep.scenes if s.scene in TARGET_RTF_SCENES]
-    if flex:
-        parts = [
-            f"{s.scene} runs at {s.default.rtf:.0f}x real time with a peak-force error of "
-            f"{s.default.error:.1e}"
-            for s in flex
-        ]
-        out.append(
-            "Default configuration: "
-            + "; ".join(parts)
-            + f" (targets {TARGET_RTF:g}x and {TARGET_ERROR:g})."
-        )
-    gaps = [
-        (s.scene, rel_error(s.scipy_ref.peak, s.ours.peak))
-        for s in rep.scenes
-        if math.isfinite(rel_error(s.scipy_ref.peak, s.ours.peak))
-    ]
-    if gaps:
-        lo, hi = min(g for _, g in gaps), max(g for _, g in gaps)
-        conv = max(
-            max(s.ours.check_change, s.scipy_ref.check_change)
-            for s in rep.scenes
-            if math.isfinite(s.scipy_ref.check_change)
-        )
-        span = f"{lo:.1e}" if f"{lo:.1e}" == f"{hi:.1e}" else f"{lo:.1e} to {hi:.1e}"
-        text = (
-            f"The two references are each converged (largest change at the next-tighter "
-            f"setting {conv:.1e}) but differ from each other by {span} in peak force."
-        )
-        if hi > 10 * conv:
-            text += (
-                " That gap is a difference of model, not of tolerance: `kernel.rhs` (the ODE "
-                "form the SciPy baselines integrate, explicit Karnopp friction) and our steppers "
-                "(implicit friction) do not converge to the same answer, so no SciPy baseline "
-                "gets closer to our reference than the gap however tight its tolerance; the "
-                "comparison against the SciPy reference measures solver speed like for like."
-            )
-            probes = [(s.scene, s.belt.gap) for s in rep.scenes if s.belt is not None]
-            probes = [(n, g) for n, g in probes if math.isfinite(g)]
-            if probes:
-                text += (
-                    " Without belt friction (conveyor.mu_belt = 0) the two agree to "
-                    + ", ".join(f"{g:.1e} ({n})" for n, g in probes)
-                    + ": the difference lies in the belt friction (34)-(36), explicit Karnopp "
-                    "in `kernel.rhs` against the implicit law of the steppers."
-                )
-        out.append(text)
-    for s in rep.scenes:
-        b = s.baselines
-        bits = []
-        for comp in (b.by_self, b.by_ref):
-            which = "SciPy's reference" if comp.metric == "self" else "our reference"
-            best = comp.best
-            if comp.metric == "self" and not math.isfinite(s.scipy_ref.peak):
-                continue  # said below: no SciPy reference
-            if best is None:
-                bits.append(f"against {which} no SciPy method reached {comp.threshold:.1e}")
-            else:
-                bits.append(
-                    f"against {which} the fastest SciPy method reaching {comp.threshold:.1e} is "
-                    f"{best.method} at rtol {best.run.rtol:g}, {comp.ratio:.0f}x the default's "
-                    "time"
-                )
-        capped = [r for r in b.runs if r.capped]
-        text = f"{s.scene}: " + "; ".join(bits) + "."
-        if capped:
-            text += (
-                " Runs that hit the "
-                f"{b.cap:g} s cap: "
-                + ", ".join(f"{r.method} at rtol {r.rtol:g}" for r in capped)
-                + "."
-            )
-        failed = [r for r in b.runs if not r.outcome.success and not r.capped]
-        if failed:
-            text += " Failed runs: " + ", ".join(f"{r.method} at rtol {r.rtol:g}" for r in failed)
-            text += " (diagnoses in the ladder table)."
-        if not math.isfinite(s.scipy_ref.peak):
-            text += (
-                f" No SciPy reference: {s.scipy_ref.label} did not finish "
-                f"({s.scipy_ref.diagnosis})."
-            )
-        out.append(text)
-    ev = [s for s in rep.scenes if s.scene in EVENT_SCENES]
-    if ev:
-        out.append(
-            "Stiff-fence events: "
-            + "; ".join(f"{s.scene} {s.default.wall * 1e3:.2f} ms" for s in ev)
-            + f" per event as loaded (target {TARGET_EVENT_S * 1e3:g} ms)."
-        )
-    bits = []
-    for s in rep.scenes:
-        built, full = s.parts.get("built"), s.parts.get("full")
-        if full is None:
-            continue
-        same = "same physics" if full.same_physics else "a different physical model"
-        dn = rel_error(full.outcome.peak_force, built.outcome.peak_force)
-        bits.append(
-            f"{s.scene} {built.wall * 1e3:.2f} ms built vs {full.wall * 1e3:.2f} ms full "
-            f"({same}; peak N differs by {dn:.1e})"
-        )
-    if bits:
-        out.append(
-            "Leaving out what the scene does not need: " + "; ".join(bits) + ". Differences "
-            "of a few percent in wall time are within the run-to-run noise of this machine."
-        )
-    j = rep.jit
-    out.append(
-        f"The compiled kernel is necessary: the same code without the JIT runs {j.ratio:.0f}x "
-        f"slower ({j.sim_time / j.nojit_wall:.2f}x real time instead of "
-        f"{j.sim_time / j.jit_wall:.0f}x on the shortened {j.scene})."
-    )
-    return out

@@ -29,7 +29,6 @@ SECTIONS = (
     "## Peak memory",
     "## Model parts: what each scene leaves out",
     "## Compiled kernel: the same code with and without the JIT",
-    "## Discussion",
 )
 
 
