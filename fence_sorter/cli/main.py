@@ -32,6 +32,7 @@ SUBCOMMAND_MODULES: tuple[str, ...] = (
     "rrd",
     "bench_suite",
     "optimize",
+    "faults",
 )
 
 

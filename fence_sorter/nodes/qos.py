@@ -23,12 +23,14 @@ RELIABLE_QOS = QoSProfile(
     durability=DurabilityPolicy.VOLATILE,
 )
 
-# What the nodes take in from outside (/parcels, /fence_commands): reliable, and a history deep
-# enough for a burst far beyond any stream, so a flood is refused and counted by the node
-# (fence_sorter.nodes.intake) instead of overwriting real messages in the history unseen.
+# What the nodes take in from outside (/parcels, /fence_commands): reliable, keep-all. A
+# keep-last reader's history silently overwrites samples it has not taken yet (a flood pushed
+# real parcels out unseen); a keep-all reader keeps every sample until the node takes it and
+# refuses or accepts it (fence_sorter.nodes.intake), and what a writer gives up before
+# delivery reaches the reader as the middleware's message-lost event, counted there.
 INPUT_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=5000,
+    history=HistoryPolicy.KEEP_ALL,
+    depth=1,
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.VOLATILE,
 )

@@ -17,6 +17,7 @@ from pathlib import Path
 import pytest
 
 from fence_sorter.runner.processes import ProcessGroup, leftovers, node_command
+from fence_sorter.verification.faults import command_msg, parcel_msg
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -136,23 +137,7 @@ def test_controller_killed_and_restarted(suite, tmp_path: Path) -> None:
     assert int(c2["commands"]) >= len(after) and c2["late_no_command"] == "0"
 
 
-def _parcel(msg_class, pid: int, scan_time, **fields):
-    msg = msg_class()
-    msg.header.frame_id = "sorter"
-    msg.parcel_id = pid
-    msg.length_a, msg.width_b, msg.height, msg.mass = 0.3, 0.2, 0.2, 3.0
-    msg.lateral_gap, msg.yaw = 0.1, 0.0
-    msg.mu_belt = msg.mu_fence = math.nan
-    msg.divert = True
-    msg.scan_time = scan_time
-    msg.scan_position_x = -3.0
-    for k, v in fields.items():
-        setattr(msg, k, v)
-    return msg
-
-
 def test_malformed_parcels_are_rejected_and_counted(suite) -> None:
-    from rclpy.time import Time
 
     from fence_sorter.nodes.qos import RELIABLE_QOS
     from fence_sorter_msgs.msg import Parcel
@@ -171,14 +156,14 @@ def test_malformed_parcels_are_rejected_and_counted(suite) -> None:
     wait(monitor, lambda: pub.get_subscription_count() >= 3, 20, "subscribers of /parcels")
     rec = monitor.records
     wait(monitor, lambda: rec.sim_time > 0.5, 20, "sim time")
-    now = Time(nanoseconds=int(rec.sim_time * 1e9)).to_msg()
+    now = rec.sim_time
     bad = [
-        _parcel(Parcel, 101, now, length_a=math.nan),
-        _parcel(Parcel, 102, now, mass=-1.0),
-        _parcel(Parcel, 103, now, width_b=0.9),  # wider than the 0.7 m belt
+        parcel_msg(101, 0, now, length_a=math.nan),
+        parcel_msg(102, 0, now, mass=-1.0),
+        parcel_msg(103, 0, now, width_b=0.9),  # wider than the 0.7 m belt
     ]
-    good = _parcel(Parcel, 104, now, divert=False)
-    dup = _parcel(Parcel, 104, now, divert=False)
+    good = parcel_msg(104, 0, now, divert=False)
+    dup = parcel_msg(104, 0, now, divert=False)
     for msg in [*bad, good, dup]:
         pub.publish(msg)
     wait(monitor, lambda: 104 in rec.outcomes, 30, "the valid parcel's outcome")
@@ -221,16 +206,6 @@ def _start_pair(group, monitor, *extra: str) -> None:
     )
 
 
-def _command(msg_class, pid: int, run_id: int, **fields):
-    msg = msg_class()
-    msg.header.frame_id = "sorter"
-    msg.parcel_id, msg.run_id = pid, run_id
-    msg.r_s, msg.t1, msg.alpha_k, msg.feasible = 0.4, 0.35, math.radians(40.0), True
-    for k, v in fields.items():
-        setattr(msg, k, v)
-    return msg
-
-
 @pytest.mark.faults
 def test_hostile_parcels_and_commands_are_refused_counted_and_kept_out(suite) -> None:
     """The issue's plausible-but-wrong messages: a scan_time 1e5 s ahead (it booked the fence
@@ -238,7 +213,6 @@ def test_hostile_parcels_and_commands_are_refused_counted_and_kept_out(suite) ->
     controller took it); another run's parcel and its forged feasible:false for a real id
     (the real parcel went NO_FEASIBLE_COMMAND); a 20 s stroke for the real parcel. Each is
     refused and counted under its reason by both nodes, and the real parcel is sorted."""
-    from rclpy.time import Time
 
     from fence_sorter.nodes.qos import INPUT_QOS
     from fence_sorter_msgs.msg import FenceCommand, Parcel
@@ -255,22 +229,20 @@ def test_hostile_parcels_and_commands_are_refused_counted_and_kept_out(suite) ->
     )
     rec = monitor.records
     wait(monitor, lambda: rec.sim_time > 0.5, 20, "sim time")
-    t = rec.sim_time
-    now = Time(nanoseconds=int(t * 1e9)).to_msg()
-    ahead = Time(nanoseconds=int((t + 1e5) * 1e9)).to_msg()
+    now = rec.sim_time
     hostile = [
-        _parcel(Parcel, 201, now, run_id=RUN, mass=math.nan),
-        _parcel(Parcel, 202, now, run_id=RUN, mu_fence=5.0),
-        _parcel(Parcel, 203, ahead, run_id=RUN),
-        _parcel(Parcel, 204, now, run_id=RUN, scan_position_x=1e9),
-        _parcel(Parcel, 205, now, run_id=999),  # another run's, valid otherwise
+        parcel_msg(201, RUN, now, mass=math.nan),
+        parcel_msg(202, RUN, now, mu_fence=5.0),
+        parcel_msg(203, RUN, now + 1e5),
+        parcel_msg(204, RUN, now, scan_position_x=1e9),
+        parcel_msg(205, 999, now),  # another run's, valid otherwise
     ]
     for msg in hostile:
         pub.publish(msg)
-    pub.publish(_parcel(Parcel, 206, now, run_id=RUN))  # the real divert parcel
-    cpub.publish(_command(FenceCommand, 206, 999, feasible=False, reason="forged"))
-    cpub.publish(_command(FenceCommand, 206, RUN, t1=10.0))  # a 20 s stroke
-    pub.publish(_parcel(Parcel, 207, now, run_id=RUN, divert=False))
+    pub.publish(parcel_msg(206, RUN, now))  # the real divert parcel
+    cpub.publish(command_msg(206, 999, feasible=False, reason="forged"))
+    cpub.publish(command_msg(206, RUN, t1=10.0))  # a 20 s stroke
+    pub.publish(parcel_msg(207, RUN, now, divert=False))
     wait(monitor, lambda: {206, 207} <= rec.outcomes.keys(), 40, "the real parcels' outcomes")
     assert rec.outcomes[206]["reason_name"] == "SORTED", rec.outcomes[206]
     assert rec.outcomes[207]["reason_name"] == "NOT_DIVERTED"
