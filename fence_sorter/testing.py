@@ -49,6 +49,15 @@ def wait_until(
             time.sleep(interval)
 
 
+def process_alive(pid: int) -> bool:
+    """Whether a process ``pid`` exists (a zombie not yet reaped counts as alive)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
 def run_domain_id() -> int:
     """Return a ROS_DOMAIN_ID for this test run (derived from the process id)."""
     low, high = DOMAIN_ID_RANGE

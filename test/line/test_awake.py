@@ -10,7 +10,7 @@ import sys
 import pytest
 
 from fence_sorter.line.awake import start_spinners, stop_spinners
-from fence_sorter.testing import wait_until
+from fence_sorter.testing import process_alive, wait_until
 
 
 def _policy(pid: int) -> int:
@@ -21,14 +21,6 @@ def _policy(pid: int) -> int:
     except AssertionError:
         pass
     return os.sched_getscheduler(pid)
-
-
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    return True
 
 
 def test_one_idle_spinner_per_cpu_pinned_and_stopped():
@@ -59,4 +51,4 @@ def test_spinners_die_with_their_parent():
     assert _policy(spinner) == os.SCHED_IDLE
     parent.kill()
     parent.wait()
-    wait_until(lambda: not _alive(spinner), 10.0, f"spinner {spinner} to end with its parent")
+    wait_until(lambda: not process_alive(spinner), 10.0, f"spinner {spinner} to end")

@@ -29,7 +29,7 @@ from fence_sorter.line.worker import (
     _frame,
 )
 from fence_sorter.scene import load_scene
-from fence_sorter.testing import wait_until
+from fence_sorter.testing import process_alive, wait_until
 
 from .test_line import heavy, stroke
 
@@ -233,15 +233,7 @@ def test_loop_process_ignores_ctrl_c_and_dies_with_its_parent():
     os.kill(child, 0)  # running
     parent.kill()
     parent.wait()
-    wait_until(lambda: not _alive(child), 10.0, f"loop process {child} to end with its parent")
-
-
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    return True
+    wait_until(lambda: not process_alive(child), 10.0, f"loop process {child} to end")
 
 
 @pytest.mark.slow
