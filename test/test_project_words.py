@@ -21,6 +21,7 @@ SUFFIXES = {".md", ".py", ".txt", ".json", ".yaml", ".yml", ".csv", ".cfg", ".to
 #: Technical phrases that contain a searched word; stripped from a line before the search.
 LEGITIMATE = re.compile(
     r"session/process group|scope=\"session\"|start_new_session|new session|session leader"
+    r"|\bsessions? of (?:its|their) own\b|\bown session\b|\bprocess session\b"
     r"|\bhelper (?:function|method|class|module|process|thread)s?\b",
     re.IGNORECASE,
 )
@@ -98,6 +99,7 @@ def test_the_patterns_catch_lab_notebook_lines(text: str) -> None:
     "text",
     [
         "every node runs in its own session/process group",
+        "fence-sorter run in a session of its own (as in a terminal)",
         "session = _session(args, name); session.close()",
         '@pytest.fixture(scope="session")',
         "subprocess.Popen(cmd, start_new_session=True)",
