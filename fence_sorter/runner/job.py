@@ -35,6 +35,8 @@ START_DELAY = 0.5
 #: sim time a parcel needs after its scan to leave the line (line end ~3 m) plus margin [s]
 LINE_END_X = 3.0
 STOP_ORDER = ("scanner", "controller", "simulator", "recorder")
+#: controller parameters the simulator takes too (the limits of its outcomes' damage margins)
+DAMAGE_LIMITS = ("w_dop", "a_ndop")
 #: the nodes that share the run's id (parameter run_id) on /parcels and /fence_commands
 RUN_ID_NODES = ("scanner", "controller", "simulator")
 #: wall time after the scanner's start without any parcel on /parcels before the run gives up
@@ -135,6 +137,12 @@ def prepare(opts: RunOptions) -> Plan:
             )
         key, _, value = kv.partition("=")
         node_params.setdefault(node, []).append(f"{key}:={value}")
+    # the outcomes' damage margins are taken against the limits the controller plans with
+    for key in DAMAGE_LIMITS:
+        given = [p for p in node_params.get("controller", []) if p.startswith(f"{key}:=")]
+        own = [p for p in node_params.get("simulator", []) if p.startswith(f"{key}:=")]
+        if given and not own:
+            node_params.setdefault("simulator", []).append(given[-1])
     sim_duration = START_DELAY + stream[-1].arrival_time + (LINE_END_X - SCAN_LINE_X) / v + 5.0
     return Plan(
         scene_path,

@@ -81,3 +81,15 @@ def test_process_group_keeps_its_nodes_on_the_cpus_it_is_given(tmp_path: Path) -
     finally:
         group.stop()
     assert not leftovers(group.pgids)
+
+
+def test_the_controllers_damage_limits_reach_the_simulator():
+    """The outcomes' margins are taken against the limits the controller plans with: a
+    --param controller:w_dop is passed on to the simulator, unless it has its own."""
+    from fence_sorter.runner.job import RunOptions, prepare
+
+    plan = prepare(RunOptions(parcels=2, params=["controller:w_dop=2.0", "controller:a_ndop=150"]))
+    assert plan.node_params["simulator"] == ["w_dop:=2.0", "a_ndop:=150"]
+    own = prepare(RunOptions(parcels=2, params=["simulator:w_dop=3.1", "controller:w_dop=2.0"]))
+    assert own.node_params["simulator"] == ["w_dop:=3.1"]
+    assert "simulator" not in prepare(RunOptions(parcels=2)).node_params
