@@ -65,7 +65,7 @@ def test_newton_contact_iteration_converges_quadratically_to_the_plain_fixed_poi
     errors = {}
     ends = {}
     for newton in (True, False):
-        monkeypatch.setattr(K, "NEWTON", newton)
+        monkeypatch.setattr(K.steps, "NEWTON", newton)
         status, ref, iterations = _step(md, cs, a, h, 50, False)
         assert status == K.STEP_OK and iterations < 10
         ends[newton] = ref
@@ -83,7 +83,7 @@ def test_newton_iteration_needs_fewer_force_evaluations_per_step(monkeypatch) ->
     h = STIFF.solver.dt_max
     count = {}
     for newton in (True, False):
-        monkeypatch.setattr(K, "NEWTON", newton)
+        monkeypatch.setattr(K.steps, "NEWTON", newton)
         status, _, count[newton] = _step(md, cs, a, h, 50, False, tol=STIFF.solver.tolerance)
         assert status == K.STEP_OK
     assert count[True] <= 2 < count[False], count

@@ -1,0 +1,778 @@
+"""The compiled solve loop (:func:`solve`): events, step size, stages, recording, the observer's
+reductions."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .control import (
+    EVENT_ONSET,
+    EVENT_SLIDE_OFF,
+    event_value,
+    first_event,
+    milne_error,
+    modal_propagators,
+    oscillation_step,
+    time_to_contact,
+)
+from .forces import evaluate, karnopp_belt, stick_wrench
+from .impact import n_stiff
+from .layout import (
+    C_ACTIVE,
+    C_DDOT,
+    C_NX,
+    C_NY,
+    N_COLS,
+    N_RES,
+    N_SLOTS,
+    P_ALPHA_K,
+    P_BELT,
+    P_EXT_M,
+    P_EXT_X,
+    P_EXT_Y,
+    P_INERTIA,
+    P_MASS,
+    P_T1,
+    R_ACTIVE_MASK,
+    R_ALPHA,
+    R_ENERGY_CONTACT,
+    R_FENCE_N,
+    R_MAX_D,
+    R_POWER_FENCE,
+    R_TIP_W,
+    SLOT_BORDER,
+    SLOT_TIP,
+)
+from .steps import STEP_FORCED, STEP_REJECTED, trapezoidal_step
+
+# -- the compiled solve loop --------------------------------------------------------------------
+# ``integrators.Integrator.stepping`` (adaptive and fixed-step trapezoidal) and the reductions of
+# ``result.Observer`` as one compiled loop over flat arrays; ``engine.py`` builds the arrays,
+# calls :func:`solve` in chunks (wall-time limit, growing the output buffers) and turns the
+# figures into a ``SimulationResult``. The package's cache directory is keyed on all of its
+# sources (``kernel.cache_directory``), so the loop's cached code goes with the kernels it inlines.
+# It is the same algorithm step for step: test/physics/test_engine.py checks both loops agree.
+
+EVENT_TOL = 1e-10  # a located onset's step ends with 0 < D <= EVENT_TOL [m]
+EVENT_SORT = 3  # C_s crossing the sorting line y0 = s (belt friction ends there)
+
+# states: rows of T, Y, LAM, OUT, RES, MODAL, ACC; cur and trial swap, loc and before are fixed
+S_LOC = 2
+S_BEFORE = 3
+N_STATES = 4
+
+# configuration ``cfg``
+G_H_NOM = 0  # dt_max (adaptive) or dt (fixed step) [s]
+G_T_END = 1
+G_DT = 2  # first adaptive step [s]
+G_MIN_DT = 3
+G_TOL = 4  # contact iteration tolerance
+G_MAX_ITER = 5
+G_ATOL = 6
+G_RTOL = 7
+G_V_REF = 8
+G_OM_REF = 9
+G_WIDTH = 10  # s [m]
+G_ADAPTIVE = 11
+G_STOP_SORTED = 12
+G_RECORD = 13
+G_BP = 14  # b_p, k_p of the stiff reference (stiff_impact_peak)
+G_KP = 15
+G_DEEP = 16
+G_SPEED_LIMIT = 17
+G_VMIN = 18
+G_PHIDOT_MIN = 19
+G_UP = 20  # 2^(1/4)
+G_DOWN = 21  # 2^(-1/4)
+G_FLUSH = 22  # contacts.FLUSH_ANGLE [rad]
+N_CFG = 23
+
+# integer control ``ctl``
+I_CUR = 0
+I_TRIAL = 1
+I_STARTED = 2
+I_DONE = 3
+I_DIAG = 4  # DIAG_*
+I_STEPS = 5
+I_REJECTED = 6
+I_FORCED = 7
+I_EVENTS = 8
+I_NEXT_BREAK = 9
+I_CLEAN = 10
+I_ON_BELT = 11
+I_STOP = 12
+I_SORTED = 13  # observer
+I_TOUCHED = 14
+I_HAD_FENCE = 15
+I_FIRST = 16
+I_MASK = 17
+I_STAGE = 18
+I_LAST_MASK0 = 19
+I_LAST_MASK1 = 20
+I_N_IMPACTS = 21
+I_N_STAGES = 22
+I_N_REC = 23
+I_N_PROPS = 24  # entries of the propagator cache in use
+I_N_TRACE = 25  # rows of the trace in use
+N_CTL = 26
+
+# float control ``fc``
+F_H = 0
+F_H_CAP = 1
+F_H_PREV = 2
+F_PREV_V = 3  # 3 values
+F_PREV_A = 6  # 3 values
+F_EXIT_SPEED = 9  # observer
+F_IMPACT_SPEED = 10
+F_PEAK_N = 11
+F_PEAK_TIP = 12
+F_MAX_DEPTH = 13
+F_Y_MAX = 14
+F_PREV_T = 15
+F_PREV_Y = 16  # 6 values
+F_PREV_POWER = 22
+F_WORK = 23
+F_LAST_N1 = 24
+F_LAST_N2 = 25
+F_LAST_T1 = 26
+F_LAST_T2 = 27
+F_MAX_RES = 28  # energy audit (result.EnergyAudit)
+F_MIN_RES = 29
+F_FLOW = 30
+F_E0 = 31
+F_T_MAX = 32
+F_T_MIN = 33
+F_MAX_RISE = 34
+F_T_RISE0 = 35
+F_T_RISE1 = 36
+F_RUN_MIN = 37
+F_T_RUN_MIN = 38
+F_DIAG_T = 39  # where a diagnosis was made, and its value (D or speed)
+F_DIAG_V = 40
+N_FC = 41
+
+# diagnoses and stop reasons
+DIAG_NONE = 0
+DIAG_NONFINITE = 1
+DIAG_DEEP = 2
+DIAG_SPEED = 3
+DIAG_MIN_DT = 4
+SOLVE_DONE = 0
+SOLVE_PAUSED = 1  # attempt budget used up (the caller checks the wall-time limit)
+SOLVE_GROW = 2  # an output buffer is full
+SOLVE_REACHED = 3  # the accepted time reached t_target
+SOLVE_TRACED = 4  # the trace is full (the caller replays and empties it)
+
+# stages (contacts.STAGE_*, in this order) and the recorded row
+STAGE_CODE_ON_BELT = 0
+STAGE_CODE_E1 = 1
+STAGE_CODE_E2 = 2
+STAGE_CODE_E3 = 3
+STAGE_CODE_E4 = 4
+STAGE_CODE_SORTED = 5
+REC_T = 0
+REC_Y = 1  # x, y, phi, vx, vy, phidot
+REC_ALPHA = 7
+REC_TIP_W = 8
+REC_FENCE_N = 9
+REC_MAX_D = 10
+REC_STAGE = 11
+# the time again, once per series group that has its own time array (fence, forces, stages), so
+# each recorded array is a row of REC of its own
+REC_T_FENCE = 12
+REC_T_FORCES = 13
+REC_T_STAGE = 14
+N_REC_COLS = 15
+N_PROP_CACHE = 256
+# a trace row: an accepted point as the Python observer sees it (``integrators.State``) and the
+# on_belt flag it was observed with: [t, on_belt, y, lam, out (row-major), res, modal, acc]
+TR_T = 0
+TR_ON_BELT = 1
+TR_Y = 2
+
+
+def trace_width(n_state, m):
+    """Columns of a trace row for a model with n_state states and m modes."""
+    return 2 + n_state + 3 + N_SLOTS * N_COLS + N_RES + m + 3 + m
+
+
+@njit(cache=True, _nrt=False)
+def _remainder(x, y):
+    """IEEE remainder of x by y > 0 (CPython's ``math.remainder``, exact like it)."""
+    absx = abs(x)
+    m = np.fmod(absx, y)
+    c = y - m
+    if m < c:
+        r = m
+    elif m > c:
+        r = -c
+    else:
+        r = m - 2.0 * np.fmod(0.5 * (absx - m), y)
+    return math.copysign(1.0, x) * r
+
+
+@njit(cache=True, _nrt=False)
+def classify_code(out, normals, phi, touched, flush):
+    """``contacts.classify`` on the stage codes STAGE_CODE_*."""
+    n_corners = 0
+    first = -1
+    for k in range(4):
+        if out[k, C_ACTIVE] != 0.0:
+            n_corners += 1
+            if first < 0:
+                first = k
+    tip = False
+    for k in range(SLOT_TIP, SLOT_BORDER):
+        if out[k, C_ACTIVE] != 0.0:
+            tip = True
+    border = False
+    for k in range(SLOT_BORDER, N_SLOTS):
+        if out[k, C_ACTIVE] != 0.0:
+            border = True
+    if n_corners == 0 and not tip:
+        return STAGE_CODE_E4 if touched else STAGE_CODE_ON_BELT
+    if border:
+        return STAGE_CODE_E3
+    if tip:
+        return STAGE_CODE_E2
+    for k in range(4):
+        if out[k, C_ACTIVE] != 0.0 and out[(k + 1) % 4, C_ACTIVE] != 0.0:
+            return STAGE_CODE_E2
+    tangent_angle = math.atan2(out[first, C_NX], -out[first, C_NY])
+    for face in (first, (first - 1) % 4):
+        face_angle = phi + math.atan2(normals[face, 0], -normals[face, 1])
+        if abs(_remainder(face_angle - tangent_angle, math.pi)) < flush:
+            return STAGE_CODE_E2
+    return STAGE_CODE_E1
+
+
+@njit(cache=True, _nrt=False)
+def parabola_peak(t0, n0, t1, n1, t2, n2):
+    """Vertex value of the parabola through three points with n1 >= n0, n2 (else n1)."""
+    d0, d2 = t0 - t1, t2 - t1
+    if d0 >= 0.0 or d2 <= 0.0:
+        return n1
+    c = ((n0 - n1) / d0 - (n2 - n1) / d2) / (d0 - d2)
+    b = (n0 - n1) / d0 - c * d0
+    if c >= 0.0:
+        return n1
+    d = -b / (2.0 * c)
+    if not d0 <= d <= d2:
+        return n1
+    return n1 + b * d + c * d * d
+
+
+@njit(cache=True, _nrt=False)
+def _copy_row(A, dst, src):
+    for k in range(A.shape[1]):
+        A[dst, k] = A[src, k]
+
+
+@njit(cache=True, _nrt=False)
+def _copy_state(T, Y, LAM, OUT, RES, MODAL, ACC, dst, src):
+    T[dst] = T[src]
+    _copy_row(Y, dst, src)
+    _copy_row(LAM, dst, src)
+    for r in range(N_SLOTS):
+        for c in range(N_COLS):
+            OUT[dst, r, c] = OUT[src, r, c]
+    _copy_row(RES, dst, src)
+    _copy_row(MODAL, dst, src)
+    _copy_row(ACC, dst, src)
+
+
+@njit(cache=True, _nrt=False)
+def _propagator_slot(omega, zeta, h, ctl, PK, PA, PG0, PG1):
+    """Row of the exact modal maps for step h in the cache (computed on a miss; the cache is
+    emptied when full, like ``integrators.Propagators``)."""
+    if omega.shape[0] == 0:
+        return 0
+    n = ctl[I_N_PROPS]
+    for i in range(n):
+        if PK[i] == h:
+            return i
+    if n >= PK.shape[0]:
+        n = 0
+    modal_propagators(omega, zeta, h, PA[n], PG0[n], PG1[n])
+    PK[n] = h
+    ctl[I_N_PROPS] = n + 1
+    return n
+
+
+@njit(cache=True, _nrt=False)
+def _jump_at(P, t):
+    if abs(t - 2.0 * P[P_T1]) <= 1e-12:
+        return -0.5 * P[P_ALPHA_K] * (math.pi / P[P_T1]) ** 2
+    return 0.0
+
+
+@njit(cache=True, _nrt=False)
+def _snap(h_nom, h):
+    """``Integrator._snap``: round a step down onto the ladder dt_max 2^(-k/4)."""
+    if h == h_nom:  # k = 0 (most steps: no log2 and pow calls)
+        return h_nom
+    k = math.ceil(4.0 * math.log2(h_nom / h) - 1e-9)
+    return h_nom * 2.0 ** (-k / 4.0)
+
+
+@njit(cache=True, _nrt=False)
+def _trap(
+    P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT, RES, MODAL, ACC,
+    w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h, a, b, jump, on_belt, force,
+):  # fmt: skip
+    """``Scheme.step`` of the trapezoidal scheme from state row a into row b."""
+    k = _propagator_slot(omega, zeta, h, ctl, PK, PA, PG0, PG1)
+    status = trapezoidal_step(
+        P, corners, normals, phi, rigid_modal, (PA[k], PG0[k], PG1[k]), h, T[a], Y[a], RES[a],
+        LAM[a], MODAL[a], OUT[a], jump, on_belt, cfg[G_TOL], int(cfg[G_MAX_ITER]), force, Y[b],
+        LAM[b], OUT[b], RES[b], MODAL[b], w, wdot, nodes, prev, work,
+    )  # fmt: skip
+    if status != STEP_REJECTED:
+        ACC[b, 0] = (RES[b, 0] + LAM[b, 0]) / P[P_MASS]
+        ACC[b, 1] = (RES[b, 1] + LAM[b, 1]) / P[P_MASS]
+        ACC[b, 2] = (RES[b, 2] + LAM[b, 2]) / P[P_INERTIA]
+    T[b] = T[a] + h
+    return status
+
+
+@njit(cache=True, _nrt=False)
+def _locate(
+    P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT, RES, MODAL, ACC,
+    w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h, on_belt, slot, kind, g0, g1,
+):  # fmt: skip
+    """``Integrator._locate``: Illinois regula falsi onto the event; the located trial is left
+    in the trial row; returns the step taken."""
+    a = ctl[I_CUR]
+    trial = ctl[I_TRIAL]
+    onset = kind == EVENT_ONSET
+    sign0 = g0 > 0.0
+    lo = 0.0
+    hi, g_hi = h, g1
+    jump = _jump_at(P, T[a])
+    best = 0.0
+    have_best = False
+    tol = cfg[G_TOL]
+    keep_before = kind == EVENT_SLIDE_OFF and g0 > tol
+    cross = kind == EVENT_SLIDE_OFF and not keep_before
+    sort = kind == EVENT_SORT
+    g_lo = g0
+    before = 0.0
+    have_before = False
+    f_lo, f_hi, last = g0, g1, 0
+    lo_prev, g_lo_prev = 0.0, g0  # the lo end before the last (Integrator._locate)
+    for _ in range(60):
+        if hi - lo <= 1e-7 * h or (onset and g_hi <= EVENT_TOL):
+            break
+        if (have_before and g_lo <= tol) or ((cross or sort) and have_best and -g_hi <= tol):
+            break
+        h_loc = lo + (hi - lo) * (f_lo / (f_lo - f_hi))
+        if cross and last == 0:
+            h_loc = min(2.0 * h_loc, hi)  # the tip is within tol: step just past it
+        else:
+            h_loc = min(max(h_loc, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
+        if keep_before and last == -1 and g_lo_prev > g_lo:
+            h_sec = lo + (g_lo - 0.5 * tol) * (lo - lo_prev) / (g_lo_prev - g_lo)
+            if lo < h_sec < hi:
+                h_loc = h_sec
+        st = _trap(
+            P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT, RES,
+            MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h_loc, a, S_LOC, jump,
+            on_belt, False,
+        )  # fmt: skip
+        if st == STEP_REJECTED:
+            break
+        if kind == EVENT_SORT:
+            g = cfg[G_WIDTH] - Y[S_LOC, 1]
+        else:
+            g = event_value(P, OUT[S_LOC], slot, kind)
+        if math.isnan(g):
+            break
+        if (g > 0.0) != sign0:
+            hi, g_hi, f_hi = h_loc, g, g
+            if last == 1:
+                f_lo *= 0.5
+            last = 1
+            best = h_loc
+            have_best = True
+            _copy_state(T, Y, LAM, OUT, RES, MODAL, ACC, trial, S_LOC)
+        else:
+            lo_prev, g_lo_prev = lo, g_lo
+            lo, g_lo, f_lo = h_loc, g, g
+            if last == -1:
+                f_hi *= 0.5
+            last = -1
+            if keep_before:
+                before = h_loc
+                have_before = True
+                _copy_state(T, Y, LAM, OUT, RES, MODAL, ACC, S_BEFORE, S_LOC)
+    ctl[I_EVENTS] += 1
+    if have_before:
+        _copy_state(T, Y, LAM, OUT, RES, MODAL, ACC, trial, S_BEFORE)
+        return before
+    return best if have_best else h
+
+
+@njit(cache=True, _nrt=False)
+def _audit(fc, t, r):
+    """``result.EnergyAudit.update``."""
+    if not math.isfinite(r):
+        fc[F_MAX_RES] = r
+        fc[F_MIN_RES] = r
+        return
+    if not math.isfinite(fc[F_MAX_RES]):
+        return
+    if r > fc[F_MAX_RES]:
+        fc[F_MAX_RES] = r
+        fc[F_T_MAX] = t
+    if r < fc[F_MIN_RES]:
+        fc[F_MIN_RES] = r
+        fc[F_T_MIN] = t
+    if r < fc[F_RUN_MIN]:
+        fc[F_RUN_MIN] = r
+        fc[F_T_RUN_MIN] = t
+    if r - fc[F_RUN_MIN] > fc[F_MAX_RISE]:
+        fc[F_MAX_RISE] = r - fc[F_RUN_MIN]
+        fc[F_T_RISE0] = fc[F_T_RUN_MIN]
+        fc[F_T_RISE1] = t
+
+
+@njit(cache=True, _nrt=False)
+def _observe(P, normals, cfg, ctl, fc, T, Y, LAM, OUT, RES, IMP, STG, REC, i, on_belt):
+    """``result.Observer.__call__`` at state row i; returns (stop, on_belt)."""
+    t = T[i]
+    y = Y[i]
+    res = RES[i]
+    out = OUT[i]
+    mass = P[P_MASS]
+    vx, vy, om = y[3], y[4], y[5]
+    energy = 0.5 * mass * (vx * vx + vy * vy) + 0.5 * P[P_INERTIA] * om * om
+    energy += res[R_ENERGY_CONTACT]
+    power = res[R_POWER_FENCE] + P[P_EXT_X] * vx + P[P_EXT_Y] * vy + P[P_EXT_M] * om
+    if on_belt:
+        power += LAM[i, 0] * P[P_BELT]
+    width = cfg[G_WIDTH]
+    if ctl[I_FIRST] != 0:
+        ctl[I_FIRST] = 0
+        fc[F_E0] = energy
+        fc[F_FLOW] = abs(energy)
+        fc[F_Y_MAX] = y[1]
+    else:
+        h = t - fc[F_PREV_T]
+        fc[F_WORK] += 0.5 * h * (power + fc[F_PREV_POWER])
+        fc[F_FLOW] += 0.5 * h * (abs(power) + abs(fc[F_PREV_POWER]))
+        _audit(fc, t, energy - fc[F_E0] - fc[F_WORK])
+        py1 = fc[F_PREV_Y + 1]
+        if y[1] >= width > py1 and ctl[I_SORTED] == 0:
+            frac = (width - py1) / (y[1] - py1)
+            fc[F_EXIT_SPEED] = fc[F_PREV_Y + 4] + frac * (vy - fc[F_PREV_Y + 4])
+            ctl[I_SORTED] = 1
+    mask = int(res[R_ACTIVE_MASK])
+    fence_on = (mask & 0xFF) != 0
+    if fence_on and ctl[I_HAD_FENCE] == 0:
+        ctl[I_TOUCHED] = 1
+        w_n = -math.inf
+        for k in range(SLOT_BORDER):
+            if out[k, C_ACTIVE] != 0.0:
+                v = out[k, C_DDOT]
+                if math.isnan(v) or math.isnan(w_n):
+                    w_n = math.nan
+                elif v > w_n:
+                    w_n = v
+        if math.isnan(fc[F_IMPACT_SPEED]):
+            fc[F_IMPACT_SPEED] = w_n
+        peak = n_stiff(mass, w_n, cfg[G_BP], cfg[G_KP])
+        n_imp = ctl[I_N_IMPACTS]
+        IMP[n_imp, 0] = t
+        IMP[n_imp, 1] = w_n
+        IMP[n_imp, 2] = peak
+        ctl[I_N_IMPACTS] = n_imp + 1
+    ctl[I_HAD_FENCE] = 1 if fence_on else 0
+    n = res[R_FENCE_N]
+    if n > fc[F_PEAK_N]:
+        fc[F_PEAK_N] = n
+    n1, n2 = fc[F_LAST_N1], fc[F_LAST_N2]
+    smooth = ctl[I_LAST_MASK0] == ctl[I_LAST_MASK1] and ctl[I_LAST_MASK1] == mask
+    ctl[I_LAST_MASK0] = ctl[I_LAST_MASK1]
+    ctl[I_LAST_MASK1] = mask
+    if smooth and n2 > n1 and n2 >= n and n1 > 0.0:
+        peak = parabola_peak(fc[F_LAST_T1], n1, fc[F_LAST_T2], n2, t, n)
+        if peak > fc[F_PEAK_N]:
+            fc[F_PEAK_N] = peak
+    fc[F_LAST_N1], fc[F_LAST_N2] = n2, n
+    fc[F_LAST_T1], fc[F_LAST_T2] = fc[F_LAST_T2], t
+    tip = abs(res[R_TIP_W])
+    if tip > fc[F_PEAK_TIP]:
+        fc[F_PEAK_TIP] = tip
+    if res[R_MAX_D] > fc[F_MAX_DEPTH]:
+        fc[F_MAX_DEPTH] = res[R_MAX_D]
+    if y[1] > fc[F_Y_MAX]:
+        fc[F_Y_MAX] = y[1]
+    sorted_ = ctl[I_SORTED] != 0
+    if mask != ctl[I_MASK] or (sorted_ and ctl[I_STAGE] != STAGE_CODE_SORTED):
+        ctl[I_MASK] = mask
+        if sorted_:
+            stage = STAGE_CODE_SORTED
+        else:
+            stage = classify_code(out, normals, y[2], ctl[I_TOUCHED] != 0, cfg[G_FLUSH])
+        if stage != ctl[I_STAGE]:
+            ctl[I_STAGE] = stage
+            n_stg = ctl[I_N_STAGES]
+            STG[n_stg, 0] = t
+            STG[n_stg, 1] = stage
+            ctl[I_N_STAGES] = n_stg + 1
+    if cfg[G_RECORD] != 0.0:
+        n_rec = ctl[I_N_REC]
+        REC[REC_T, n_rec] = t
+        REC[REC_T_FENCE, n_rec] = t
+        REC[REC_T_FORCES, n_rec] = t
+        REC[REC_T_STAGE, n_rec] = t
+        for k in range(6):
+            REC[REC_Y + k, n_rec] = y[k]
+        REC[REC_ALPHA, n_rec] = res[R_ALPHA]
+        REC[REC_TIP_W, n_rec] = res[R_TIP_W]
+        REC[REC_FENCE_N, n_rec] = res[R_FENCE_N]
+        REC[REC_MAX_D, n_rec] = res[R_MAX_D]
+        REC[REC_STAGE, n_rec] = ctl[I_STAGE]
+        ctl[I_N_REC] = n_rec + 1
+    fc[F_PREV_T] = t
+    for k in range(6):
+        fc[F_PREV_Y + k] = y[k]
+    fc[F_PREV_POWER] = power
+    return sorted_ and cfg[G_STOP_SORTED] != 0.0, on_belt and not sorted_
+
+
+@njit(cache=True, _nrt=False)
+def _trace(ctl, TR, T, Y, LAM, OUT, RES, MODAL, ACC, i, on_belt):
+    """Append state row i and the on_belt flag it is observed with to the trace (if kept)."""
+    if TR.shape[0] == 0:
+        return
+    row = TR[ctl[I_N_TRACE]]
+    ctl[I_N_TRACE] += 1
+    row[TR_T] = T[i]
+    row[TR_ON_BELT] = 1.0 if on_belt else 0.0
+    k = TR_Y
+    for v in Y[i]:
+        row[k] = v
+        k += 1
+    for v in LAM[i]:
+        row[k] = v
+        k += 1
+    for r in range(N_SLOTS):
+        for c in range(N_COLS):
+            row[k] = OUT[i, r, c]
+            k += 1
+    for v in RES[i]:
+        row[k] = v
+        k += 1
+    for v in MODAL[i]:
+        row[k] = v
+        k += 1
+    for v in ACC[i]:
+        row[k] = v
+        k += 1
+
+
+@njit(cache=True, _nrt=False)
+def _diverged(P, cfg, fc, t, y, res):
+    """``Integrator._diverged``: a DIAG_* code (value and time left in fc)."""
+    total = 0.0
+    for k in range(y.shape[0]):
+        total += y[k]
+    fc[F_DIAG_T] = t
+    if not math.isfinite(total):
+        return DIAG_NONFINITE
+    if res[R_MAX_D] > cfg[G_DEEP]:
+        fc[F_DIAG_V] = res[R_MAX_D]
+        return DIAG_DEEP
+    speed = math.hypot(y[3], y[4])
+    if speed > cfg[G_SPEED_LIMIT]:
+        fc[F_DIAG_V] = speed
+        return DIAG_SPEED
+    return DIAG_NONE
+
+
+@njit(cache=True, _nrt=False)
+def solve(
+    P, corners, normals, phi, rigid_modal, omega, zeta, cfg, breaks, ctl, fc, T, Y, LAM, OUT, RES,
+    MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, IMP, STG, REC, TR, max_attempts,
+    t_target,
+):  # fmt: skip
+    """Run the solve loop (``Integrator.stepping`` with ``Observer``) from where ``ctl``/``fc``
+    left it: until it ends (SOLVE_DONE, the diagnosis in ctl[I_DIAG]), ``max_attempts`` step
+    attempts (SOLVE_PAUSED), an output buffer (IMP, STG rows; REC columns, one row per
+    recorded quantity REC_*) without a free entry (SOLVE_GROW),
+    the accepted time reaching ``t_target`` (SOLVE_REACHED) or a full trace (SOLVE_TRACED: ``TR``
+    with rows keeps every observed point for a Python observer, ``integrators.Integrator``; no
+    rows, no trace). Row 0 of Y holds the initial state on the first call, which zeroes the
+    other state rows and the scratch arrays."""
+    adaptive = cfg[G_ADAPTIVE] != 0.0
+    h_nom = cfg[G_H_NOM]
+    min_dt = cfg[G_MIN_DT]
+    width = cfg[G_WIDTH]
+    m = omega.shape[0]
+    if ctl[I_STARTED] == 0:
+        # Scheme.initialize: forces at t = 0, belt wrench by Karnopp, accelerations
+        ctl[I_STARTED] = 1
+        a = ctl[I_CUR]
+        # the state rows other than the initial state, and the scratch arrays, start at zero
+        # (the caller may pass arrays of an earlier solve: engine reuses them)
+        T[:] = 0.0
+        for i in range(Y.shape[0]):
+            if i != a:
+                Y[i, :] = 0.0
+        LAM[:, :] = 0.0
+        OUT[:, :, :] = 0.0
+        RES[:, :] = 0.0
+        MODAL[:, :] = 0.0
+        ACC[:, :] = 0.0
+        w[:] = 0.0
+        wdot[:] = 0.0
+        nodes[:, :] = 0.0
+        work[:, :] = 0.0
+        for k in range(N_SLOTS):
+            prev[k] = math.nan
+        evaluate(
+            P, corners, normals, phi, rigid_modal, T[a], 0.0, Y[a], LAM[a], 0.0, prev, OUT[a],
+            RES[a], MODAL[a], w, wdot, nodes,
+        )  # fmt: skip
+        y, r = Y[a], RES[a]
+        bx, by, bz = karnopp_belt(P, y[3] - P[P_BELT], y[4], y[5], r[0], r[1], r[2])
+        LAM[a, 0], LAM[a, 1], LAM[a, 2] = bx, by, bz
+        if math.hypot(y[3] - P[P_BELT], y[4]) <= cfg[G_VMIN] and abs(y[5]) <= cfg[G_PHIDOT_MIN]:
+            bx, by, bz = stick_wrench(P, r[0], r[1], r[2])
+            LAM[a, 0], LAM[a, 1], LAM[a, 2] = bx, by, bz
+        ACC[a, 0] = (r[0] + LAM[a, 0]) / P[P_MASS]
+        ACC[a, 1] = (r[1] + LAM[a, 1]) / P[P_MASS]
+        ACC[a, 2] = (r[2] + LAM[a, 2]) / P[P_INERTIA]
+        for j in range(m):
+            ACC[a, 3 + j] = (
+                MODAL[a, j] - omega[j] ** 2 * y[6 + j] - 2.0 * zeta[j] * omega[j] * y[6 + m + j]
+            )
+        _trace(ctl, TR, T, Y, LAM, OUT, RES, MODAL, ACC, a, True)
+        stop, on_belt = _observe(
+            P, normals, cfg, ctl, fc, T, Y, LAM, OUT, RES, IMP, STG, REC, a, True
+        )
+        ctl[I_STOP] = 1 if stop else 0
+        ctl[I_ON_BELT] = 1 if on_belt else 0
+        fc[F_H] = h_nom if not adaptive else min(h_nom, cfg[G_DT])
+        fc[F_H_CAP] = h_nom
+        fc[F_H_PREV] = 0.0
+    attempts = 0
+    while True:
+        a = ctl[I_CUR]
+        b = ctl[I_TRIAL]
+        if ctl[I_STOP] != 0 or not T[a] < cfg[G_T_END] - 1e-12:
+            ctl[I_DONE] = 1
+            return SOLVE_DONE
+        if T[a] >= t_target - 1e-12:
+            return SOLVE_REACHED
+        if attempts >= max_attempts:
+            return SOLVE_PAUSED
+        if (
+            ctl[I_N_IMPACTS] >= IMP.shape[0]
+            or ctl[I_N_STAGES] >= STG.shape[0]
+            or ctl[I_N_REC] >= REC.shape[1]
+        ):
+            return SOLVE_GROW
+        if TR.shape[0] > 0 and ctl[I_N_TRACE] >= TR.shape[0]:
+            return SOLVE_TRACED
+        attempts += 1
+        on_belt = ctl[I_ON_BELT] != 0
+        nb = ctl[I_NEXT_BREAK]
+        while breaks[nb] <= T[a] + 1e-12:
+            nb += 1
+        ctl[I_NEXT_BREAK] = nb
+        to_break = breaks[nb] - T[a]
+        h_try = min(fc[F_H], to_break)
+        if adaptive:
+            cap = min(time_to_contact(OUT[a]), oscillation_step(P, OUT[a], cfg[G_RTOL]))
+            h_try = min(h_try, max(cap, 10.0 * min_dt))
+            tiny = h_try <= 4.0 * min_dt
+        else:
+            tiny = h_try <= 1e-3 * h_nom
+        status = _trap(
+            P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT, RES,
+            MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h_try, a, b,
+            _jump_at(P, T[a]), on_belt, tiny,
+        )  # fmt: skip
+        if status == STEP_REJECTED:
+            ctl[I_REJECTED] += 1
+            fc[F_H] = h_try / 2.0
+            fc[F_H_CAP] = h_try * cfg[G_DOWN]
+            ctl[I_CLEAN] = 0
+            if fc[F_H] < min_dt:
+                ctl[I_DIAG] = DIAG_MIN_DT
+                fc[F_DIAG_T] = T[a]
+                ctl[I_DONE] = 1
+                return SOLVE_DONE
+            continue
+        if status == STEP_FORCED:
+            ctl[I_FORCED] += 1
+        h_taken = h_try
+        slot, kind, g0, g1 = first_event(P, OUT[a], OUT[b])
+        if slot < 0 and on_belt and Y[a, 1] < width <= Y[b, 1]:
+            slot, kind, g0, g1 = -1, EVENT_SORT, width - Y[a, 1], width - Y[b, 1]
+        located = False
+        if (slot >= 0 or kind == EVENT_SORT) and h_try > 1e-9:
+            h_taken = _locate(
+                P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT,
+                RES, MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h_try, on_belt,
+                slot, kind, g0, g1,
+            )  # fmt: skip
+            located = True
+        if adaptive:
+            h_prev = fc[F_H_PREV]
+            r = h_taken / h_prev if h_prev > 0.0 else 0.0
+            err = milne_error(
+                Y[a], ACC[a], Y[b], fc[F_PREV_V : F_PREV_V + 3], fc[F_PREV_A : F_PREV_A + 3], r,
+                h_taken, cfg[G_ATOL], cfg[G_RTOL], cfg[G_V_REF], cfg[G_OM_REF],
+            )  # fmt: skip
+            order = 3.0 if r > 0.0 else 2.0
+            if err > 1.0 and h_taken > 4.0 * min_dt:
+                ctl[I_REJECTED] += 1
+                fc[F_H] = _snap(h_nom, h_taken * max(0.2, 0.9 * err ** (-1.0 / order)))
+                continue
+            if not located:
+                ctl[I_CLEAN] += 1
+                if ctl[I_CLEAN] >= 4 and fc[F_H_CAP] < h_nom:
+                    fc[F_H_CAP] = fc[F_H_CAP] * cfg[G_UP]
+                    ctl[I_CLEAN] = 0
+                cap = min(h_nom, fc[F_H_CAP])
+                # h_taken grow >= cap when err <= (0.9 h_taken / cap)^order (and cap <= 4
+                # h_taken); with a 1 % margin for pow's rounding that decides without the pow
+                # call (most steps: at the cap with a small error); the same step otherwise
+                ratio = 0.9 * h_taken / cap
+                bound = ratio * ratio * ratio if order == 3.0 else ratio * ratio
+                if cap <= 4.0 * h_taken and err <= 0.99 * bound:
+                    h_next = cap
+                else:
+                    grow = min(4.0, 0.9 * max(err, 1e-12) ** (-1.0 / order))
+                    h_next = min(cap, h_taken * grow)
+                fc[F_H] = _snap(h_nom, h_next)
+        else:
+            fc[F_H] = min(h_nom, 2.0 * h_try)
+        # accept
+        for k in range(3):
+            fc[F_PREV_V + k] = Y[a, 3 + k]
+            fc[F_PREV_A + k] = ACC[a, k]
+        fc[F_H_PREV] = h_taken
+        if located or abs(T[a] + h_taken - breaks[nb]) <= 1e-12:
+            fc[F_H_PREV] = 0.0
+        ctl[I_CUR] = b
+        ctl[I_TRIAL] = a
+        a = b
+        ctl[I_STEPS] += 1
+        _trace(ctl, TR, T, Y, LAM, OUT, RES, MODAL, ACC, a, on_belt)
+        stop, on_belt = _observe(
+            P, normals, cfg, ctl, fc, T, Y, LAM, OUT, RES, IMP, STG, REC, a, on_belt
+        )
+        ctl[I_STOP] = 1 if stop else 0
+        ctl[I_ON_BELT] = 1 if on_belt else 0
+        diag = _diverged(P, cfg, fc, T[a], Y[a], RES[a])
+        if diag != DIAG_NONE:
+            ctl[I_DIAG] = diag
+            ctl[I_DONE] = 1
+            return SOLVE_DONE
