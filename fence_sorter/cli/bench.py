@@ -148,13 +148,15 @@ def run(args: argparse.Namespace) -> int:
         command=shlex.join(argv),
         log=log,
     )
-    text = B.render_markdown(report)
     out = Path(args.out)
+    path = Path(args.json) if args.json else out.with_suffix(".json")
+    data = json.dumps(B.report_dict(report), indent=1) + "\n"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(data, encoding="utf-8")
+    # the markdown is rendered from the data as written, so it can be rebuilt from the JSON
+    text = B.render_markdown(B.report_from_dict(json.loads(data)))
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(text + _suite_section(out), encoding="utf-8")
-    path = Path(args.json) if args.json else out.with_suffix(".json")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(B.report_dict(report), indent=1) + "\n", encoding="utf-8")
     print(text)
     failed = [f"{t.scene}: {t.target}" for t in report.targets if t.verdict == "FAIL"]
     print(f"report written to {out}")

@@ -57,6 +57,8 @@ import sys
 import tempfile
 import time
 import tracemalloc
+import types
+import typing
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -1170,6 +1172,32 @@ def report_dict(report: BenchReport) -> dict:
         jit_wall=report.jit.jit_wall, nojit_wall=report.jit.nojit_wall, ratio=report.jit.ratio
     )
     return _jsonable(d)
+
+
+def _from_json(kind, value):
+    """``value`` (JSON data) as an instance of the annotated type ``kind``."""
+    origin, args = typing.get_origin(kind), typing.get_args(kind)
+    if origin in (types.UnionType, typing.Union):
+        if value is None:
+            return math.nan if float in args else None
+        (kind,) = [a for a in args if a is not type(None)]
+        return _from_json(kind, value)
+    if dc.is_dataclass(kind):
+        hints = typing.get_type_hints(kind)
+        names = {f.name for f in dc.fields(kind) if f.init}
+        return kind(**{k: _from_json(hints[k], v) for k, v in value.items() if k in names})
+    if origin is list:
+        return [_from_json(args[0], v) for v in value]
+    if origin is tuple:
+        return tuple(_from_json(args[0], v) for v in value)
+    if kind is float:
+        return math.nan if value is None else float(value)
+    return value
+
+
+def report_from_dict(data: dict) -> BenchReport:
+    """The report back from :func:`report_dict`'s JSON (derived figures are recomputed)."""
+    return _from_json(BenchReport, data)
 
 
 # -- markdown -------------------------------------------------------------------------------------

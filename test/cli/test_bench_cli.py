@@ -70,6 +70,8 @@ def test_quick_writes_the_report(tmp_path: Path) -> None:
 
     data = json.loads(json_path.read_text(encoding="utf-8"))
     assert data["options"]["quick"] is True
+    # the markdown is the JSON rendered: rebuilt from it, the same text
+    assert md.startswith(B.render_markdown(B.report_from_dict(data)))
     (s,) = data["scenes"]
     assert s["scene"] == "positioned_stiff"
     d = s["default"]
