@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Container
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 from fence_sorter.codes import StartMode
 from fence_sorter.physics.params import ParcelParams
@@ -131,18 +131,9 @@ def check_range(key: str, field: str, value, lo: float, hi: float, unit: str, lo
         )
 
 
-FLOAT_FIELDS = (
-    "length_a",
-    "width_b",
-    "height",
-    "mass",
-    "cog_offset_x",
-    "cog_offset_y",
-    "lateral_gap",
-    "yaw",
-    "scan_time",
-    "scan_position_x",
-    "arrival_time",
+#: the fields that must be finite numbers (mu_belt/mu_fence may be NaN: the scene's value)
+FLOAT_FIELDS = tuple(
+    f.name for f in fields(ParcelSpec) if f.type == "float" and not f.name.startswith("mu_")
 )
 
 

@@ -4,9 +4,12 @@ See :class:`SortingLine`; data types in :mod:`fence_sorter.line.types`, input ch
 :mod:`fence_sorter.inputs`. Nothing here imports rclpy.
 """
 
+from fence_sorter.codes import StartMode
 from fence_sorter.inputs import (
     PARCEL_REASONS,
     InputError,
+    ParcelSpec,
+    StrokeCommand,
     validate_command,
     validate_parcel,
 )
@@ -23,11 +26,8 @@ from .types import (
     OutcomeCode,
     OverlapWarning,
     ParcelSnapshot,
-    ParcelSpec,
     SolverWarning,
     Stage,
-    StartMode,
-    StrokeCommand,
     StrokeStarted,
 )
 

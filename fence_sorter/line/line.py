@@ -26,7 +26,14 @@ from typing import NamedTuple
 
 import numpy as np
 
-from fence_sorter.inputs import SCAN_LINE_TOLERANCE, validate_command, validate_parcel
+from fence_sorter.codes import StartMode
+from fence_sorter.inputs import (
+    SCAN_LINE_TOLERANCE,
+    ParcelSpec,
+    StrokeCommand,
+    validate_command,
+    validate_parcel,
+)
 from fence_sorter.physics import kernel as K
 from fence_sorter.physics.contacts import STAGE_E1, STAGE_E2, STAGE_E3, STAGE_E4, STAGE_SORTED
 from fence_sorter.physics.drive import drive_state
@@ -54,11 +61,8 @@ from .types import (
     OutcomeCode,
     OverlapWarning,
     ParcelSnapshot,
-    ParcelSpec,
     SolverWarning,
     Stage,
-    StartMode,
-    StrokeCommand,
     StrokeStarted,
 )
 

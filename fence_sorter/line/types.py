@@ -14,8 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fence_sorter.codes import OutcomeCode, Stage, StartMode
-from fence_sorter.inputs import ParcelSpec, StrokeCommand
+from fence_sorter.codes import OutcomeCode, Stage
 
 NAN = math.nan
 
@@ -167,21 +166,3 @@ class LineSnapshot:
     t: float
     fence: FenceSnapshot
     parcels: list[ParcelSnapshot] = field(default_factory=list)
-
-
-__all__ = [
-    "CommandResult",
-    "FenceSnapshot",
-    "LineEvent",
-    "LineSnapshot",
-    "Outcome",
-    "OutcomeCode",
-    "OverlapWarning",
-    "ParcelSnapshot",
-    "ParcelSpec",
-    "SolverWarning",
-    "Stage",
-    "StartMode",
-    "StrokeCommand",
-    "StrokeStarted",
-]

@@ -48,11 +48,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from fence_sorter.inputs import InputError
+from fence_sorter.inputs import InputError, ParcelSpec, StrokeCommand
 
 from .line import LineConfig, SortingLine
 from .pacing import CycleTrace, LatenessHistogram, Pacer
-from .types import ParcelSpec, StrokeCommand
 
 #: sim time a command for a not-yet-known parcel waits for its parcel message [s]
 COMMAND_HOLD = 0.5

@@ -26,6 +26,8 @@ from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from fence_sorter.capacity.constraints import ConstraintProfile, damage_risk
+from fence_sorter.codes import StartMode
+from fence_sorter.inputs import ParcelSpec, StrokeCommand
 from fence_sorter.line.types import (
     EventTrace,
     FenceSnapshot,
@@ -33,9 +35,6 @@ from fence_sorter.line.types import (
     Outcome,
     OutcomeCode,
     ParcelSnapshot,
-    ParcelSpec,
-    StartMode,
-    StrokeCommand,
 )
 from fence_sorter.physics.contact import stiff_course
 from fence_sorter.physics.params import ContactParams
