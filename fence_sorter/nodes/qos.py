@@ -24,7 +24,7 @@ RELIABLE_QOS = QoSProfile(
 )
 
 # What the nodes take in from outside (/parcels, /fence_commands): reliable, keep-all. A
-# keep-last reader's history silently overwrites samples it has not taken yet (a flood pushed
+# keep-last reader's history silently overwrites samples it has not taken yet (a flood would push
 # real parcels out unseen); a keep-all reader keeps every sample until the node takes it and
 # refuses or accepts it (fence_sorter.nodes.intake), and what a writer gives up before
 # delivery reaches the reader as the middleware's message-lost event, counted there.

@@ -117,6 +117,32 @@ class InterruptTrial:
     exit_after_s: float  # from the first signal
     leftovers: int
     traceback: bool
+    leftover_names: str = ""
+
+
+def _names(pids: list[int]) -> str:
+    """The leftovers' executables, e.g. "simulator, python (2)"."""
+    from collections import Counter
+
+    names = Counter()
+    for pid in pids:
+        try:
+            argv = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
+        except OSError:
+            continue
+        words = [Path(a.decode(errors="replace")).name for a in argv if a]
+        mod = next((w for w in words if w.startswith("fence_sorter.")), None)
+        names[
+            mod
+            or (
+                words[1]
+                if len(words) > 1 and words[0].startswith("python")
+                else words[0]
+                if words
+                else "?"
+            )
+        ] += 1
+    return ", ".join(f"{n}" + (f" ({c})" if c > 1 else "") for n, c in sorted(names.items()))
 
 
 def interrupt_trial(rng: random.Random, workdir: Path, parcels: int = 20) -> InterruptTrial:
@@ -159,10 +185,11 @@ def interrupt_trial(rng: random.Random, workdir: Path, parcels: int = 20) -> Int
     watch.poll()
     watch.done.set()
     left = watch.alive()
+    names = _names(left)
     watch.kill_alive()
     text = log.read_text(errors="replace")
     return InterruptTrial(
-        round(first, 2), sent, proc.returncode, exit_after, len(left), "Traceback" in text
+        round(first, 2), sent, proc.returncode, exit_after, len(left), "Traceback" in text, names
     )
 
 
@@ -700,7 +727,9 @@ def write_report(path: Path, meta: dict, interrupts, floods, wire, wire_extra, c
         for i, t in enumerate(interrupts, 1):
             L.append(
                 f"| {i} | {t.first_signal_s:.2f} | {t.signals} | {t.exit_code} | "
-                f"{t.exit_after_s:.2f} | {t.leftovers} | {'yes' if t.traceback else 'no'} |"
+                f"{t.exit_after_s:.2f} | {t.leftovers}"
+                + (f" ({t.leftover_names})" if t.leftover_names else "")
+                + f" | {'yes' if t.traceback else 'no'} |"
             )
         L.append("")
     if floods:
@@ -872,7 +901,8 @@ def campaign(
             interrupts.append(t)
             progress(
                 f"ctrl-c {i + 1:2d}: first at {t.first_signal_s:5.2f} s, {t.signals} signals, "
-                f"exit {t.exit_code} after {t.exit_after_s:.2f} s, leftovers {t.leftovers}"
+                f"exit {t.exit_code} after {t.exit_after_s:.2f} s, leftovers {t.leftovers} "
+                f"{t.leftover_names}"
             )
     argv = ["fence-sorter", "faults"]
     if trials != 20:

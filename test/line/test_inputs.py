@@ -1,6 +1,6 @@
 """The one validation of parcels and commands (fence_sorter.inputs), shared by the stream
 loaders, the controller and the simulator's line, and the hostile inputs it must refuse:
-a scan_time 1e5 s ahead (it booked the fence until t = 100009.9 s), scan_position_x = 1e9,
+a scan_time 1e5 s ahead (planned, it would book the fence until t = 1e5 s), scan_position_x = 1e9,
 mu_fence = 5, a 20 s stroke, commands outside their parcel's window."""
 
 from __future__ import annotations

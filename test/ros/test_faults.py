@@ -208,10 +208,10 @@ def _start_pair(group, monitor, *extra: str) -> None:
 
 @pytest.mark.faults
 def test_hostile_parcels_and_commands_are_refused_counted_and_kept_out(suite) -> None:
-    """The issue's plausible-but-wrong messages: a scan_time 1e5 s ahead (it booked the fence
-    to t = 100009.9 s), scan_position_x = 1e9 (the simulator took it), mu_fence = 5 (the
-    controller took it); another run's parcel and its forged feasible:false for a real id
-    (the real parcel went NO_FEASIBLE_COMMAND); a 20 s stroke for the real parcel. Each is
+    """Plausible-but-wrong messages: a scan_time 1e5 s ahead (planned, it would book the
+    fence until t = 1e5 s), scan_position_x = 1e9, mu_fence = 5; another run's parcel and its
+    forged feasible:false for a real id (taken, the real parcel would go
+    NO_FEASIBLE_COMMAND); a 20 s stroke for the real parcel. Each is
     refused and counted under its reason by both nodes, and the real parcel is sorted."""
 
     from fence_sorter.nodes.qos import INPUT_QOS
