@@ -1,0 +1,75 @@
+"""The kernel's Python reference is its own source run with NUMBA_DISABLE_JIT=1.
+
+Every bench scene is solved twice with the default (compiled loop): here, compiled by Numba,
+and in a fresh process with NUMBA_DISABLE_JIT=1, where every kernel function runs as the
+plain Python it is written in. The two must take the same steps and events and agree on every
+figure of the result to round-off (LLVM may reorder a few floating-point operations).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+
+import pytest
+
+from fence_sorter.physics.simulate import simulate
+from fence_sorter.scene import load_scene
+
+pytestmark = pytest.mark.slow
+
+SCENES = ("positioned_stiff", "arbitrary_stiff", "impact_flexible", "slide_flexible")
+COUNTS = ("steps", "rejected_steps", "forced_steps", "events", "sorted")
+FIGURES = (
+    "peak_contact_force",
+    "peak_contact_force_stiff",
+    "impact_normal_speed",
+    "exit_speed_y",
+    "y_max",
+    "peak_tip_deflection",
+    "sim_time",
+    "max_penetration",
+    "energy_excess",
+)
+
+SOLVE = """
+import json, sys
+import numba
+from fence_sorter.physics.simulate import simulate
+from fence_sorter.scene import load_scene
+assert numba.config.DISABLE_JIT
+keys = json.loads(sys.argv[1])
+out = {}
+for name in sys.argv[2:]:
+    r = simulate(load_scene(name).scenario)
+    out[name] = {k: getattr(r, k) for k in keys}
+    out[name]["stages"] = [s for s, _ in r.stages]
+print(json.dumps(out))
+"""
+
+
+def test_every_bench_scene_solves_the_same_without_the_jit():
+    env = dict(os.environ, NUMBA_DISABLE_JIT="1")
+    proc = subprocess.run(
+        [sys.executable, "-c", SOLVE, json.dumps(COUNTS + FIGURES), *SCENES],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    python = json.loads(proc.stdout.strip().splitlines()[-1])
+    for name in SCENES:
+        r = simulate(load_scene(name).scenario)
+        ref = python[name]
+        assert r.steps > 100 and r.sorted, name  # real sorting events
+        for key in COUNTS:
+            assert getattr(r, key) == ref[key], (name, key)
+        assert [s for s, _ in r.stages] == ref["stages"], name
+        for key in FIGURES:
+            got, want = getattr(r, key), ref[key]
+            assert math.isclose(got, want, rel_tol=1e-9, abs_tol=1e-12), (name, key, got, want)
