@@ -33,6 +33,9 @@ SUBCOMMAND_MODULES: tuple[str, ...] = (
     "bench_suite",
     "optimize",
     "faults",
+    "emulate",
+    "calibrate",
+    "validate",
 )
 
 

@@ -1,0 +1,605 @@
+"""Fit the twin's physics to a measured bag: robust nonlinear least squares over replays.
+
+Steps (docs/calibration.md):
+
+1. **Align.** Each stroke's start, alpha_k and t1 come from the drive encoder
+   (:func:`~fence_sorter.calibration.bag.fit_stroke`); the camera frame is placed in the sorter
+   frame by a rigid 2D fit (Kabsch) of the poses seen before the strokes start, where the twin
+   knows the motion without any fit parameter (the parcel rides the belt).
+2. **Fit.** The residuals are the measured camera poses (x, y, yaw) and fence root moments
+   minus the twin's replay of the same parcel and stroke, each channel divided by its noise
+   level. Parameters are fitted in log space (``scipy.optimize.least_squares``, trust region
+   reflective, ``soft_l1`` loss), the Jacobian by forward differences with every parcel's
+   replays run in parallel processes. The noise levels are re-estimated from the first fit's
+   residuals and the fit repeated from there, so the covariance is in the data's units.
+3. **Judge.** Covariance s^2 (J^T J)^-1 in log space gives 95 % intervals exp(z +- 1.96 sd)
+   and the correlation matrix. A parameter whose interval spans more than a factor
+   exp(2 ``max_log_halfwidth``) (or that ends on a bound) is flagged as not identifiable by
+   this data, fixed at the scene's value, and the others are refitted without it.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from fence_sorter.physics.parcel import initial_pose, parcel_body
+from fence_sorter.physics.simulate import Scenario
+
+from .bag import MeasuredBag
+from .replay import PARAMETERS, ParcelEvent, ReplayError, replay, scene_value
+from .sensors import camera_to_sorter, sorter_to_camera
+
+Z95 = 1.959964
+#: seconds before a stroke where the root moment is read as the gauge's noise
+PRE_WINDOW = 0.5
+#: initial noise levels of the first pass: position [m], yaw [rad], root moment [N m]
+NOMINAL_SIGMA = (2e-3, 1e-2, 1.0)
+SIGMA_FLOOR = (1e-8, 1e-8, 1e-8)
+FD_STEP = 1e-4  # forward-difference step in log(parameter)
+OFFSET_STEP = (1e-6, 1e-6, 1e-6)  # [m, m, rad]
+
+
+class CalibrationInputError(ValueError):
+    """Bad input to a calibration (exit 2): the message names what is wrong."""
+
+
+class FitError(RuntimeError):
+    """The fit failed: a replay diverged or the optimiser did not converge (exit 3)."""
+
+
+@dataclass
+class EventData:
+    """One parcel's measured samples, sorter frame, times from its stroke start [s]."""
+
+    ev: ParcelEvent
+    cam_tau: np.ndarray
+    cam_x: np.ndarray
+    cam_y: np.ndarray
+    cam_yaw: np.ndarray
+    str_tau: np.ndarray
+    str_m: np.ndarray
+
+
+def pre_stroke_centre(base: Scenario, ev: ParcelEvent, tau: np.ndarray):
+    """Geometric centre and yaw of a parcel riding the belt before its stroke (tau <= 0)."""
+    body = parcel_body(ev.parcel, base.conveyor)
+    xc, yc, yaw = initial_pose(body, ev.r_s, ev.parcel.lateral_gap, ev.parcel.yaw)
+    c, s = math.cos(yaw), math.sin(yaw)
+    p = ev.parcel
+    x0 = xc - (c * p.cog_offset_x - s * p.cog_offset_y)
+    y0 = yc - (s * p.cog_offset_x + c * p.cog_offset_y)
+    v = base.conveyor.belt_speed
+    return x0 + v * tau, np.full_like(tau, y0), np.full_like(tau, yaw)
+
+
+def align_camera(base: Scenario, mb: MeasuredBag) -> tuple[tuple[float, float, float], float]:
+    """The camera frame in the sorter frame (x, y, yaw) from the pre-stroke poses (Kabsch), and
+    the RMS distance left [m]."""
+    m = mb.m
+    src, dst = [], []
+    for ev in mb.events:
+        sel = (m.cam_id == ev.parcel_id) & (m.cam_t < ev.t_start)
+        if not sel.any():
+            continue
+        px, py, _ = pre_stroke_centre(base, ev, m.cam_t[sel] - ev.t_start)
+        src.append(np.column_stack([m.cam_x[sel], m.cam_y[sel]]))
+        dst.append(np.column_stack([px, py]))
+    if not src or sum(len(s) for s in src) < 3:
+        raise CalibrationInputError(
+            f"{mb.path}: the camera sees fewer than 3 parcel poses before the strokes start; "
+            "the camera frame cannot be aligned"
+        )
+    a, b = np.concatenate(src), np.concatenate(dst)
+    ca, cb = a.mean(axis=0), b.mean(axis=0)
+    h = (a - ca).T @ (b - cb)
+    theta = math.atan2(h[0, 1] - h[1, 0], h[0, 0] + h[1, 1])
+    c, s = math.cos(theta), math.sin(theta)
+    rot = np.array([[c, -s], [s, c]])
+    d = cb - rot @ ca
+    rms = float(np.sqrt(np.mean(np.sum((a @ rot.T + d - b) ** 2, axis=1))))
+    return (float(d[0]), float(d[1]), theta), rms
+
+
+def event_data(mb: MeasuredBag) -> list[EventData]:
+    """Each parcel's samples (camera frame), times from its stroke start, to its replay's end."""
+    m = mb.m
+    out = []
+    for ev in mb.events:
+        sel = m.cam_id == ev.parcel_id
+        tau = m.cam_t[sel] - ev.t_start
+        keep = tau < ev.t_end - 1e-6
+        ssel = (m.str_t >= ev.t_start - PRE_WINDOW) & (m.str_t < ev.t_start + ev.t_end - 1e-6)
+        out.append(
+            EventData(
+                ev,
+                tau[keep],
+                m.cam_x[sel][keep],
+                m.cam_y[sel][keep],
+                m.cam_yaw[sel][keep],
+                m.str_t[ssel] - ev.t_start,
+                m.str_moment[ssel],
+            )
+        )
+    return out
+
+
+def noise_levels(base: Scenario, eds: list[EventData], offset) -> tuple[float, float, float]:
+    """Noise of each channel where the twin knows the truth without any fit parameter: poses
+    before the stroke (riding the belt), the root moment before the stroke (fence at rest)."""
+    dp, dyaw, mom = [], [], []
+    for ed in eds:
+        pre = ed.cam_tau < 0.0
+        if pre.any():
+            px, py, pyaw = pre_stroke_centre(base, ed.ev, ed.cam_tau[pre])
+            x, y, yaw = camera_to_sorter(offset, ed.cam_x[pre], ed.cam_y[pre], ed.cam_yaw[pre])
+            dp.extend((x - px, y - py))
+            dyaw.append(_wrap(yaw - pyaw))
+        mom.append(ed.str_m[ed.str_tau < 0.0])
+    rms = [_rms(np.concatenate(v)) if v else math.nan for v in (dp, dyaw, mom)]
+    return tuple(
+        max(r, floor) if math.isfinite(r) else nominal
+        for r, floor, nominal in zip(rms, SIGMA_FLOOR, NOMINAL_SIGMA, strict=True)
+    )
+
+
+def predict(base: Scenario, ed: EventData, values: dict[str, float]):
+    """The twin's replay sampled where this parcel was measured: x, y, yaw, moment."""
+    tr = replay(base, ed.ev, values)
+    x, y, yaw = tr.pose_at(ed.cam_tau)
+    return x, y, yaw, tr.moment_at(ed.str_tau)
+
+
+# -- parallel evaluation -----------------------------------------------------------------------
+_WORKER: dict = {}
+
+
+def _init_worker(base: Scenario, eds: list[EventData]) -> None:
+    _WORKER["base"], _WORKER["eds"] = base, eds
+
+
+def _run_chunk(idx: list[int], values_list: list[dict[str, float]]):
+    base, eds = _WORKER["base"], _WORKER["eds"]
+    out = []
+    for values in values_list:
+        row = []
+        for i in idx:
+            try:
+                row.append(predict(base, eds[i], values))
+            except ReplayError as exc:
+                return str(exc)
+        out.append(row)
+    return out
+
+
+class Evaluator:
+    """Replays every parcel for a list of parameter sets, parcels split over processes."""
+
+    def __init__(self, base: Scenario, eds: list[EventData], workers: int | None = None):
+        self.base, self.eds = base, eds
+        self.workers = max(1, min(workers or os.cpu_count() or 1, len(eds)))
+        self.pool = None
+        if self.workers > 1:
+            self.pool = ProcessPoolExecutor(
+                self.workers, initializer=_init_worker, initargs=(base, eds)
+            )
+        else:
+            _init_worker(base, eds)
+        n = len(eds)
+        k = min(n, 2 * self.workers) if self.workers > 1 else 1
+        self.chunks = [list(range(i, n, k)) for i in range(k)]
+        self.replays = 0
+        self.on_replays = None  # callback(count) for a progress bar
+
+    def close(self) -> None:
+        if self.pool is not None:
+            self.pool.shutdown(cancel_futures=True)
+            self.pool = None
+
+    def __call__(self, values_list: list[dict[str, float]]):
+        """Per parameter set, the list (per event) of predictions."""
+        if self.pool is None:
+            parts = [_run_chunk(c, values_list) for c in self.chunks]
+        else:
+            futures = [self.pool.submit(_run_chunk, c, values_list) for c in self.chunks]
+            parts = [f.result() for f in futures]
+        out = [[None] * len(self.eds) for _ in values_list]
+        for chunk, part in zip(self.chunks, parts, strict=True):
+            if isinstance(part, str):
+                raise FitError(part)
+            for j, row in enumerate(part):
+                for i, pred in zip(chunk, row, strict=True):
+                    out[j][i] = pred
+        self.replays += len(values_list) * len(self.eds)
+        if self.on_replays is not None:
+            self.on_replays(len(values_list) * len(self.eds))
+        return out
+
+
+# -- residuals ---------------------------------------------------------------------------------
+def _wrap(a: np.ndarray) -> np.ndarray:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def channels(eds: list[EventData], preds, offset) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Raw residuals (predicted - measured) per channel: position (every x, then every y),
+    yaw, moment; the camera samples placed in the sorter frame by ``offset``."""
+    xs, ys, yaw, mom = [], [], [], []
+    for ed, (x, y, a, mz) in zip(eds, preds, strict=True):
+        mx, my, myaw = camera_to_sorter(offset, ed.cam_x, ed.cam_y, ed.cam_yaw)
+        xs.append(x - mx)
+        ys.append(y - my)
+        yaw.append(_wrap(a - myaw))
+        mom.append(mz - ed.str_m)
+    return np.concatenate(xs + ys), np.concatenate(yaw), np.concatenate(mom)
+
+
+def weighted(eds, preds, offset, sigma) -> np.ndarray:
+    p, a, m = channels(eds, preds, offset)
+    return np.concatenate([p / sigma[0], a / sigma[1], m / sigma[2]])
+
+
+# -- the fit -----------------------------------------------------------------------------------
+@dataclass
+class Estimate:
+    name: str
+    prior: float
+    value: float | None  # None: not identifiable, not returned as a number
+    ci95: tuple[float, float] | None
+    log_sd: float  # standard deviation of log(value) from the Jacobian
+    verdict: str
+    why: str = ""
+    bootstrap_ci95: tuple[float, float] | None = None
+
+    def to_dict(self) -> dict:
+        return {
+            "name": self.name,
+            "scene_key": PARAMETERS[self.name][0],
+            "prior": self.prior,
+            "value": self.value,
+            "ci95": list(self.ci95) if self.ci95 else None,
+            "log_sd": self.log_sd if math.isfinite(self.log_sd) else None,
+            "verdict": self.verdict,
+            "why": self.why,
+            "bootstrap_ci95": list(self.bootstrap_ci95) if self.bootstrap_ci95 else None,
+        }
+
+
+@dataclass
+class CalibrationResult:
+    estimates: list[Estimate]
+    correlation: np.ndarray
+    names: list[str]
+    singular_values: np.ndarray
+    sigma: tuple[float, float, float]
+    camera_offset: tuple[float, float, float]
+    camera_rms: float
+    encoder_rms: float
+    parcels: list[int]
+    samples: int
+    cost: float
+    nfev: int
+    replays: int
+    wall_time: float
+    residuals: tuple[np.ndarray, np.ndarray, np.ndarray] = ()
+    final_values: dict[str, float] = field(default_factory=dict)
+    data: list[EventData] = field(default_factory=list)  # the parcels fitted
+
+    def values(self) -> dict[str, float]:
+        """The identified values (what a calibrated scene takes)."""
+        return {e.name: e.value for e in self.estimates if e.value is not None}
+
+    def to_dict(self) -> dict:
+        return {
+            "estimates": [e.to_dict() for e in self.estimates],
+            "correlation": {"names": self.names, "matrix": self.correlation.round(6).tolist()},
+            "singular_values": self.singular_values.tolist(),
+            "noise_sigma": {
+                "position_m": self.sigma[0],
+                "yaw_rad": self.sigma[1],
+                "moment_Nm": self.sigma[2],
+            },
+            "camera_offset": {
+                "x_m": self.camera_offset[0],
+                "y_m": self.camera_offset[1],
+                "yaw_deg": math.degrees(self.camera_offset[2]),
+            },
+            "camera_alignment_rms_m": self.camera_rms,
+            "encoder_rms_rad": self.encoder_rms,
+            "parcels": self.parcels,
+            "samples": self.samples,
+            "cost": self.cost,
+            "function_evaluations": self.nfev,
+            "replays": self.replays,
+            "wall_time_s": self.wall_time,
+        }
+
+
+def check_fit_names(base: Scenario, names: list[str], scene: str) -> list[str]:
+    """Canonical fit names; CalibrationInputError names an unknown or absent parameter."""
+    from .replay import canonical
+
+    out = []
+    for raw in names:
+        name = canonical(raw)
+        if name is None:
+            raise CalibrationInputError(
+                f"--fit {raw}: not a fit parameter; allowed: {', '.join(PARAMETERS)}"
+            )
+        if scene_value(base, name) is None:
+            have = [n for n in PARAMETERS if scene_value(base, n) is not None]
+            raise CalibrationInputError(
+                f"--fit {raw}: scene {scene} has a stiff fence, no {PARAMETERS[name][0]}; "
+                f"this scene's fit parameters: {', '.join(have)}"
+            )
+        if scene_value(base, name) <= 0.0:
+            raise CalibrationInputError(
+                f"--fit {raw}: the scene's {PARAMETERS[name][0]} is {scene_value(base, name)!r}; "
+                "a fitted parameter needs a positive starting value"
+            )
+        if name not in out:
+            out.append(name)
+    if not out:
+        raise CalibrationInputError("--fit: give at least one parameter")
+    return out
+
+
+class _Problem:
+    """Residuals and Jacobian over z = [log of the ``names``, camera x, y, yaw] (other fit
+    parameters ``fixed``). The physics columns by forward differences of replays (one parallel
+    batch), the camera columns by differences of the transform alone (no replays)."""
+
+    def __init__(self, evaluate: Evaluator, eds, names, fixed, sigma):
+        self.evaluate, self.eds, self.names, self.fixed = evaluate, eds, names, dict(fixed)
+        self.sigma = sigma
+        self.k = len(names)
+        self._cache: tuple[bytes, list] | None = None
+
+    def values(self, z) -> dict[str, float]:
+        v = dict(self.fixed)
+        v.update({n: float(math.exp(zi)) for n, zi in zip(self.names, z[: self.k], strict=True)})
+        return v
+
+    def preds(self, z) -> list:
+        key = np.asarray(z[: self.k]).tobytes()
+        if self._cache is None or self._cache[0] != key:
+            self._cache = (key, self.evaluate([self.values(z)])[0])
+        return self._cache[1]
+
+    def fun(self, z) -> np.ndarray:
+        return weighted(self.eds, self.preds(z), tuple(z[self.k :]), self.sigma)
+
+    def jac(self, z) -> np.ndarray:
+        z = np.asarray(z, dtype=float)
+        f0 = self.fun(z)
+        lo, hi = self.bounds()
+        steps, sets = [], []
+        for j in range(self.k):
+            zj = z.copy()
+            h = FD_STEP if zj[j] + FD_STEP <= hi[j] else -FD_STEP
+            zj[j] += h
+            steps.append(h)
+            sets.append(self.values(zj))
+        off = tuple(z[self.k :])
+        cols = [
+            (weighted(self.eds, p, off, self.sigma) - f0) / h
+            for p, h in zip(self.evaluate(sets) if sets else [], steps, strict=True)
+        ]
+        base = self.preds(z)
+        for j in range(3):
+            o = np.array(off)
+            o[j] += OFFSET_STEP[j]
+            cols.append((weighted(self.eds, base, tuple(o), self.sigma) - f0) / OFFSET_STEP[j])
+        return np.column_stack(cols)
+
+    def bounds(self):
+        lo = [math.log(PARAMETERS[n][1]) for n in self.names] + [-np.inf] * 3
+        hi = [math.log(PARAMETERS[n][2]) for n in self.names] + [np.inf] * 3
+        return np.array(lo), np.array(hi)
+
+
+def _solve(problem: _Problem, z0, max_nfev: int):
+    """Gauss-Newton (linear loss) from z0, then the robust ``soft_l1`` loss from there: far
+    from the optimum every residual is many sigma large, where the robust loss would turn the
+    fit into a slow L1 descent; near it the robust loss keeps outliers from dominating."""
+    lo, hi = problem.bounds()
+    z0 = np.clip(z0, lo + 1e-9, hi - 1e-9)
+    nfev = 0
+    for loss in ("linear", "soft_l1"):
+        sol = least_squares(
+            problem.fun,
+            z0,
+            jac=problem.jac,
+            bounds=(lo, hi),
+            method="trf",
+            loss=loss,
+            f_scale=3.0,
+            x_scale=1.0,
+            xtol=1e-10,
+            ftol=1e-10,
+            gtol=1e-10,
+            max_nfev=max_nfev,
+        )
+        nfev += sol.nfev
+        if sol.status <= 0 or not np.all(np.isfinite(sol.x)):
+            raise FitError(
+                f"the fit of {', '.join(problem.names)} did not converge in {nfev} "
+                f"evaluations (status {sol.status}: {sol.message})"
+            )
+        z0 = sol.x
+    sol.nfev = nfev
+    return sol
+
+
+def _rms(r: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(r**2))) if r.size else math.nan
+
+
+def _covariance(jac: np.ndarray, r: np.ndarray):
+    """s^2 (J^T J)^-1 by SVD; a parameter in a null direction of J gets an infinite variance."""
+    m, n = jac.shape
+    s2 = float(r @ r) / max(m - n, 1)
+    _, sv, vt = np.linalg.svd(jac, full_matrices=False)
+    keep = sv > sv.max() * 1e-10 if sv.size and sv.max() > 0 else np.zeros(sv.size, bool)
+    cov = (vt[keep].T / sv[keep] ** 2) @ vt[keep]
+    for k in np.flatnonzero(~keep):
+        for j in np.flatnonzero(np.abs(vt[k]) > 1e-3):
+            cov[j, j] = np.inf
+    return s2 * cov, sv
+
+
+def calibrate(
+    base: Scenario,
+    mb: MeasuredBag,
+    names: list[str],
+    *,
+    workers: int | None = None,
+    max_log_halfwidth: float = 0.5,
+    max_nfev: int = 40,
+    min_parcels: int = 3,
+    bootstrap: int = 0,
+    seed: int = 0,
+    progress=None,
+) -> CalibrationResult:
+    """Fit ``names`` of ``base`` to the bag; see the module docstring."""
+    wall0 = time.perf_counter()
+    offset0, cam_rms = align_camera(base, mb)
+    eds = [ed for ed in event_data(mb) if (ed.cam_tau > 0.0).sum() >= 3]
+    if len(eds) < min_parcels:
+        raise CalibrationInputError(
+            f"{mb.path}: {len(eds)} parcels with a stroke and camera poses during it; a "
+            f"calibration needs at least {min_parcels}"
+        )
+    sigma = noise_levels(base, eds, offset0)
+    prior = {n: float(scene_value(base, n)) for n in names}
+    evaluate = Evaluator(base, eds, workers)
+    evaluate.on_replays = progress
+    active, fixed, flagged = list(names), {}, {}
+    z = np.concatenate([np.log([prior[n] for n in names]), offset0])
+    nfev = 0
+    try:
+        while True:
+            prob = _Problem(evaluate, eds, active, fixed, sigma)
+            sol = _solve(prob, z, max_nfev)
+            nfev += sol.nfev
+            cov, sv = _covariance(sol.jac, sol.fun)
+            sd = np.sqrt(np.diag(cov))
+            lo, hi = prob.bounds()
+            bad = {}
+            for j, n in enumerate(active):
+                if not math.isfinite(sd[j]) or Z95 * sd[j] > max_log_halfwidth:
+                    bad[n] = (
+                        f"the 95 % interval spans a factor {math.exp(2 * Z95 * sd[j]):.3g} "
+                        f"(limit {math.exp(2 * max_log_halfwidth):.3g})"
+                        if math.isfinite(sd[j])
+                        else "the data carry no information on it"
+                    )
+                elif sol.x[j] - lo[j] < 1e-6 or hi[j] - sol.x[j] < 1e-6:
+                    bad[n] = "the estimate ends on its bound"
+            if not bad:
+                break
+            # fix the least determined one at the scene's value and refit the rest
+            worst = max(bad, key=lambda n: sd[active.index(n)])
+            flagged[worst] = bad[worst]
+            fixed[worst] = prior[worst]
+            keep = [j for j, n in enumerate(active) if n != worst]
+            z = np.concatenate([sol.x[keep], sol.x[len(active) :]])
+            active = [n for n in active if n != worst]
+        final = prob.values(sol.x)
+        offset = tuple(float(v) for v in sol.x[len(active) :])
+        preds = evaluate([final])[0]
+        raw = channels(eds, preds, offset)
+        boot = _bootstrap(
+            evaluate, eds, preds, active, fixed, sigma, sol.x, bootstrap, seed, max_nfev
+        )
+    finally:
+        evaluate.close()
+    estimates = []
+    k = len(active)
+    for n in names:
+        if n in active:
+            j = active.index(n)
+            ci = (math.exp(sol.x[j] - Z95 * sd[j]), math.exp(sol.x[j] + Z95 * sd[j]))
+            estimates.append(
+                Estimate(
+                    n,
+                    prior[n],
+                    math.exp(sol.x[j]),
+                    ci,
+                    float(sd[j]),
+                    "identified",
+                    bootstrap_ci95=boot.get(n),
+                )
+            )
+        else:
+            estimates.append(
+                Estimate(
+                    n,
+                    prior[n],
+                    None,
+                    None,
+                    math.nan,
+                    "not identifiable",
+                    why=flagged[n] + "; kept at the scene's value",
+                )
+            )
+    d = np.sqrt(np.diag(cov[:k, :k]))
+    corr = cov[:k, :k] / np.outer(d, d)
+    return CalibrationResult(
+        estimates=estimates,
+        correlation=corr,
+        names=active,
+        singular_values=sv,
+        sigma=sigma,
+        camera_offset=offset,
+        camera_rms=cam_rms,
+        encoder_rms=mb.encoder_rms,
+        parcels=[ed.ev.parcel_id for ed in eds],
+        samples=int(sum(r.size for r in raw)),
+        cost=float(sol.cost),
+        nfev=nfev,
+        replays=evaluate.replays,
+        wall_time=time.perf_counter() - wall0,
+        residuals=raw,
+        final_values=final,
+        data=eds,
+    )
+
+
+def _bootstrap(evaluate, eds, preds, active, fixed, sigma, z_hat, count, seed, max_nfev):
+    """Parametric bootstrap: ``count`` refits to the twin's prediction at the estimate plus
+    fresh noise of the estimated levels at the measured sample times; percentile intervals."""
+    if not count or not active:
+        return {}
+    rng = np.random.default_rng(seed)
+    offset = tuple(z_hat[len(active) :])
+    draws = []
+    for _ in range(count):
+        fake = []
+        for ed, (x, y, a, mz) in zip(eds, preds, strict=True):
+            cx, cy, ca = sorter_to_camera(offset, x, y, a)
+            fake.append(
+                EventData(
+                    ed.ev,
+                    ed.cam_tau,
+                    cx + rng.normal(0, sigma[0], x.size),
+                    cy + rng.normal(0, sigma[0], y.size),
+                    ca + rng.normal(0, sigma[1], a.size),
+                    ed.str_tau,
+                    mz + rng.normal(0, sigma[2], mz.size),
+                )
+            )
+        prob = _Problem(evaluate, fake, active, fixed, sigma)
+        draws.append(_solve(prob, z_hat, max_nfev).x)
+    draws = np.array(draws)
+    out = {}
+    for j, n in enumerate(active):
+        lo, hi = np.percentile(draws[:, j], [2.5, 97.5])
+        out[n] = (float(math.exp(lo)), float(math.exp(hi)))
+    return out

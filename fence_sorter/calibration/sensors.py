@@ -1,0 +1,344 @@
+"""Sensor emulator core (no ROS): what a real sorter's sensors would measure of the twin.
+
+A sensors file (``config/sensors/*.yaml``) describes three instruments:
+
+- ``encoder``: the fence drive angle alpha_w (sensor_msgs/JointState), ``rate`` [Hz] and
+  ``noise`` [rad] (standard deviation, Gaussian).
+- ``camera``: an overhead camera's pose of each parcel's geometric centre and yaw (LoadState in
+  frame ``camera``), ``rate`` [Hz], ``noise_position`` [m], ``noise_yaw`` [rad], ``dropout``
+  (probability a frame loses the parcel), ``latency`` [s] (bag time = capture stamp + latency),
+  ``offset`` (the camera frame in the sorter frame: ``x``, ``y`` [m], ``yaw_deg``) and
+  ``field_of_view`` (``x``, ``y`` ranges in the sorter frame [m] where the parcel is seen).
+- ``strain`` (optional, flexible fence only): the fence root's bending moment
+  (geometry_msgs/WrenchStamped, torque.z [N m]), ``rate`` [Hz], ``noise`` [N m].
+
+:func:`measure` turns the twin's truth (one :class:`TruthEvent` per parcel: its stroke start in
+bag time and the replayed track) into :class:`Measurements` with one seeded generator, so truth
+and noise are reproducible. Every emitter (the bag writer of ``fence-sorter emulate``) uses
+this one function, so every path yields the same measured samples.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from fence_sorter.physics.params import ParameterError
+
+REPO_SENSORS = Path(__file__).resolve().parent.parent.parent / "config" / "sensors"
+
+
+class SensorConfigError(ParameterError):
+    """A sensors file is invalid; the message names the file and the dotted key."""
+
+
+@dataclass(frozen=True)
+class EncoderSpec:
+    rate: float = 500.0  # [Hz]
+    noise: float = 1e-4  # [rad]
+
+
+@dataclass(frozen=True)
+class CameraSpec:
+    rate: float = 60.0  # [Hz]
+    noise_position: float = 2e-3  # [m]
+    noise_yaw: float = math.radians(0.5)  # [rad]
+    dropout: float = 0.05  # probability a frame misses the parcel
+    latency: float = 0.03  # [s] capture stamp -> bag time
+    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)  # camera frame in sorter (x, y, yaw)
+    fov_x: tuple[float, float] = (-1.0, 2.0)  # [m] sorter frame
+    fov_y: tuple[float, float] = (-0.1, 0.8)  # [m] sorter frame
+
+
+@dataclass(frozen=True)
+class StrainSpec:
+    rate: float = 1000.0  # [Hz]
+    noise: float = 1.0  # [N m]
+
+
+@dataclass(frozen=True)
+class SensorConfig:
+    name: str = "default"
+    encoder: EncoderSpec = EncoderSpec()
+    camera: CameraSpec = CameraSpec()
+    strain: StrainSpec | None = None
+
+
+_RANGES = {
+    "encoder.rate": (1.0, 1e5, "Hz"),
+    "encoder.noise": (0.0, 0.1, "rad"),
+    "camera.rate": (1.0, 1000.0, "Hz"),
+    "camera.noise_position": (0.0, 0.1, "m"),
+    "camera.noise_yaw": (0.0, 0.5, "rad"),
+    "camera.dropout": (0.0, 0.9, ""),
+    "camera.latency": (0.0, 1.0, "s"),
+    "strain.rate": (1.0, 1e5, "Hz"),
+    "strain.noise": (0.0, 1e4, "N m"),
+}
+_KEYS = {
+    "encoder": ("rate", "noise"),
+    "camera": (
+        "rate",
+        "noise_position",
+        "noise_yaw_deg",
+        "dropout",
+        "latency",
+        "offset",
+        "field_of_view",
+    ),
+    "strain": ("rate", "noise"),
+}
+
+
+def resolve_sensors(path_or_name: str | Path) -> Path:
+    """A sensors file by path, or by name under config/sensors/."""
+    p = Path(path_or_name)
+    if p.is_file():
+        return p
+    cand = REPO_SENSORS / f"{path_or_name}.yaml"
+    if cand.is_file():
+        return cand
+    names = sorted(q.stem for q in REPO_SENSORS.glob("*.yaml"))
+    raise SensorConfigError(
+        f"sensors {path_or_name}: no such file; give a path or one of {', '.join(names)}"
+    )
+
+
+def _number(src: str, key: str, value) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        try:
+            value = float(value)
+        except (TypeError, ValueError):
+            raise SensorConfigError(
+                f"sensors {src}: {key} must be a number, got {value!r}"
+            ) from None
+    lo, hi, unit = _RANGES.get(key, (-math.inf, math.inf, ""))
+    if not (math.isfinite(value) and lo <= value <= hi):
+        raise SensorConfigError(
+            f"sensors {src}: {key} must be in [{lo:g}, {hi:g}] {unit}".rstrip()
+            + f", got {value!r}"
+        )
+    return float(value)
+
+
+def _pair(src: str, key: str, value) -> tuple[float, float]:
+    if not (isinstance(value, list | tuple) and len(value) == 2):
+        raise SensorConfigError(f"sensors {src}: {key} must be a list [low, high], got {value!r}")
+    lo, hi = (_number(src, key, v) for v in value)
+    if not lo < hi:
+        raise SensorConfigError(f"sensors {src}: {key} must have low < high, got {value!r}")
+    return lo, hi
+
+
+def load_sensors(path_or_name: str | Path) -> SensorConfig:
+    """Load and check a sensors file; SensorConfigError names the key and its range."""
+    path = resolve_sensors(path_or_name)
+    src = path.name
+    try:
+        raw = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+    except (OSError, yaml.YAMLError) as exc:
+        detail = " ".join(str(exc).split())
+        raise SensorConfigError(f"sensors {src}: cannot read: {detail}") from None
+    if not isinstance(raw, dict):
+        raise SensorConfigError(f"sensors {src}: the top level must be a mapping")
+    for k in raw:
+        if k not in (*_KEYS, "name", "description"):
+            raise SensorConfigError(
+                f"sensors {src}: {k} is not a known key; allowed: name, description, "
+                + ", ".join(_KEYS)
+            )
+    sections = {}
+    for sec, keys in _KEYS.items():
+        data = raw.get(sec)
+        if data is None:
+            continue
+        if not isinstance(data, dict):
+            raise SensorConfigError(f"sensors {src}: {sec} must be a mapping")
+        for k in data:
+            if k not in keys:
+                raise SensorConfigError(
+                    f"sensors {src}: {sec}.{k} is not a known key; allowed: {', '.join(keys)}"
+                )
+        sections[sec] = data
+    enc = sections.get("encoder", {})
+    encoder = EncoderSpec(
+        **{k: _number(src, f"encoder.{k}", v) for k, v in enc.items()},
+    )
+    cam = dict(sections.get("camera", {}))
+    kw = {}
+    for k in ("rate", "noise_position", "dropout", "latency"):
+        if k in cam:
+            kw[k] = _number(src, f"camera.{k}", cam[k])
+    if "noise_yaw_deg" in cam:
+        kw["noise_yaw"] = math.radians(_number(src, "camera.noise_yaw_deg", cam["noise_yaw_deg"]))
+        _number(src, "camera.noise_yaw", kw["noise_yaw"])
+    if "offset" in cam:
+        off = cam["offset"]
+        if not isinstance(off, dict) or set(off) - {"x", "y", "yaw_deg"}:
+            raise SensorConfigError(
+                f"sensors {src}: camera.offset must be a mapping of x, y [m] and yaw_deg"
+            )
+        kw["offset"] = (
+            _number(src, "camera.offset.x", off.get("x", 0.0)),
+            _number(src, "camera.offset.y", off.get("y", 0.0)),
+            math.radians(_number(src, "camera.offset.yaw_deg", off.get("yaw_deg", 0.0))),
+        )
+    if "field_of_view" in cam:
+        fov = cam["field_of_view"]
+        if not isinstance(fov, dict) or set(fov) - {"x", "y"}:
+            raise SensorConfigError(
+                f"sensors {src}: camera.field_of_view must be a mapping of x and y ranges [m]"
+            )
+        if "x" in fov:
+            kw["fov_x"] = _pair(src, "camera.field_of_view.x", fov["x"])
+        if "y" in fov:
+            kw["fov_y"] = _pair(src, "camera.field_of_view.y", fov["y"])
+    strain = None
+    if "strain" in sections:
+        strain = StrainSpec(
+            **{k: _number(src, f"strain.{k}", v) for k, v in sections["strain"].items()}
+        )
+    return SensorConfig(
+        name=str(raw.get("name", path.stem)),
+        encoder=encoder,
+        camera=CameraSpec(**kw),
+        strain=strain,
+    )
+
+
+# -- frames ------------------------------------------------------------------------------------
+def sorter_to_camera(offset, x, y, yaw):
+    """Sorter-frame pose -> camera frame, the camera frame lying at ``offset`` (x, y, yaw)."""
+    ox, oy, oyaw = offset
+    c, s = math.cos(oyaw), math.sin(oyaw)
+    dx, dy = np.asarray(x) - ox, np.asarray(y) - oy
+    return c * dx + s * dy, -s * dx + c * dy, np.asarray(yaw) - oyaw
+
+
+def camera_to_sorter(offset, x, y, yaw):
+    """Camera-frame pose -> sorter frame (inverse of :func:`sorter_to_camera`)."""
+    ox, oy, oyaw = offset
+    c, s = math.cos(oyaw), math.sin(oyaw)
+    x, y = np.asarray(x), np.asarray(y)
+    return ox + c * x - s * y, oy + s * x + c * y, np.asarray(yaw) + oyaw
+
+
+# -- truth and measurements --------------------------------------------------------------------
+@dataclass
+class Track:
+    """A parcel's replayed motion (times from its stroke start, s) and the fence's.
+
+    ``x``, ``y`` the geometric centre [m] and ``yaw`` [rad], sorter frame; ``moment`` the fence
+    root bending moment [N m] on ``t_fence`` (empty for a stiff fence).
+    """
+
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    yaw: np.ndarray
+    t_fence: np.ndarray
+    moment: np.ndarray
+    t_end: float
+
+    def pose_at(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return (
+            np.interp(t, self.t, self.x),
+            np.interp(t, self.t, self.y),
+            np.interp(t, self.t, self.yaw),
+        )
+
+    def moment_at(self, t: np.ndarray) -> np.ndarray:
+        if not len(self.t_fence):
+            return np.zeros_like(t)
+        return np.interp(t, self.t_fence, self.moment, left=0.0)
+
+
+@dataclass
+class TruthEvent:
+    parcel_id: int
+    t_start: float  # stroke start in bag time [s]
+    alpha_k: float
+    t1: float
+    track: Track
+
+
+@dataclass
+class Measurements:
+    """The measured samples of a bag, in bag time (stamps are capture times)."""
+
+    enc_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    enc_angle: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    cam_t: np.ndarray = field(default_factory=lambda: np.zeros(0))  # capture stamp
+    cam_id: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    cam_x: np.ndarray = field(default_factory=lambda: np.zeros(0))  # camera frame
+    cam_y: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    cam_yaw: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    cam_latency: float = 0.0
+    str_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    str_moment: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+
+def drive_angle(events, t: np.ndarray) -> np.ndarray:
+    """alpha_w at bag times ``t`` from the strokes of ``events`` (anything with ``t_start``,
+    ``alpha_k``, ``t1``; 0 between strokes)."""
+    out = np.zeros_like(t)
+    for ev in events:
+        tau = t - ev.t_start
+        inside = (tau >= 0.0) & (tau <= 2.0 * ev.t1)
+        out[inside] = 0.5 * ev.alpha_k * (1.0 - np.cos(math.pi * tau[inside] / ev.t1))
+    return out
+
+
+def _grid(t0: float, t1: float, rate: float) -> np.ndarray:
+    n0, n1 = math.ceil(t0 * rate), math.floor(t1 * rate)
+    return np.arange(n0, n1 + 1) / rate
+
+
+def measure(
+    events: list[TruthEvent], cfg: SensorConfig, seed: int, pre_time: float, t_bag_end: float
+) -> Measurements:
+    """Sample the truth as the sensors of ``cfg`` would, with one seeded generator.
+
+    Encoder: every 1/rate from 0 to ``t_bag_end``. Camera: every frame in which a parcel lies
+    inside the field of view from ``pre_time`` before its stroke to the end of its track, minus
+    the dropped frames. Strain: every 1/rate over the same window as the camera's.
+    """
+    rng = np.random.default_rng(seed)
+    m = Measurements(cam_latency=cfg.camera.latency)
+    m.enc_t = _grid(0.0, t_bag_end, cfg.encoder.rate)
+    m.enc_angle = drive_angle(events, m.enc_t) + rng.normal(0.0, 1.0, m.enc_t.size) * (
+        cfg.encoder.noise
+    )
+    cam = cfg.camera
+    ts, ids, xs, ys, yaws = [], [], [], [], []
+    for ev in events:
+        tt = _grid(ev.t_start - pre_time, ev.t_start + ev.track.t_end, cam.rate)
+        tau = tt - ev.t_start
+        x, y, yaw = ev.track.pose_at(tau)
+        seen = (
+            (x >= cam.fov_x[0]) & (x <= cam.fov_x[1]) & (y >= cam.fov_y[0]) & (y <= cam.fov_y[1])
+        )
+        kept = seen & (rng.random(tt.size) >= cam.dropout)
+        n = int(kept.sum())
+        cx, cy, cyaw = sorter_to_camera(cam.offset, x[kept], y[kept], yaw[kept])
+        ts.append(tt[kept])
+        ids.append(np.full(n, ev.parcel_id, dtype=np.int64))
+        xs.append(cx + rng.normal(0.0, 1.0, n) * cam.noise_position)
+        ys.append(cy + rng.normal(0.0, 1.0, n) * cam.noise_position)
+        yaws.append(cyaw + rng.normal(0.0, 1.0, n) * cam.noise_yaw)
+    if events:
+        m.cam_t, m.cam_id = np.concatenate(ts), np.concatenate(ids)
+        m.cam_x, m.cam_y, m.cam_yaw = np.concatenate(xs), np.concatenate(ys), np.concatenate(yaws)
+    if cfg.strain is not None and any(len(ev.track.t_fence) for ev in events):
+        st, sm = [], []
+        for ev in events:
+            tt = _grid(ev.t_start - pre_time, ev.t_start + ev.track.t_end, cfg.strain.rate)
+            st.append(tt)
+            sm.append(ev.track.moment_at(tt - ev.t_start))
+        m.str_t = np.concatenate(st)
+        m.str_moment = np.concatenate(sm) + rng.normal(0.0, 1.0, m.str_t.size) * cfg.strain.noise
+    return m
