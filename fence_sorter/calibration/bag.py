@@ -72,6 +72,7 @@ def write_measured_bag(
         parcel = T["fence_sorter_msgs/msg/Parcel"](
             header=_header(ts, t_scan, "sorter"),
             parcel_id=ev.parcel_id,
+            run_id=0,
             length_a=p.length_a,
             width_b=p.width_b,
             height=p.height,
@@ -89,6 +90,7 @@ def write_measured_bag(
         cmd = T["fence_sorter_msgs/msg/FenceCommand"](
             header=_header(ts, t_scan, "sorter"),
             parcel_id=ev.parcel_id,
+            run_id=0,
             start_mode=int(StartMode.AT_TIME),
             r_s=ev.r_s,
             start_time=_stamp(ts, ev.t_start),

@@ -28,8 +28,7 @@ import numpy as np
 import yaml
 
 from fence_sorter.physics.params import ParameterError
-
-REPO_SENSORS = Path(__file__).resolve().parent.parent.parent / "config" / "sensors"
+from fence_sorter.resources import find_data
 
 
 class SensorConfigError(ParameterError):
@@ -95,17 +94,13 @@ _KEYS = {
 
 
 def resolve_sensors(path_or_name: str | Path) -> Path:
-    """A sensors file by path, or by name under config/sensors/."""
-    p = Path(path_or_name)
-    if p.is_file():
-        return p
-    cand = REPO_SENSORS / f"{path_or_name}.yaml"
-    if cand.is_file():
-        return cand
-    names = sorted(q.stem for q in REPO_SENSORS.glob("*.yaml"))
-    raise SensorConfigError(
-        f"sensors {path_or_name}: no such file; give a path or one of {', '.join(names)}"
-    )
+    """A sensors file by path, or by name under config/sensors/ (checkout or share)."""
+    found = find_data("config/sensors", path_or_name, (".yaml", ".yml"))
+    if found is None:
+        raise SensorConfigError(
+            f"sensors {path_or_name}: no such file (nor config/sensors/{path_or_name}.yaml)"
+        )
+    return found
 
 
 def _number(src: str, key: str, value) -> float:
