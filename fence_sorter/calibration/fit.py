@@ -44,6 +44,7 @@ NOMINAL_SIGMA = (2e-3, 1e-2, 1.0)
 SIGMA_FLOOR = (1e-8, 1e-8, 1e-8)
 FD_STEP = 1e-4  # forward-difference step in log(parameter)
 OFFSET_STEP = (1e-6, 1e-6, 1e-6)  # [m, m, rad]
+TOL = 1e-8  # least_squares' xtol, ftol, gtol
 
 
 class CalibrationInputError(ValueError):
@@ -421,9 +422,9 @@ def _solve(problem: _Problem, z0, max_nfev: int):
             loss=loss,
             f_scale=3.0,
             x_scale=1.0,
-            xtol=1e-10,
-            ftol=1e-10,
-            gtol=1e-10,
+            xtol=TOL,
+            ftol=TOL,
+            gtol=TOL,
             max_nfev=max_nfev,
         )
         nfev += sol.nfev

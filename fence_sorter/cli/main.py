@@ -36,6 +36,7 @@ SUBCOMMAND_MODULES: tuple[str, ...] = (
     "emulate",
     "calibrate",
     "validate",
+    "calibrate_bench",
 )
 
 
