@@ -187,6 +187,8 @@ class Evaluator:
         self.workers = max(1, min(workers or os.cpu_count() or 1, len(eds)))
         self.pool = None
         if self.workers > 1:
+            # compile (or load) the kernel once here, so the forked workers inherit it
+            replay(base, eds[0].ev)
             self.pool = ProcessPoolExecutor(
                 self.workers, initializer=_init_worker, initargs=(base, eds)
             )
