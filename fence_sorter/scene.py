@@ -20,8 +20,6 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from fence_sorter.physics.fence import MAX_ELEMENTS, PROFILES, FenceParams
 from fence_sorter.physics.model import RECORDABLE, Scenario
 from fence_sorter.physics.params import (
@@ -33,6 +31,7 @@ from fence_sorter.physics.params import (
     SolverParams,
 )
 from fence_sorter.resources import ResourceNotFound, data_path, find_data
+from fence_sorter.textinput import TextInputError, load_yaml, read_text
 
 __all__ = [
     "LoadedScene",
@@ -239,8 +238,8 @@ def _apply_overrides(src: str, raw: dict, overrides: Sequence[str]) -> set[str]:
         key, _, text = item.partition("=")
         key = key.strip()
         try:
-            value = yaml.safe_load(text) if text.strip() else None
-        except yaml.YAMLError as exc:
+            value = load_yaml(text) if text.strip() else None
+        except TextInputError as exc:
             raise _err(src, f"--set {key}: cannot parse value {text!r}: {exc}") from None
         parts = key.split(".")
         if len(parts) == 1 and parts[0] in TOP_LEVEL_KEYS and parts[0] not in SECTIONS:
@@ -360,14 +359,9 @@ def load_scene(path_or_name: str | Path, overrides: Sequence[str] = ()) -> Loade
     path = resolve_scene(path_or_name)
     src = path.name
     try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise _err(src, f"cannot read {path}: {exc.strerror or exc}") from None
-    try:
-        raw = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        detail = " ".join(str(exc).split())
-        raise _err(src, f"YAML syntax error: {detail}") from None
+        raw = load_yaml(read_text(path))
+    except TextInputError as exc:
+        raise _err(src, str(exc)) from None
     if raw is None:
         raw = {}
     if not isinstance(raw, dict):

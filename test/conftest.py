@@ -18,7 +18,9 @@ def pytest_configure(config: pytest.Config) -> None:
         'pytest -m "not slow" is the quick run',
     )
     config.addinivalue_line(
-        "markers", "faults: fault injection (hostile, malformed and flooding input) over DDS"
+        "markers",
+        "faults: fault injection (signals, killed nodes; hostile, malformed and flooding input; "
+        "bad files)",
     )
 
 

@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import signal
 import sys
+import threading
 from collections.abc import Callable, Sequence
 
 from fence_sorter import __version__
@@ -75,19 +77,40 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _interrupt_once(signum: int, frame: object) -> None:
+    """SIGINT/SIGTERM until a subcommand installs its own handling: the first raises
+    KeyboardInterrupt (exit 130, one line), later ones are ignored so they cannot interrupt
+    that exit with a traceback."""
+    del frame
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Parse the command line and run the chosen subcommand; return its exit code."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    func = getattr(args, "func", None)
-    if func is None:
-        parser.print_help(sys.stderr)
-        return 2
+    """Parse the command line and run the chosen subcommand; return its exit code. As the
+    process's own command (``argv`` None) it also owns the signals: Ctrl-C during start-up is
+    exit 130 in one line, and none after the command is done changes the exit status."""
+    own = argv is None and threading.current_thread() is threading.main_thread()
+    if own:
+        signal.signal(signal.SIGINT, _interrupt_once)
+        signal.signal(signal.SIGTERM, _interrupt_once)
     try:
-        return int(func(args) or 0)
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        func = getattr(args, "func", None)
+        if func is None:
+            parser.print_help(sys.stderr)
+            code = 2
+        else:
+            code = int(func(args) or 0)
     except KeyboardInterrupt:
         print("fence-sorter: interrupted", file=sys.stderr)
-        return 130
+        code = 130
+    if own:  # the interpreter's exit resets Python-level handlers to default, not SIG_IGN
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    return code
 
 
 if __name__ == "__main__":

@@ -45,7 +45,20 @@ def register(subparsers) -> None:
     parser.add_argument(
         "--timeout", type=float, help="wall-time limit [s] (default: from the stream)"
     )
-    parser.add_argument("--log-dir", help="node logs (default: a new temporary directory)")
+    parser.add_argument(
+        "--log-dir",
+        help="node logs (default: a new temporary directory, removed after a clean run)",
+    )
+    parser.add_argument(
+        "--keep-logs", action="store_true", help="keep the log directory of a clean run too"
+    )
+    parser.add_argument(
+        "--domain",
+        type=int,
+        metavar="N",
+        help="ROS domain of the run, 0-232 (default: ROS_DOMAIN_ID if set, else a free one "
+        "of 201-232); refused if another participant on this host uses it",
+    )
     add_param_option(
         parser, "node parameter override, e.g. controller:max_evaluations=5 (repeatable)"
     )
@@ -61,8 +74,7 @@ def add_param_option(parser: argparse.ArgumentParser, help: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fence_sorter.runner.job import BadInput, RunOptions, run_job
-    from fence_sorter.runner.summary import format_summary
+    from fence_sorter.runner.job import BadInput, RunOptions, StopRequest
 
     opts = RunOptions(
         scene=args.scene,
@@ -76,13 +88,28 @@ def run(args: argparse.Namespace) -> int:
         timeout=args.timeout,
         log_dir=args.log_dir,
         params=args.params,
+        domain=args.domain,
+        keep_logs=args.keep_logs,
     )
     say = (lambda s: print(s, file=sys.stderr)) if args.json else print
+    # from here to the exit SIGINT/SIGTERM are flags the job checks (no traceback, no
+    # half-done start or stop)
+    stop = StopRequest()
+    stop.install()
     try:
-        result = run_job(opts, say=say)
+        return _run_and_report(args, opts, say, stop)
     except BadInput as exc:
         print(f"fence-sorter: error: {exc}", file=sys.stderr)
         return 2
+    finally:
+        stop.restore()
+
+
+def _run_and_report(args: argparse.Namespace, opts, say, stop) -> int:
+    from fence_sorter.runner.job import run_job
+    from fence_sorter.runner.summary import format_summary
+
+    result = run_job(opts, say=say, stop=stop)
     if args.json:
         print(
             json.dumps(
@@ -92,5 +119,9 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(format_summary(result.summary))
     if result.code != 0:
-        print(f"fence-sorter run: {result.message} (logs: {result.log_dir})", file=sys.stderr)
+        kept = result.summary.get("log_dir")
+        print(
+            f"fence-sorter run: {result.message}" + (f" (logs: {kept})" if kept else ""),
+            file=sys.stderr,
+        )
     return result.code

@@ -1,7 +1,8 @@
 """Common machinery of the fence_sorter nodes: parameters, diagnostic heartbeat, clean shutdown.
 
 Every executable is a small :class:`FenceSorterNode` subclass that lists its parameters as
-:class:`ParamSpec` entries (declared in one place, with a ParameterDescriptor each) and a
+:class:`ParamSpec` entries (its table in :mod:`fence_sorter.nodes.parameters`, ROS-free, so
+`fence-sorter run` checks overrides against the same table) and a
 module-level ``main()`` that calls :func:`run_node`.
 """
 
@@ -10,16 +11,10 @@ from __future__ import annotations
 import signal
 import sys
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import (
-    FloatingPointRange,
-    IntegerRange,
-    ParameterDescriptor,
-    SetParametersResult,
-)
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
@@ -27,82 +22,10 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from fence_sorter import __version__
+from fence_sorter.nodes.parameters import COMMON_PARAMETERS, ParamSpec
 from fence_sorter.nodes.qos import RELIABLE_QOS
 
-ParamValue = bool | int | float | str | list[str] | list[float] | list[int]
-
 DIAGNOSTICS_TOPIC = "/diagnostics"
-
-
-@dataclass(frozen=True)
-class ParamSpec:
-    """One node parameter: name, default, description (with unit) and constraints."""
-
-    name: str
-    default: ParamValue
-    description: str
-    read_only: bool = False
-    min_value: float | int | None = None
-    max_value: float | int | None = None
-
-    def descriptor(self) -> ParameterDescriptor:
-        """Return the ParameterDescriptor that declares this parameter."""
-        param_type = Parameter.Type.from_parameter_value(self.default)
-        desc = ParameterDescriptor(
-            name=self.name,
-            type=param_type.value,
-            description=self.description,
-            read_only=self.read_only,
-        )
-        if self.min_value is not None and self.max_value is not None:
-            if param_type is Parameter.Type.DOUBLE:
-                desc.floating_point_range = [
-                    FloatingPointRange(
-                        from_value=float(self.min_value), to_value=float(self.max_value), step=0.0
-                    )
-                ]
-            elif param_type is Parameter.Type.INTEGER:
-                desc.integer_range = [
-                    IntegerRange(
-                        from_value=int(self.min_value), to_value=int(self.max_value), step=0
-                    )
-                ]
-            else:
-                raise ValueError(f"parameter {self.name!r}: a range needs a number default")
-        return desc
-
-
-COMMON_PARAMETERS: tuple[ParamSpec, ...] = (
-    ParamSpec(
-        "heartbeat_period",
-        1.0,
-        "Period of the diagnostic heartbeat on /diagnostics [s] (steady clock)",
-        read_only=True,
-        min_value=0.05,
-        max_value=60.0,
-    ),
-    ParamSpec(
-        "events_executor",
-        True,
-        "Spin with rclpy's EventsExecutor (rclpy.experimental): a fraction of the "
-        "SingleThreadedExecutor's CPU per callback, which counts at the thousands of /clock "
-        "messages per second of an unpaced run; false: SingleThreadedExecutor",
-        read_only=True,
-    ),
-)
-
-
-#: the run identity of the nodes that exchange /parcels and /fence_commands (scanner,
-#: controller, simulator): ``fence-sorter run`` draws one per run and gives it to all three
-RUN_ID_PARAMETER = ParamSpec(
-    "run_id",
-    0,
-    "Id of the run this node belongs to: stamped on its /parcels and /fence_commands, and "
-    "messages with another id are refused and counted as foreign; 0: none (takes any)",
-    read_only=True,
-    min_value=0,
-    max_value=2**63 - 1,
-)
 
 
 def make_executor(events: bool, context=None) -> Executor:

@@ -43,7 +43,8 @@ from rosbags.interfaces import (
     QosTime,
 )
 
-from fence_sorter.nodes.base import FenceSorterNode, ParamSpec, run_node
+from fence_sorter.nodes.base import FenceSorterNode, run_node
+from fence_sorter.nodes.parameters import RECORDER_PARAMETERS
 from fence_sorter.recording.topics import LATCHED_TOPICS, TOPIC_TYPES
 
 DEFAULT_TOPICS = list(TOPIC_TYPES)
@@ -121,33 +122,7 @@ class RecorderNode(FenceSorterNode):
     NODE_NAME = "recorder"
     STATUS = "recording"
     STATUS_LEVEL = DiagnosticStatus.OK
-    PARAMETERS = (
-        ParamSpec(
-            "output_dir",
-            "",
-            "The bag directory if missing or empty, else the directory that receives a new "
-            "run_<UTC time> bag; empty: a new $ROS_HOME/bags/run_<UTC time> (~/.ros/bags)",
-            read_only=True,
-        ),
-        ParamSpec("storage", "mcap", "rosbag2 storage: mcap or sqlite3", read_only=True),
-        ParamSpec("topics", list(DEFAULT_TOPICS), "Topics to record", read_only=True),
-        ParamSpec(
-            "max_segment_duration",
-            10.0,
-            "A segment is closed (complete, readable) after this long [s] (wall clock)",
-            read_only=True,
-            min_value=0.1,
-            max_value=3600.0,
-        ),
-        ParamSpec(
-            "max_segment_size_mb",
-            64.0,
-            "A segment is closed when its messages reach this size [MiB]",
-            read_only=True,
-            min_value=0.01,
-            max_value=100000.0,
-        ),
-    )
+    PARAMETERS = RECORDER_PARAMETERS
 
     def __init__(self, **kwargs: object) -> None:
         super().__init__(**kwargs)

@@ -18,8 +18,9 @@ from rclpy.exceptions import ParameterException
 from rclpy.time import Time
 from rosgraph_msgs.msg import Clock
 
-from fence_sorter.nodes.base import RUN_ID_PARAMETER, FenceSorterNode, ParamSpec, run_node
+from fence_sorter.nodes.base import FenceSorterNode, run_node
 from fence_sorter.nodes.convert import fill_clock
+from fence_sorter.nodes.parameters import SCANNER_PARAMETERS
 from fence_sorter.nodes.qos import RELIABLE_QOS
 from fence_sorter.physics.params import ParameterError
 from fence_sorter.stream import ParcelSpec, load_stream
@@ -77,38 +78,7 @@ class ScannerNode(FenceSorterNode):
     NODE_NAME = "scanner"
     STATUS = "scanning"
     STATUS_LEVEL = DiagnosticStatus.OK
-    PARAMETERS = (
-        RUN_ID_PARAMETER,
-        ParamSpec("frame_id", "sorter", "Fixed frame of the sorter (REP-103, z up)", True),
-        ParamSpec("scene", "", "Scene YAML (belt speed and width); empty: default", True),
-        ParamSpec("stream", "", "Stream config (YAML) or CSV manifest; empty: default", True),
-        ParamSpec("seed", -1, "Seed of a random stream; -1: the file's", True, -1, 2**31 - 1),
-        ParamSpec(
-            "scan_line_x", -3.0, "Scan line along the belt, frame sorter [m]", True, -100.0, 0.0
-        ),
-        ParamSpec("parcels", 0, "Parcels to inject; 0: use duration", True, 0, 10**7),
-        ParamSpec(
-            "duration", 0.0, "Inject parcels arriving within [s]; 0: use parcels", True, 0.0, 1e6
-        ),
-        ParamSpec("start_delay", 0.5, "Sim time before the first parcel [s]", True, 0.0, 1e4),
-        ParamSpec(
-            "wait_for_subscribers",
-            0,
-            "Start the stream only once /parcels has this many subscribers",
-            True,
-            0,
-            100,
-        ),
-        ParamSpec(
-            "tick_period",
-            0.005,
-            "Period of the scan check on the wall clock [s] (with use_sim_time the check runs "
-            "on every /clock update instead)",
-            True,
-            1e-4,
-            1.0,
-        ),
-    )
+    PARAMETERS = SCANNER_PARAMETERS
 
     def __init__(self) -> None:
         super().__init__()

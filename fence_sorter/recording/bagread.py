@@ -240,7 +240,7 @@ def read_bag(path: Path | str, topics: Iterable[str] | None = None) -> BagConten
         if path.suffix not in STORAGE_SUFFIXES:
             raise BagReadError(f"{path}: not a bag (expected a directory, .mcap or .db3 file)")
         read_file_into(out, path, wanted)
-        return out
+        return _readable(out)
     if not path.is_dir():
         raise BagReadError(f"{path}: no such bag (directory or .mcap/.db3 file)")
     files, out.expected_counts = bag_files(path, out.issues)
@@ -255,4 +255,17 @@ def read_bag(path: Path | str, topics: Iterable[str] | None = None) -> BagConten
         read_file_into(out, f, wanted)
         if len(out.issues) == before:
             out.issues.append(BagIssue(str(f), "segment left open by the recorder (read)"))
+    return _readable(out)
+
+
+def _readable(out: BagContents) -> BagContents:
+    """``out`` if anything of it could be read; BagReadError naming the first problem when
+    no message was read and no storage file read cleanly (a clean bag with no messages is
+    readable)."""
+    damaged = {issue.file for issue in out.issues}
+    if not out.messages and all(f in damaged for f in out.files):
+        problems = [i for i in out.issues if i.file in damaged and i.file in out.files]
+        first = problems[0] if problems else out.issues[0]
+        more = f" (and {len(out.issues) - 1} more problems)" if len(out.issues) > 1 else ""
+        raise BagReadError(f"{out.path}: nothing readable: {first}{more}")
     return out

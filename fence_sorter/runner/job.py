@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 import os
 import secrets
+import shutil
 import signal
 import tempfile
 import threading
@@ -15,14 +16,18 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from fence_sorter.nodes.parameters import ParamOverrideError, ParamValue, parse_override, ros_value
 from fence_sorter.physics.params import ParameterError
 from fence_sorter.resources import data_path
+from fence_sorter.runner.monitor import Records
 from fence_sorter.runner.processes import (
+    DomainError,
     ProcessGroup,
+    choose_domain,
+    clean_shm,
     leftovers,
     node_command,
     node_env,
-    run_domain_id,
     wait_until,
 )
 from fence_sorter.runner.summary import summarise, verdict
@@ -41,8 +46,13 @@ DAMAGE_LIMITS = ("w_dop", "a_ndop")
 RUN_ID_NODES = ("scanner", "controller", "simulator")
 #: wall time after the scanner's start without any parcel on /parcels before the run gives up
 NO_PARCEL_TIMEOUT = 60.0
+#: nodes the run restarts when they die (the others end the run with exit 1), and how often
+RESTARTABLE = ("controller",)
+MAX_CONTROLLER_RESTARTS = 3
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+#: the node logs of a run without --log-dir
+LOG_DIR_PREFIX = "fence_sorter_run_"
 
 
 class BadInput(ValueError):
@@ -63,6 +73,8 @@ class RunOptions:
     log_dir: str | None = None
     heartbeat_period: float = 1.0
     params: list[str] = field(default_factory=list)  # NODE:KEY=VALUE
+    domain: int | None = None  # ROS domain (None: ROS_DOMAIN_ID if set, else a free one)
+    keep_logs: bool = False  # keep the node logs of a clean run too
 
 
 @dataclass
@@ -87,7 +99,8 @@ class Plan:
     stream_path: Path
     expected_ids: list[int]
     sim_duration: float  # expected sim time until the last parcel leaves the line [s]
-    node_params: dict[str, list[str]]
+    node_params: dict[str, dict[str, ParamValue]]  # checked --param values by node
+    domain: int  # ROS_DOMAIN_ID of the run, free when checked
     divert_ids: list[int] = field(default_factory=list)
     #: the run's identity on the wire (drawn per run; messages with another are foreign)
     run_id: int = field(default_factory=lambda: 1 + secrets.randbelow(2**63 - 1))
@@ -128,22 +141,23 @@ def prepare(opts: RunOptions) -> Plan:
         raise BadInput(str(exc)) from None
     if not stream:
         raise BadInput(f"stream {stream_path}: no parcels within the requested count/duration")
-    node_params: dict[str, list[str]] = {}
+    node_params: dict[str, dict[str, ParamValue]] = {}
     for item in opts.params:
-        node, sep, kv = item.partition(":")
-        if not sep or "=" not in kv or node not in STOP_ORDER:
-            raise BadInput(
-                f"--param {item!r} must be NODE:KEY=VALUE with NODE one of {', '.join(STOP_ORDER)}"
-            )
-        key, _, value = kv.partition("=")
-        node_params.setdefault(node, []).append(f"{key}:={value}")
+        try:
+            node, key, value = parse_override(item, STOP_ORDER)
+        except ParamOverrideError as exc:
+            raise BadInput(str(exc)) from None
+        node_params.setdefault(node, {})[key] = value
     # the outcomes' damage margins are taken against the limits the controller plans with
     for key in DAMAGE_LIMITS:
-        given = [p for p in node_params.get("controller", []) if p.startswith(f"{key}:=")]
-        own = [p for p in node_params.get("simulator", []) if p.startswith(f"{key}:=")]
-        if given and not own:
-            node_params.setdefault("simulator", []).append(given[-1])
+        given = node_params.get("controller", {})
+        if key in given and key not in node_params.get("simulator", {}):
+            node_params.setdefault("simulator", {})[key] = given[key]
     sim_duration = START_DELAY + stream[-1].arrival_time + (LINE_END_X - SCAN_LINE_X) / v + 5.0
+    try:
+        domain = choose_domain(opts.domain)
+    except DomainError as exc:
+        raise BadInput(str(exc)) from None
     return Plan(
         scene_path,
         v,
@@ -152,6 +166,7 @@ def prepare(opts: RunOptions) -> Plan:
         [s.parcel_id for s in stream],
         sim_duration,
         node_params,
+        domain,
         [s.parcel_id for s in stream if s.divert],
     )
 
@@ -164,7 +179,7 @@ def _ros_args(node: str, plan: Plan, opts: RunOptions, extra: list[str]) -> list
     overrides = [f"heartbeat_period:={opts.heartbeat_period}", *extra]
     if node in RUN_ID_NODES:
         overrides.append(f"run_id:={plan.run_id}")
-    overrides += plan.node_params.get(node, [])
+    overrides += [f"{k}:={ros_value(v)}" for k, v in plan.node_params.get(node, {}).items()]
     for o in overrides:
         args += ["-p", o]
     return args
@@ -179,13 +194,8 @@ def loop_cpu(plan: Plan, rtf: float, cpus: set[int]) -> tuple[int, bool]:
     """The simulator's ``loop_cpu`` for this run and whether the run sets it: a ``--param``
     override as given (-1 turns pinning off), else config/simulator.yaml's if >= 0, else, for
     a paced run on two CPUs or more, the last CPU (set by the run)."""
-    for item in reversed(plan.node_params.get("simulator", [])):
-        key, _, value = item.partition(":=")
-        if key == "loop_cpu":
-            try:
-                return int(value), False
-            except ValueError:
-                return -1, False  # the simulator rejects it with its own message
+    if "loop_cpu" in plan.node_params.get("simulator", {}):
+        return int(plan.node_params["simulator"]["loop_cpu"]), False
     try:
         import yaml
 
@@ -200,30 +210,74 @@ def loop_cpu(plan: Plan, rtf: float, cpus: set[int]) -> tuple[int, bool]:
     return -1, False
 
 
-def _terminate(signum, frame) -> None:
-    raise KeyboardInterrupt(f"signal {signum}")
+class Interrupted(Exception):
+    """A stop signal arrived (raised by :meth:`StopRequest.check`, never from a handler)."""
 
 
-def run_job(opts: RunOptions, say: Callable[[str], None] = print) -> RunResult:
-    """Run the suite once; never leaves a node process behind (SIGTERM stops it like Ctrl-C)."""
-    plan = prepare(opts)
-    previous = None
-    if threading.current_thread() is threading.main_thread():
-        previous = signal.signal(signal.SIGTERM, _terminate)
+class StopRequest:
+    """SIGINT and SIGTERM as a flag: the handler only records the signal, the job checks it
+    where it waits (:meth:`check`), so no signal can interrupt a start or a stop half-way;
+    any number of them end the run the same way, each one after the first only hurries the
+    stop (:meth:`urgent`)."""
+
+    def __init__(self) -> None:
+        self.signals: list[int] = []
+        self._seen_by_stop = 0
+        self._previous: dict[int, object] = {}
+
+    def __call__(self, signum, frame) -> None:
+        self.signals.append(signum)
+
+    def install(self) -> None:
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self._previous[sig] = signal.signal(sig, self)
+
+    def restore(self) -> None:
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+        self._previous.clear()
+
+    def check(self) -> None:
+        if self.signals:
+            raise Interrupted(signal.Signals(self.signals[0]).name)
+
+    def urgent(self) -> bool:
+        """A signal arrived since the stop began (or before it)."""
+        return len(self.signals) > self._seen_by_stop
+
+    def stopping(self) -> None:
+        self._seen_by_stop = len(self.signals)
+
+
+def run_job(
+    opts: RunOptions, say: Callable[[str], None] = print, stop: StopRequest | None = None
+) -> RunResult:
+    """Run the suite once; never leaves a node process behind: SIGINT or SIGTERM, any
+    number of them at any moment, end it with EXIT_INTERRUPTED (``stop``: a StopRequest
+    installed earlier by the caller, so that signals during its imports count too)."""
+    own = stop is None
+    if own:
+        stop = StopRequest()
+        stop.install()
     affinity = os.sched_getaffinity(0)  # _run may keep this thread off the loop's CPU
     try:
-        return _run(plan, opts, say)
+        plan = prepare(opts)
+        return _run(plan, opts, say, stop)
     finally:
         os.sched_setaffinity(0, affinity)
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+        if own:
+            stop.restore()
 
 
-def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None]) -> RunResult:
-    domain = run_domain_id()
-    log_dir = Path(opts.log_dir or tempfile.mkdtemp(prefix="fence_sorter_run_"))
+def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None], stop: StopRequest) -> RunResult:
+    domain = plan.domain
+    log_dir = Path(opts.log_dir or tempfile.mkdtemp(prefix=LOG_DIR_PREFIX))
     log_dir.mkdir(parents=True, exist_ok=True)
     env = node_env(domain, log_dir / "ros")
+    clean_shm()  # what killed runs (of any program) left in /dev/shm
+    # this process's participant (the monitor) on the nodes' transports
+    os.environ["FASTDDS_DEFAULT_PROFILES_FILE"] = env["FASTDDS_DEFAULT_PROFILES_FILE"]
     # paced with the loop pinned: every other process of the run keeps off the loop's CPU, so
     # its work does not evict the loop's caches while the loop sleeps (docs/simulator.md)
     allowed = set(os.sched_getaffinity(0))
@@ -233,19 +287,22 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None]) -> RunResult:
     group = ProcessGroup(env, log_dir, cpus)
     if cpus is not None:  # this thread, and the monitor's threads created from it
         os.sched_setaffinity(0, cpus)
-    from fence_sorter.runner.monitor import Monitor
-
-    monitor = Monitor(domain, run_id=plan.run_id)
+    monitor = None
     code, message = EXIT_OK, "done"
     stalled = False  # the nodes ran on, but outcomes stayed missing (stall or timeout)
     count = len(plan.expected_ids)
     scene = f"scene:={plan.scene_path}"
-    say(
-        f"fence-sorter run: {count} parcels from {plan.stream_path.name}, scene "
-        f"{plan.scene_path.stem}, rtf {opts.rtf:g}, ROS domain {domain}, logs {log_dir}"
-    )
     wall0 = time.monotonic()
     try:
+        stop.check()
+        from fence_sorter.runner.monitor import Monitor
+
+        monitor = Monitor(domain, run_id=plan.run_id)
+        stop.check()
+        say(
+            f"fence-sorter run: {count} parcels from {plan.stream_path.name}, scene "
+            f"{plan.scene_path.stem}, rtf {opts.rtf:g}, ROS domain {domain}, logs {log_dir}"
+        )
         group.start(
             "controller",
             node_command(
@@ -273,9 +330,9 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None]) -> RunResult:
                     ),
                 ),
             )
-        _wait_for(monitor, group, "controller", 120.0)
+        _wait_for(monitor, group, stop, "controller", 120.0)
         if opts.bag:
-            _wait_for(monitor, group, "recorder", 60.0)
+            _wait_for(monitor, group, stop, "recorder", 60.0)
         group.start(
             "simulator",
             node_command(
@@ -297,9 +354,9 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None]) -> RunResult:
                 ),
             ),
         )
-        _wait_for(monitor, group, "simulator", 60.0)
+        _wait_for(monitor, group, stop, "simulator", 60.0)
         # the controller listens to /parcels once the simulator has matched its commands
-        _wait_for(monitor, group, "controller", 30.0, listening=True)
+        _wait_for(monitor, group, stop, "controller", 30.0, listening=True)
         scanner_args = [
             scene,
             "use_sim_time:=true",
@@ -326,12 +383,27 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None]) -> RunResult:
         outcomes_seen, last_outcome = 0, time.monotonic()
         while True:
             monitor.spin_for(0.1)
+            stop.check()
             rec = monitor.records
             if expected <= rec.outcomes.keys():
                 break
             if len(rec.outcomes) > outcomes_seen:
                 outcomes_seen, last_outcome = len(rec.outcomes), time.monotonic()
             dead = group.dead()
+            if (
+                dead
+                and dead[0].name in RESTARTABLE
+                and group.restarts.get(dead[0].name, 0) < MAX_CONTROLLER_RESTARTS
+            ):
+                # the line goes on without its controller (the simulator gives parcels that
+                # reach R_s without a command NO_COMMAND); a new one plans the later parcels
+                n = dead[0]
+                say(
+                    f"node {n.name} exited with status {n.proc.returncode}; restarting it "
+                    f"({group.restarts.get(n.name, 0) + 1} of at most {MAX_CONTROLLER_RESTARTS})"
+                )
+                group.restart(n.name)
+                continue
             if dead:
                 n = dead[0]
                 code, message = (
@@ -381,17 +453,30 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None]) -> RunResult:
                 )
                 break
         # one more heartbeat round for the final counters
-        monitor.spin_for(opts.heartbeat_period + 0.3)
-    except KeyboardInterrupt as exc:
-        why = exc.args[0] if exc.args else "Ctrl-C"
-        code, message = EXIT_INTERRUPTED, f"interrupted ({why})"
+        end = time.monotonic() + opts.heartbeat_period + 0.3
+        while time.monotonic() < end:
+            monitor.spin_for(0.1)
+            stop.check()
+    except Interrupted as exc:
+        code, message = EXIT_INTERRUPTED, f"interrupted ({exc})"
+    except KeyboardInterrupt:  # run_job in a thread: no handler of ours
+        code, message = EXIT_INTERRUPTED, "interrupted (SIGINT)"
     except _StartFailure as exc:
         code, message = EXIT_FAILED, str(exc)
     finally:
-        exit_codes = group.stop(STOP_ORDER)
+        stop.stopping()
+        if code == EXIT_INTERRUPTED:
+            exit_codes = group.kill()
+        else:
+            exit_codes = group.stop(STOP_ORDER, stop.urgent)
+        if stop.signals and code != EXIT_INTERRUPTED:
+            code = EXIT_INTERRUPTED
+            message = f"interrupted ({signal.Signals(stop.signals[0]).name}) while stopping"
         left = leftovers(group.pgids)
-        summary = summarise(monitor.records, plan.belt_speed, plan.expected_ids, plan.divert_ids)
-        monitor.close()
+        records = monitor.records if monitor is not None else Records()
+        summary = summarise(records, plan.belt_speed, plan.expected_ids, plan.divert_ids)
+        if monitor is not None:
+            monitor.close()
     bad_exit = {n: c for n, c in exit_codes.items() if c not in (0, None)}
     if code == EXIT_OK and bad_exit:
         code, message = EXIT_FAILED, f"nodes did not exit cleanly: {bad_exit}"
@@ -402,13 +487,16 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None]) -> RunResult:
     if own is not None and (code == EXIT_OK or stalled) and not bad_exit and not left:
         code, message = own
     summary["wall_time_s"] = time.monotonic() - wall0
+    summary["controller_restarts"] = group.restarts.get("controller", 0)
     summary["exit_codes"] = exit_codes
-    summary["log_dir"] = str(log_dir)
+    # a temporary log directory goes with a run that did not fail (kept: --keep-logs)
+    keep = opts.keep_logs or opts.log_dir is not None or code not in (EXIT_OK, EXIT_INTERRUPTED)
+    if not keep:
+        shutil.rmtree(log_dir, ignore_errors=True)
+    summary["log_dir"] = str(log_dir) if keep else None
     summary["process_groups"] = list(group.pgids)
     summary["leftover_processes"] = left
-    return RunResult(
-        code, summary, message, log_dir, list(group.pgids), left, exit_codes, monitor.records
-    )
+    return RunResult(code, summary, message, log_dir, list(group.pgids), left, exit_codes, records)
 
 
 class _StartFailure(RuntimeError):
@@ -416,7 +504,12 @@ class _StartFailure(RuntimeError):
 
 
 def _wait_for(
-    monitor, group: ProcessGroup, node: str, timeout: float, listening: bool = False
+    monitor,
+    group: ProcessGroup,
+    stop: StopRequest,
+    node: str,
+    timeout: float,
+    listening: bool = False,
 ) -> None:
     """Wait for the first heartbeat of ``node`` (it is spinning, so it is ready), with
     ``listening``: for one that says it listens (the controller, once its commands match)."""
@@ -427,6 +520,7 @@ def _wait_for(
 
     def ready() -> bool:
         monitor.spin_for(0.05)
+        stop.check()
         return up() or group.nodes[node].proc.poll() is not None
 
     wait_until(ready, timeout, step=0.0)

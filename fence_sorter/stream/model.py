@@ -17,11 +17,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from fence_sorter.inputs import InputError, ParcelSpec, validate_parcel
 from fence_sorter.physics.params import ParameterError
 from fence_sorter.resources import find_data
+from fence_sorter.textinput import TextInputError, load_yaml, read_text
 
 
 class StreamError(ParameterError):
@@ -261,9 +261,9 @@ class StreamConfig:
     def from_yaml(cls, path: str | Path) -> StreamConfig:
         p = resolve_stream(path)
         try:
-            data = yaml.safe_load(p.read_text(encoding="utf-8"))
-        except (OSError, yaml.YAMLError) as exc:
-            raise StreamError(f"stream {p}: cannot read: {exc}") from None
+            data = load_yaml(read_text(p))
+        except TextInputError as exc:
+            raise StreamError(f"stream {p}: {exc}") from None
         return cls.from_mapping(data, str(p))
 
 
@@ -378,9 +378,9 @@ def read_manifest(path: str | Path, belt_width: float = 0.7) -> list[ParcelSpec]
     be missing or empty). Errors name the file, line and column."""
     p = resolve_stream(path)
     try:
-        text = p.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise StreamError(f"manifest {p}: cannot read: {exc}") from None
+        text = read_text(p)
+    except TextInputError as exc:
+        raise StreamError(f"manifest {p}: {exc}") from None
     rows = csv.reader(line for line in text.splitlines() if not line.lstrip().startswith("#"))
     lines = [
         i + 1 for i, line in enumerate(text.splitlines()) if not line.lstrip().startswith("#")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -22,6 +23,34 @@ from fence_sorter.testing import run_cli, wait_until
         (
             ["--param", "controller.a_ndop=1"],
             "--param 'controller.a_ndop=1' must be NODE:KEY=VALUE",
+        ),
+        (
+            ["--param", "controller:a_ndop=1e9"],
+            "--param controller:a_ndop must be a double in [1e-06, 100000], got '1e9'",
+        ),
+        (
+            ["--param", "controller:no_such_key=1"],
+            "--param controller:no_such_key: controller has no parameter 'no_such_key'",
+        ),
+        (
+            ["--param", f"simulator:loop_cpu={os.cpu_count()}"],
+            f"--param simulator:loop_cpu must be an integer in [-1, {os.cpu_count() - 1}]",
+        ),
+        (
+            ["--param", "simulator:loop_cpu=99"],
+            f"--param simulator:loop_cpu must be an integer in [-1, {os.cpu_count() - 1}]",
+        ),
+        (
+            ["--param", "controller:max_evaluations=2.5"],
+            "--param controller:max_evaluations must be an integer in [1, 1000], got '2.5'",
+        ),
+        (
+            ["--param", "simulator:warm_up=2"],
+            "--param simulator:warm_up must be true or false, got '2'",
+        ),
+        (
+            ["--param", "controller:w_dop=abc"],
+            "--param controller:w_dop must be a double in [1e-06, 100], got 'abc'",
         ),
     ],
 )
@@ -52,8 +81,8 @@ def test_loop_cpu_comes_from_the_override_the_config_or_the_run(tmp_path: Path) 
     assert loop_cpu(plan, 1.0, {0, 1}) == (1, True)
     assert loop_cpu(plan, 0.0, {0, 1}) == (-1, False)  # unpaced: the loop never sleeps
     assert loop_cpu(plan, 1.0, {0}) == (-1, False)
-    opts = RunOptions(parcels=2, params=["simulator:loop_cpu=3", "simulator:loop_cpu=1"])
-    assert loop_cpu(prepare(opts), 1.0, {0, 1, 2, 3}) == (1, False)  # the last override
+    opts = RunOptions(parcels=2, params=["simulator:loop_cpu=1", "simulator:loop_cpu=0"])
+    assert loop_cpu(prepare(opts), 1.0, {0, 1}) == (0, False)  # the last override
     off = RunOptions(parcels=2, params=["simulator:loop_cpu=-1"])
     assert loop_cpu(prepare(off), 1.0, {0, 1}) == (-1, False)
 
@@ -89,7 +118,51 @@ def test_the_controllers_damage_limits_reach_the_simulator():
     from fence_sorter.runner.job import RunOptions, prepare
 
     plan = prepare(RunOptions(parcels=2, params=["controller:w_dop=2.0", "controller:a_ndop=150"]))
-    assert plan.node_params["simulator"] == ["w_dop:=2.0", "a_ndop:=150"]
+    assert plan.node_params["simulator"] == {"w_dop": 2.0, "a_ndop": 150.0}
     own = prepare(RunOptions(parcels=2, params=["simulator:w_dop=3.1", "controller:w_dop=2.0"]))
-    assert own.node_params["simulator"] == ["w_dop:=3.1"]
+    assert own.node_params["simulator"] == {"w_dop": 3.1}
     assert "simulator" not in prepare(RunOptions(parcels=2)).node_params
+
+
+def test_param_values_reach_the_nodes_as_the_type_they_declare() -> None:
+    """An integer for a double widens (the README's controller:a_ndop=150), a string stays a
+    string even when it reads as a number, every value as a typed ROS ``-p`` argument."""
+    from fence_sorter.runner.job import RunOptions, _ros_args, prepare
+
+    opts = RunOptions(
+        parcels=2,
+        params=[
+            "controller:a_ndop=150",
+            "controller:frame_id=42",
+            "controller:active_constraints=[7, 10]",
+            "simulator:warm_up=false",
+            "simulator:lookahead=1e-2",
+        ],
+    )
+    plan = prepare(opts)
+    assert plan.node_params["controller"] == {
+        "a_ndop": 150.0,
+        "frame_id": "42",
+        "active_constraints": [7, 10],
+    }
+    assert isinstance(plan.node_params["controller"]["a_ndop"], float)
+    assert plan.node_params["simulator"] == {"warm_up": False, "lookahead": 0.01}
+    args = _ros_args("controller", plan, opts, [])
+    for given in ("a_ndop:=150.0", 'frame_id:="42"', "active_constraints:=[7, 10]"):
+        assert given in args
+    assert "warm_up:=false" in _ros_args("simulator", plan, opts, [])
+
+
+def test_every_node_table_is_ros_free_and_declarable() -> None:
+    """The tables the runner checks against load without rclpy, and every default passes its
+    own check (a node declares its defaults)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys; import fence_sorter.nodes.parameters as p; "
+        "assert 'rclpy' not in sys.modules, 'rclpy imported'; "
+        "[s.coerce(s.default) for t in p.NODE_PARAMETERS.values() for s in t]; print('ok')"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert proc.stdout.strip() == "ok", proc.stderr
