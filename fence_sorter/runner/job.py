@@ -277,7 +277,8 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None], stop: StopReq
     env = node_env(domain, log_dir / "ros")
     clean_shm()  # what killed runs (of any program) left in /dev/shm
     # this process's participant (the monitor) on the nodes' transports
-    os.environ["FASTDDS_DEFAULT_PROFILES_FILE"] = env["FASTDDS_DEFAULT_PROFILES_FILE"]
+    for var in ("FASTDDS_DEFAULT_PROFILES_FILE", "ROS_AUTOMATIC_DISCOVERY_RANGE"):
+        os.environ[var] = env[var]
     # paced with the loop pinned: every other process of the run keeps off the loop's CPU, so
     # its work does not evict the loop's caches while the loop sleeps (docs/simulator.md)
     allowed = set(os.sched_getaffinity(0))

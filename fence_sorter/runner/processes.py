@@ -117,11 +117,14 @@ def run_domain_id(pid: int | None = None) -> int:
 def node_env(
     domain_id: int, log_dir: Path, extra: Mapping[str, str] | None = None
 ) -> dict[str, str]:
-    """os.environ plus isolation: own domain, localhost discovery, shared memory and loopback
-    UDP only (FASTDDS_PROFILE), rcl logs in ``log_dir``."""
+    """os.environ plus isolation: own domain, transports on this host only (FASTDDS_PROFILE:
+    shared memory and loopback UDP), rcl logs in ``log_dir``."""
     env = dict(os.environ)
     env["ROS_DOMAIN_ID"] = str(domain_id)
-    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    # rmw_fastrtps's LOCALHOST range adds a UDP transport of its own, with sockets on every
+    # interface (0.0.0.0 and the host's address in `ss -lnuap`); with the profile's transports
+    # alone (SUBNET: the rmw adds none) discovery and data stay on this host all the same
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "SUBNET"
     env["FASTDDS_DEFAULT_PROFILES_FILE"] = str(FASTDDS_PROFILE)
     env["ROS_LOG_DIR"] = str(log_dir)
     env["PYTHONUNBUFFERED"] = "1"

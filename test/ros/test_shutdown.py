@@ -95,10 +95,9 @@ def _catches_sigterm(pid: int) -> bool:
     [
         ("start-up", [signal.SIGINT, signal.SIGINT]),
         ("nodes starting", [signal.SIGINT, signal.SIGINT, signal.SIGINT]),
-        ("running", [signal.SIGINT, signal.SIGINT]),
         ("running", [signal.SIGTERM, signal.SIGINT, signal.SIGTERM]),
     ],
-    ids=["start-up-2xINT", "starting-3xINT", "running-2xINT", "running-TERM-INT-TERM"],
+    ids=["start-up-2xINT", "starting-3xINT", "running-TERM-INT-TERM"],
 )
 def test_interrupted_run_ends_every_process(tmp_path: Path, moment: str, signals: list) -> None:
     proc, tag = _start_run(tmp_path, "--parcels", "40", "--rrd", str(tmp_path / "r.rrd"))
