@@ -62,6 +62,7 @@ def test_a_bag_with_one_readable_segment_is_read(tmp_path: Path) -> None:
     assert contents.messages and damaged == [str(bag / "bag_1.mcap")]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", BAD_BAGS)
 def test_rrd_of_an_unreadable_bag_exits_2_and_writes_nothing(kind: str, tmp_path: Path) -> None:
     out = tmp_path / "out.rrd"
@@ -72,6 +73,7 @@ def test_rrd_of_an_unreadable_bag_exits_2_and_writes_nothing(kind: str, tmp_path
     assert not out.exists()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("command", "kind"), [("analyze", "random-bytes"), ("replay", "truncated")]
 )
@@ -112,6 +114,7 @@ def test_scene_and_stream_loaders_take_any_bytes(content, named: str, tmp_path: 
             load_stream(tmp_path / "manifest.csv", 2.0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("option", ["--scene", "--stream"])
 def test_run_refuses_unreadable_scene_and_stream_files(option: str, tmp_path: Path) -> None:
     bad = tmp_path / "bad.yaml"

@@ -153,6 +153,7 @@ def test_param_values_reach_the_nodes_as_the_type_they_declare() -> None:
     assert "warm_up:=false" in _ros_args("simulator", plan, opts, [])
 
 
+@pytest.mark.slow
 def test_every_node_table_is_ros_free_and_declarable() -> None:
     """The tables the runner checks against load without rclpy, and every default passes its
     own check (a node declares its defaults)."""

@@ -69,6 +69,7 @@ def test_automatic_domain_skips_the_taken_ones(occupied, monkeypatch) -> None:
     assert chosen != first and lo <= chosen <= hi and not domain_in_use(chosen)
 
 
+@pytest.mark.slow
 def test_run_exits_2_when_its_domain_is_taken(occupied) -> None:
     taken = occupied(_free_domain(160))
     done = run_cli("run", "--parcels", "1", "--domain", str(taken), timeout=120)

@@ -18,7 +18,7 @@ import pytest
 
 from fence_sorter.runner.processes import tagged, wait_until
 
-pytestmark = [pytest.mark.ros, pytest.mark.faults]
+pytestmark = [pytest.mark.ros, pytest.mark.faults, pytest.mark.slow]
 
 TAG = "FENCE_SORTER_TEST_RUN"
 REPO = Path(__file__).resolve().parents[2]

@@ -1,0 +1,300 @@
+"""Every command of the README runs in a test.
+
+:data:`COVERED` maps each command line of the README's ``bash`` blocks to the test that runs
+it (the same subcommand and options; smaller amounts where the README's take minutes), or to
+the cheap run of it here (:data:`RUN_HERE`); a few lines need what this machine has not (a
+ROS install under /opt/ros, a viewer window, a Dask cluster) and say so in
+:data:`NOT_HERE`. A new README command without an entry fails this test, and so does an
+entry whose test does not exist or does not use the command's subcommand and options."""
+
+from __future__ import annotations
+
+import ast
+import re
+import shlex
+from pathlib import Path
+
+import pytest
+
+from fence_sorter.testing import run_cli
+
+REPO = Path(__file__).resolve().parents[1]
+
+HERE = "test/test_readme_commands.py::test_readme_command_runs"
+MAKE = "test/test_readme_commands.py::test_make_targets_run_the_documented_commands"
+ACCURACY = (
+    "test/cli/test_accuracy_cli.py::test_quick_report_has_the_command_plots_and_reference_check"
+)
+
+#: README command -> "test file::test function" that runs it
+COVERED: dict[str, str] = {
+    "make run": MAKE,
+    "fence-sorter check": "test/cli/test_cli.py::test_check_passes_in_the_bootstrapped_env",
+    "fence-sorter demo-roundtrip": "test/cli/test_cli.py::test_demo_roundtrip",
+    "simulator --ros-args -p real_time_factor:=2.0": (
+        "test/ros/test_simulator.py::test_real_time_factor_can_change_at_run_time"
+    ),
+    "fence-sorter run": "test/ros/test_shutdown.py::test_interrupted_run_ends_every_process",
+    "fence-sorter run --parcels 40 --rtf 2 --seed 7": HERE,
+    "fence-sorter run --duration 60 --bag bags/run1": HERE,
+    "fence-sorter run --stream config/streams/example_manifest.csv": HERE,
+    "fence-sorter run --rtf 0 --json": HERE,
+    "fence-sorter run --param controller:a_ndop=150": HERE,
+    "fence-sorter bench-suite": HERE,
+    "fence-sorter analyze bags/example_4_parcels": HERE,
+    "fence-sorter analyze bags/example_4_parcels --json --out /tmp/ex": (
+        "test/ros/test_recording.py::test_analysis_of_the_run_matches_the_live_outcomes"
+    ),
+    "fence-sorter rrd bags/example_4_parcels --out /tmp/ex.rrd": HERE,
+    "fence-sorter replay bags/example_4_parcels --rate 2": (
+        "test/ros/test_recording.py::test_replay_republishes_the_run"
+    ),
+    "fence-sorter run --parcels 4 --bag /tmp/b --rrd /tmp/b.rrd": (
+        "test/ros/test_recording.py::test_live_rrd_of_the_run_has_every_published_frame"
+    ),
+    "python -m rerun mcap check --full bags/example_4_parcels/example_4_parcels_0.mcap": (
+        "test/ros/test_recording.py::test_rerun_full_check_accepts_every_segment_of_the_run"
+    ),
+    "source scripts/env.sh": MAKE,
+    "fence-sorter simulate impact_flexible": (
+        "test/cli/test_simulate_cli.py::test_simulate_impact_flexible_json"
+    ),
+    "fence-sorter simulate slide_flexible --json": HERE,
+    "fence-sorter simulate positioned_stiff --set parcel.mass=20 --set drive.alpha_k_deg=35": HERE,
+    "fence-sorter modes impact_flexible --tip-load 100": HERE,
+    "fence-sorter simulate impact_flexible --set solver.method=generalized_alpha "
+    "--set solver.dt=2.5e-4": HERE,
+    "fence-sorter simulate impact_flexible --set solver.method=scipy:Radau "
+    "--set solver.rtol=1e-6": HERE,
+    "fence-sorter accuracy": ACCURACY,
+    "fence-sorter stability": "test/cli/test_stability_cli.py::test_quick_writes_the_report",
+    "fence-sorter bench": HERE,
+    "fence-sorter optimize --case positioned --alpha-k 40 --constraints 7,8,11 --json": HERE,
+    "fence-sorter optimize --case arbitrary --alpha-k 35 --w-dop 2.4 --mu1 0.5 --mu2 0.3": HERE,
+    "fence-sorter optimize --sweep fig6 --out docs/paper": (
+        "test/cli/test_data_cli_bad_input.py::test_plots_only_redraws_from_the_saved_results"
+    ),
+}
+
+#: README commands that need what this machine has not, and why
+NOT_HERE: dict[str, str] = {
+    "make test": "the suite itself (what CI runs; its recipe is checked by " + MAKE + ")",
+    "pytest test/ros test/cli": "a part of the suite itself (make test runs all of it)",
+    'pytest -m "not slow"': "a part of the suite itself (make test runs all of it)",
+    "rerun bags/example_4_parcels.rrd": "opens a viewer window",
+    "mkdir -p ~/ws/src && cd ~/ws/src && git clone <this repository> fence_sorter": (
+        "a full ROS 2 install (colcon workspace)"
+    ),
+    "cd ~/ws": "a full ROS 2 install (colcon workspace)",
+    "source /opt/ros/kilted/setup.bash": "a full ROS 2 install under /opt/ros",
+    "colcon build --paths src/fence_sorter src/fence_sorter/msg_defs": "a full ROS 2 install",
+    "source install/setup.bash": "a full ROS 2 install (colcon workspace)",
+    "ros2 run fence_sorter simulator": "a full ROS 2 install (ros2 CLI)",
+    "fence-sorter optimize --case positioned --alpha-k 40 --scheduler tcp://10.0.0.5:8786": (
+        "a Dask scheduler at 10.0.0.5 (a local cluster: "
+        "test/optimize/test_optimize.py::test_dask_cluster_gives_the_process_pool_optimum)"
+    ),
+}
+
+#: what this test runs of a README command: the command with smaller amounts, and text its
+#: output must hold (the command's own figures, not just an exit status)
+#: one run of `fence-sorter run` for the README's run commands that can share it
+_RUN = (
+    [
+        "run",
+        "--stream",
+        "config/streams/example_manifest.csv",
+        "--parcels",
+        "3",
+        "--rtf",
+        "0",
+        "--seed",
+        "7",
+        "--json",
+        "--param",
+        "controller:a_ndop=150",
+    ],
+    '"parcels_seen": 3',
+)
+RUN_HERE: dict[str, tuple[list[str], str]] = {
+    "fence-sorter run --parcels 40 --rtf 2 --seed 7": _RUN,
+    "fence-sorter run --stream config/streams/example_manifest.csv": _RUN,
+    "fence-sorter run --rtf 0 --json": _RUN,
+    "fence-sorter run --param controller:a_ndop=150": _RUN,
+    "fence-sorter run --duration 60 --bag bags/run1": (
+        ["run", "--duration", "4", "--rtf", "2", "--bag", "{tmp}/run1"],
+        "parcels seen",
+    ),
+    "fence-sorter bench-suite": (
+        ["bench-suite", "--duration", "3", "--unpaced-parcels", "3", "--no-write"],
+        "deadline",
+    ),
+    "fence-sorter analyze bags/example_4_parcels": (
+        ["analyze", "bags/example_4_parcels"],
+        "SORTED",
+    ),
+    "fence-sorter rrd bags/example_4_parcels --out /tmp/ex.rrd": (
+        ["rrd", "bags/example_4_parcels", "--out", "{tmp}/ex.rrd"],
+        "frames",
+    ),
+    "fence-sorter simulate slide_flexible --json": (
+        ["simulate", "slide_flexible", "--json"],
+        '"sorted"',
+    ),
+    "fence-sorter simulate positioned_stiff --set parcel.mass=20 --set drive.alpha_k_deg=35": (
+        [
+            "simulate",
+            "positioned_stiff",
+            "--set",
+            "parcel.mass=20",
+            "--set",
+            "drive.alpha_k_deg=35",
+        ],
+        "sorted",
+    ),
+    "fence-sorter modes impact_flexible --tip-load 100": (
+        ["modes", "impact_flexible", "--tip-load", "100"],
+        "Hz",
+    ),
+    "fence-sorter simulate impact_flexible --set solver.method=generalized_alpha "
+    "--set solver.dt=2.5e-4": (
+        [
+            "simulate",
+            "impact_flexible",
+            "--set",
+            "solver.method=generalized_alpha",
+            "--set",
+            "solver.dt=2.5e-4",
+        ],
+        "sorted",
+    ),
+    "fence-sorter simulate impact_flexible --set solver.method=scipy:Radau "
+    "--set solver.rtol=1e-6": (
+        [
+            "simulate",
+            "impact_flexible",
+            "--set",
+            "solver.method=scipy:Radau",
+            "--set",
+            "solver.rtol=1e-6",
+        ],
+        "sorted",
+    ),
+    "fence-sorter bench": (
+        ["bench", "--quick", "--scenes", "impact_flexible", "--out", "{tmp}/bench.md"],
+        "impact_flexible",
+    ),
+    "fence-sorter optimize --case positioned --alpha-k 40 --constraints 7,8,11 --json": (
+        [
+            "optimize",
+            "--case",
+            "positioned",
+            "--alpha-k",
+            "40",
+            "--constraints",
+            "7,8,11",
+            "--json",
+            "--restarts",
+            "1",
+        ],
+        '"feasible"',
+    ),
+    "fence-sorter optimize --case arbitrary --alpha-k 35 --w-dop 2.4 --mu1 0.5 --mu2 0.3": (
+        [
+            "optimize",
+            "--case",
+            "arbitrary",
+            "--alpha-k",
+            "35",
+            "--w-dop",
+            "2.4",
+            "--mu1",
+            "0.5",
+            "--mu2",
+            "0.3",
+            "--restarts",
+            "1",
+        ],
+        "pcs/h",
+    ),
+}
+
+
+def readme_commands() -> list[str]:
+    """The command lines of the README's ``bash`` blocks, comments stripped."""
+    text = (REPO / "README.md").read_text()
+    commands = []
+    for block in re.findall(r"```bash\n(.*?)```", text, re.S):
+        for line in block.splitlines():
+            command = line.split("  #", 1)[0].split(" # ", 1)[0].strip()
+            if command and not command.startswith("#"):
+                commands.append(command)
+    return commands
+
+
+def test_every_readme_command_has_its_test() -> None:
+    commands = readme_commands()
+    missing = [c for c in commands if c not in COVERED and c not in NOT_HERE]
+    assert missing == [], f"README commands without a test (add them to COVERED): {missing}"
+    stale = [c for c in list(COVERED) + list(NOT_HERE) if c not in commands]
+    assert stale == [], f"entries for commands the README no longer has: {stale}"
+    assert set(RUN_HERE) <= set(COVERED)
+
+
+def _functions(path: Path) -> set[str]:
+    return {
+        node.name
+        for node in ast.walk(ast.parse(path.read_text()))
+        if isinstance(node, ast.FunctionDef)
+    }
+
+
+@pytest.mark.parametrize("command", sorted(COVERED))
+def test_the_covering_test_runs_the_command(command: str) -> None:
+    """The test named for a command exists and uses its subcommand and every option."""
+    file, _, function = COVERED[command].partition("::")
+    path = REPO / file
+    assert path.is_file() and function in _functions(path), COVERED[command]
+    if command in RUN_HERE:
+        words = RUN_HERE[command][0]
+        source = " ".join(words)
+    else:
+        source = path.read_text()
+    tokens = shlex.split(command)
+    wanted = [t for t in tokens if t.startswith("--")]
+    if tokens[0] == "fence-sorter":
+        wanted.append(tokens[1])
+    missing = [w for w in wanted if w not in source]
+    assert missing == [], f"{COVERED[command]} does not use {missing} of {command!r}"
+
+
+#: each distinct run of RUN_HERE once
+_RUNS = sorted({(tuple(args), expected) for args, expected in RUN_HERE.values()})
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("args", "expected"), _RUNS, ids=[" ".join(a[:2]) for a, _ in _RUNS])
+def test_readme_command_runs(args: tuple[str, ...], expected: str, tmp_path: Path) -> None:
+    args = [a.replace("{tmp}", str(tmp_path)) for a in args]
+    done = run_cli(*args, timeout=600)
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    assert expected in done.stdout, done.stdout[-2000:]
+
+
+@pytest.mark.slow
+def test_make_targets_run_the_documented_commands() -> None:
+    """`make run` is the documented `fence-sorter run` and `make test` bootstraps, sources
+    scripts/env.sh, runs ruff and pytest over test/ (which holds test/ros and test/cli): what
+    make would run, without running it (make test is this very run)."""
+    import subprocess
+
+    def dry(target: str) -> str:
+        return subprocess.run(
+            ["make", "-n", target], cwd=REPO, capture_output=True, text=True, check=True
+        ).stdout
+
+    run = dry("run")
+    assert "fence-sorter run --parcels 12 --bag bags/run-" in run and "--rrd bags/run-" in run
+    test = dry("test")
+    assert "scripts/bootstrap.sh" in test and "source scripts/env.sh" in test
+    assert "ruff check" in test and "pytest -q test/" in test
