@@ -146,7 +146,7 @@ def test_param_values_reach_the_nodes_as_the_type_they_declare() -> None:
         "active_constraints": [7, 10],
     }
     assert isinstance(plan.node_params["controller"]["a_ndop"], float)
-    assert plan.node_params["simulator"] == {"warm_up": False, "lookahead": 0.01}
+    assert plan.node_params["simulator"] == {"warm_up": False, "lookahead": 0.01, "a_ndop": 150.0}
     args = _ros_args("controller", plan, opts, [])
     for given in ("a_ndop:=150.0", 'frame_id:="42"', "active_constraints:=[7, 10]"):
         assert given in args
