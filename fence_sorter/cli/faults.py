@@ -21,7 +21,12 @@ def register(subparsers) -> None:
         "hostile messages, bad input), count what the suite refused, dropped and sorted, and "
         "write the report.",
     )
-    parser.add_argument("--out", default="docs/reliability.md", help="report file")
+    parser.add_argument(
+        "--out",
+        default="docs/reliability.md",
+        help="report (markdown; its data beside it as .json: a run of some --cases replaces "
+        "only their sections)",
+    )
     parser.add_argument(
         "--trials", type=int, default=20, help="repeated Ctrl-C trials (default 20)"
     )
@@ -43,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     from fence_sorter.verification.faults import campaign
 
-    verdicts = campaign(
+    met = campaign(
         Path(args.out),
         trials=args.trials,
         seed=args.seed,
@@ -51,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
         progress=lambda s: print(s, flush=True),
     )
     print(f"report: {args.out}")
-    missed = [k for k, ok in verdicts.items() if not ok]
+    missed = [k for k, ok in met.items() if not ok]
     if missed:
         print(f"targets not met: {', '.join(missed)}")
         return 1

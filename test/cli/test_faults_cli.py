@@ -20,7 +20,10 @@ def test_bad_input_cases_exit_2_with_one_line_and_are_reported(tmp_path: Path) -
     assert "--parcels must be in [1, inf)" in by_name["--parcels 0"].line
     meta = {"command": "fence-sorter faults --cases cli", "commit": "x", "date": "d"}
     out = tmp_path / "reliability.md"
-    F.write_report(out, {**meta, "machine": "m", "wall_s": 1.0}, [], [], [], {}, results)
+    data = {"cli": {"rows": [F.cli_row(r) for r in results], "meta": {**meta, "machine": "m"}}}
+    data["cli"]["meta"]["wall_s"] = 1.0
+    F.write_report(out, data)
     text = out.read_text()
+    assert F.verdicts(data) == {"cli": True}
     assert "**3 of 3 as required; tracebacks: 0; silently accepted (exit 0): 0.**" in text
     assert "| streams | mu_fence 5 |" in text
