@@ -40,6 +40,7 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE_NAME}"]),
         (f"share/{PACKAGE_NAME}", ["package.xml"]),
+        ("bin", ["bin/fence-sorter"]),  # runs lib/fence_sorter/fence-sorter
         *share_data_files(),
     ],
     install_requires=["setuptools"],

@@ -208,9 +208,22 @@ def run_list(args: argparse.Namespace) -> int:
     return _run(args, "list", body)
 
 
+def plain(value):
+    """A message dict for printing: rosidl's byte and char fields (bytes) as integers (a list
+    for several), NaN and infinities as null for JSON."""
+    if isinstance(value, bytes):
+        return value[0] if len(value) == 1 else list(value)
+    if isinstance(value, dict):
+        return {k: plain(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [plain(v) for v in value]
+    return value
+
+
 def run_echo(args: argparse.Namespace) -> int:
     import yaml
 
+    from fence_sorter.jsonsafe import json_safe
     from fence_sorter.nodes.convert import msg_to_dict
 
     if args.count < 0:
@@ -225,9 +238,9 @@ def run_echo(args: argparse.Namespace) -> int:
             if args.count and len(received) >= args.count:
                 return
             received.append(1)
-            data = msg_to_dict(msg)
+            data = plain(msg_to_dict(msg))
             if args.json:
-                print(json.dumps(data), flush=True)
+                print(json.dumps(json_safe(data)), flush=True)
             else:
                 print(yaml.safe_dump(data, sort_keys=False).rstrip() + "\n---", flush=True)
 

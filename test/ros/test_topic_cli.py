@@ -112,3 +112,14 @@ def test_missing_topic_and_bad_domain(env, domain_id):
     )  # fmt: skip
     assert out.returncode == 1
     assert "no publisher on the graph within 1 s" in out.stderr
+
+
+def test_byte_fields_print_as_integers():
+    """rclpy gives byte fields (DiagnosticStatus.level) as bytes, which JSON cannot hold."""
+    from fence_sorter.cli.topic import plain
+
+    assert plain({"level": b"\x02", "raw": [b"\x01\x02"], "x": 1.5}) == {
+        "level": 2,
+        "raw": [[1, 2]],
+        "x": 1.5,
+    }
