@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 
 import numpy as np
@@ -41,6 +41,8 @@ DRIVE_JOINT = "fence_drive"
 #: the scanner sees a parcel this long before its stroke starts [s]
 SCAN_LEAD = 1.0
 BAG_TOPICS = {**TOPIC_TYPES, **MEASURED_TOPICS}
+#: the fields Parcel messages and ParcelParams share (same names, SI units)
+PARCEL_FIELDS = tuple(f.name for f in fields(ParcelParams))
 
 
 class MeasuredBagError(ValueError):
@@ -73,14 +75,7 @@ def write_measured_bag(
             header=_header(ts, t_scan, "sorter"),
             parcel_id=ev.parcel_id,
             run_id=0,
-            length_a=p.length_a,
-            width_b=p.width_b,
-            height=p.height,
-            mass=p.mass,
-            cog_offset_x=p.cog_offset_x,
-            cog_offset_y=p.cog_offset_y,
-            lateral_gap=p.lateral_gap,
-            yaw=p.yaw,
+            **{f: getattr(p, f) for f in PARCEL_FIELDS},
             mu_belt=math.nan,
             mu_fence=math.nan,
             divert=True,
@@ -244,16 +239,7 @@ def read_measured_bag(path: Path | str) -> MeasuredBag:
         if p is None or not cmd.feasible:
             continue
         t0, ak, t1 = fit_stroke(m.enc_t, m.enc_angle, cmd.alpha_k, cmd.t1, _t(cmd.start_time))
-        parcel = ParcelParams(
-            length_a=p.length_a,
-            width_b=p.width_b,
-            height=p.height,
-            mass=p.mass,
-            cog_offset_x=p.cog_offset_x,
-            cog_offset_y=p.cog_offset_y,
-            lateral_gap=p.lateral_gap,
-            yaw=p.yaw,
-        )
+        parcel = ParcelParams(**{f: float(getattr(p, f)) for f in PARCEL_FIELDS})
         events.append(ParcelEvent(pid, parcel, ak, t1, cmd.r_s, t0))
     events.sort(key=lambda e: e.t_start)
     # encoder residual about the fitted strokes: what the sinusoidal law leaves unexplained

@@ -15,21 +15,14 @@ import json
 import sys
 from pathlib import Path
 
-from fence_sorter.cli.simulate import error
+from fence_sorter.cli.simulate import add_set_argument, error
 
 
 def add_bag_scene_arguments(parser: argparse.ArgumentParser, scene_help: str) -> None:
     """BAG, --scene, --set, --workers, --json, --out: shared with ``fence-sorter validate``."""
     parser.add_argument("bag", metavar="BAG", help="bag directory with the measured topics")
     parser.add_argument("--scene", help=scene_help)
-    parser.add_argument(
-        "--set",
-        dest="overrides",
-        metavar="KEY=VALUE",
-        action="append",
-        default=[],
-        help="override a scene value by its dotted key",
-    )
+    add_set_argument(parser)
     parser.add_argument("--workers", type=int, default=None, help="processes (default: CPUs)")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     parser.add_argument("--out", metavar="DIR", help="write the result files here")

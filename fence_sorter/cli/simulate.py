@@ -22,6 +22,11 @@ def add_scene_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "scene", metavar="SCENE", help="scene file, or the name of a shipped scene"
     )
+    add_set_argument(parser)
+
+
+def add_set_argument(parser: argparse.ArgumentParser) -> None:
+    """--set KEY=VALUE (repeatable) into ``overrides``."""
     parser.add_argument(
         "--set",
         dest="overrides",
