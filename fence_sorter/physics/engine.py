@@ -261,13 +261,13 @@ class CompiledSolve:
     def _call(self, t_target: float) -> int:
         """One call of ``kernel.solve`` (at most CHUNK step attempts); grows a full buffer."""
         md = self.model
-        status = K.solve(
-            md.P, md.corners, md.normals, *self.modes, self.cfg,
-            self.breaks, self.ctl, self.fc, self.T, self.Y, self.LAM, self.OUT, self.RES,
-            self.MODAL, self.ACC, self.w, self.wdot, self.nodes, self.prev, self.work, self.PK,
-            self.PA, self.PG0, self.PG1, self.IMP, self.STG, self.REC, self.TR, CHUNK,
-            float(t_target),
+        model = K.LoopModel(md.P, md.corners, md.normals, *self.modes, self.cfg, self.breaks)
+        state = K.LoopState(
+            self.ctl, self.fc, self.T, self.Y, self.LAM, self.OUT, self.RES, self.MODAL,
+            self.ACC, self.w, self.wdot, self.nodes, self.prev, self.work, self.PK, self.PA,
+            self.PG0, self.PG1, self.IMP, self.STG, self.REC, self.TR,
         )  # fmt: skip
+        status = K.solve(model, state, CHUNK, float(t_target))
         self._n_props[0] = self.ctl[K.I_N_PROPS]
         if status == K.SOLVE_GROW:
             self._grow()

@@ -169,6 +169,8 @@ from .layout import (  # noqa: E402 (after the cache directory is set)
     R_TIP_W,
     SLOT_BORDER,
     SLOT_TIP,
+    LoopModel,
+    LoopState,
     pack,
 )
 from .loop import (  # noqa: E402 (after the cache directory is set)
@@ -312,6 +314,8 @@ from .steps import (  # noqa: E402 (after the cache directory is set)
 )
 
 __all__ = [
+    "LoopModel",
+    "LoopState",
     "C_ACTIVE",
     "C_D",
     "C_DDOT",

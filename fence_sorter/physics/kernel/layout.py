@@ -3,6 +3,8 @@ columns ``C_*``, resultants ``R_*``."""
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 
 # -- packed parameters --------------------------------------------------------------------------
@@ -105,3 +107,48 @@ def pack(
     p[P_EXT_X], p[P_EXT_Y], p[P_EXT_M] = external
     p[P_MARGIN] = margin
     return np.array(p, dtype=float)
+
+
+# The loop's arrays in two groups, as MuJoCo's MjModel and MjData: what one event is (read only)
+# and what the loop writes as it runs (rows of accepted and trial states, counters, outputs).
+LoopModel = namedtuple(
+    "LoopModel",
+    [
+        "params",  # packed parameters P_* (layout.pack)
+        "corners",  # the load's corners relative to C_s [m]
+        "normals",  # the load's face normals
+        "phi",  # modal shapes at the fence nodes (flexible; else empty)
+        "rigid_modal",  # modal load of a unit drive acceleration
+        "omega",  # modal angular frequencies [rad/s]
+        "zeta",  # modal damping ratios
+        "settings",  # solver settings G_*
+        "breaks",  # drive breakpoints and the end time [s]
+    ],
+)
+LoopState = namedtuple(
+    "LoopState",
+    [
+        "counters",  # integer state of the loop I_* (rows in use, steps, events, diagnosis)
+        "scalars",  # float state of the loop F_* (step sizes, history, peaks, energy audit)
+        "times",  # t of the state rows S_* [s]
+        "states",  # state vectors of the rows
+        "belt_wrench",  # belt friction (F_x, F_y, M_z) of the rows
+        "contacts",  # contact slots C_* of the rows
+        "resultants",  # resultants R_* of the rows
+        "modal_force",  # modal force of the rows
+        "accelerations",  # accelerations of the rows
+        "deflection",  # nodal deflection and slope of the fence (scratch)
+        "deflection_rate",
+        "nodes",
+        "friction_prev",  # each slot's friction at the previous contact iterate
+        "work",  # the trapezoidal step's workspace
+        "propagator_keys",  # cache of the modal propagators per step size
+        "propagators",
+        "propagator_g0",
+        "propagator_g1",
+        "impacts",  # rows (t, w_n, N_stiff)
+        "stages",  # rows (t, stage code)
+        "record",  # recorded series REC_*, a column per accepted point
+        "trace",  # accepted points for a Python observer (no rows: none)
+    ],
+)

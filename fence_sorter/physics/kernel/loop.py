@@ -595,19 +595,21 @@ def _diverged(P, cfg, fc, t, y, res):
 
 
 @njit(cache=True, _nrt=False)
-def solve(
-    P, corners, normals, phi, rigid_modal, omega, zeta, cfg, breaks, ctl, fc, T, Y, LAM, OUT, RES,
-    MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, IMP, STG, REC, TR, max_attempts,
-    t_target,
-):  # fmt: skip
-    """Run the solve loop (``Integrator.stepping`` with ``Observer``) from where ``ctl``/``fc``
-    left it: until it ends (SOLVE_DONE, the diagnosis in ctl[I_DIAG]), ``max_attempts`` step
-    attempts (SOLVE_PAUSED), an output buffer (IMP, STG rows; REC columns, one row per
-    recorded quantity REC_*) without a free entry (SOLVE_GROW),
-    the accepted time reaching ``t_target`` (SOLVE_REACHED) or a full trace (SOLVE_TRACED: ``TR``
-    with rows keeps every observed point for a Python observer, ``integrators.Integrator``; no
-    rows, no trace). Row 0 of Y holds the initial state on the first call, which zeroes the
-    other state rows and the scratch arrays."""
+def solve(model, state, max_attempts, t_target):
+    """Run the solve loop (``Integrator.stepping`` with ``Observer``) on ``model``
+    (:data:`LoopModel`) from where ``state`` (:data:`LoopState`) left it: until it ends
+    (SOLVE_DONE, the diagnosis in counters[I_DIAG]), ``max_attempts`` step attempts
+    (SOLVE_PAUSED), an output buffer (impacts, stages rows; record columns, one row per recorded
+    quantity REC_*) without a free entry (SOLVE_GROW), the accepted time reaching ``t_target``
+    (SOLVE_REACHED) or a full trace (SOLVE_TRACED: a trace with rows keeps every observed point
+    for a Python observer, ``integrators.Integrator``; no rows, no trace). Row 0 of the states
+    holds the initial state on the first call, which zeroes the other state rows and the
+    scratch arrays."""
+    P, corners, normals, phi, rigid_modal, omega, zeta, cfg, breaks = model
+    (
+        ctl, fc, T, Y, LAM, OUT, RES, MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1,
+        IMP, STG, REC, TR,
+    ) = state  # fmt: skip
     adaptive = cfg[G_ADAPTIVE] != 0.0
     h_nom = cfg[G_H_NOM]
     min_dt = cfg[G_MIN_DT]
