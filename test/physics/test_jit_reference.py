@@ -1,4 +1,4 @@
-"""The kernel's Python reference is its own source run with NUMBA_DISABLE_JIT=1.
+"""The kernel's Python reference is its own source run with NUMBA_DISABLE_JIT=1; its cache.
 
 Every bench scene is solved twice with the default (compiled loop): here, compiled by Numba,
 and in a fresh process with NUMBA_DISABLE_JIT=1, where every kernel function runs as the
@@ -13,13 +13,12 @@ import math
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
 from fence_sorter.physics.simulate import simulate
 from fence_sorter.scene import load_scene
-
-pytestmark = pytest.mark.slow
 
 SCENES = ("positioned_stiff", "arbitrary_stiff", "impact_flexible", "slide_flexible")
 COUNTS = ("steps", "rejected_steps", "forced_steps", "events", "sorted")
@@ -51,6 +50,7 @@ print(json.dumps(out))
 """
 
 
+@pytest.mark.slow
 def test_every_bench_scene_solves_the_same_without_the_jit():
     env = dict(os.environ, NUMBA_DISABLE_JIT="1")
     proc = subprocess.run(
@@ -73,3 +73,25 @@ def test_every_bench_scene_solves_the_same_without_the_jit():
         for key in FIGURES:
             got, want = getattr(r, key), ref[key]
             assert math.isclose(got, want, rel_tol=1e-9, abs_tol=1e-12), (name, key, got, want)
+
+
+def test_the_kernel_cache_is_keyed_on_every_module_of_the_package(tmp_path, monkeypatch):
+    """A change to any module of the kernel (a callee inlined into another module's function)
+    names a new cache directory, and the caches of earlier sources are removed."""
+    import shutil
+
+    from fence_sorter.physics import kernel as K
+
+    package = tmp_path / "kernel"
+    shutil.copytree(Path(K.__file__).parent, package, ignore=shutil.ignore_patterns("__pycache__"))
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    first = K.cache_directory(package)
+    assert first == K.cache_directory(package)
+    assert first.parent == package / "__pycache__" and first.name.startswith("numba-")
+    first.mkdir(parents=True)
+    forces = package / "forces.py"
+    forces.write_text(forces.read_text() + "\n# a change to a callee\n")
+    second = K.cache_directory(package)
+    assert second != first and not first.exists()
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "user"))
+    assert K.cache_directory(package) == tmp_path / "user" / second.name
