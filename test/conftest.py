@@ -22,6 +22,9 @@ def pytest_configure(config: pytest.Config) -> None:
         "faults: fault injection (signals, killed nodes; hostile, malformed and flooding input; "
         "bad files)",
     )
+    config.addinivalue_line(
+        "markers", "install: colcon build into a temporary install/, then runs from it"
+    )
 
 
 @pytest.fixture(scope="session")
