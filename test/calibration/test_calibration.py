@@ -241,3 +241,21 @@ def test_validate_with_the_truth_scene_predicts_the_measured_figures(tmp_path, c
     assert main(["validate", str(bag), "--scene", str(scene), *sets, "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["summary"]["y_max"]["max_abs_error"] > 1e-3
+
+
+def test_bootstrap_intervals_agree_with_the_jacobian(tmp_path):
+    """The parametric bootstrap's percentile interval of the fence friction has the width of
+    the Jacobian's 95 % interval (8 refits: within a factor 2.5) and overlaps it."""
+    base = load_scene("arbitrary_stiff").scenario
+    truth = with_values(base, {"mu_fence": 0.40})
+    bag = emulate_bag(
+        tmp_path / "boot", truth, load_sensors("camera60"), scene_name="x", stream="default",
+        count=3, seed=8,
+    )  # fmt: skip
+    res = calibrate(base, read_measured_bag(bag), ["mu_fence"], bootstrap=8, seed=1)
+    (e,) = res.estimates
+    assert e.ci95[0] < 0.40 < e.ci95[1]
+    jac_width = e.ci95[1] - e.ci95[0]
+    boot_width = e.bootstrap_ci95[1] - e.bootstrap_ci95[0]
+    assert 1 / 2.5 < boot_width / jac_width < 2.5
+    assert e.bootstrap_ci95[0] < e.ci95[1] and e.ci95[0] < e.bootstrap_ci95[1]
