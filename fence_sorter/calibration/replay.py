@@ -89,8 +89,11 @@ def event_scenario(base: Scenario, ev: ParcelEvent) -> Scenario:
     """The scene's physics with this parcel, this stroke, a fixed end and the series a track
     needs; a fixed-step trapezoidal solve, so a track is a smooth function of the parameters
     (adaptive step sequences would change with them and spoil finite differences)."""
+    # the first replay of a process may compile the kernel inside the solve's wall-time
+    # budget (minutes on a loaded machine); divergence is caught by the solver's other checks
     solver = replace(
         base.solver,
+        max_wall_time=max(base.solver.max_wall_time, 900.0),
         method="trapezoidal",
         stop_when_sorted=False,
         t_end=ev.t_end,
