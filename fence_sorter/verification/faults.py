@@ -245,12 +245,16 @@ def flood_main(argv: list[str]) -> int:
             failed += 1
             error = f"{type(exc).__name__}: {exc}"
     wall = time.monotonic() - t0
-    time.sleep(1.0)  # let the reliable writer deliver before the participant goes
+    # every subscriber has it before the participant goes (its writer's history goes with it)
+    from rclpy.duration import Duration
+
+    acked = pub.wait_for_all_acked(Duration(seconds=30))
     print(
         json.dumps(
             {
                 "sent": sent,
                 "publish_failed": failed,
+                "all_acked": acked,
                 "error": error[:200],
                 "wall_s": wall,
                 "subscribers": subscribers,

@@ -5,7 +5,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
 from fence_sorter.verification import faults as F
+
+pytestmark = pytest.mark.faults
 
 
 def test_bad_input_cases_exit_2_with_one_line_and_are_reported(tmp_path: Path) -> None:

@@ -1,4 +1,5 @@
-"""Faults over DDS: the controller killed mid-run (SIGKILL) and restarted; malformed parcels.
+"""Faults over DDS: the controller killed mid-run (SIGKILL) and restarted; malformed parcels;
+hostile parcels and commands of a run (another run's, forged, out of their window).
 
 - Kill: the simulator keeps running; divert parcels scanned while no controller listens get
   NO_COMMAND; a restarted controller plans the parcels scanned after it is up (SORTED).
@@ -19,7 +20,7 @@ import pytest
 from fence_sorter.runner.processes import ProcessGroup, leftovers, node_command
 from fence_sorter.verification.faults import command_msg, parcel_msg
 
-pytestmark = [pytest.mark.ros, pytest.mark.slow]
+pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.faults]
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -206,7 +207,6 @@ def _start_pair(group, monitor, *extra: str) -> None:
     )
 
 
-@pytest.mark.faults
 def test_hostile_parcels_and_commands_are_refused_counted_and_kept_out(suite) -> None:
     """Plausible-but-wrong messages: a scan_time 1e5 s ahead (planned, it would book the
     fence until t = 1e5 s), scan_position_x = 1e9, mu_fence = 5; another run's parcel and its
