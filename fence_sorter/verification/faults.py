@@ -760,9 +760,11 @@ def _interrupts_md(sec: dict) -> list[str]:
         *_meta_lines(sec["meta"]),
         "`fence-sorter run --parcels 20` in a session of its own; the first SIGINT to its "
         "process group at a random moment in [0, 30] s, then more at random gaps of 0-0.5 s "
-        "(2-5 in all). Leftovers: processes the run started (its descendants, polled every "
-        "0.1 s) still alive 1 s after it exited. Target: 0 leftovers, every trial out within "
-        "5 s.",
+        "(2-5 in all; fewer when the run was out before the next). Leftovers: processes the "
+        "run started (its descendants, polled every 0.1 s) still alive 1 s after it exited. "
+        "Exit status -2: the run ended by the signal's default action (a signal in the "
+        "interpreter's start-up, before the run's handler exists). Target: 0 leftovers, every "
+        "trial out within 5 s.",
         "",
         f"**{len(rows)} trials: {within} exited within 5 s, "
         f"{sum(t['leftovers'] for t in rows)} leftover processes in all, "
