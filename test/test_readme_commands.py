@@ -181,7 +181,18 @@ RUN_HERE: dict[str, tuple[list[str], str]] = {
         "sorted",
     ),
     "fence-sorter bench": (
-        ["bench", "--quick", "--scenes", "impact_flexible", "--out", "{tmp}/bench.md"],
+        [
+            "bench",
+            "--quick",
+            "--scenes",
+            "impact_flexible",
+            "--repeats",
+            "1",
+            "--scipy-cap",
+            "5",
+            "--out",
+            "{tmp}/bench.md",
+        ],
         "impact_flexible",
     ),
     "fence-sorter optimize --case positioned --alpha-k 40 --constraints 7,8,11 --json": (

@@ -430,40 +430,84 @@ def tagged(key: str, value: str) -> list[int]:
 
 #: where Fast DDS keeps its shared-memory ports and segments (Linux)
 SHM_DIR = Path("/dev/shm")
-#: a port or segment's lock file: <name>_el or <name>_sl, locked while its owner lives
-_SHM_LOCK = re.compile(r"^(fastdds|fastrtps)_(port\d{1,5}|[0-9a-z]{16})_(el|sl)$")
-#: a lock file this young may belong to a participant that is still creating it [s]
+#: Fast DDS's shared-memory files: ports, segments, their lock files, the ports' semaphores
+_SHM_FILE = re.compile(r"^(sem\.)?(fastdds|fastrtps)_(port\d{1,5}|[0-9a-z]{16})(_el|_sl|_mutex)?$")
+#: a file this young may belong to a participant that is still creating it [s]
 SHM_GRACE = 5.0
 
 
 def clean_shm(directory: Path = SHM_DIR) -> list[str]:
-    """Remove the shared-memory files of Fast DDS ports and segments whose owner processes are
-    dead (a participant killed with SIGKILL cannot remove them): a lock file nobody holds
-    (flock, as ``fastdds shm clean`` tests it) goes with its port or segment and the port's
-    semaphore. Returns the names removed."""
+    """Remove the shared-memory files of Fast DDS that no live process uses (a participant
+    killed with SIGKILL cannot remove its own): a file that no process maps or holds open and
+    that nobody holds a lock on (a lock file ``<name>_el``/``_sl`` is flock-ed while its
+    owner lives, as ``fastdds shm clean`` tests it); files younger than SHM_GRACE stay.
+    Where the processes cannot be read, only a free lock file tells, and it takes its port
+    or segment and the port's semaphore with it. Returns the names removed."""
     import fcntl
 
-    removed = []
     try:
-        names = os.listdir(directory)
+        names = sorted(n for n in os.listdir(directory) if _SHM_FILE.match(n))
     except OSError:
-        return removed
+        return []
+    in_use = _files_in_use(directory)
+    removed = []
     for name in names:
-        if not _SHM_LOCK.match(name):
+        path = directory / name
+        is_lock = name.endswith(("_el", "_sl"))
+        if (in_use is None and not is_lock) or (in_use is not None and str(path) in in_use):
             continue
-        lock = directory / name
         try:
-            if time.time() - lock.stat().st_mtime < SHM_GRACE:
+            if time.time() - path.stat().st_mtime < SHM_GRACE:
                 continue
-            with open(lock, "ab") as handle:
-                fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                base = name[:-3]
-                for victim in (base, name, f"sem.{base}_mutex"):
-                    try:
-                        (directory / victim).unlink()
-                        removed.append(victim)
-                    except FileNotFoundError:
-                        pass
-        except OSError:  # locked: its owner is alive (or it vanished meanwhile)
+            fd = os.open(path, os.O_RDONLY)
+        except OSError:
             continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # a live owner holds its lock
+        except OSError:
+            continue
+        finally:
+            os.close(fd)
+        victims = [name]
+        if is_lock and in_use is None:
+            victims = [name[:-3], name, f"sem.{name[:-3]}_mutex"]
+        for victim in victims:
+            try:
+                (directory / victim).unlink()
+                removed.append(victim)
+            except FileNotFoundError:
+                pass
     return removed
+
+
+def _files_in_use(directory: Path) -> set[str] | None:
+    """Paths under ``directory`` that a live process maps or holds open (/proc); None if
+    /proc cannot be read at all."""
+    prefix = str(directory) + "/"
+    found: set[str] = set()
+    try:
+        entries = list(Path("/proc").iterdir())
+    except OSError:
+        return None
+    for entry in entries:
+        if not entry.name.isdigit():
+            continue
+        try:
+            for line in (entry / "maps").read_text().splitlines():
+                at = line.find(prefix)
+                if at >= 0:
+                    found.add(line[at:].removesuffix(" (deleted)"))
+            for fd in (entry / "fd").iterdir():
+                try:
+                    target = os.readlink(fd)
+                except OSError:
+                    continue
+                if target.startswith(prefix):
+                    found.add(target)
+        except (FileNotFoundError, ProcessLookupError):
+            continue  # the process ended meanwhile
+        except PermissionError:
+            # another user's process: it cannot open this user's files read-write as Fast
+            # DDS does (they are 0644), so it uses none of the files this user may remove
+            continue
+    return found

@@ -92,13 +92,20 @@ def _leftover(directory: Path, base: str, age: float = 60.0) -> list[Path]:
 def test_shared_memory_of_dead_participants_is_cleaned(tmp_path: Path) -> None:
     dead_port = _leftover(tmp_path, "fastdds_port7413")
     dead_segment = _leftover(tmp_path, "fastdds_0123456789abcdef")
+    orphan = _leftover(tmp_path, "fastdds_port7419")[::2]  # its lock file already gone
+    (tmp_path / "fastdds_port7419_el").unlink()
     live_port = _leftover(tmp_path, "fastdds_port7415")
     young = _leftover(tmp_path, "fastdds_port7417", age=0.0)  # maybe being created
     other = tmp_path / "not_fast_dds_el"
     other.write_bytes(b"x")
-    with open(live_port[1], "ab") as held:  # its owner is alive: it holds the lock
-        fcntl.flock(held, fcntl.LOCK_SH)
+    # a live owner maps its port and semaphore and holds its lock file open and locked
+    held = [open(f, "ab") for f in live_port]  # noqa: SIM115
+    try:
+        fcntl.flock(held[1], fcntl.LOCK_SH)
         removed = clean_shm(tmp_path)
-    assert sorted(removed) == sorted(f.name for f in dead_port + dead_segment)
-    assert all(not f.exists() for f in dead_port + dead_segment)
+    finally:
+        for h in held:
+            h.close()
+    assert sorted(removed) == sorted(f.name for f in dead_port + dead_segment + orphan)
+    assert all(not f.exists() for f in dead_port + dead_segment + orphan)
     assert all(f.exists() for f in live_port + young + [other])

@@ -7,16 +7,18 @@ Every process of a run inherits the runner's environment, so a tag set there fin
 
 from __future__ import annotations
 
+import fcntl
 import os
 import signal
 import subprocess
 import sys
+import time
 import uuid
 from pathlib import Path
 
 import pytest
 
-from fence_sorter.runner.processes import tagged, wait_until
+from fence_sorter.runner.processes import SHM_DIR, SHM_GRACE, clean_shm, tagged, wait_until
 
 pytestmark = [pytest.mark.ros, pytest.mark.faults, pytest.mark.slow]
 
@@ -135,3 +137,18 @@ def test_killed_runner_takes_every_process_with_it(tmp_path: Path) -> None:
     finally:
         _finish(proc, tag)
     assert proc.returncode == -signal.SIGKILL
+    # the killed participants' shared-memory files stay in /dev/shm until the next start
+    # cleans them: afterwards every Fast DDS lock file left there is held by a live process
+    clean_shm()
+    for lock in SHM_DIR.glob("fastdds_*_[es]l"):
+        try:
+            if time.time() - lock.stat().st_mtime < SHM_GRACE:
+                continue  # another program's participant may be creating it right now
+            fd = os.open(lock, os.O_RDONLY)
+        except FileNotFoundError:
+            continue
+        try:
+            with pytest.raises(BlockingIOError):
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        finally:
+            os.close(fd)
