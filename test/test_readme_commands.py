@@ -71,6 +71,24 @@ COVERED: dict[str, str] = {
     "fence-sorter bench": HERE,
     "fence-sorter optimize --case positioned --alpha-k 40 --constraints 7,8,11 --json": HERE,
     "fence-sorter optimize --case arbitrary --alpha-k 35 --w-dop 2.4 --mu1 0.5 --mu2 0.3": HERE,
+    "fence-sorter bag info bags/example_4_parcels": (
+        "test/recording/test_baginfo.py::test_example_bag_info_matches_the_independent_reader"
+    ),
+    "fence-sorter bag info bags/example_4_parcels --json": (
+        "test/recording/test_baginfo.py::test_example_bag_info_matches_the_independent_reader"
+    ),
+    "fence-sorter topic list -t --domain 219": (
+        "test/ros/test_topic_cli.py::test_echo_yaml_and_list_show_the_topic"
+    ),
+    "fence-sorter topic echo /sort_outcomes --domain 219 -n 3": (
+        "test/ros/test_topic_cli.py::test_echo_prints_the_published_messages"
+    ),
+    "fence-sorter topic hz /joint_states --domain 219": (
+        "test/ros/test_topic_cli.py::test_hz_reports_the_stamp_rate"
+    ),
+    "fence-sorter run --parcels 4 --bag /tmp/b": (
+        "test/ros/test_recording.py::test_run_bag_has_every_topic_and_consistent_counts"
+    ),
     "fence-sorter optimize --sweep fig6 --out docs/paper": (
         "test/cli/test_data_cli_bad_input.py::test_plots_only_redraws_from_the_saved_results"
     ),
@@ -78,6 +96,10 @@ COVERED: dict[str, str] = {
 
 #: README commands that need what this machine has not, and why
 NOT_HERE: dict[str, str] = {
+    "ros2 run fence_sorter fence-sorter check": (
+        "the ros2 CLI of a full ROS 2 install (the lib/fence_sorter layout it runs: "
+        "test/cli/test_packaging.py::test_console_scripts)"
+    ),
     "make test": "the suite itself (what CI runs; its recipe is checked by " + MAKE + ")",
     "pytest test/ros test/cli": "a part of the suite itself (make test runs all of it)",
     'pytest -m "not slow"': "a part of the suite itself (make test runs all of it)",
