@@ -36,6 +36,8 @@ import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from fence_sorter.resources import data_path
+
 REPO = Path(__file__).resolve().parents[2]
 #: the run id of the wire case's nodes
 WIRE_RUN = 4242
@@ -473,7 +475,7 @@ def run_wire(workdir: Path, domain: int, progress=print) -> tuple[list[WireResul
     rec = monitor.records
 
     def args(node: str, *extra: str) -> list[str]:
-        out = ["--params-file", str(REPO / "config" / f"{node}.yaml")]
+        out = ["--params-file", str(data_path("config", f"{node}.yaml"))]
         for o in ("heartbeat_period:=0.2", f"run_id:={WIRE_RUN}", *extra):
             out += ["-p", o]
         return out
@@ -577,7 +579,7 @@ def _nested(depth: int) -> bytes:
 
 
 def cli_cases() -> list[CliCase]:
-    scene_ok = (REPO / "config" / "scenes" / "impact_flexible.yaml").read_bytes()
+    scene_ok = data_path("config", "scenes", "impact_flexible.yaml").read_bytes()
     run = ("run", "--parcels", "1", "--rtf", "0", "--timeout", "120")
     csv_head = b"parcel_id,arrival_time,length_a,width_b,height,mass,divert\n"
 
