@@ -67,7 +67,7 @@ def generate_launch_description() -> LaunchDescription:
                     "stream": stream,
                     "parcels": LaunchConfiguration("parcels"),
                     "seed": LaunchConfiguration("seed"),
-                    "wait_for_subscribers": 2,
+                    "start_gate": "simulator,controller,recorder",
                     **sim_time,
                 },
             ],

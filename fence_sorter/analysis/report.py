@@ -10,11 +10,12 @@ from pathlib import Path
 
 from fence_sorter.analysis.run import TABLE_COLUMNS, load_run, parcel_table, stream_summary
 from fence_sorter.jsonsafe import json_safe
+from fence_sorter.recording import topics
 from fence_sorter.recording.bagread import BagIssue, read_bag
 
 ANALYSIS_TOPICS = (
-    "/parcels", "/fence_commands", "/sort_outcomes", "/load_states", "/fence_state",
-    "/markers", "/diagnostics", "/sort_events",
+    topics.PARCELS, topics.FENCE_COMMANDS, topics.SORT_OUTCOMES, topics.LOAD_STATES,
+    topics.FENCE_STATE, topics.MARKERS, topics.DIAGNOSTICS, topics.SORT_EVENTS,
 )  # fmt: skip
 
 
@@ -102,6 +103,17 @@ def _csv(value):
     return value
 
 
+def missing_parcels(summary: dict) -> list[str]:
+    """One line per kind of record the bag has without its parcel's /parcels message."""
+    kinds = (("outcomes_without_parcel", "outcome"), ("commands_without_parcel", "command"))
+    return [
+        f"{what} of parcel(s) {summary[key]} without their /parcels message: the bag lost the "
+        "scan; stream figures are incomplete"
+        for key, what in kinds
+        if summary[key]
+    ]
+
+
 def format_report(report: AnalysisReport) -> str:
     """Human-readable table and summary."""
 
@@ -174,6 +186,8 @@ def format_report(report: AnalysisReport) -> str:
             else ""
         )
     )
+    for problem in missing_parcels(s):
+        lines.append(f"INCOMPLETE: {problem}")
     for note in report.notes:
         lines.append(f"note: {note}")
     for issue in report.issues:

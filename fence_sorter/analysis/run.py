@@ -28,6 +28,7 @@ from fence_sorter.analysis.events import (
     risk_summary,
 )
 from fence_sorter.codes import OutcomeCode, Stage, code_name
+from fence_sorter.recording import topics
 from fence_sorter.recording.bagread import BagContents
 from fence_sorter.stamps import time_to_sec
 
@@ -110,16 +111,16 @@ def load_run(bag: BagContents) -> RecordedRun:
     """Arrays of a recorded run (what is missing from the bag is noted, never fatal)."""
     notes: list[str] = []
     parcels, commands, outcomes = {}, {}, {}
-    for m in bag.by_topic("/parcels"):
+    for m in bag.by_topic(topics.PARCELS):
         d = _fields(m.msg, PARCEL_FIELDS)
         d["scan_time"] = time_to_sec(m.msg.scan_time)
         d["divert"] = bool(d["divert"])
         parcels[int(d["parcel_id"])] = d
-    for m in bag.by_topic("/fence_commands"):
+    for m in bag.by_topic(topics.FENCE_COMMANDS):
         d = _fields(m.msg, COMMAND_FIELDS)
         d["stamp"] = time_to_sec(m.msg.header.stamp)
         commands[int(d["parcel_id"])] = d
-    for m in bag.by_topic("/sort_outcomes"):
+    for m in bag.by_topic(topics.SORT_OUTCOMES):
         d = _fields(m.msg, OUTCOME_FIELDS)
         d["t"] = time_to_sec(m.msg.header.stamp)
         d["sorted"] = bool(d["sorted"])
@@ -127,12 +128,12 @@ def load_run(bag: BagContents) -> RecordedRun:
         outcomes[int(d["parcel_id"])] = d
 
     events = {}
-    for m in bag.by_topic("/sort_events"):
+    for m in bag.by_topic(topics.SORT_EVENTS):
         ev = SortEventData.from_msg(m.msg)
         events[ev.parcel_id] = ev
 
     rows: dict[int, list] = {}
-    for m in bag.by_topic("/load_states"):
+    for m in bag.by_topic(topics.LOAD_STATES):
         s = m.msg
         p, v = s.pose.position, s.twist.linear
         yaw = 2.0 * math.atan2(s.pose.orientation.z, s.pose.orientation.w)
@@ -148,7 +149,7 @@ def load_run(bag: BagContents) -> RecordedRun:
         a = np.array(sorted(r), dtype=float)
         series[pid] = Series(*(a[:, k] for k in range(11)))
 
-    fence_msgs = bag.by_topic("/fence_state")
+    fence_msgs = bag.by_topic(topics.FENCE_STATE)
     fence_msgs.sort(key=lambda m: time_to_sec(m.msg.header.stamp))
     fence = FenceSeries(
         np.array([time_to_sec(m.msg.header.stamp) for m in fence_msgs]),
@@ -163,7 +164,7 @@ def load_run(bag: BagContents) -> RecordedRun:
 
     belt_width, belt_x, chute = DEFAULT_BELT_WIDTH, (-3.0, 3.0), None
     found_belt = False
-    for m in bag.by_topic("/markers"):
+    for m in bag.by_topic(topics.MARKERS):
         for mk in m.msg.markers:
             if mk.ns == "belt" and mk.action == 0 and not found_belt:
                 belt_width = float(mk.scale.y)
@@ -186,7 +187,7 @@ def load_run(bag: BagContents) -> RecordedRun:
     belt_speed = float(np.median(vx)) if vx.size else NAN
 
     diagnostics: dict[str, dict[str, str]] = {}
-    for m in bag.by_topic("/diagnostics"):
+    for m in bag.by_topic(topics.DIAGNOSTICS):
         for st in m.msg.status:
             diagnostics[st.name] = {kv.key: kv.value for kv in st.values}
     return RecordedRun(
@@ -367,6 +368,15 @@ def check_risk(outcome: dict, risk: dict) -> list[str]:
     return out
 
 
+def incomplete_records(run: RecordedRun) -> dict[str, list[int]]:
+    """Parcel ids whose outcome or command is in the bag without their /parcels message: the
+    bag lost the scan (the stream's counts and capacity are then wrong)."""
+    return {
+        "outcomes_without_parcel": sorted(set(run.outcomes) - set(run.parcels)),
+        "commands_without_parcel": sorted(set(run.commands) - set(run.parcels)),
+    }
+
+
 def stream_summary(run: RecordedRun, rows: list[dict]) -> dict:
     """Capacity and share sorted of the stream (definitions as fence_sorter.runner.summary)."""
     scans = sorted(p["scan_time"] for pid, p in run.parcels.items() if pid in run.outcomes)
@@ -407,4 +417,5 @@ def stream_summary(run: RecordedRun, rows: list[dict]) -> dict:
         "parcels_without_outcome": [r["parcel_id"] for r in rows if r["agrees"] is None],
         "sort_events": len(run.events),
         "damage_risk": risk_summary(rows),
+        **incomplete_records(run),
     }

@@ -2,7 +2,8 @@
 plots, and the check of the recorded states against the live outcomes.
 
 Exit codes: 0 analysed, every file readable and the states agree with the live outcomes;
-1 analysed what was readable but the bag has problems (named per file) or the states disagree;
+1 analysed what was readable but the bag has problems (named per file), the states disagree,
+or an outcome or command is in the bag without its parcel's /parcels message;
 2 not a bag / nothing readable.
 """
 
@@ -32,7 +33,7 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fence_sorter.analysis.report import analyze_bag, format_report
+    from fence_sorter.analysis.report import analyze_bag, format_report, missing_parcels
     from fence_sorter.recording.bagread import BagReadError
 
     bag = Path(args.bag)
@@ -48,6 +49,9 @@ def run(args: argparse.Namespace) -> int:
         print(format_report(report))
     for issue in report.issues:
         print(f"fence-sorter analyze: {issue}", file=sys.stderr)
-    if report.issues or report.summary["agrees_with_live"] is False:
+    missing = missing_parcels(report.summary)
+    for problem in missing:
+        print(f"fence-sorter analyze: {problem}", file=sys.stderr)
+    if report.issues or missing or report.summary["agrees_with_live"] is False:
         return 1
     return 0

@@ -23,9 +23,8 @@ from rclpy.parameter import Parameter
 
 from fence_sorter import __version__
 from fence_sorter.nodes.parameters import COMMON_PARAMETERS, ParamSpec
-from fence_sorter.nodes.qos import RELIABLE_QOS
-
-DIAGNOSTICS_TOPIC = "/diagnostics"
+from fence_sorter.nodes.qos import topic_qos
+from fence_sorter.recording.topics import DIAGNOSTICS
 
 
 def make_executor(events: bool, context=None) -> Executor:
@@ -69,7 +68,7 @@ class FenceSorterNode(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self._diagnostics_pub = self.create_publisher(
-            DiagnosticArray, DIAGNOSTICS_TOPIC, RELIABLE_QOS
+            DiagnosticArray, DIAGNOSTICS, topic_qos(DIAGNOSTICS)
         )
         # The heartbeat runs on the steady clock: it must beat even before /clock arrives when
         # the node runs with use_sim_time:=true.

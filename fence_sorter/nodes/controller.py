@@ -27,12 +27,11 @@ from fence_sorter.nodes.base import FenceSorterNode, run_node
 from fence_sorter.nodes.convert import parcel_from_msg
 from fence_sorter.nodes.intake import TopicIntake
 from fence_sorter.nodes.parameters import CONTROLLER_PARAMETERS
-from fence_sorter.nodes.qos import INPUT_QOS, RELIABLE_QOS
+from fence_sorter.nodes.qos import INPUT_QOS, topic_qos
 from fence_sorter.physics.params import ParameterError, ParcelParams
+from fence_sorter.recording import topics
 
 DEFAULT_SCENE = "impact_flexible"
-PARCELS_TOPIC = "/parcels"
-COMMANDS_TOPIC = "/fence_commands"
 
 
 def request_from_spec(spec: ParcelSpec) -> LoadRequest:
@@ -176,7 +175,9 @@ class ControllerNode(FenceSorterNode):
         )
         self.seen: set[int] = set()
         self._warm_up(p)
-        self._pub = self.create_publisher(FenceCommand, COMMANDS_TOPIC, RELIABLE_QOS)
+        self._pub = self.create_publisher(
+            FenceCommand, topics.FENCE_COMMANDS, topic_qos(topics.FENCE_COMMANDS)
+        )
         # Listen to /parcels only once a commands subscriber (the simulator) is matched: a
         # command published before discovery completes would be lost (volatile QoS).
         self._parcel_class = Parcel
@@ -225,7 +226,11 @@ class ControllerNode(FenceSorterNode):
             return
         self._listen_timer.cancel()
         self._sub = self.create_intake_subscription(
-            self._parcel_class, PARCELS_TOPIC, self.on_parcel, INPUT_QOS, self.parcel_intake
+            self._parcel_class,
+            topics.PARCELS,
+            self.on_parcel,
+            INPUT_QOS,
+            self.parcel_intake,
         )
         self.get_logger().info("listening on /parcels")
 

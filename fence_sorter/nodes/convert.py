@@ -356,8 +356,9 @@ def fill_load_state(
     msg.contact_normal_force_stiff = float(p.contact_normal_force_stiff)
     msg.deformation = float(p.deformation)
     msg.deformation_rate = float(p.deformation_rate)
-    cp = msg.contact_point
-    cp.x, cp.y, cp.z = float(p.contact_point[0]), float(p.contact_point[1]), 0.0
+    cp = msg.contact_point  # NaN x, y, z while the parcel has no fence contact (LoadState.msg)
+    cp.x, cp.y = float(p.contact_point[0]), float(p.contact_point[1])
+    cp.z = 0.0 if math.isfinite(cp.x) else math.nan
     return msg
 
 

@@ -407,12 +407,13 @@ SCANNER_PARAMETERS: tuple[ParamSpec, ...] = (
     ),
     ParamSpec("start_delay", 0.5, "Sim time before the first parcel [s]", True, 0.0, 1e4),
     ParamSpec(
-        "wait_for_subscribers",
-        0,
-        "Start the stream only once /parcels has this many subscribers",
+        "start_gate",
+        "simulator,controller",
+        "Nodes (names, comma-separated) that must be in the ROS graph with a subscription on "
+        "every topic they need before the stream starts (recorder: every suite topic; "
+        "simulator: /parcels, /fence_commands, /scan_progress; any other: /parcels); "
+        "empty: start at once",
         True,
-        0,
-        100,
     ),
     ParamSpec(
         "tick_period",
@@ -533,6 +534,22 @@ RECORDER_PARAMETERS: tuple[ParamSpec, ...] = (
         read_only=True,
         min_value=0.01,
         max_value=100000.0,
+    ),
+    ParamSpec(
+        "flush_period",
+        0.5,
+        "The open segment's pending messages are written to its file (a complete MCAP "
+        "chunk) at least this often [s] (wall clock): a SIGKILL loses at most this much "
+        "plus the 0.2 s a message is held for log-time order",
+        read_only=True,
+        min_value=0.01,
+        max_value=60.0,
+    ),
+    ParamSpec(
+        "compression",
+        "zstd",
+        "MCAP chunk compression: zstd or none (sqlite3: none)",
+        read_only=True,
     ),
 )
 

@@ -4,9 +4,10 @@ Subscriptions are raw (the CDR bytes pass through untouched) with the QoS each t
 published with (best effort for the high-rate states, reliable for the rest). Callbacks only
 stamp a message and queue it; a writer thread writes the queue into a
 :class:`~fence_sorter.recording.writer.SegmentedBagWriter`, whose segments close every
-``max_segment_duration`` seconds or ``max_segment_size_mb``, so a SIGKILL loses at most the open
-segment. SIGINT/SIGTERM drain the queue and close the bag. Received, written and queued counts
-per topic are on /diagnostics.
+``max_segment_duration`` seconds or ``max_segment_size_mb`` and whose open segment is flushed
+(a complete, zstd-compressed MCAP chunk) every ``flush_period``, so a SIGKILL loses at most the
+messages of the last ``flush_period`` and those still queued. SIGINT/SIGTERM drain the queue
+and close the bag. Received, written and queued counts per topic are on /diagnostics.
 
 The bag is ``output_dir`` itself when it does not exist or is empty (``fence-sorter run --bag
 DIR``); otherwise a new ``output_dir/run_<UTC time>`` (never overwrites a bag). Bag timestamps
@@ -33,7 +34,6 @@ from pathlib import Path
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosbags.interfaces import (
     Qos,
     QosDurability,
@@ -45,34 +45,27 @@ from rosbags.interfaces import (
 
 from fence_sorter.nodes.base import FenceSorterNode, run_node
 from fence_sorter.nodes.parameters import RECORDER_PARAMETERS
-from fence_sorter.recording.topics import LATCHED_TOPICS, TOPIC_TYPES
+from fence_sorter.nodes.qos import topic_qos
+from fence_sorter.recording.logtime import SettleBuffer
+from fence_sorter.recording.topics import RECORDER_DEPTH, TOPICS, QosSpec
+from fence_sorter.recording.writer import COMPRESSIONS
 
-DEFAULT_TOPICS = list(TOPIC_TYPES)
+DEFAULT_TOPICS = list(TOPICS)
 #: set when a recorder of this process failed to write or close its bag (exit status 1)
 _WRITE_FAILED: list[str] = []
-#: history kept per subscription while the executor is busy (the writer has its own queue)
-SUBSCRIPTION_DEPTH = 1000
+#: a message is held this long [s] before it is written, in log-time order (SettleBuffer)
+SETTLE = 0.2
 
 
-def rclpy_qos(reliable: bool, latched: bool = False) -> QoSProfile:
-    """Subscription QoS; ``latched`` topics transient local (the last message of a publisher
-    that started earlier arrives too)."""
-    return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST,
-        depth=SUBSCRIPTION_DEPTH,
-        reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
-        durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
-    )
-
-
-def bag_qos(reliable: bool, latched: bool = False) -> Qos:
-    """The QoS stored with a topic in the bag (what replay offers again)."""
+def bag_qos(spec: QosSpec) -> Qos:
+    """The QoS stored with a topic in the bag: what its publisher offers (replay offers it
+    again)."""
     zero = QosTime(0, 0)
     return Qos(
         QosHistory.KEEP_LAST,
-        100 if reliable else 5,
-        QosReliability.RELIABLE if reliable else QosReliability.BEST_EFFORT,
-        QosDurability.TRANSIENT_LOCAL if latched else QosDurability.VOLATILE,
+        spec.depth,
+        QosReliability.RELIABLE if spec.reliable else QosReliability.BEST_EFFORT,
+        QosDurability.TRANSIENT_LOCAL if spec.transient_local else QosDurability.VOLATILE,
         zero,
         zero,
         QosLiveliness.AUTOMATIC,
@@ -136,6 +129,8 @@ class RecorderNode(FenceSorterNode):
             storage=str(p["storage"]),
             max_segment_bytes=int(float(p["max_segment_size_mb"]) * 2**20),
             max_segment_duration=float(p["max_segment_duration"]),
+            flush_period=float(p["flush_period"]),
+            compression=str(p["compression"]),
             custom_data={"recorder": "fence_sorter", "node": self.get_fully_qualified_name()},
         ).open()
         self.stamp_order = StampOrder()
@@ -145,14 +140,13 @@ class RecorderNode(FenceSorterNode):
         self.write_error: str | None = None
         self.topics: list[_Topic] = []
         for name in p["topics"]:
-            if name not in TOPIC_TYPES:
+            if name not in TOPICS:
                 raise ValueError(
                     f"recorder: topics: {name} is not one of the suite's topics "
-                    f"({', '.join(TOPIC_TYPES)})"
+                    f"({', '.join(TOPICS)})"
                 )
-            msgtype, reliable = TOPIC_TYPES[name]
-            latched = name in LATCHED_TOPICS
-            handle = self.writer.add_topic(name, msgtype, [bag_qos(reliable, latched)])
+            msgtype, spec = TOPICS[name].msgtype, TOPICS[name].qos
+            handle = self.writer.add_topic(name, msgtype, [bag_qos(spec)])
             topic = _Topic(
                 name, msgtype, handle, starts_with_header(self.writer.typestore, msgtype)
             )
@@ -161,7 +155,7 @@ class RecorderNode(FenceSorterNode):
                 message_class(msgtype),
                 name,
                 self._callback(topic),
-                rclpy_qos(reliable, latched),
+                topic_qos(name, max(RECORDER_DEPTH, spec.depth)),
                 raw=True,
             )
         self._stop = threading.Event()
@@ -184,23 +178,31 @@ class RecorderNode(FenceSorterNode):
 
     # -- writer thread ------------------------------------------------------------------------
     def _write_loop(self) -> None:
+        """Take the queue, give each message its log time (StampOrder), hold it SETTLE in log
+        time order (SettleBuffer), write it; poll the writer (segments, flushes) when idle."""
         q, writer, log_time = self._queue, self.writer, self.stamp_order.log_time
+        held = SettleBuffer(SETTLE)
         while True:
             try:
-                item = q.get(timeout=0.1)
+                item = q.get(timeout=0.05)
             except queue.Empty:
-                if self._stop.is_set():
+                item = None
+            if item is not None:
+                size = q.qsize() + 1
+                if size > self._queued_max:
+                    self._queued_max = size
+                topic, t_ns, data = item
+                if topic.header:
+                    t_ns = log_time(topic.name, t_ns, data)
+                held.push(t_ns, (topic, data))
+            stopping = item is None and self._stop.is_set()
+            for t_ns, (topic, data) in held.ready(everything=stopping):
+                if self._guard(writer.write, topic.handle, t_ns, data):
+                    topic.written += 1
+            if item is None:
+                if stopping:
                     break
                 self._guard(writer.poll)
-                continue
-            size = q.qsize() + 1
-            if size > self._queued_max:
-                self._queued_max = size
-            topic, t_ns, data = item
-            if topic.header:
-                t_ns = log_time(topic.name, t_ns, data)
-            if self._guard(writer.write, topic.handle, t_ns, data):
-                topic.written += 1
         # closed by this thread: a storage may be bound to the thread that opened it (sqlite3)
         try:
             writer.close()
@@ -252,6 +254,8 @@ class RecorderNode(FenceSorterNode):
             "bag": str(self.path),
             "storage": self.writer.storage,
             "segments_closed": str(len(self.writer.segments)),
+            "compression": self.writer.compression,
+            "flushes": str(self.writer.flushes),
             "received": str(received),
             "written": str(written),
             "queued": str(self._queue.qsize()),
@@ -273,6 +277,8 @@ class RecorderNode(FenceSorterNode):
         for param in parameters:
             if param.name == "storage" and param.value not in ("mcap", "sqlite3"):
                 return f"storage must be mcap or sqlite3, got {param.value!r}"
+            if param.name == "compression" and param.value not in COMPRESSIONS:
+                return f"compression must be zstd or none, got {param.value!r}"
         return None
 
 

@@ -15,7 +15,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
 from fence_sorter.recording.bagread import BagContents
-from fence_sorter.recording.topics import TOPIC_TYPES
+from fence_sorter.recording.topics import REPLAY_DEPTH, TOPICS
 
 NODE_NAME = "replay"
 
@@ -41,8 +41,8 @@ def replay(
     replayed topic before starting (so a node started just before does not miss the start).
     """
     import rclpy
-    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+    from fence_sorter.nodes.qos import RELIABLE_QOS, topic_qos
     from fence_sorter.nodes.recorder import message_class
 
     if not rate > 0:
@@ -59,15 +59,7 @@ def replay(
         pubs = {}
         for topic in sorted({m.topic for m in msgs}):
             msgtype = next(m.msgtype for m in msgs if m.topic == topic)
-            reliable = TOPIC_TYPES.get(topic, (msgtype, True))[1]
-            qos = QoSProfile(
-                history=HistoryPolicy.KEEP_LAST,
-                depth=1000,
-                reliability=(
-                    ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT
-                ),
-                durability=DurabilityPolicy.VOLATILE,
-            )
+            qos = topic_qos(topic, REPLAY_DEPTH) if topic in TOPICS else RELIABLE_QOS
             pubs[topic] = node.create_publisher(message_class(msgtype), topic, qos)
         if wait_for_subscribers > 0:
             deadline = time.monotonic() + wait_for_subscribers

@@ -3,11 +3,18 @@
 The stream (random from a config in config/streams/, or a CSV manifest) is drawn once at start
 (:mod:`fence_sorter.stream`); each parcel is published on /parcels when its front crosses the
 scan line x = scan_line_x in sim time, with scan_time (the crossing time) and scan_position_x.
+
+The stream starts once every node named in ``start_gate`` is in the ROS graph with a
+subscription on each topic it needs (``NODE_SUBSCRIPTIONS`` of
+:mod:`fence_sorter.recording.topics`; by node name, so extra listeners on /parcels do not
+count). /parcels is transient local with a history covering the stream, so a subscriber whose
+matching completes after the gate opened still gets every parcel.
 """
 
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Sequence
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
@@ -21,15 +28,13 @@ from rosgraph_msgs.msg import Clock
 from fence_sorter.nodes.base import FenceSorterNode, run_node
 from fence_sorter.nodes.convert import fill_clock
 from fence_sorter.nodes.parameters import SCANNER_PARAMETERS
-from fence_sorter.nodes.qos import RELIABLE_QOS
+from fence_sorter.nodes.qos import topic_qos
 from fence_sorter.physics.params import ParameterError
+from fence_sorter.recording import topics
 from fence_sorter.stream import ParcelSpec, load_stream
 
 DEFAULT_SCENE = "impact_flexible"
 DEFAULT_STREAM = "default"
-PARCELS_TOPIC = "/parcels"
-#: the scanner's progress (rosgraph_msgs/Clock: every parcel due by this sim time is out)
-SCAN_PROGRESS_TOPIC = "/scan_progress"
 
 
 def fill_parcel(
@@ -62,6 +67,16 @@ SCAN_LAG_WARN = 0.1
 #: /scan_progress at least every this much sim time [s] and this much wall time [s]
 PROGRESS_PERIOD = 0.2
 PROGRESS_WALL_PERIOD = 0.1
+
+
+#: the start gate looks at the ROS graph at most this often [s] (wall clock)
+GATE_CHECK_PERIOD = 0.02
+
+
+def gate_requirements(names: str) -> list[tuple[str, str]]:
+    """'simulator,controller' -> the (node, topic) subscriptions the start gate waits for."""
+    nodes = [n.strip() for n in names.split(",") if n.strip()]
+    return [(n, t) for n in nodes for t in topics.NODE_SUBSCRIPTIONS.get(n, (topics.PARCELS,))]
 
 
 def due(stream: Sequence[ParcelSpec], next_index: int, t0: float, now: float) -> int:
@@ -109,7 +124,9 @@ class ScannerNode(FenceSorterNode):
         )
         self.scan_x = float(p["scan_line_x"])
         self.start_delay = float(p["start_delay"])
-        self.wait_for_subscribers = int(p["wait_for_subscribers"])
+        self.gate = gate_requirements(str(p["start_gate"]))
+        self.gate_missing: list[str] = [f"{n}:{t}" for n, t in self.gate]
+        self._gate_checked = -math.inf
         self.frame_id = p["frame_id"]
         self.run_id = int(p["run_id"])
         self.t0: float | None = None
@@ -118,9 +135,11 @@ class ScannerNode(FenceSorterNode):
         # executor ran it: /clock at hundreds of messages per second when unpaced)
         self.scan_lag_max = 0.0
         self._parcel_class = Parcel
-        self._pub = self.create_publisher(Parcel, PARCELS_TOPIC, RELIABLE_QOS)
+        self._pub = self.create_publisher(Parcel, topics.PARCELS, self._stream_qos())
         # how far it has scanned: an unpaced simulator keeps within its scan_lead of it
-        self._progress = self.create_publisher(Clock, SCAN_PROGRESS_TOPIC, RELIABLE_QOS)
+        self._progress = self.create_publisher(
+            Clock, topics.SCAN_PROGRESS, topic_qos(topics.SCAN_PROGRESS)
+        )
         self._progress_msg = Clock()
         self._progress_sent = -math.inf
         self._timer = self._jump = self._wall = None
@@ -148,12 +167,17 @@ class ScannerNode(FenceSorterNode):
             f"{self.scan_x:g} m, belt {self.belt_speed:g} m/s"
         )
 
+    def _stream_qos(self):
+        """/parcels' profile with a history covering the whole stream (late joiners get
+        every parcel)."""
+        return topic_qos(topics.PARCELS, max(topics.STREAM_HISTORY_DEPTH, len(self.stream)))
+
     def tick(self, report: bool = False) -> None:
         """Publish the parcels whose front crossed the scan line since the last tick, and the
         progress every PROGRESS_PERIOD of sim time (``report``: now)."""
         now = self.get_clock().now().nanoseconds * 1e-9
         if self.t0 is None:
-            if self._pub.get_subscription_count() < self.wait_for_subscribers:
+            if not self._gate_open():
                 return
             self._report(max(now, 0.0), report)  # ready: nothing is due before now
             if now <= 0.0:  # no /clock yet
@@ -174,11 +198,42 @@ class ScannerNode(FenceSorterNode):
         self.next_index = end
         self._report(now, report)
 
+    def _gate_open(self) -> bool:
+        """Every (node, topic) of the start gate is in the graph (checked every
+        GATE_CHECK_PERIOD of wall time; once open it stays open)."""
+        if not self.gate_missing:
+            return True
+        wall = time.monotonic()
+        if wall - self._gate_checked < GATE_CHECK_PERIOD:
+            return False
+        self._gate_checked = wall
+        subscribed: dict[str, set[str]] = {}
+        for _, topic in self.gate:
+            if topic not in subscribed:
+                infos = self.get_subscriptions_info_by_topic(topic)
+                subscribed[topic] = {i.node_name for i in infos}
+        self.gate_missing = [f"{n}:{t}" for n, t in self.gate if n not in subscribed[t]]
+        if not self.gate_missing:
+            self.get_logger().info(
+                "start gate open: "
+                + ", ".join(sorted({n for n, _ in self.gate}))
+                + " subscribed on their topics"
+            )
+        return not self.gate_missing
+
     def _report(self, now: float, force: bool) -> None:
         """/scan_progress: every parcel due by sim time ``now`` is out."""
         if force or now - self._progress_sent >= PROGRESS_PERIOD:
             self._progress.publish(fill_clock(self._progress_msg, now))
             self._progress_sent = now
+
+    def publish_heartbeat(self) -> None:
+        """Not before the first /clock: the scanner starts into a running simulation, and a
+        heartbeat stamped 0 in mid-run is logged before every message stamped later
+        (StampOrder), into a bag chunk written long before (rerun reports the chunks out of
+        order)."""
+        if self.get_clock().now().nanoseconds > 0:
+            super().publish_heartbeat()
 
     def heartbeat_status(self) -> DiagnosticStatus:
         status = super().heartbeat_status()
@@ -193,6 +248,8 @@ class ScannerNode(FenceSorterNode):
                 "done": str(done).lower(),
                 "last_arrival_s": f"{last:.3f}",
                 "scan_lag_max_s": f"{self.scan_lag_max:.4f}",
+                # node:topic subscriptions the start gate still waits for
+                "start_gate_missing": " ".join(self.gate_missing),
             }.items()
         )
         return status

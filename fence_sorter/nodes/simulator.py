@@ -32,7 +32,6 @@ from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.logging import LoggingSeverity
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
@@ -56,9 +55,9 @@ from fence_sorter.nodes import convert
 from fence_sorter.nodes.base import FenceSorterNode, spin_node
 from fence_sorter.nodes.intake import TopicIntake
 from fence_sorter.nodes.parameters import SIMULATOR_PARAMETERS
-from fence_sorter.nodes.qos import INPUT_QOS, RELIABLE_QOS, SENSOR_QOS
-from fence_sorter.nodes.scanner import SCAN_PROGRESS_TOPIC
+from fence_sorter.nodes.qos import INPUT_QOS, topic_qos
 from fence_sorter.nodes.tf_publisher import TfPublisher
+from fence_sorter.recording import topics
 from fence_sorter.scene import load_scene
 from fence_sorter.stamps import time_to_sec
 from fence_sorter_msgs.msg import (
@@ -75,17 +74,6 @@ DEFAULT_SCENE = "impact_flexible"
 UNPACED_PUBLISH_LEAD = 0.1
 #: the node process's GIL switch interval while running [s] (see start())
 SWITCH_INTERVAL = 2e-4
-
-# /clock: reliable keep-last, compatible with rclpy/rclcpp's best-effort clock subscriptions
-# and with reliable ones (recorders).
-CLOCK_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=10,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.VOLATILE,
-)
-# /joint_states and /markers: reliable keep-last, what robot_state_publisher and RViz ask for.
-VIEWER_QOS = CLOCK_QOS
 
 
 class SimulatorNode(FenceSorterNode):
@@ -146,21 +134,29 @@ class SimulatorNode(FenceSorterNode):
         self.parcel_intake = TopicIntake("parcels", run_id)
         self.command_intake = TopicIntake("commands", run_id)
         self._parcel_sub = self.create_intake_subscription(
-            Parcel, "/parcels", self._on_parcel, INPUT_QOS, self.parcel_intake
+            Parcel, topics.PARCELS, self._on_parcel, INPUT_QOS, self.parcel_intake
         )
         self._command_sub = self.create_intake_subscription(
-            FenceCommand, "/fence_commands", self._on_command, INPUT_QOS, self.command_intake
+            FenceCommand,
+            topics.FENCE_COMMANDS,
+            self._on_command,
+            INPUT_QOS,
+            self.command_intake,
         )
         self._progress_sub = self.create_subscription(
-            Clock, SCAN_PROGRESS_TOPIC, self._on_scan_progress, RELIABLE_QOS
+            Clock, topics.SCAN_PROGRESS, self._on_scan_progress, topic_qos(topics.SCAN_PROGRESS)
         )
-        self.pub_clock = self.create_publisher(Clock, "/clock", CLOCK_QOS)
-        self.pub_fence = self.create_publisher(FenceState, "/fence_state", SENSOR_QOS)
-        self.pub_joint = self.create_publisher(JointState, "/joint_states", VIEWER_QOS)
-        self.pub_loads = self.create_publisher(LoadState, "/load_states", SENSOR_QOS)
-        self.pub_markers = self.create_publisher(MarkerArray, "/markers", VIEWER_QOS)
-        self.pub_outcomes = self.create_publisher(SortOutcome, "/sort_outcomes", RELIABLE_QOS)
-        self.pub_events = self.create_publisher(SortEvent, "/sort_events", RELIABLE_QOS)
+
+        def publisher(msg_type, name):
+            return self.create_publisher(msg_type, name, topic_qos(name))
+
+        self.pub_clock = publisher(Clock, topics.CLOCK)
+        self.pub_fence = publisher(FenceState, topics.FENCE_STATE)
+        self.pub_joint = publisher(JointState, topics.JOINT_STATES)
+        self.pub_loads = publisher(LoadState, topics.LOAD_STATES)
+        self.pub_markers = publisher(MarkerArray, topics.MARKERS)
+        self.pub_outcomes = publisher(SortOutcome, topics.SORT_OUTCOMES)
+        self.pub_events = publisher(SortEvent, topics.SORT_EVENTS)
         self.tf = TfPublisher(self, self.line_config, self.frame_id)  # /tf, /tf_static, URDF
         self.tf.publish_static(line.t)
 
@@ -186,6 +182,7 @@ class SimulatorNode(FenceSorterNode):
         self._stopping = False
         self._saved_switch: float | None = None
         self._clock_published = line.t  # sim time of the last /clock message
+        self._clock_sent = -math.inf  # the same, -inf before the first
         self._reader = threading.Thread(
             target=self._receive_loop, name="simulator-publisher", daemon=True
         )
@@ -358,11 +355,16 @@ class SimulatorNode(FenceSorterNode):
         self.get_logger().fatal(text)
         self.context.try_shutdown()
 
+    def _publish_clock(self, t: float) -> None:
+        """/clock at ``t`` unless it went out already (an outcome at a snapshot's time)."""
+        if t > self._clock_sent:
+            self.pub_clock.publish(convert.fill_clock(self._clock_msg, t))
+            self._clock_published = self._clock_sent = t
+
     def _publish_states(self, snap) -> None:
         """/clock first, then the fence, the drive joint and each parcel; one message object
         per topic, filled in place (publish() serialises it at once)."""
-        self.pub_clock.publish(convert.fill_clock(self._clock_msg, snap.t))
-        self._clock_published = snap.t
+        self._publish_clock(snap.t)
         loop = self.loop
         if loop is not None:  # the unpaced loop waits for this (LoopSettings.publish_lead)
             loop.gauges.header[Gauges.PUBLISHED] = snap.t
@@ -383,6 +385,10 @@ class SimulatorNode(FenceSorterNode):
         log = self.get_logger()
         for e in events:
             if isinstance(e, Outcome):
+                # the loop has reached e.t (its events come from line.advance): /clock goes to
+                # e.t first, so a sim-time subscriber (the recorder) receives the outcome at
+                # its stamp, not up to a publish period before it
+                self._publish_clock(e.t)
                 self.pub_outcomes.publish(convert.outcome_to_msg(e, self.frame_id, self.limits))
                 if self.rerun is not None and math.isfinite(e.peak_normal_force):
                     # its EventTrace follows in the same list: the damage colours of the view
@@ -554,22 +560,57 @@ def _start_rerun(p: dict, belt_width: float, belt_x: tuple[float, float], rtf: f
     return RerunProcess(scene, path or None, url or None, lossless=rtf == 0.0)
 
 
+class OrderlyStop:
+    """SIGINT/SIGTERM handler of the simulator: the first signal stops the pacing loop, lets
+    the publisher thread publish what the loop still sends (its last outcomes and complete
+    snapshots: no /clock whose states never went out) and then shuts rclpy down, in a thread
+    of its own; a second signal raises KeyboardInterrupt at once. rclpy's own handlers would
+    shut the context down under a snapshot half published."""
+
+    def __init__(self) -> None:
+        self.node: SimulatorNode | None = None
+        self.signals = 0
+        self._thread: threading.Thread | None = None
+
+    def install(self) -> None:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, self._on_signal)
+
+    def _on_signal(self, signum, frame) -> None:
+        self.signals += 1
+        if self.signals > 1:
+            raise KeyboardInterrupt
+        self._thread = threading.Thread(target=self.stop, name="simulator-stop", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        node = self.node
+        if node is not None:
+            node.stop()
+        rclpy.try_shutdown()
+
+
 def main(args: Sequence[str] | None = None) -> int:
-    """Run the simulator until Ctrl-C or SIGTERM; exit 2 with one line on a bad scene or
-    parameter, 1 if the pacing loop failed."""
-    # A SIGINT/SIGTERM that arrives while rclpy.init installs its handlers, before the context
-    # exists, is lost (the process then runs on): hold them until init is done.
-    stop_signals = {signal.SIGINT, signal.SIGTERM}
-    signal.pthread_sigmask(signal.SIG_BLOCK, stop_signals)
-    try:
-        rclpy.init(args=list(args) if args is not None else None)
-    finally:
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, stop_signals)
+    """Run the simulator until Ctrl-C or SIGTERM (:class:`OrderlyStop`); exit 2 with one line
+    on a bad scene or parameter, 1 if the pacing loop failed."""
+    from rclpy.signals import SignalHandlerOptions
+
+    stopper = OrderlyStop()
+    stopper.install()
+    rclpy.init(
+        args=list(args) if args is not None else None,
+        signal_handler_options=SignalHandlerOptions.NO,
+    )
     node: SimulatorNode | None = None
     code = 0
     try:
+        if stopper.signals:  # a signal before the context existed
+            return 0
         node = SimulatorNode()
+        stopper.node = node
         node.start()
+        if stopper.signals:  # a signal during start-up: the stop thread may have missed it
+            stopper.stop()
         spin_node(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
@@ -580,8 +621,9 @@ def main(args: Sequence[str] | None = None) -> int:
         print(f"simulator: {exc}", file=sys.stderr)
         code = 2
     except LoopStartError as exc:
-        print(f"simulator: pacing loop did not start: {exc}", file=sys.stderr)
-        code = 1
+        if not stopper.signals:  # else: stopped by the signal during start-up
+            print(f"simulator: pacing loop did not start: {exc}", file=sys.stderr)
+            code = 1
     except Exception as exc:  # RCLError: a signal shut the context down during start-up
         if rclpy.ok():
             raise

@@ -22,8 +22,9 @@ from fence_sorter.line.line import LineConfig
 from fence_sorter.line.types import FenceSnapshot, LineSnapshot, ParcelSnapshot
 from fence_sorter.nodes.convert import FRAME_ID
 from fence_sorter.nodes.convert import _stamp as stamp_header  # the stamps of /load_states
-from fence_sorter.nodes.qos import LATCHED_QOS, TF_QOS
+from fence_sorter.nodes.qos import topic_qos
 from fence_sorter.physics.fence import FenceParams
+from fence_sorter.recording import topics
 from fence_sorter.resources import data_path
 
 URDF_FILE = ("urdf", "fence_sorter.urdf")
@@ -135,9 +136,13 @@ class TfPublisher:
         self.description = robot_description(
             line.conveyor.width, line.fence_length, fence_height, frame_id
         )
-        self.pub_description = node.create_publisher(String, "/robot_description", LATCHED_QOS)
-        self.pub_static = node.create_publisher(TFMessage, "/tf_static", LATCHED_QOS)
-        self.pub_tf = node.create_publisher(TFMessage, "/tf", TF_QOS)
+        self.pub_description = node.create_publisher(
+            String, topics.ROBOT_DESCRIPTION, topic_qos(topics.ROBOT_DESCRIPTION)
+        )
+        self.pub_static = node.create_publisher(
+            TFMessage, topics.TF_STATIC, topic_qos(topics.TF_STATIC)
+        )
+        self.pub_tf = node.create_publisher(TFMessage, topics.TF, topic_qos(topics.TF))
 
     def publish_static(self, t: float) -> None:
         """The description and every fixed frame (the URDF's root is the fixed frame)."""

@@ -25,8 +25,12 @@ logged before every message stamped later.
 
 from __future__ import annotations
 
+import heapq
+import itertools
 import struct
+import time
 from bisect import bisect_right
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 from rosbags.typesys.store import Typestore
@@ -117,3 +121,33 @@ class StampOrder:
         if len(stamps) > 2 * self.window:
             del stamps[: -self.window], logs[: -self.window]
         return t
+
+
+class SettleBuffer:
+    """Messages held ``settle`` seconds of ``clock`` and released in log-time order.
+
+    A message that :class:`StampOrder` logs before messages received ahead of it is written
+    before them as long as it arrives within ``settle`` of them, so the bag's chunks (flushed
+    every fraction of a second) follow log time: ``rerun mcap check`` reports a topic whose
+    chunks overlap out of order. Ties keep their arrival order.
+    """
+
+    def __init__(self, settle: float, clock: Callable[[], float] = time.monotonic) -> None:
+        self.settle = float(settle)
+        self.clock = clock
+        self._heap: list[tuple[int, int, float, object]] = []
+        self._seq = itertools.count()
+
+    def __len__(self) -> int:
+        return len(self._heap)
+
+    def push(self, log_ns: int, item: object) -> None:
+        heapq.heappush(self._heap, (log_ns, next(self._seq), self.clock(), item))
+
+    def ready(self, everything: bool = False) -> Iterator[tuple[int, object]]:
+        """(log time, item) in log-time order while the earliest has been held ``settle``
+        (``everything``: all of them)."""
+        heap, now = self._heap, self.clock()
+        while heap and (everything or now - heap[0][2] >= self.settle):
+            log_ns, _, _, item = heapq.heappop(heap)
+            yield log_ns, item

@@ -1,36 +1,123 @@
-"""The topics of the node suite as they are recorded: type and whether they are reliable."""
+"""The topics of the node suite in one place: names, message types and QoS (ROS-free).
+
+Every node, the recorder, the run's monitor, analysis, replay and the Rerun logging take their
+topic names from here, and :mod:`fence_sorter.nodes.qos` builds the rclpy profiles from the
+:class:`QosSpec` of each topic, so a publisher, its subscribers, the bag's offered QoS and the
+replay agree. History depths are the named constants below.
+"""
 
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
+
+CLOCK = "/clock"
 PARCELS = "/parcels"
+#: the scanner's progress (rosgraph_msgs/Clock: every parcel due by this sim time is out)
+SCAN_PROGRESS = "/scan_progress"
 FENCE_COMMANDS = "/fence_commands"
+FENCE_STATE = "/fence_state"
+LOAD_STATES = "/load_states"
+SORT_OUTCOMES = "/sort_outcomes"
+#: full-rate sorting events (SortEvent): one per stroke, at the solver's resolution
+SORT_EVENTS = "/sort_events"
+JOINT_STATES = "/joint_states"
+MARKERS = "/markers"
+DIAGNOSTICS = "/diagnostics"
 #: measured topics a real sorter can record (docs/calibration.md): drive encoder (>= 200 Hz),
 #: overhead camera poses of the parcels (25-120 Hz), fence root bending moment (>= 1 kHz)
 DRIVE_ENCODER = "/sensors/drive_encoder"
 CAMERA_POSES = "/sensors/camera/parcel_poses"
 FENCE_ROOT_MOMENT = "/sensors/fence_root/moment"
+TF = "/tf"
+TF_STATIC = "/tf_static"
+ROBOT_DESCRIPTION = "/robot_description"
 
-#: topic -> (type, reliable). Reliable topics are recorded (and replayed) reliable, the others
-#: best effort: what their publishers offer (fence_sorter/nodes/qos.py, nodes/simulator.py).
-TOPIC_TYPES: dict[str, tuple[str, bool]] = {
-    "/clock": ("rosgraph_msgs/msg/Clock", True),
-    PARCELS: ("fence_sorter_msgs/msg/Parcel", True),
-    "/scan_progress": ("rosgraph_msgs/msg/Clock", True),
-    FENCE_COMMANDS: ("fence_sorter_msgs/msg/FenceCommand", True),
-    "/fence_state": ("fence_sorter_msgs/msg/FenceState", False),
-    "/load_states": ("fence_sorter_msgs/msg/LoadState", False),
-    "/sort_outcomes": ("fence_sorter_msgs/msg/SortOutcome", True),
-    "/sort_events": ("fence_sorter_msgs/msg/SortEvent", True),
-    "/joint_states": ("sensor_msgs/msg/JointState", True),
-    "/markers": ("visualization_msgs/msg/MarkerArray", True),
-    "/diagnostics": ("diagnostic_msgs/msg/DiagnosticArray", True),
-    "/tf": ("tf2_msgs/msg/TFMessage", True),
-    "/tf_static": ("tf2_msgs/msg/TFMessage", True),
-    "/robot_description": ("std_msgs/msg/String", True),
+#: high-rate state (fence, loads): the newest samples count; best effort
+STATE_DEPTH = 5
+#: reliable events (outcomes, diagnostics, progress): samples kept while a reader is slow
+EVENT_DEPTH = 100
+#: /clock, /joint_states, /markers: reliable keep-last as robot_state_publisher and RViz ask
+CLOCK_DEPTH = 10
+#: /parcels and /fence_commands: history kept for late joiners (transient local). The scanner
+#: keeps its whole stream when it is longer; readers keep this many
+STREAM_HISTORY_DEPTH = 10000
+#: /tf: what tf2's TransformListener asks for (reliable, volatile)
+TF_DEPTH = 100
+#: the recorder's subscriptions: history kept while its executor is busy (the writer thread
+#: has its own queue)
+RECORDER_DEPTH = 1000
+#: replay's publishers (it publishes as fast as the bag's pace asks)
+REPLAY_DEPTH = 1000
+
+
+@dataclass(frozen=True)
+class QosSpec:
+    """A topic's QoS: reliable or best effort, keep-last ``depth``, transient local or
+    volatile."""
+
+    reliable: bool
+    depth: int
+    transient_local: bool = False
+    keep_all: bool = False  # keep every sample until taken (depth unused)
+
+    def with_depth(self, depth: int) -> QosSpec:
+        return replace(self, depth=int(depth))
+
+
+STATE_QOS = QosSpec(reliable=False, depth=STATE_DEPTH)
+EVENT_QOS = QosSpec(reliable=True, depth=EVENT_DEPTH)
+CLOCK_QOS = QosSpec(reliable=True, depth=CLOCK_DEPTH)
+STREAM_QOS = QosSpec(reliable=True, depth=STREAM_HISTORY_DEPTH, transient_local=True)
+#: what the nodes take in from outside (subscriptions of /parcels and /fence_commands):
+#: keep-all, so a flood is refused and counted by the node (nodes/intake.py) instead of
+#: overwriting samples it has not taken yet; transient local, for the history
+INPUT_QOS = QosSpec(reliable=True, depth=1, transient_local=True, keep_all=True)
+#: static descriptions (/tf_static, /robot_description): late joiners get the last one
+LATCHED_QOS = QosSpec(reliable=True, depth=1, transient_local=True)
+TF_QOS = QosSpec(reliable=True, depth=TF_DEPTH)
+
+
+@dataclass(frozen=True)
+class Topic:
+    name: str
+    msgtype: str
+    qos: QosSpec
+
+
+#: every topic of the suite, in recording order
+TOPICS: dict[str, Topic] = {
+    t.name: t
+    for t in (
+        Topic(CLOCK, "rosgraph_msgs/msg/Clock", CLOCK_QOS),
+        Topic(PARCELS, "fence_sorter_msgs/msg/Parcel", STREAM_QOS),
+        Topic(SCAN_PROGRESS, "rosgraph_msgs/msg/Clock", EVENT_QOS),
+        Topic(FENCE_COMMANDS, "fence_sorter_msgs/msg/FenceCommand", STREAM_QOS),
+        Topic(FENCE_STATE, "fence_sorter_msgs/msg/FenceState", STATE_QOS),
+        Topic(LOAD_STATES, "fence_sorter_msgs/msg/LoadState", STATE_QOS),
+        Topic(SORT_OUTCOMES, "fence_sorter_msgs/msg/SortOutcome", EVENT_QOS),
+        Topic(SORT_EVENTS, "fence_sorter_msgs/msg/SortEvent", EVENT_QOS),
+        Topic(JOINT_STATES, "sensor_msgs/msg/JointState", CLOCK_QOS),
+        Topic(MARKERS, "visualization_msgs/msg/MarkerArray", CLOCK_QOS),
+        Topic(DIAGNOSTICS, "diagnostic_msgs/msg/DiagnosticArray", EVENT_QOS),
+        Topic(TF, "tf2_msgs/msg/TFMessage", TF_QOS),
+        Topic(TF_STATIC, "tf2_msgs/msg/TFMessage", LATCHED_QOS),
+        Topic(ROBOT_DESCRIPTION, "std_msgs/msg/String", LATCHED_QOS),
+    )
 }
-#: published once, transient local: subscribed transient local so a late recorder gets them
-LATCHED_TOPICS = frozenset({"/tf_static", "/robot_description"})
-SUITE_TOPICS = list(TOPIC_TYPES)
+#: topic -> (type, reliable), as the recorder and the bag tests look them up
+TOPIC_TYPES: dict[str, tuple[str, bool]] = {
+    t.name: (t.msgtype, t.qos.reliable) for t in TOPICS.values()
+}
+SUITE_TOPICS = list(TOPICS)
+
+#: the topics each node of the suite subscribes to: the scanner starts its stream once every
+#: node it waits for has these subscriptions in the ROS graph (nodes/scanner.py)
+NODE_SUBSCRIPTIONS: dict[str, tuple[str, ...]] = {
+    "simulator": (PARCELS, FENCE_COMMANDS, SCAN_PROGRESS),
+    "controller": (PARCELS,),
+    "recorder": tuple(SUITE_TOPICS),
+}
+#: measured topics (calibration bags, not recorded by the recorder): topic -> (type, reliable)
 MEASURED_TOPICS: dict[str, tuple[str, bool]] = {
     DRIVE_ENCODER: ("sensor_msgs/msg/JointState", False),
     CAMERA_POSES: ("fence_sorter_msgs/msg/LoadState", False),

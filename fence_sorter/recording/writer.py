@@ -1,4 +1,4 @@
-"""Segmented rosbag2 writer (no ROS): a bag that survives SIGKILL up to its last closed segment.
+"""Segmented rosbag2 writer (no ROS): a bag that survives SIGKILL up to its last flush.
 
 A bag is a directory with ``metadata.yaml`` and storage files ``<name>_<i>.mcap`` (or ``.db3``),
 as ``ros2 bag record --max-bag-size/--max-bag-duration`` lays it out. Each segment is written by
@@ -6,9 +6,11 @@ a rosbags :class:`~rosbags.rosbag2.Writer` in a staging directory ``<bag>/.open/
 into the bag, complete (MCAP summary and index, message definitions embedded), when it reaches
 ``max_segment_bytes`` or ``max_segment_duration`` or the bag is closed. ``metadata.yaml`` is
 rewritten atomically (write to a temporary file, fsync, rename) after every segment, so at any
-moment it is valid and lists exactly the closed segments: a writer killed with SIGKILL loses at
-most the open segment (left in ``.open/``, where :mod:`fence_sorter.recording.bagread` can still
-recover its complete chunks).
+moment it is valid and lists exactly the closed segments. Within the open segment the messages
+go out as MCAP chunks (zstd-compressed by default) closed and flushed to the file at least every
+``flush_period`` seconds (sqlite3: a commit), so a writer killed with SIGKILL loses the messages
+of the last ``flush_period`` at most: the open segment is left in ``.open/``, where
+:mod:`fence_sorter.recording.bagread` (and any MCAP stream reader) reads its complete chunks.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from pathlib import Path
 import yaml
 from rosbags.interfaces import Qos
 from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 from rosbags.rosbag2.metadata import dump_qos_v9
 from rosbags.typesys.store import Typestore
 
@@ -35,6 +38,10 @@ STORAGES = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
 SUFFIXES = {"mcap": ".mcap", "sqlite3": ".db3"}
 DEFAULT_MAX_SEGMENT_BYTES = 64 * 2**20
 DEFAULT_MAX_SEGMENT_DURATION = 10.0  # [s] of writer clock
+#: the open chunk is closed and flushed to the file at least this often [s] of writer clock
+DEFAULT_FLUSH_PERIOD = 0.5
+#: MCAP chunk compression: zstd (default) or none
+COMPRESSIONS = ("zstd", "none")
 
 
 class BagWriteError(RuntimeError):
@@ -70,6 +77,7 @@ class _OpenSegment:
     writer: Writer
     connections: dict[int, object] = field(default_factory=dict)  # topic index -> Connection
     opened_at: float = 0.0
+    flushed_at: float = 0.0
     bytes: int = 0
     count: int = 0
 
@@ -79,8 +87,10 @@ class SegmentedBagWriter:
 
     ``path`` must not exist or be an empty directory. ``storage`` is ``mcap`` (default) or
     ``sqlite3``. A segment is closed when its payload reaches ``max_segment_bytes`` or when it
-    has been open ``max_segment_duration`` seconds of ``clock`` (checked on every write and by
-    :meth:`poll`). Not thread-safe: one thread writes.
+    has been open ``max_segment_duration`` seconds of ``clock``; its pending messages are
+    flushed to the file every ``flush_period`` seconds (both checked on every write and by
+    :meth:`poll`). ``compression``: MCAP chunks zstd-compressed (``zstd``) or not (``none``).
+    Not thread-safe: one thread writes.
     """
 
     def __init__(
@@ -91,6 +101,8 @@ class SegmentedBagWriter:
         typestore: Typestore | None = None,
         max_segment_bytes: int = DEFAULT_MAX_SEGMENT_BYTES,
         max_segment_duration: float = DEFAULT_MAX_SEGMENT_DURATION,
+        flush_period: float = DEFAULT_FLUSH_PERIOD,
+        compression: str = "zstd",
         custom_data: dict[str, str] | None = None,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
@@ -100,11 +112,20 @@ class SegmentedBagWriter:
             raise BagWriteError(f"max_segment_bytes must be > 0, got {max_segment_bytes}")
         if not max_segment_duration > 0:
             raise BagWriteError(f"max_segment_duration must be > 0 s, got {max_segment_duration}")
+        if not flush_period > 0:
+            raise BagWriteError(f"flush_period must be > 0 s, got {flush_period}")
+        if compression not in COMPRESSIONS:
+            raise BagWriteError(
+                f"compression must be one of {', '.join(COMPRESSIONS)}, got {compression!r}"
+            )
         self.path = Path(path)
         self.storage = storage
         self.typestore = typestore if typestore is not None else make_typestore()
         self.max_segment_bytes = int(max_segment_bytes)
         self.max_segment_duration = float(max_segment_duration)
+        self.flush_period = float(flush_period)
+        self.compression = compression if storage == "mcap" else "none"
+        self.flushes = 0
         self.custom_data = dict(custom_data or {})
         self.clock = clock
         self.topics: list[TopicRecord] = []
@@ -178,12 +199,36 @@ class SegmentedBagWriter:
             self.poll()
 
     def poll(self) -> None:
-        """Close the open segment if it has been open longer than max_segment_duration."""
+        """Close the open segment if it has been open longer than max_segment_duration, else
+        flush it if its last flush is flush_period ago."""
         seg = self._open
         if seg is None or not seg.count:
             return
-        if self.clock() - seg.opened_at >= self.max_segment_duration:
+        now = self.clock()
+        if now - seg.opened_at >= self.max_segment_duration:
             self.rotate()
+        elif now - seg.flushed_at >= self.flush_period:
+            self.flush()
+
+    def flush(self) -> None:
+        """Write the open segment's pending messages to its file: the open MCAP chunk is
+        closed (a complete, indexed chunk record) and the file flushed; sqlite3 commits. A
+        process killed afterwards leaves them readable."""
+        seg = self._open
+        if seg is None:
+            return
+        seg.flushed_at = self.clock()
+        storage = seg.writer.storage
+        try:
+            if self.storage == "mcap":
+                if storage.chunk.msgs:  # schemas and channels go with the first messages
+                    storage.close_chunk()
+                storage.bio.flush()
+            else:
+                storage.conn.commit()
+        except OSError as exc:
+            raise BagWriteError(f"{self.path}: cannot flush segment {seg.name}: {exc}") from exc
+        self.flushes += 1
 
     def rotate(self) -> None:
         """Close the open segment (if it holds messages) and list it in metadata.yaml."""
@@ -233,13 +278,16 @@ class SegmentedBagWriter:
         self._next_index += 1
         plugin = STORAGES[self.storage]
         writer = Writer(self.path / STAGING_DIR / name, version=BAG_VERSION, storage_plugin=plugin)
+        if self.compression == "zstd":  # chunk compression inside the MCAP file
+            writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
         try:
             writer.open()
         except Exception as exc:
             raise BagWriteError(f"{self.path}: cannot open segment {name}: {exc}") from exc
         for key, value in self.custom_data.items():
             writer.set_custom_data(key, value)
-        seg = _OpenSegment(self._next_index - 1, name, writer, opened_at=self.clock())
+        now = self.clock()
+        seg = _OpenSegment(self._next_index - 1, name, writer, opened_at=now, flushed_at=now)
         for handle in range(len(self.topics)):
             self._connect(seg, handle)
         self._open = seg

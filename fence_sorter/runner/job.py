@@ -316,7 +316,9 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None], stop: StopReq
                 ),
             ),
         )
-        subscribers = 3 + bool(opts.bag)  # simulator, controller, this monitor, recorder
+        # the stream starts once these nodes subscribe to their topics (by name in the graph)
+        gate = ["simulator", "controller", monitor.node.get_name()]
+        gate += ["recorder"] if opts.bag else []
         if opts.bag:
             Path(opts.bag).mkdir(parents=True, exist_ok=True)
             group.start(
@@ -364,7 +366,7 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None], stop: StopReq
             f"stream:={plan.stream_path}",
             f"scan_line_x:={SCAN_LINE_X}",
             f"start_delay:={START_DELAY}",
-            f"wait_for_subscribers:={subscribers}",
+            f"start_gate:={','.join(gate)}",
         ]
         if opts.parcels is not None or opts.duration is None:
             scanner_args.append(f"parcels:={count}")

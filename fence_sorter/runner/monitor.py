@@ -42,8 +42,8 @@ class Monitor:
         from rosgraph_msgs.msg import Clock
 
         from fence_sorter.nodes.base import make_executor
-        from fence_sorter.nodes.qos import INPUT_QOS, RELIABLE_QOS
-        from fence_sorter.nodes.scanner import SCAN_PROGRESS_TOPIC
+        from fence_sorter.nodes.qos import INPUT_QOS, topic_qos
+        from fence_sorter.recording import topics
         from fence_sorter_msgs.msg import FenceCommand, Parcel, SortOutcome
 
         os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
@@ -58,16 +58,21 @@ class Monitor:
         self.records = Records()
         self.run_id = int(run_id)
         n = self.node
-        n.create_subscription(Parcel, "/parcels", self._on_parcel, INPUT_QOS)
-        n.create_subscription(FenceCommand, "/fence_commands", self._on_command, INPUT_QOS)
-        n.create_subscription(SortOutcome, "/sort_outcomes", self._on_outcome, RELIABLE_QOS)
-        n.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, RELIABLE_QOS)
+        for msg_type, name, callback in (
+            (Parcel, topics.PARCELS, self._on_parcel),
+            (FenceCommand, topics.FENCE_COMMANDS, self._on_command),
+            (SortOutcome, topics.SORT_OUTCOMES, self._on_outcome),
+            (DiagnosticArray, topics.DIAGNOSTICS, self._on_diag),
+        ):
+            inputs = name in (topics.PARCELS, topics.FENCE_COMMANDS)
+            qos = INPUT_QOS if inputs else topic_qos(name)
+            n.create_subscription(msg_type, name, callback, qos)
         # sim time from the scanner's progress (5 per sim second), the simulator's heartbeat and
         # the outcomes, not /clock: an unpaced run sends thousands of /clock messages per
         # second, and taking them cost this process a third of a core
         n.create_subscription(
             Clock,
-            SCAN_PROGRESS_TOPIC,
+            topics.SCAN_PROGRESS,
             self._on_progress,
             QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT),
         )

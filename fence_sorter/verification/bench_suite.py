@@ -21,6 +21,7 @@ from collections.abc import Sequence
 from dataclasses import asdict
 from pathlib import Path
 
+from fence_sorter.recording import topics
 from fence_sorter.runner.job import RunOptions, run_job
 from fence_sorter.verification.stall_probe import StallReport, run_probe
 
@@ -56,18 +57,18 @@ def message_counts(summary: dict) -> dict[str, dict[str, int]]:
         int(v) for k, v in sim.items() if k.startswith("outcomes.") and v.isdigit()
     )
     return {
-        "/parcels": {
+        topics.PARCELS: {
             "published (scanner)": i(scn, "parcels_published"),
             "received (simulator)": i(sim, "parcels_received"),
             "received (controller)": i(ctl, "parcels_received"),
             "received (monitor)": summary["parcel_messages"],
         },
-        "/fence_commands": {
+        topics.FENCE_COMMANDS: {
             "published (controller)": i(ctl, "commands"),
             "received (simulator)": i(sim, "commands_received"),
             "received (monitor)": summary["command_messages"],
         },
-        "/sort_outcomes": {
+        topics.SORT_OUTCOMES: {
             "published (simulator)": outcomes_published,
             "received (monitor)": summary["outcome_messages"],
         },

@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fence_sorter.recording import topics
 from fence_sorter.stamps import time_to_sec
 
 APP_ID = "fence_sorter"
@@ -597,7 +598,7 @@ def scene_from_bag(contents) -> SceneGeometry:
     from fence_sorter.analysis.run import DEFAULT_BELT_WIDTH
 
     width, belt_x, chute = DEFAULT_BELT_WIDTH, (-3.0, 3.0), None
-    for m in contents.by_topic("/markers"):
+    for m in contents.by_topic(topics.MARKERS):
         for mk in m.msg.markers:
             if mk.ns == "belt":
                 width = float(mk.scale.y)
@@ -606,19 +607,20 @@ def scene_from_bag(contents) -> SceneGeometry:
             elif mk.ns == "chute":
                 chute = (mk.pose.position.x, mk.pose.position.y, mk.scale.x, mk.scale.y)
         break
-    scans = [m.msg.scan_position_x for m in contents.by_topic("/parcels")]
+    scans = [m.msg.scan_position_x for m in contents.by_topic(topics.PARCELS)]
     scan_x = float(np.median(scans)) if scans else None
     return SceneGeometry(width, belt_x, chute, scan_x)
 
 
 def bag_frames(contents) -> Iterable[tuple[float, FenceFrame | None, list[ParcelFrame]]]:
     """(t, fence, parcels) per published snapshot of a recorded run, in sim-time order."""
-    specs = {m.msg.parcel_id: m.msg for m in contents.by_topic("/parcels")}
+    specs = {m.msg.parcel_id: m.msg for m in contents.by_topic(topics.PARCELS)}
     loads: dict[float, list] = {}
-    for m in contents.by_topic("/load_states"):
+    for m in contents.by_topic(topics.LOAD_STATES):
         loads.setdefault(round(time_to_sec(m.msg.header.stamp), 9), []).append(m.msg)
     fences = {
-        round(time_to_sec(m.msg.header.stamp), 9): m.msg for m in contents.by_topic("/fence_state")
+        round(time_to_sec(m.msg.header.stamp), 9): m.msg
+        for m in contents.by_topic(topics.FENCE_STATE)
     }
     for t in sorted(set(loads) | set(fences)):
         fm = fences.get(t)
@@ -660,9 +662,9 @@ def log_bag(contents, rec) -> RerunLogger:
     logger = RerunLogger(rec, scene_from_bag(contents), series_every=1000, scene_every=1000)
     rr = logger.rr
     outcomes = {}
-    for m in contents.by_topic("/sort_outcomes"):
+    for m in contents.by_topic(topics.SORT_OUTCOMES):
         outcomes[int(m.msg.parcel_id)] = {n: getattr(m.msg, n, math.nan) for n in OUTCOME_FIELDS}
-    for m in contents.by_topic("/sort_events"):
+    for m in contents.by_topic(topics.SORT_EVENTS):
         ev = SortEventData.from_msg(m.msg)
         o = outcomes.get(ev.parcel_id)
         logger.log_event(ev, risk_of(o) if o is not None else None)
@@ -671,7 +673,7 @@ def log_bag(contents, rec) -> RerunLogger:
         margin = min(risk["impact_speed_margin"], risk["accel_margin"])
         if pid not in logger.margins and math.isfinite(margin):
             logger.margins[pid] = margin
-    for m in contents.by_topic("/sort_outcomes"):
+    for m in contents.by_topic(topics.SORT_OUTCOMES):
         o = m.msg
         rec.set_time(TIMELINE, duration=time_to_sec(o.header.stamp))
         rec.log("events/outcomes", rr.TextLog(f"parcel {o.parcel_id}: {o.reason}",

@@ -177,3 +177,25 @@ def test_rerun_full_check_on_a_racing_diagnostics_topic(tmp_path, typestore, ord
         assert line.split()[0] == "ok", out.stdout
     else:
         assert line.split()[0] == "PROBLEM" and "row-order conflict" in line, out.stdout
+
+
+def test_settle_buffer_releases_held_messages_in_log_time_order():
+    """A message logged before one received ahead of it (StampOrder moved it) is released
+    first once the earliest has been held the settle time; ties keep their arrival order."""
+    from fence_sorter.recording.logtime import SettleBuffer
+
+    now = [0.0]
+    held = SettleBuffer(0.2, clock=lambda: now[0])
+    held.push(100, "a")
+    held.push(120, "b")
+    now[0] = 0.1
+    held.push(110, "moved")  # logged between a and b, arrived after b
+    held.push(120, "c")
+    assert list(held.ready()) == []  # the earliest is held 0.1 s of 0.2
+    now[0] = 0.25
+    assert list(held.ready()) == [(100, "a")]
+    now[0] = 0.35
+    assert list(held.ready()) == [(110, "moved"), (120, "b"), (120, "c")]
+    held.push(90, "late")
+    assert list(held.ready(everything=True)) == [(90, "late")]
+    assert len(held) == 0

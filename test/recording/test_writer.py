@@ -303,3 +303,93 @@ def _has_rerun() -> bool:
     except ImportError:
         return False
     return True
+
+
+def _open_segment_messages(bag: Path) -> list[tuple[str, int]]:
+    """(topic, log time) of what the independent MCAP stream reader decodes from the open
+    segment (a file without its summary: read up to its last complete record)."""
+    from mcap.exceptions import McapError
+    from mcap.reader import NonSeekingReader
+
+    (segment,) = (bag / STAGING_DIR).glob("*/*.mcap")
+    out = []
+    with segment.open("rb") as stream:
+        reader = NonSeekingReader(stream, decoder_factories=[DecoderFactory()])
+        try:
+            # in file order: a time-ordered read collects the whole file first
+            for _, channel, message, decoded in reader.iter_decoded_messages(log_time_order=False):
+                assert decoded is not None
+                out.append((channel.topic, message.log_time))
+        except (McapError, EOFError):  # the end of what was flushed
+            pass
+    return out
+
+
+@pytest.mark.parametrize("compression", ["zstd", "none"])
+def test_open_segment_is_flushed_every_flush_period(tmp_path, typestore, compression):
+    """Pending messages reach the file as a complete chunk once flush_period has passed on the
+    writer's clock, compressed as asked; the independent reader decodes them from the open
+    segment while the writer still holds it."""
+    from mcap.exceptions import EndOfFile
+    from mcap.records import Chunk
+    from mcap.stream_reader import StreamReader
+
+    clock = FakeClock()
+    bag = tmp_path / "bag"
+    writer = SegmentedBagWriter(
+        bag, typestore=typestore, clock=clock, flush_period=0.5, compression=compression
+    ).open()
+    msgtype = TOPIC_TYPES["/clock"][0]
+    handle = writer.add_topic("/clock", msgtype)
+    data = typestore.serialize_cdr(
+        to_rosbags(typestore, msgtype, sample_values(typestore, msgtype, seed=1)), msgtype
+    )
+    for k in range(10):
+        writer.write(handle, k, data)
+    assert _open_segment_messages(bag) == []  # nothing flushed yet: 0 s of writer clock
+    clock.t = 0.5
+    writer.poll()
+    assert _open_segment_messages(bag) == [("/clock", k) for k in range(10)]
+    for k in range(10, 15):
+        writer.write(handle, k, data)
+    clock.t = 0.9
+    writer.poll()  # 0.4 s since the last flush: pending
+    assert len(_open_segment_messages(bag)) == 10
+    clock.t = 1.0
+    writer.write(handle, 15, data)  # a write checks the period too
+    assert _open_segment_messages(bag) == [("/clock", k) for k in range(16)]
+    assert writer.flushes == 2
+    (segment,) = (bag / STAGING_DIR).glob("*/*.mcap")
+    chunks = []
+    with segment.open("rb") as stream:
+        try:
+            for record in StreamReader(stream, emit_chunks=True).records:
+                chunks += [record] if isinstance(record, Chunk) else []
+        except EndOfFile:  # no footer: the segment is still open
+            pass
+    assert len(chunks) == 2
+    assert {c.compression for c in chunks} == {"zstd" if compression == "zstd" else ""}
+    writer.close()
+    with Reader(bag) as reader:
+        assert sum(1 for _ in reader.messages()) == 16
+
+
+def test_zstd_chunks_are_smaller_and_decode_the_same(tmp_path, typestore):
+    sizes, decoded = {}, {}
+    for compression in ("zstd", "none"):
+        bag = tmp_path / compression
+        write_suite(bag, typestore, per_topic=20, compression=compression)
+        sizes[compression] = sum(f.stat().st_size for f in bag.glob("*.mcap"))
+        decoded[compression] = read_bag(bag).messages
+        for f in sorted(bag.glob("*.mcap")):
+            with f.open("rb") as stream:
+                reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+                summary = reader.get_summary()
+                assert {c.compression for c in summary.chunk_indexes} == {
+                    "zstd" if compression == "zstd" else ""
+                }
+                assert all(m is not None for *_, m in reader.iter_decoded_messages())
+    assert sizes["zstd"] < sizes["none"]
+    assert [(m.topic, m.t_ns, m.raw) for m in decoded["zstd"]] == [
+        (m.topic, m.t_ns, m.raw) for m in decoded["none"]
+    ]

@@ -133,7 +133,7 @@ def test_scanner_on_the_wall_clock_publishes_its_stream_in_order(
         "--ros-args",
         "-p", "parcels:=3",
         "-p", "start_delay:=0.2",
-        "-p", "wait_for_subscribers:=1",
+        "-p", "start_gate:=test_listener",
         "-p", "tick_period:=0.01",
     ]  # fmt: skip
     with managed_process(cmd, env) as proc:

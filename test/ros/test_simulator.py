@@ -32,7 +32,7 @@ def probe(domain_id: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
     from sensor_msgs.msg import JointState
     from visualization_msgs.msg import MarkerArray
 
-    from fence_sorter.nodes.qos import RELIABLE_QOS, SENSOR_QOS
+    from fence_sorter.nodes.qos import RELIABLE_QOS, SENSOR_QOS, STREAM_QOS
     from fence_sorter_msgs.msg import FenceCommand, FenceState, LoadState, Parcel, SortOutcome
 
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
@@ -52,8 +52,8 @@ def probe(domain_id: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
     node.create_subscription(SortOutcome, "/sort_outcomes", got["outcomes"].append, RELIABLE_QOS)
     node.create_subscription(DiagnosticArray, "/diagnostics", got["diag"].append, RELIABLE_QOS)
     pubs = (
-        node.create_publisher(Parcel, "/parcels", RELIABLE_QOS),
-        node.create_publisher(FenceCommand, "/fence_commands", RELIABLE_QOS),
+        node.create_publisher(Parcel, "/parcels", STREAM_QOS),
+        node.create_publisher(FenceCommand, "/fence_commands", STREAM_QOS),
     )
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
@@ -261,8 +261,8 @@ def test_unpaced_sim_time_follows_the_scanners_progress(domain_id: int) -> None:
     from fence_sorter.line.worker import Gauges
     from fence_sorter.nodes.convert import fill_clock
     from fence_sorter.nodes.qos import RELIABLE_QOS
-    from fence_sorter.nodes.scanner import SCAN_PROGRESS_TOPIC
     from fence_sorter.nodes.simulator import SimulatorNode
+    from fence_sorter.recording.topics import SCAN_PROGRESS as SCAN_PROGRESS_TOPIC
 
     context = rclpy.Context()
     args = ["--ros-args", "-p", "warm_up:=false", "-p", "real_time_factor:=0.0"]
