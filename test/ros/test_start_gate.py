@@ -8,7 +8,6 @@ from __future__ import annotations
 import json
 import sys
 import textwrap
-import time
 from pathlib import Path
 
 import pytest
@@ -19,9 +18,10 @@ from fence_sorter.recording.bagread import read_bag
 from fence_sorter.runner.processes import ProcessGroup, leftovers, node_command
 from fence_sorter.testing import run_cli
 
+from .test_faults import ros_args, wait
+
 pytestmark = pytest.mark.ros
 
-REPO = Path(__file__).resolve().parents[2]
 EXTRA = 3  # extra subscribers on every suite topic
 
 #: EXTRA nodes in one process, each subscribed to every suite topic with a volatile profile
@@ -50,22 +50,6 @@ LISTENERS = textwrap.dedent(
         pass
     """
 )
-
-
-def ros_args(node: str, *overrides: str) -> list[str]:
-    args = ["--params-file", str(REPO / "config" / f"{node}.yaml"), "-p", "heartbeat_period:=0.25"]
-    for o in overrides:
-        args += ["-p", o]
-    return args
-
-
-def wait(monitor, predicate, timeout: float, what: str) -> None:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        monitor.spin_for(0.1)
-        if predicate():
-            return
-    raise AssertionError(f"timed out after {timeout:.0f} s waiting for {what}")
 
 
 def test_stream_waits_for_the_recorder_by_name(domain_id, env, tmp_path: Path) -> None:
