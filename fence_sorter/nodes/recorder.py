@@ -34,6 +34,7 @@ from pathlib import Path
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rclpy.parameter import Parameter
+from rclpy.subscription import Subscription
 from rosbags.interfaces import (
     Qos,
     QosDurability,
@@ -107,6 +108,7 @@ class _Topic:
     header: bool = False  # messages start with a std_msgs/Header
     received: int = 0
     written: int = 0
+    subscription: Subscription | None = None
 
 
 class RecorderNode(FenceSorterNode):
@@ -151,7 +153,7 @@ class RecorderNode(FenceSorterNode):
                 name, msgtype, handle, starts_with_header(self.writer.typestore, msgtype)
             )
             self.topics.append(topic)
-            self.create_subscription(
+            topic.subscription = self.create_subscription(
                 message_class(msgtype),
                 name,
                 self._callback(topic),
@@ -264,6 +266,9 @@ class RecorderNode(FenceSorterNode):
             "log_times_moved_to_stamp_order": str(self.stamp_order.adjusted),
             "write_rate_msgs_s": f"{written / elapsed:.1f}",
         }
+        # topics with a publisher in the graph that this recorder's subscription has not yet
+        # matched: what it publishes now is not recorded (the scanner's start gate waits)
+        values["publishers_unmatched"] = " ".join(self.publishers_unmatched())
         for t in self.topics:
             values[f"received{t.name.replace('/', '.')}"] = str(t.received)
             values[f"written{t.name.replace('/', '.')}"] = str(t.written)
@@ -272,6 +277,15 @@ class RecorderNode(FenceSorterNode):
             status.level = DiagnosticStatus.ERROR
             status.message = f"writing failed: {self.write_error}"
         return status
+
+    def publishers_unmatched(self) -> list[str]:
+        """The recorded topics on which the graph holds more publishers than this recorder's
+        subscription has matched."""
+        return [
+            t.name
+            for t in self.topics
+            if self.count_publishers(t.name) > t.subscription.get_publisher_count()
+        ]
 
     def validate_parameters(self, parameters: Sequence[Parameter]) -> str | None:
         for param in parameters:

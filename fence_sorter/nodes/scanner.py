@@ -7,8 +7,12 @@ scan line x = scan_line_x in sim time, with scan_time (the crossing time) and sc
 The stream starts once every node named in ``start_gate`` is in the ROS graph with a
 subscription on each topic it needs (``NODE_SUBSCRIPTIONS`` of
 :mod:`fence_sorter.recording.topics`; by node name, so extra listeners on /parcels do not
-count). /parcels is transient local with a history covering the stream, so a subscriber whose
-matching completes after the gate opened still gets every parcel.
+count) and, when the recorder is named, once a recorder heartbeat sent after that reports
+every publisher in the graph matched (``publishers_unmatched`` empty): the graph shows a
+subscription before DDS has matched it, and the volatile state topics (/clock, /load_states)
+published in between would be missing from the bag. /parcels is transient local with a
+history covering the stream, so a subscriber whose matching completes after the gate opened
+still gets every parcel.
 """
 
 from __future__ import annotations
@@ -17,7 +21,7 @@ import math
 import time
 from collections.abc import Sequence
 
-from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.clock import Clock as RosClock
 from rclpy.clock import ClockType, JumpThreshold
 from rclpy.duration import Duration
@@ -71,6 +75,11 @@ PROGRESS_WALL_PERIOD = 0.1
 
 #: the start gate looks at the ROS graph at most this often [s] (wall clock)
 GATE_CHECK_PERIOD = 0.02
+#: the node whose heartbeat must report its publishers matched before the stream starts
+MATCH_REPORTER = "recorder"
+#: a recorder that reports unmatched publishers this long [s] (wall clock; for example a
+#: publisher of incompatible QoS) no longer holds the stream back; the scanner logs it
+MATCH_WAIT_MAX = 15.0
 
 
 def gate_requirements(names: str) -> list[tuple[str, str]]:
@@ -127,6 +136,16 @@ class ScannerNode(FenceSorterNode):
         self.gate = gate_requirements(str(p["start_gate"]))
         self.gate_missing: list[str] = [f"{n}:{t}" for n, t in self.gate]
         self._gate_checked = -math.inf
+        # (wall time received, publishers_unmatched) of the recorder's latest heartbeat
+        self._match_report: tuple[float, str] | None = None
+        self._graph_open_at: float | None = None
+        if any(n == MATCH_REPORTER for n, _ in self.gate):
+            self.create_subscription(
+                DiagnosticArray,
+                topics.DIAGNOSTICS,
+                self._on_diagnostics,
+                topic_qos(topics.DIAGNOSTICS),
+            )
         self.frame_id = p["frame_id"]
         self.run_id = int(p["run_id"])
         self.t0: float | None = None
@@ -198,28 +217,52 @@ class ScannerNode(FenceSorterNode):
         self.next_index = end
         self._report(now, report)
 
+    def _on_diagnostics(self, msg: DiagnosticArray) -> None:
+        for status in msg.status:
+            if status.name == f"fence_sorter/{MATCH_REPORTER}":
+                values = {kv.key: kv.value for kv in status.values}
+                if "publishers_unmatched" in values:
+                    self._match_report = (time.monotonic(), values["publishers_unmatched"])
+
     def _gate_open(self) -> bool:
-        """Every (node, topic) of the start gate is in the graph (checked every
-        GATE_CHECK_PERIOD of wall time; once open it stays open)."""
+        """Every (node, topic) of the start gate is in the graph, and the recorder, if named,
+        has matched every publisher (checked every GATE_CHECK_PERIOD of wall time; once open
+        it stays open). ``gate_missing`` lists what it still waits for as node:topic."""
         if not self.gate_missing:
             return True
         wall = time.monotonic()
         if wall - self._gate_checked < GATE_CHECK_PERIOD:
             return False
         self._gate_checked = wall
-        subscribed: dict[str, set[str]] = {}
-        for _, topic in self.gate:
-            if topic not in subscribed:
-                infos = self.get_subscriptions_info_by_topic(topic)
-                subscribed[topic] = {i.node_name for i in infos}
-        self.gate_missing = [f"{n}:{t}" for n, t in self.gate if n not in subscribed[t]]
-        if not self.gate_missing:
-            self.get_logger().info(
-                "start gate open: "
-                + ", ".join(sorted({n for n, _ in self.gate}))
-                + " subscribed on their topics"
-            )
-        return not self.gate_missing
+        if self._graph_open_at is None:
+            subscribed: dict[str, set[str]] = {}
+            for _, topic in self.gate:
+                if topic not in subscribed:
+                    infos = self.get_subscriptions_info_by_topic(topic)
+                    subscribed[topic] = {i.node_name for i in infos}
+            self.gate_missing = [f"{n}:{t}" for n, t in self.gate if n not in subscribed[t]]
+            if self.gate_missing:
+                return False
+            self._graph_open_at = wall
+        if any(n == MATCH_REPORTER for n, _ in self.gate):
+            report = self._match_report
+            fresh = report is not None and report[0] > self._graph_open_at
+            if not fresh or report[1]:
+                unmatched = report[1].split() if fresh else ["heartbeat"]
+                self.gate_missing = [f"{MATCH_REPORTER}:{t}" for t in unmatched]
+                if wall - self._graph_open_at < MATCH_WAIT_MAX:
+                    return False
+                self.get_logger().warning(
+                    f"start gate: the {MATCH_REPORTER} has not matched the publishers of "
+                    f"{' '.join(unmatched)} after {MATCH_WAIT_MAX:g} s; starting the stream"
+                )
+        self.gate_missing = []
+        self.get_logger().info(
+            "start gate open: "
+            + ", ".join(sorted({n for n, _ in self.gate}))
+            + " subscribed on their topics"
+        )
+        return True
 
     def _report(self, now: float, force: bool) -> None:
         """/scan_progress: every parcel due by sim time ``now`` is out."""
