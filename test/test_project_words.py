@@ -1,10 +1,10 @@
 """Documents, code and tests describe the project as it is, not how it was made.
 
-Every text file under docs/, fence_sorter/ and test/ and the README is searched for words of a
-lab notebook: work sessions ("session 8", "this session"), helpers or engineers as persons
-(H1..H9, "the lead"), scratch scripts in /tmp. History lives in git. Technical uses of the same
-words (a process session, pytest's session scope, a helper function) are named in LEGITIMATE
-and removed from a line before it is searched; a variable named ``session`` is not matched.
+Every text file under docs/, fence_sorter/ and test/ and the README is searched for the words
+of a lab notebook (numbered work periods, people named by initials or role, scratch scripts in
+/tmp; the patterns are in FORBIDDEN). History lives in git. Technical uses of the same words
+(process groups, pytest's scopes, functions) are named in LEGITIMATE and removed from a line
+before it is searched; a variable of that name is not matched.
 """
 
 from __future__ import annotations

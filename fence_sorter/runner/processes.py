@@ -1,6 +1,6 @@
 """Node processes of a run (ROS-free): isolated environment, process groups, clean stop.
 
-Every node runs in its own session/process group, so stopping a node also ends anything it
+Every node runs in its own process group (setsid), so stopping a node also ends anything it
 started; :func:`leftovers` scans /proc for processes still in those groups (no orphans).
 Nothing outlives the run: each node gets SIGKILL when the runner dies (PR_SET_PDEATHSIG), and a
 watchdog process (:mod:`fence_sorter.runner.reaper`) kills every group of the run when the
@@ -178,8 +178,9 @@ class ProcessGroup:
         self.restarts: dict[str, int] = {}
 
     def start(self, name: str, cmd: Sequence[str]) -> NodeProcess:
-        """Start node ``name``: own session, SIGKILL when this process dies, watched by the
-        reaper; SIGINT/SIGTERM held until it is registered (so a stop finds it)."""
+        """Start node ``name``: own process group (setsid), SIGKILL when this process dies,
+        watched by the reaper; SIGINT/SIGTERM held until it is registered (so a stop finds
+        it)."""
         if self.reaper is None:
             self.reaper = Reaper(self.env)
         log_path = self.log_dir / f"{name}.log"
@@ -288,7 +289,7 @@ class ProcessGroup:
 
 
 class Reaper:
-    """A watchdog process (own session, no signals from the terminal) that SIGKILLs every
+    """A watchdog process (own process group, no signals from the terminal) that SIGKILLs every
     process group it was told about when this process ends without calling :meth:`done`:
     the nodes' children (the pacing worker, the Rerun child) do not die with the runner by
     PR_SET_PDEATHSIG, their group does."""
@@ -411,7 +412,7 @@ def wait_until(predicate, timeout: float, step: float = 0.05) -> bool:
 
 def tagged(key: str, value: str) -> list[int]:
     """Pids of live processes whose environment has ``key=value``: every process a run
-    started inherits the runner's environment, whatever session or group it moved to, so a
+    started inherits the runner's environment, whatever process group it moved to, so a
     tag set for one run finds all of them (the leftover count of a fault campaign)."""
     wanted = f"{key}={value}".encode()
     found = []

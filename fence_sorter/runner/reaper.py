@@ -2,7 +2,7 @@
 
 Reads process group ids (one per line) from pipe FD, written by the runner as it starts each
 node. When the pipe ends without a ``done`` line (the runner died, SIGKILL included), every
-process of those groups gets SIGKILL, the real-time ones first. It runs in a process session of its
+process of those groups gets SIGKILL, the real-time ones first. It runs in a process group of its
 own, so a Ctrl-C at the terminal reaches the runner, not this process.
 """
 

@@ -3,7 +3,7 @@ counted, written to docs/reliability.md (``fence-sorter faults``).
 
 Cases:
 
-- **interrupts**: ``fence-sorter run --parcels 20`` in a session of its own (as in a terminal);
+- **interrupts**: ``fence-sorter run --parcels 20`` started with setsid (as from a terminal);
   the first SIGINT to its process group at a random moment in [0, 30] s, then 1-4 more at
   random gaps of 0-0.5 s (2-5 in all). Every process the run started is tracked (its
   descendants, polled every 0.1 s); figures: exit status, seconds from the first signal to
@@ -760,8 +760,9 @@ def _interrupts_md(sec: dict) -> list[str]:
         "## Repeated Ctrl-C",
         "",
         *_meta_lines(sec["meta"]),
-        "`fence-sorter run --parcels 20` in a session of its own; the first SIGINT to its "
-        "process group at a random moment in [0, 30] s, then more at random gaps of 0-0.5 s "
+        "`fence-sorter run --parcels 20` started with setsid (its own process group, as "
+        "from a terminal); the first SIGINT to its process group at a random moment in "
+        "[0, 30] s, then more at random gaps of 0-0.5 s "
         "(2-5 in all; fewer when the run was out before the next). Leftovers: processes the "
         "run started (its descendants, polled every 0.1 s) still alive 1 s after it exited. "
         "Exit status -2: the run ended by the signal's default action (a signal in the "

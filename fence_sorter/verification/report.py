@@ -1,4 +1,4 @@
-"""Markdown from the verification commands' JSON: the table helpers every renderer shares.
+"""Markdown from the verification commands' JSON: the table functions every renderer shares.
 
 Each command (``fence-sorter accuracy``, ``stability``, ``bench``) writes its figures as JSON
 and renders its markdown from that JSON alone, so the committed markdown can be rebuilt from

@@ -27,7 +27,7 @@ REPO = Path(__file__).resolve().parents[2]
 
 
 def _start_run(tmp_path: Path, *args: str) -> tuple[subprocess.Popen, str]:
-    """`fence-sorter run ARGS` in its own session (as from a terminal), tagged."""
+    """`fence-sorter run ARGS` with setsid (as from a terminal), tagged."""
     tag = uuid.uuid4().hex
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH")]))

@@ -21,13 +21,13 @@ compiled kernel reaches (docs/benchmarks.md measures the same code with and with
 Setting NUMBA_DISABLE_JIT=1 runs exactly this code as plain Python.
 
 Compiled without Numba's reference counting (``_nrt=False``, as Numba compiles its own hot
-helpers): every array here is allocated by the caller, and with NRT each call of a kernel
-function and each view (``Y[a]``, ``out[slot]``) paid an atomic incref/decref per array, 139,000
+functions): every array here is allocated by the caller, and with NRT each call of a kernel
+function and each view (``Y[a]``, ``out[slot]``) pays an atomic incref/decref per array, 139,000
 per positioned_stiff event, half its run time (perf; counted with gdb on NRT_incref/decref).
 The two functions that allocate (``modal_propagators``, ``generalized_alpha_step``) say
 ``_nrt=True`` explicitly: a callee otherwise inherits the flag of whoever compiles it first.
 
-The small helpers of the contact iteration (``_add``, ``_surface``, ``_fence_friction``,
+The small functions of the contact iteration (``_add``, ``_surface``, ``_fence_friction``,
 ``implicit_belt``, ``belt_multiplier``, ``_friction_prev``, ``_newton_load``) are inlined into
 their callers by Numba (``inline="always"``): a call passes every array as ~7-9 machine words,
 and the profile showed the callers pushing ~150 words per ``_evaluate`` call and dozens per
