@@ -41,8 +41,14 @@ def register(subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     from fence_sorter.calibration import bench
 
-    if args.seeds < 0 or args.parcels < 3 or args.timing_parcels < 0:
-        return error("--seeds and --timing-parcels must be >= 0 and --parcels >= 3")
+    for option, value, low in (
+        ("--seeds", args.seeds, 0),
+        ("--parcels", args.parcels, 3),
+        ("--timing-parcels", args.timing_parcels, 0),
+        ("--workers", 1 if args.workers is None else args.workers, 1),
+    ):
+        if value < low:
+            return error(f"{option} must be in [{low}, inf), got {value}")
     report: dict = {}
     if args.seeds:
         report["coverage"] = bench.coverage(
