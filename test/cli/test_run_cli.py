@@ -97,7 +97,11 @@ def test_process_group_keeps_its_nodes_on_the_cpus_it_is_given(tmp_path: Path) -
 
     cpus = {min(os.sched_getaffinity(0))}
     group = ProcessGroup(dict(os.environ), tmp_path, cpus)
-    code = "import threading, time; threading.Thread(target=time.sleep, args=(30,)).start()"
+    # a node with a second thread, both blocked until the group stops it
+    code = (
+        "import threading; threading.Thread(target=threading.Event().wait, daemon=True).start(); "
+        "threading.Event().wait()"
+    )
     node = group.start("sleeper", [sys.executable, "-c", code])
     try:
 

@@ -40,11 +40,11 @@ def test_one_idle_spinner_per_cpu_pinned_and_stopped():
 @pytest.mark.slow
 def test_spinners_die_with_their_parent():
     code = (
-        "import sys, time\n"
+        "import signal, sys\n"
         "from fence_sorter.line.awake import start_spinners\n"
         "procs = start_spinners({min(__import__('os').sched_getaffinity(0))})\n"
         "print(procs[0].pid, flush=True)\n"
-        "time.sleep(60)\n"
+        "signal.pause()\n"  # until killed
     )
     parent = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
     spinner = int(parent.stdout.readline())

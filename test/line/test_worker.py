@@ -219,13 +219,13 @@ def test_loop_process_ignores_ctrl_c_and_dies_with_its_parent():
         lp.close()
 
     code = (
-        "import sys, time, pickle\n"
+        "import pickle, signal, sys\n"
         "from fence_sorter.line.worker import LineProcess\n"
         "config, settings = pickle.loads(bytes.fromhex(sys.argv[1]))\n"
         "lp = LineProcess(config, None, settings)\n"
         "lp.wait_ready(60.0)\n"
         "print(lp.proc.pid, flush=True)\n"
-        "time.sleep(60)\n"
+        "signal.pause()\n"  # until killed
     )
     arg = pickle.dumps((CONFIG, FAST)).hex()
     parent = subprocess.Popen([sys.executable, "-c", code, arg], stdout=subprocess.PIPE, text=True)

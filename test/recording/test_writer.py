@@ -220,22 +220,25 @@ def test_garbage_metadata_and_no_bag(tmp_path, suite_bag):
 
 KILLED_WRITER = textwrap.dedent(
     """
-    import sys, time
+    import sys
     from fence_sorter.recording.msgtypes import make_typestore
     from fence_sorter.recording.samples import sample_values, to_rosbags
     from fence_sorter.recording.writer import SegmentedBagWriter
     ts = make_typestore()
     t = "fence_sorter_msgs/msg/LoadState"
     data = ts.serialize_cdr(to_rosbags(ts, t, sample_values(ts, t)), t)
-    w = SegmentedBagWriter(sys.argv[1], typestore=ts, max_segment_duration=0.2).open()
-    h = w.add_topic("/load_states", t)
     k = 0
+    # the writer's clock counts writes (0.5 ms each): a segment every 400 writes, whatever
+    # the machine's speed
+    w = SegmentedBagWriter(
+        sys.argv[1], typestore=ts, max_segment_duration=0.2, clock=lambda: k * 5e-4
+    ).open()
+    h = w.add_topic("/load_states", t)
     while True:
         w.write(h, 10**9 + k, data)
         k += 1
         if k % 100 == 0:
             print(k, len(w.segments), flush=True)
-        time.sleep(0.0005)
     """
 )
 

@@ -71,15 +71,21 @@ def publishers(node):
     )
 
 
-def wait_matched(pubs, proc, timeout=60.0) -> None:
+def wait_matched(node, pubs, proc, timeout=60.0) -> None:
+    """Our writers see the recorder's subscriptions, and then a recorder heartbeat reports
+    every publisher in its graph matched (``publishers_unmatched`` empty): a volatile message
+    the recorder receives before its side has matched our writer is dropped."""
+
     def matched() -> bool:
         assert proc.poll() is None, proc.communicate()
         return all(p.get_subscription_count() > 0 for p in pubs)
 
     wait_until(matched, timeout, "the recorder's subscriptions")
-    # the recorder's side of the match is not observable from here (volatile QoS: a message
-    # it receives before it has matched our writer is dropped): a grace period
-    time.sleep(0.3)
+    # the heartbeats are taken from here on: each was sent after our writers had matched
+    wait_heartbeat(
+        node, proc, lambda v: v.get("publishers_unmatched") == "", timeout,
+        "the recorder to match our publishers",
+    )  # fmt: skip
 
 
 def publish(pubs, clocks: int, stop=None) -> int:
@@ -101,6 +107,8 @@ def publish(pubs, clocks: int, stop=None) -> int:
         sent += 1
         if stop is not None and stop(k):
             break
+        # paced publisher: a 1 kHz /clock is the subject (the recorder closes its segments
+        # and flushes on wall time, and the tests count segments and the loss at a SIGKILL)
         time.sleep(0.001)
     return sent
 
@@ -112,42 +120,47 @@ def clock_values(bag: Path) -> list[int]:
     ]
 
 
-def wait_received(node, proc, counts: dict[str, int], timeout=60.0) -> None:
-    """Spin ``node`` until the recorder's heartbeat reports at least ``counts`` received per
-    topic ("received.clock": 1500, ...): a reliable message is only the recorder's to lose
-    once it has taken it (a fixed sleep was too short on a loaded CI machine: 1499 of 1500)."""
+def wait_heartbeat(node, proc, done, timeout: float, what: str) -> dict[str, str]:
+    """Spin ``node`` until a recorder heartbeat (its /diagnostics status, as key: value) makes
+    ``done`` true; that heartbeat's values."""
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.executors import SingleThreadedExecutor
 
     from fence_sorter.nodes.qos import RELIABLE_QOS
     from fence_sorter.recording.topics import DIAGNOSTICS as DIAGNOSTICS_TOPIC
 
-    seen: dict[str, int] = {}
+    heartbeats: list[dict[str, str]] = []
 
     def on_diag(msg) -> None:
         for st in msg.status:
             if "recorder" in st.name:
-                for kv in st.values:
-                    if kv.key.startswith("received."):
-                        seen[kv.key] = int(kv.value)
+                heartbeats.append({kv.key: kv.value for kv in st.values})
 
     sub = node.create_subscription(DiagnosticArray, DIAGNOSTICS_TOPIC, on_diag, RELIABLE_QOS)
     executor = SingleThreadedExecutor(context=node.context)  # the fixture's own context
     executor.add_node(node)
 
-    def received() -> bool:
+    def found() -> dict[str, str] | None:
         assert proc.poll() is None, proc.communicate()
-        return all(seen.get(k, -1) >= n for k, n in counts.items())
+        return next((v for v in heartbeats if done(v)), None)
 
     try:
-        wait_until(
-            received, timeout, f"the recorder to report {counts}",
-            lambda: executor.spin_once(timeout_sec=0.1),
-        )  # fmt: skip
+        return wait_until(found, timeout, what, lambda: executor.spin_once(timeout_sec=0.1))
     finally:
         executor.remove_node(node)
         executor.shutdown()
         node.destroy_subscription(sub)
+
+
+def wait_received(node, proc, counts: dict[str, int], timeout=60.0) -> None:
+    """Spin ``node`` until the recorder's heartbeat reports at least ``counts`` received per
+    topic ("received.clock": 1500, ...): a reliable message is only the recorder's to lose
+    once it has taken it."""
+
+    def received(values: dict[str, str]) -> bool:
+        return all(int(values.get(k, -1)) >= n for k, n in counts.items())
+
+    wait_heartbeat(node, proc, received, timeout, f"the recorder to report {counts}")
 
 
 @pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
@@ -155,7 +168,7 @@ def test_sigint_closes_the_bag_with_every_message(ros_node, env, tmp_path, stora
     bag = tmp_path / "bag"
     with start_recorder(bag, env, storage=storage) as proc:
         pubs = publishers(ros_node)
-        wait_matched(pubs, proc)
+        wait_matched(ros_node, pubs, proc)
         publish(pubs, CLOCKS)
         wait_received(ros_node, proc, {"received.clock": CLOCKS, "received.parcels": PARCELS})
         proc.send_signal(signal.SIGINT)
@@ -214,7 +227,7 @@ def test_sigkill_keeps_every_closed_segment(ros_node, env, tmp_path):
 
     with start_recorder(bag, env, segment=0.3) as proc:
         pubs = publishers(ros_node)
-        wait_matched(pubs, proc)
+        wait_matched(ros_node, pubs, proc)
         sent = publish(pubs, 20 * CLOCKS, stop=lambda k: k % 50 == 0 and closed_clocks() >= 500)
         os.killpg(proc.pid, signal.SIGKILL)
         proc.wait(timeout=10)
@@ -249,7 +262,7 @@ def test_sigkill_loses_at_most_the_last_second(ros_node, env, tmp_path):
 
     with start_recorder(bag, env, segment=600.0) as proc:
         pubs = publishers(ros_node)
-        wait_matched(pubs, proc)
+        wait_matched(ros_node, pubs, proc)
         publish(pubs, 100 * CLOCKS, stop=stop)
         killed_at = time.monotonic()
         os.killpg(proc.pid, signal.SIGKILL)
