@@ -3,7 +3,9 @@
 Runs :mod:`fence_sorter.verification.bench` (per scene: the default configuration against a
 converged reference and the fastest SciPy baseline at the same error, stiff-fence event times,
 peak memory, the model each scene builds against the full model, the kernel with and without
-the JIT), prints the report and writes it as markdown (default ``docs/benchmarks.md``).
+the JIT), prints the report and writes it as JSON (default ``docs/benchmarks.json``) and as
+markdown rendered from that JSON (default ``docs/benchmarks.md``); ``--from-json`` renders the
+markdown again from an earlier run's JSON without measuring anything.
 
 Exit codes: 0 the bench ran (targets that fail are reported in the tables, not as an exit
 code), 2 bad arguments (one line ``fence-sorter: error: ...``; an unknown scene names the
@@ -81,6 +83,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="FILE",
         help="where to write every figure as JSON (default: --out with the suffix .json)",
     )
+    parser.add_argument(
+        "--from-json",
+        metavar="FILE",
+        help="measure nothing: render --out again from the JSON of an earlier run",
+    )
 
 
 def _error(message: str) -> int:
@@ -100,9 +107,32 @@ def _suite_section(out: Path) -> str:
     return "\n" + old[start:stop] + "\n"
 
 
+def write_markdown(out: Path, text: str) -> None:
+    """``out`` rewritten as ``text`` plus the node-suite section it held."""
+    suite = _suite_section(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(text + suite, encoding="utf-8")
+
+
+def render_again(source: Path, out: Path) -> int:
+    """``--from-json``: the markdown of an earlier run's JSON, nothing measured."""
+    from fence_sorter.verification import bench as B
+
+    try:
+        data = json.loads(source.read_text(encoding="utf-8"))
+        text = B.render_markdown(B.report_from_dict(data))
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        return _error(f"--from-json {source}: not a bench report ({exc})")
+    write_markdown(out, text)
+    print(f"report rendered from {source} to {out}")
+    return EXIT_OK
+
+
 def run(args: argparse.Namespace) -> int:
     from fence_sorter.verification import bench as B
 
+    if args.from_json:
+        return render_again(Path(args.from_json), Path(args.out))
     allowed = B.SCENES
     if args.scenes:
         names = [n.strip() for item in args.scenes for n in item.split(",") if n.strip()]
@@ -155,8 +185,7 @@ def run(args: argparse.Namespace) -> int:
     path.write_text(data, encoding="utf-8")
     # the markdown is rendered from the data as written, so it can be rebuilt from the JSON
     text = B.render_markdown(B.report_from_dict(json.loads(data)))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(text + _suite_section(out), encoding="utf-8")
+    write_markdown(out, text)
     print(text)
     failed = [f"{t.scene}: {t.target}" for t in report.targets if t.verdict == "FAIL"]
     print(f"report written to {out}")

@@ -900,15 +900,14 @@ def _cli_md(sec: dict) -> list[str]:
 SECTIONS = {"interrupts": _interrupts_md, "floods": _floods_md, "wire": _wire_md, "cli": _cli_md}
 
 
-def write_report(path: Path, data: dict) -> None:
-    """The report ``path`` (markdown) from ``data`` (section -> {meta, rows[, extra]}), and
-    the data beside it as JSON (a later run of some cases replaces only their sections)."""
+def render_report(data: dict, json_name: str = "reliability.json") -> str:
+    """The markdown report of ``data`` (section -> {meta, rows[, extra]}) alone."""
     L = [
         "# Reliability: the fault-injection campaign",
         "",
         "`fence-sorter faults` (fence_sorter/verification/faults.py) injects the faults below "
         "into the node suite and counts what it refused, dropped and sorted; every figure "
-        f"comes from the run named in its section (data: {path.with_suffix('.json').name}).",
+        f"comes from the run named in its section (data: {json_name}).",
         "",
     ]
     for name, render in SECTIONS.items():
@@ -921,8 +920,14 @@ def write_report(path: Path, data: dict) -> None:
         "command line).",
         "",
     ]
+    return "\n".join(L)
+
+
+def write_report(path: Path, data: dict) -> None:
+    """The report ``path`` (markdown) rendered from ``data``, and the data beside it as JSON
+    (a later run of some cases replaces only their sections)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(L))
+    path.write_text(render_report(data, path.with_suffix(".json").name))
     path.with_suffix(".json").write_text(json.dumps(data, indent=1, sort_keys=True) + "\n")
 
 

@@ -6,7 +6,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from fence_sorter.verification import accuracy, stability
+import pytest
+
+from fence_sorter.verification import accuracy, bench, faults, stability
 from fence_sorter.verification.report import fmt, table, tables
 
 DOCS = Path(__file__).resolve().parents[2] / "docs"
@@ -52,3 +54,134 @@ def test_stability_readme_tables_are_those_of_its_results_json() -> None:
     (rendered,) = tables(stability.render_readme(data))
     assert len(rendered) == 2 + len(data["cases"])  # one row per case
     assert committed == [rendered]
+
+
+DATA = Path(__file__).resolve().parent / "data"
+
+#: the tables docs/benchmarks.md gets from data/bench_small.json, written out by hand
+BENCH_SMALL_TABLES = [
+    [
+        "|  |  |",
+        "|---|---|",
+        "| cpu | Test CPU |",
+        "| cores | 2 |",
+        "| load average (1, 5, 15 min) | 0.10 0.20 0.30 before, 1.00 1.10 1.20 after |",
+    ],
+    [
+        "| target | scene | measured | limit | verdict | note |",
+        "|---|---|---|---|---|---|",
+        "| stiff-fence event (as loaded) | positioned_stiff | 2.00 ms | <= 5 ms | **PASS** "
+        "| median of 3 |",
+    ],
+    [
+        "| scene | method | sim time [s] | wall median [ms] | CPU median [ms] | real-time factor "
+        "| real-time factor on CPU time | steps / rejected | peak N [N] | reference peak N [N] "
+        "| rel. error | exit speed diff [m/s] | first call in this process [ms] | repeats |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| positioned_stiff | adaptive rtol 0.0001 dt_max 0.005 | 0.500 | 2.00 | 1.00 | 250.0 "
+        "| 500.0 | 100 / 5 | 100.05 | 100 | 5.0e-04 | 1.0e-05 | 2.00 | 3 |",
+    ],
+    [
+        "| scene | our reference peak N [N] | change at dt / 2 | wall [s] "
+        "| SciPy reference peak N [N] | change at rtol / 10 | wall [s] | SciPy ref. vs ours "
+        "| the same with conveyor.mu_belt = 0 |",
+        "|---|---|---|---|---|---|---|---|---|",
+        "| positioned_stiff | 100 | 1.0e-06 | 0.3 | 100.002 | 0.0e+00 | 3.0 | 2.0e-05 | not run |",
+    ],
+    [
+        "| scene | error vs | same error | method | loosest rung reaching it | its error "
+        "| error at the next tighter rung | steps | wall median [ms] | wall / default's |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+        "| positioned_stiff | SciPy ref. | <= 5.0e-04 | **scipy:LSODA** | rtol 0.001 | 8.0e-05 "
+        "| 1.0e-05 | 400 | 50.00 | 25x |",
+        "| positioned_stiff | our ref. | <= 5.0e-04 | **scipy:LSODA** | rtol 0.001 | 1.0e-04 "
+        "| 2.0e-05 | 400 | 50.00 | 25x |",
+    ],
+    [
+        "| scene | method | rtol | wall [s] | steps | error vs our ref. | error vs SciPy ref. "
+        "| status |",
+        "|---|---|---|---|---|---|---|---|",
+        "| positioned_stiff | scipy:LSODA | 0.001 | 0.050 | 400 | 1.0e-04 | 8.0e-05 | ok |",
+        "| positioned_stiff | scipy:LSODA | 0.0001 | 0.080 | 800 | 2.0e-05 | 1.0e-05 | ok |",
+    ],
+    [
+        "| scene | ms per event (as loaded) | ms per event (no recording) | steps | sim time [s] "
+        "| target |",
+        "|---|---|---|---|---|---|",
+        "| positioned_stiff | 2.00 | 1.00 | 100 | 0.500 | PASS |",
+    ],
+    [
+        "| scene | tracemalloc peak of one run [KiB] | fresh process max RSS after imports [MiB] "
+        "| ... after one event [MiB] |",
+        "|---|---|---|---|",
+        "| positioned_stiff | 200 | 100 | 150 |",
+    ],
+    [
+        "| scene | variant | same physics | parts vs built | wall median [ms] | / built | steps "
+        "| peak N [N] | peak vs built | exit speed [m/s] | sorted |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| positioned_stiff | as built | yes | (built) | 2.00 | 1.00 | 100 | 100.05 | 0.0e+00 "
+        "| 1.000000 | yes |",
+        "| positioned_stiff | no recording | yes | -belt | 1.00 | 0.50 | 100 | 100.05 | 0.0e+00 "
+        "| 1.000000 | yes |",
+    ],
+    [
+        "|  | JIT (Numba) | NUMBA_DISABLE_JIT=1 |",
+        "|---|---|---|",
+        "| wall median [ms] | 1.00 | 100.00 |",
+        "| timed calls | 3 | 2 |",
+        "| real-time factor | 400.0 | 4.00 |",
+        "| peak N [N] | 1000 | 1000 |",
+    ],
+]
+
+
+def test_bench_markdown_of_a_small_report_is_the_one_written_by_hand() -> None:
+    data = json.loads((DATA / "bench_small.json").read_text(encoding="utf-8"))
+    text = bench.render_markdown(bench.report_from_dict(data))
+    assert tables(text) == BENCH_SMALL_TABLES
+    assert "Without the JIT the same run takes **100x** as long" in text
+    assert "peaked at 200 MiB resident" in text
+
+
+def test_bench_renders_again_from_its_json_keeping_the_suite_section(tmp_path: Path) -> None:
+    from fence_sorter.cli import bench as bench_cli
+    from fence_sorter.verification.bench_suite import BEGIN, END
+
+    out = tmp_path / "benchmarks.md"
+    out.write_text(f"old\n\n{BEGIN}\n| suite |\n|---|\n{END}\n", encoding="utf-8")
+    assert bench_cli.main(["--from-json", str(DATA / "bench_small.json"), "--out", str(out)]) == 0
+    assert tables(out.read_text(encoding="utf-8")) == [*BENCH_SMALL_TABLES, ["| suite |", "|---|"]]
+    bad = tmp_path / "bad.json"
+    bad.write_text("{}", encoding="utf-8")
+    assert bench_cli.main(["--from-json", str(bad), "--out", str(out)]) == 2
+
+
+def without_suite_section(markdown: str) -> str:
+    """The markdown ``fence-sorter bench`` writes, without the node-suite section
+    ``fence-sorter bench-suite`` keeps in the same file."""
+    from fence_sorter.verification.bench_suite import BEGIN, END
+
+    if BEGIN in markdown and END in markdown:
+        head, rest = markdown.split(BEGIN, 1)
+        return head + rest.split(END, 1)[1]
+    return markdown
+
+
+@pytest.mark.skipif(
+    not (DOCS / "benchmarks.json").is_file(), reason="docs/benchmarks.json not committed yet"
+)
+def test_benchmarks_md_tables_are_those_of_benchmarks_json() -> None:
+    data = json.loads((DOCS / "benchmarks.json").read_text(encoding="utf-8"))
+    committed = tables(without_suite_section((DOCS / "benchmarks.md").read_text(encoding="utf-8")))
+    rendered = tables(bench.render_markdown(bench.report_from_dict(data)))
+    assert len(rendered) >= 8
+    assert committed == rendered
+
+
+def test_reliability_md_is_its_json_rendered() -> None:
+    data = json.loads((DOCS / "reliability.json").read_text(encoding="utf-8"))
+    committed = (DOCS / "reliability.md").read_text(encoding="utf-8")
+    rendered = faults.render_report(data)
+    assert len(tables(rendered)) == len(data)  # one table per section
+    assert committed == rendered
