@@ -13,7 +13,7 @@ checks ``solver.max_wall_time``, which compiled code cannot read, and grows the 
 and turns the figures into the :class:`SimulationResult` the Python loop would have produced
 (through ``result.make_result``, which ``Observer.result`` calls too, so every text is the
 same). A one-shot solve (``run_compiled``) reuses the arrays of the previous solve of the same
-shape. ``generalized_alpha`` has no compiled loop and always runs the Python one.
+shape. Every scheme of ours (adaptive, trapezoidal, generalized_alpha) runs in it.
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ from .contacts import (
 )
 from .result import EnergyAudit, make_result
 
-COMPILED_METHODS = ("adaptive", "trapezoidal")
+COMPILED_METHODS = ("adaptive", "trapezoidal", "generalized_alpha")
 STAGE_NAMES = (STAGE_ON_BELT, STAGE_E1, STAGE_E2, STAGE_E3, STAGE_E4, STAGE_SORTED)
 _STAGE_LENGTHS = np.array([len(n) for n in STAGE_NAMES])
 # the names as arrays of each string width (a recorded series takes the width of its longest)
@@ -46,6 +46,15 @@ _STAGE_BY_WIDTH = {
     w: np.array(STAGE_NAMES, dtype=f"<U{w}") for w in range(1, 1 + max(map(len, STAGE_NAMES)))
 }
 CHUNK = 512  # step attempts between two wall-time checks (~5-50 ms of solving)
+
+
+def generalized_alpha_coefficients(rho_inf: float) -> np.ndarray:
+    """(alpha_m, alpha_f, beta, gamma) of Chung and Hulbert (1993) for spectral radius rho_inf."""
+    am = (2.0 * rho_inf - 1.0) / (rho_inf + 1.0)
+    af = rho_inf / (rho_inf + 1.0)
+    gamma = 0.5 - am + af
+    beta = 0.25 * (1.0 - am + af) ** 2
+    return np.array([am, af, beta, gamma])
 
 
 def uses_compiled(sc) -> bool:
@@ -93,7 +102,7 @@ _UP, _DOWN = 2.0**0.25, 2.0**-0.25  # the adaptive step's ladder rungs
 _CFG_ORDER = (
     "G_H_NOM G_T_END G_DT G_MIN_DT G_TOL G_MAX_ITER G_ATOL G_RTOL G_V_REF G_OM_REF G_WIDTH "
     "G_ADAPTIVE G_STOP_SORTED G_RECORD G_BP G_KP G_DEEP G_SPEED_LIMIT G_VMIN G_PHIDOT_MIN G_UP "
-    "G_DOWN G_FLUSH"
+    "G_DOWN G_FLUSH G_GEN_ALPHA G_ALPHA_M G_ALPHA_F G_BETA G_GAMMA"
 ).split()
 assert [getattr(K, g) for g in _CFG_ORDER] == list(range(K.N_CFG)), "CompiledSolve's cfg order"
 # the control integers and figures at the start of a solve
@@ -180,6 +189,8 @@ class CompiledSolve:
                 _UP,
                 _DOWN,
                 FLUSH_ANGLE,
+                float(sv.method == "generalized_alpha"),
+                *generalized_alpha_coefficients(sv.rho_inf),
             ],
             dtype=float,
         )

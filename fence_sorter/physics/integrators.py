@@ -26,8 +26,8 @@ solve with a diagnosis; nothing past it is returned as data.
 
 The loop here is the Python one (``solver.engine = python``; the soft-real-time line steps it as
 a generator). ``kernel.solve`` is the same loop compiled, which :func:`simulate.simulate` runs by
-default for ``adaptive`` and ``trapezoidal`` (``engine.py``); a change to one must be made to
-the other (test/physics/test_engine.py compares them).
+default for every scheme (``engine.py``); a change to one must be made to the other
+(test/physics/test_engine.py compares them).
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ import numpy as np
 
 from . import kernel as K
 from .contacts import STAGE_SORTED, classify
-from .engine import CompiledSolve, uses_compiled
+from .engine import CompiledSolve, generalized_alpha_coefficients, uses_compiled
 
 EVENT_TOL = 1e-10  # a located onset's step ends with 0 < D <= EVENT_TOL [m]
 EVENT_SORT = 3  # C_s crossing the sorting line y0 = s (belt friction ends there)
@@ -66,15 +66,6 @@ class Propagators:
             self._cache.clear()
         self._cache[h] = out
         return out
-
-
-def generalized_alpha_coefficients(rho_inf: float) -> np.ndarray:
-    """(alpha_m, alpha_f, beta, gamma) of Chung and Hulbert (1993) for spectral radius rho_inf."""
-    am = (2.0 * rho_inf - 1.0) / (rho_inf + 1.0)
-    af = rho_inf / (rho_inf + 1.0)
-    gamma = 0.5 - am + af
-    beta = 0.25 * (1.0 - am + af) ** 2
-    return np.array([am, af, beta, gamma])
 
 
 class State:

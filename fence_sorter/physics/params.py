@@ -148,7 +148,7 @@ class SolverParams:
     ``method``: ``adaptive`` (default; error-controlled trapezoidal), ``trapezoidal`` or
     ``generalized_alpha`` (fixed step ``dt``), or a SciPy baseline ``scipy:RK45``,
     ``scipy:DOP853``, ``scipy:Radau``, ``scipy:BDF``, ``scipy:LSODA`` (``rtol``/``atol``).
-    ``engine``: ``compiled`` (default) runs the adaptive and trapezoidal control loops in one
+    ``engine``: ``compiled`` (default) runs the control loop of every scheme in one
     Numba function (``engine.py``), ``python`` in ``integrators.Integrator``: the same answers.
     """
 
@@ -165,8 +165,8 @@ class SolverParams:
     settle_time: float = 0.5  # [s] after the cycle for a load that is still moving
     stop_when_sorted: bool = True
     max_wall_time: float = 120.0  # [s]; a solve that takes longer is stopped and reported
-    # compiled: the whole adaptive / trapezoidal loop in one Numba function (``engine``);
-    # python: the loop of ``integrators.Integrator`` (same answers; generalized_alpha always)
+    # compiled: the whole solve loop in one Numba function (``engine``);
+    # python: the loop of ``integrators.Integrator`` (same answers)
     engine: str = "compiled"
 
     def validate(self, prefix: str = "solver") -> None:

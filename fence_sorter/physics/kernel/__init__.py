@@ -38,7 +38,7 @@ The time-stepping schemes built on it (trapezoidal, generalized-alpha) are the `
 functions of ``steps``. The control loop (events, step size, stages, recording) exists twice:
 :func:`solve` runs it compiled (``solver.engine = compiled``, the default, driven by
 ``engine.py``), ``integrators.Integrator`` in Python (``solver.engine = python``, the
-soft-real-time line, generalized-alpha); test/physics/test_engine.py checks they agree.
+soft-real-time line); test/physics/test_engine.py checks they agree.
 """
 
 from __future__ import annotations
@@ -214,12 +214,17 @@ from .loop import (  # noqa: E402 (after the cache directory is set)
     F_WORK,
     F_Y_MAX,
     G_ADAPTIVE,
+    G_ALPHA_F,
+    G_ALPHA_M,
     G_ATOL,
+    G_BETA,
     G_BP,
     G_DEEP,
     G_DOWN,
     G_DT,
     G_FLUSH,
+    G_GAMMA,
+    G_GEN_ALPHA,
     G_H_NOM,
     G_KP,
     G_MAX_ITER,
@@ -278,6 +283,7 @@ from .loop import (  # noqa: E402 (after the cache directory is set)
     REC_T_STAGE,
     REC_TIP_W,
     REC_Y,
+    S_ALPHA,
     S_BEFORE,
     S_LOC,
     SOLVE_DONE,
@@ -457,6 +463,11 @@ __all__ = [
     "G_DOWN",
     "G_DT",
     "G_FLUSH",
+    "G_GEN_ALPHA",
+    "G_ALPHA_M",
+    "G_ALPHA_F",
+    "G_BETA",
+    "G_GAMMA",
     "G_H_NOM",
     "G_KP",
     "G_MAX_ITER",
@@ -517,6 +528,7 @@ __all__ = [
     "REC_TIP_W",
     "REC_Y",
     "S_BEFORE",
+    "S_ALPHA",
     "S_LOC",
     "solve",
     "SOLVE_DONE",

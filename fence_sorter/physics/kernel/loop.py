@@ -46,7 +46,7 @@ from .layout import (
     SLOT_BORDER,
     SLOT_TIP,
 )
-from .steps import STEP_FORCED, STEP_REJECTED, trapezoidal_step
+from .steps import STEP_FORCED, STEP_REJECTED, generalized_alpha_step, trapezoidal_step
 
 # -- the compiled solve loop --------------------------------------------------------------------
 # ``integrators.Integrator.stepping`` (adaptive and fixed-step trapezoidal) and the reductions of
@@ -59,10 +59,12 @@ from .steps import STEP_FORCED, STEP_REJECTED, trapezoidal_step
 EVENT_TOL = 1e-10  # a located onset's step ends with 0 < D <= EVENT_TOL [m]
 EVENT_SORT = 3  # C_s crossing the sorting line y0 = s (belt friction ends there)
 
-# states: rows of T, Y, LAM, OUT, RES, MODAL, ACC; cur and trial swap, loc and before are fixed
+# states: rows of T, Y, LAM, OUT, RES, MODAL, ACC; cur and trial swap, loc and before are fixed;
+# the generalized-alpha step's state at its alpha point goes in Y[S_ALPHA] (scratch)
 S_LOC = 2
 S_BEFORE = 3
-N_STATES = 4
+S_ALPHA = 4
+N_STATES = 5
 
 # configuration ``cfg``
 G_H_NOM = 0  # dt_max (adaptive) or dt (fixed step) [s]
@@ -88,7 +90,12 @@ G_PHIDOT_MIN = 19
 G_UP = 20  # 2^(1/4)
 G_DOWN = 21  # 2^(-1/4)
 G_FLUSH = 22  # contacts.FLUSH_ANGLE [rad]
-N_CFG = 23
+G_GEN_ALPHA = 23  # 1: the generalized-alpha step (fixed step), 0: the trapezoidal one
+G_ALPHA_M = 24  # generalized-alpha (alpha_m, alpha_f, beta, gamma), in this order
+G_ALPHA_F = 25
+G_BETA = 26
+G_GAMMA = 27
+N_CFG = 28
 
 # integer control ``ctl``
 I_CUR = 0
@@ -339,6 +346,46 @@ def _trap(
 
 
 @njit(cache=True, _nrt=False)
+def _step(
+    P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT, RES, MODAL, ACC,
+    w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h, a, b, jump, on_belt, force,
+):  # fmt: skip
+    """One step of the solver's scheme from state row a into row b: generalized-alpha
+    (``cfg[G_GEN_ALPHA]``) or the trapezoidal rule (adaptive and fixed step)."""
+    if cfg[G_GEN_ALPHA] != 0.0:
+        status = generalized_alpha_step(
+            P, corners, normals, phi, rigid_modal, omega, zeta, cfg[G_ALPHA_M : G_GAMMA + 1], h,
+            T[a], Y[a], ACC[a], LAM[a], on_belt, cfg[G_TOL], int(cfg[G_MAX_ITER]), force, Y[b],
+            ACC[b], LAM[b], OUT[b], RES[b], MODAL[b], w, wdot, nodes, prev, Y[S_ALPHA],
+        )  # fmt: skip
+        T[b] = T[a] + h
+        return status
+    return _trap(
+        P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT, RES, MODAL,
+        ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h, a, b, jump, on_belt, force,
+    )  # fmt: skip
+
+
+@njit(cache=True, _nrt=False)
+def _accelerations(P, rigid_modal, omega, zeta, Y, LAM, RES, MODAL, ACC, i, jump):
+    """Accelerations of state row i consistent with its forces (the start, and
+    generalized-alpha's restart after an event or a drive breakpoint; ``jump``: the drive's
+    acceleration jump at 2 t1, which the forces at the breakpoint do not contain yet)."""
+    m = omega.shape[0]
+    y = Y[i]
+    ACC[i, 0] = (RES[i, 0] + LAM[i, 0]) / P[P_MASS]
+    ACC[i, 1] = (RES[i, 1] + LAM[i, 1]) / P[P_MASS]
+    ACC[i, 2] = (RES[i, 2] + LAM[i, 2]) / P[P_INERTIA]
+    for j in range(m):
+        ACC[i, 3 + j] = (
+            MODAL[i, j]
+            - rigid_modal[j] * jump
+            - omega[j] ** 2 * y[6 + j]
+            - 2.0 * zeta[j] * omega[j] * y[6 + m + j]
+        )
+
+
+@njit(cache=True, _nrt=False)
 def _locate(
     P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT, RES, MODAL, ACC,
     w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h, on_belt, slot, kind, g0, g1,
@@ -377,7 +424,7 @@ def _locate(
             h_sec = lo + (g_lo - 0.5 * tol) * (lo - lo_prev) / (g_lo_prev - g_lo)
             if lo < h_sec < hi:
                 h_loc = h_sec
-        st = _trap(
+        st = _step(
             P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT, RES,
             MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h_loc, a, S_LOC, jump,
             on_belt, False,
@@ -614,7 +661,6 @@ def solve(model, state, max_attempts, t_target):
     h_nom = cfg[G_H_NOM]
     min_dt = cfg[G_MIN_DT]
     width = cfg[G_WIDTH]
-    m = omega.shape[0]
     if ctl[I_STARTED] == 0:
         # Scheme.initialize: forces at t = 0, belt wrench by Karnopp, accelerations
         ctl[I_STARTED] = 1
@@ -646,13 +692,7 @@ def solve(model, state, max_attempts, t_target):
         if math.hypot(y[3] - P[P_BELT], y[4]) <= cfg[G_VMIN] and abs(y[5]) <= cfg[G_PHIDOT_MIN]:
             bx, by, bz = stick_wrench(P, r[0], r[1], r[2])
             LAM[a, 0], LAM[a, 1], LAM[a, 2] = bx, by, bz
-        ACC[a, 0] = (r[0] + LAM[a, 0]) / P[P_MASS]
-        ACC[a, 1] = (r[1] + LAM[a, 1]) / P[P_MASS]
-        ACC[a, 2] = (r[2] + LAM[a, 2]) / P[P_INERTIA]
-        for j in range(m):
-            ACC[a, 3 + j] = (
-                MODAL[a, j] - omega[j] ** 2 * y[6 + j] - 2.0 * zeta[j] * omega[j] * y[6 + m + j]
-            )
+        _accelerations(P, rigid_modal, omega, zeta, Y, LAM, RES, MODAL, ACC, a, 0.0)
         _trace(ctl, TR, T, Y, LAM, OUT, RES, MODAL, ACC, a, True)
         stop, on_belt = _observe(
             P, normals, cfg, ctl, fc, T, Y, LAM, OUT, RES, IMP, STG, REC, a, True
@@ -695,7 +735,7 @@ def solve(model, state, max_attempts, t_target):
             tiny = h_try <= 4.0 * min_dt
         else:
             tiny = h_try <= 1e-3 * h_nom
-        status = _trap(
+        status = _step(
             P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT, RES,
             MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h_try, a, b,
             _jump_at(P, T[a]), on_belt, tiny,
@@ -763,6 +803,10 @@ def solve(model, state, max_attempts, t_target):
         fc[F_H_PREV] = h_taken
         if located or abs(T[a] + h_taken - breaks[nb]) <= 1e-12:
             fc[F_H_PREV] = 0.0
+            if cfg[G_GEN_ALPHA] != 0.0:
+                # restart from consistent accelerations after an event or a drive breakpoint
+                jump = _jump_at(P, T[b])
+                _accelerations(P, rigid_modal, omega, zeta, Y, LAM, RES, MODAL, ACC, b, jump)
         ctl[I_CUR] = b
         ctl[I_TRIAL] = a
         a = b
