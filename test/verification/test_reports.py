@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from fence_sorter.verification import accuracy, bench, faults, stability
+from fence_sorter.verification import accuracy, bench, faults, stability, versus
 from fence_sorter.verification.report import fmt, table, tables
 
 DOCS = Path(__file__).resolve().parents[2] / "docs"
@@ -185,3 +185,9 @@ def test_reliability_md_is_its_json_rendered() -> None:
     rendered = faults.render_report(data)
     assert len(tables(rendered)) == len(data)  # one table per section
     assert committed == rendered
+
+
+@pytest.mark.skipif(not (DOCS / "versus.json").is_file(), reason="docs/versus.json not written")
+def test_versus_md_is_its_json_rendered() -> None:
+    data = json.loads((DOCS / "versus.json").read_text(encoding="utf-8"))
+    assert (DOCS / "versus.md").read_text(encoding="utf-8") == versus.render(data)
