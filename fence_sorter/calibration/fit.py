@@ -8,20 +8,25 @@ Steps (docs/calibration.md):
    knows the motion without any fit parameter (the parcel rides the belt).
 2. **Fit.** The residuals are the measured camera poses (x, y, yaw) and fence root moments
    minus the twin's replay of the same parcel and stroke, each channel divided by its noise
-   level. Parameters are fitted in log space (``scipy.optimize.least_squares``, trust region
-   reflective, ``soft_l1`` loss), the Jacobian by forward differences with every parcel's
-   replays run in parallel processes. The noise levels are re-estimated from the first fit's
-   residuals and the fit repeated from there, so the covariance is in the data's units.
-3. **Judge.** Covariance s^2 (J^T J)^-1 in log space gives 95 % intervals exp(z +- 1.96 sd)
-   and the correlation matrix. A parameter whose interval spans more than a factor
-   exp(2 ``max_log_halfwidth``) (or that ends on a bound) is flagged as not identifiable by
-   this data, fixed at the scene's value, and the others are refitted without it.
+   level (from the samples before the strokes). Parameters are fitted in log space
+   (``scipy.optimize.least_squares``, trust region reflective; Gauss-Newton, then the
+   ``soft_l1`` loss), the Jacobian by forward differences: one replay per parcel and
+   parameter, every parcel's replays run in parallel (:class:`Evaluator`).
+3. **Judge.** The covariance of the estimate over the parameters and the camera frame is the
+   M-estimator's sandwich with each channel's noise level re-estimated from its residuals
+   (:func:`_covariance`); 95 % intervals exp(z +- 1.96 sd) and the correlation matrix. A
+   parameter whose interval spans more than a factor exp(2 ``max_log_halfwidth``) (or that
+   ends on a bound) is flagged as not identifiable by this data, fixed at the scene's value,
+   and the others are refitted without it.
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
+import multiprocessing
 import os
+import resource
 import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
@@ -45,6 +50,10 @@ SIGMA_FLOOR = (1e-8, 1e-8, 1e-8)
 FD_STEP = 1e-4  # forward-difference step in log(parameter)
 OFFSET_STEP = (1e-6, 1e-6, 1e-6)  # [m, m, rad]
 TOL = 1e-8  # least_squares' xtol, ftol, gtol
+#: the Gauss-Newton stage only brings the robust stage near the optimum: its ftol
+START_FTOL = 1e-4
+F_SCALE = 3.0  # the robust loss's scale [noise levels]
+CACHED_POINTS = 8  # replayed parameter sets and Jacobians a problem keeps
 
 
 class CalibrationInputError(ValueError):
@@ -166,6 +175,8 @@ def _init_worker(base: Scenario, eds: list[EventData]) -> None:
 
 
 def _run_chunk(idx: list[int], values_list: list[dict[str, float]]):
+    """Predictions of the worker's parcels ``idx`` for each parameter set, or the message of
+    the first replay that failed."""
     base, eds = _WORKER["base"], _WORKER["eds"]
     out = []
     for values in values_list:
@@ -179,39 +190,99 @@ def _run_chunk(idx: list[int], values_list: list[dict[str, float]]):
     return out
 
 
-class Evaluator:
-    """Replays every parcel for a list of parameter sets, parcels split over processes."""
+def _run_detached(base: Scenario, eds: list[EventData], values_list):
+    """:func:`_run_chunk` for a worker that holds no parcels (a Dask cluster's): all of
+    ``eds``."""
+    _init_worker(base, eds)
+    return _run_chunk(list(range(len(eds))), values_list)
 
-    def __init__(self, base: Scenario, eds: list[EventData], workers: int | None = None):
+
+#: how parcels' replays are run in parallel: ``processes`` (a pool of forked processes),
+#: ``dask`` (the same processes driven by Dask's multiprocessing scheduler) or the address of
+#: a Dask distributed scheduler (tcp://host:8786)
+SCHEDULERS = ("processes", "dask")
+
+
+def check_scheduler(scheduler: str) -> str:
+    """``scheduler`` if it is one of SCHEDULERS or a Dask scheduler address, else
+    CalibrationInputError naming the allowed values."""
+    if scheduler in SCHEDULERS or "://" in scheduler:
+        return scheduler
+    raise CalibrationInputError(
+        f"--scheduler {scheduler}: allowed: {', '.join(SCHEDULERS)} or a Dask scheduler "
+        "address such as tcp://127.0.0.1:8786"
+    )
+
+
+class Evaluator:
+    """Replays every parcel for a list of parameter sets, parcels split over processes.
+
+    A call replays each parcel once per parameter set (a Jacobian's sets in one batch); the
+    parcels are split into interleaved chunks, one task per chunk, run by ``scheduler``
+    (:data:`SCHEDULERS`) on ``workers`` processes that hold the parcels from their start."""
+
+    def __init__(
+        self,
+        base: Scenario,
+        eds: list[EventData],
+        workers: int | None = None,
+        scheduler: str = "processes",
+    ):
         self.base, self.eds = base, eds
+        self.scheduler = check_scheduler(scheduler)
         self.workers = max(1, min(workers or os.cpu_count() or 1, len(eds)))
         self.pool = None
-        if self.workers > 1:
+        self._stack = contextlib.ExitStack()
+        if "://" in scheduler:
+            from fence_sorter.optimize.executor import evaluation_pool
+
+            self.pool = self._stack.enter_context(evaluation_pool(scheduler, workers))
+        elif self.workers > 1:
             # compile (or load) the kernel once here, so the forked workers inherit it
             replay(base, eds[0].ev)
-            self.pool = ProcessPoolExecutor(
-                self.workers, initializer=_init_worker, initargs=(base, eds)
+            self.pool = self._stack.enter_context(
+                ProcessPoolExecutor(
+                    self.workers,
+                    mp_context=multiprocessing.get_context("fork"),
+                    initializer=_init_worker,
+                    initargs=(base, eds),
+                )
             )
         else:
             _init_worker(base, eds)
         n = len(eds)
-        k = min(n, 2 * self.workers) if self.workers > 1 else 1
+        k = min(n, 2 * self.workers) if self.workers > 1 or "://" in scheduler else 1
         self.chunks = [list(range(i, n, k)) for i in range(k)]
         self.replays = 0
         self.on_replays = None  # callback(count) for a progress bar
 
     def close(self) -> None:
-        if self.pool is not None:
-            self.pool.shutdown(cancel_futures=True)
-            self.pool = None
+        """Shut the processes down (and wait for them, so their CPU time is counted)."""
+        self._stack.close()
+        self.pool = None
+
+    def _parts(self, values_list) -> list:
+        if "://" in self.scheduler:
+            futures = [
+                self.pool.submit(_run_detached, self.base, [self.eds[i] for i in c], values_list)
+                for c in self.chunks
+            ]
+            return [f.result() for f in futures]
+        if self.scheduler == "dask":
+            import dask
+
+            tasks = [dask.delayed(_run_chunk, pure=False)(c, values_list) for c in self.chunks]
+            if self.pool is None:
+                return list(dask.compute(*tasks, scheduler="synchronous"))
+            return list(dask.compute(*tasks, scheduler="processes", pool=self.pool))
+        if self.pool is None:
+            return [_run_chunk(c, values_list) for c in self.chunks]
+        futures = [self.pool.submit(_run_chunk, c, values_list) for c in self.chunks]
+        return [f.result() for f in futures]
 
     def __call__(self, values_list: list[dict[str, float]]):
         """Per parameter set, the list (per event) of predictions."""
-        if self.pool is None:
-            parts = [_run_chunk(c, values_list) for c in self.chunks]
-        else:
-            futures = [self.pool.submit(_run_chunk, c, values_list) for c in self.chunks]
-            parts = [f.result() for f in futures]
+        parts = self._parts(values_list)
         out = [[None] * len(self.eds) for _ in values_list]
         for chunk, part in zip(self.chunks, parts, strict=True):
             if isinstance(part, str):
@@ -290,6 +361,8 @@ class CalibrationResult:
     nfev: int
     replays: int
     wall_time: float
+    cpu_time: float  # of this process and its worker processes [s]
+    worker_cpu_time: float  # of the worker processes alone [s]
     residuals: tuple[np.ndarray, np.ndarray, np.ndarray] = ()
     final_values: dict[str, float] = field(default_factory=dict)
     data: list[EventData] = field(default_factory=list)  # the parcels fitted
@@ -321,6 +394,8 @@ class CalibrationResult:
             "function_evaluations": self.nfev,
             "replays": self.replays,
             "wall_time_s": self.wall_time,
+            "cpu_time_s": self.cpu_time,
+            "worker_cpu_time_s": self.worker_cpu_time,
         }
 
 
@@ -362,7 +437,11 @@ class _Problem:
         self.evaluate, self.eds, self.names, self.fixed = evaluate, eds, names, dict(fixed)
         self.sigma = sigma
         self.k = len(names)
-        self._cache: tuple[bytes, list] | None = None
+        # replays of recent parameter sets and Jacobians by point: the optimiser asks for the
+        # residuals at a point it already evaluated (the accepted trial, a stage's start, the
+        # final prediction), and a stage's Jacobian at the point the last stage ended on
+        self._preds: dict[bytes, list] = {}
+        self._jacs: dict[bytes, np.ndarray] = {}
 
     def values(self, z) -> dict[str, float]:
         v = dict(self.fixed)
@@ -370,16 +449,26 @@ class _Problem:
         return v
 
     def preds(self, z) -> list:
-        key = np.asarray(z[: self.k]).tobytes()
-        if self._cache is None or self._cache[0] != key:
-            self._cache = (key, self.evaluate([self.values(z)])[0])
-        return self._cache[1]
+        key = np.asarray(z[: self.k], dtype=float).tobytes()
+        if key not in self._preds:
+            if len(self._preds) >= CACHED_POINTS:
+                self._preds.pop(next(iter(self._preds)))
+            self._preds[key] = self.evaluate([self.values(z)])[0]
+        return self._preds[key]
 
     def fun(self, z) -> np.ndarray:
         return weighted(self.eds, self.preds(z), tuple(z[self.k :]), self.sigma)
 
     def jac(self, z) -> np.ndarray:
         z = np.asarray(z, dtype=float)
+        key = z.tobytes()
+        if key not in self._jacs:
+            if len(self._jacs) >= CACHED_POINTS:
+                self._jacs.pop(next(iter(self._jacs)))
+            self._jacs[key] = self._forward_differences(z)
+        return self._jacs[key].copy()
+
+    def _forward_differences(self, z: np.ndarray) -> np.ndarray:
         f0 = self.fun(z)
         lo, hi = self.bounds()
         steps, sets = [], []
@@ -414,7 +503,7 @@ def _solve(problem: _Problem, z0, max_nfev: int):
     lo, hi = problem.bounds()
     z0 = np.clip(z0, lo + 1e-9, hi - 1e-9)
     nfev = 0
-    for loss in ("linear", "soft_l1"):
+    for loss, ftol in (("linear", START_FTOL), ("soft_l1", TOL)):
         sol = least_squares(
             problem.fun,
             z0,
@@ -422,10 +511,10 @@ def _solve(problem: _Problem, z0, max_nfev: int):
             bounds=(lo, hi),
             method="trf",
             loss=loss,
-            f_scale=3.0,
+            f_scale=F_SCALE,
             x_scale=1.0,
             xtol=TOL,
-            ftol=TOL,
+            ftol=ftol,
             gtol=TOL,
             max_nfev=max_nfev,
         )
@@ -440,21 +529,59 @@ def _solve(problem: _Problem, z0, max_nfev: int):
     return sol
 
 
+def cpu_seconds() -> tuple[float, float]:
+    """CPU time [s] of this process and of its ended child processes (a closed Evaluator's
+    workers; a Dask cluster's workers are not counted): the load-independent cost of a
+    calibration."""
+    own, children = (resource.getrusage(who) for who in (resource.RUSAGE_SELF,
+                                                          resource.RUSAGE_CHILDREN))  # fmt: skip
+    return own.ru_utime + own.ru_stime, children.ru_utime + children.ru_stime
+
+
 def _rms(r: np.ndarray) -> float:
     return float(np.sqrt(np.mean(r**2))) if r.size else math.nan
 
 
-def _covariance(jac: np.ndarray, r: np.ndarray):
-    """s^2 (J^T J)^-1 by SVD; a parameter in a null direction of J gets an infinite variance."""
-    m, n = jac.shape
-    s2 = float(r @ r) / max(m - n, 1)
-    _, sv, vt = np.linalg.svd(jac, full_matrices=False)
+def _covariance(jac: np.ndarray, r: np.ndarray, sizes: tuple[int, ...], f_scale: float):
+    """Covariance of the robust (``soft_l1``, scale ``f_scale``) estimate, each channel's
+    noise level re-estimated from its residuals.
+
+    ``jac``, ``r``: the Jacobian and residuals (each channel divided by its assumed noise
+    level) at the estimate; ``sizes``: the rows of each channel, in order. The M-estimator's
+    sandwich A^-1 B A^-1 (Huber 1973) with the loss's influence psi(r) = r / sqrt(1 + (r/c)^2):
+    A = J^T diag(a) J, a = the channel's mean psi'(r); B = J^T diag(b) J, b = the channel's
+    sum of psi(r)^2 over its degrees of freedom (its rows less the sum of their leverages, the
+    hat matrix's diagonal). With Gaussian residuals and every level right this is about
+    (J^T J)^-1; a channel whose level was under- or over-estimated (the pre-stroke samples a
+    level comes from are few) counts with its actual spread, not with a pooled s^2 that the
+    channel with the most samples would set. Returns the covariance (a parameter in a null
+    direction of J gets an infinite variance), the singular values of sqrt(a) J and each
+    channel's variance factor sum r^2 / dof (its noise level is the assumed one times the
+    root of it)."""
+    u2 = (r / f_scale) ** 2
+    psi, dpsi = r / np.sqrt(1.0 + u2), (1.0 + u2) ** -1.5
+    a_rows, b_rows = np.ones(r.size), np.ones(r.size)
+    bounds = np.cumsum((0, *sizes))
+    for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
+        if hi > lo:
+            a_rows[lo:hi] = dpsi[lo:hi].mean()
+    u, sv, vt = np.linalg.svd(jac * np.sqrt(a_rows)[:, None], full_matrices=False)
     keep = sv > sv.max() * 1e-10 if sv.size and sv.max() > 0 else np.zeros(sv.size, bool)
-    cov = (vt[keep].T / sv[keep] ** 2) @ vt[keep]
+    a_inv = (vt[keep].T / sv[keep] ** 2) @ vt[keep]
+    leverage = np.sum(u[:, keep] ** 2, axis=1)
+    factors = []
+    for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
+        dof = (hi - lo) - float(leverage[lo:hi].sum())
+        if hi == lo or dof <= 0.5:
+            factors.append(1.0)
+            continue
+        b_rows[lo:hi] = float(psi[lo:hi] @ psi[lo:hi]) / dof
+        factors.append(float(r[lo:hi] @ r[lo:hi]) / dof)
+    cov = a_inv @ ((jac.T * b_rows) @ jac) @ a_inv
     for k in np.flatnonzero(~keep):
         for j in np.flatnonzero(np.abs(vt[k]) > 1e-3):
             cov[j, j] = np.inf
-    return s2 * cov, sv
+    return cov, sv, tuple(factors)
 
 
 def calibrate(
@@ -469,9 +596,10 @@ def calibrate(
     bootstrap: int = 0,
     seed: int = 0,
     progress=None,
+    scheduler: str = "processes",
 ) -> CalibrationResult:
     """Fit ``names`` of ``base`` to the bag; see the module docstring."""
-    wall0 = time.perf_counter()
+    wall0, cpu0 = time.perf_counter(), cpu_seconds()
     offset0, cam_rms = align_camera(base, mb)
     eds = [ed for ed in event_data(mb) if (ed.cam_tau > 0.0).sum() >= 3]
     if len(eds) < min_parcels:
@@ -480,8 +608,10 @@ def calibrate(
             f"calibration needs at least {min_parcels}"
         )
     sigma = noise_levels(base, eds, offset0)
+    n_cam = sum(ed.cam_tau.size for ed in eds)
+    sizes = (2 * n_cam, n_cam, sum(ed.str_tau.size for ed in eds))
     prior = {n: float(scene_value(base, n)) for n in names}
-    evaluate = Evaluator(base, eds, workers)
+    evaluate = Evaluator(base, eds, workers, scheduler)
     evaluate.on_replays = progress
     active, fixed, flagged = list(names), {}, {}
     z = np.concatenate([np.log([prior[n] for n in names]), offset0])
@@ -491,7 +621,7 @@ def calibrate(
             prob = _Problem(evaluate, eds, active, fixed, sigma)
             sol = _solve(prob, z, max_nfev)
             nfev += sol.nfev
-            cov, sv = _covariance(sol.jac, sol.fun)
+            cov, sv, factors = _covariance(prob.jac(sol.x), prob.fun(sol.x), sizes, F_SCALE)
             sd = np.sqrt(np.diag(cov))
             lo, hi = prob.bounds()
             bad = {}
@@ -516,10 +646,11 @@ def calibrate(
             active = [n for n in active if n != worst]
         final = prob.values(sol.x)
         offset = tuple(float(v) for v in sol.x[len(active) :])
-        preds = evaluate([final])[0]
+        preds = prob.preds(sol.x)
         raw = channels(eds, preds, offset)
+        levels = tuple(sg * math.sqrt(f) for sg, f in zip(sigma, factors, strict=True))
         boot = _bootstrap(
-            evaluate, eds, preds, active, fixed, sigma, sol.x, bootstrap, seed, max_nfev
+            evaluate, eds, preds, active, fixed, levels, sol.x, bootstrap, seed, max_nfev
         )
     finally:
         evaluate.close()
@@ -559,7 +690,7 @@ def calibrate(
         correlation=corr,
         names=active,
         singular_values=sv,
-        sigma=sigma,
+        sigma=levels,
         camera_offset=offset,
         camera_rms=cam_rms,
         encoder_rms=mb.encoder_rms,
@@ -569,6 +700,8 @@ def calibrate(
         nfev=nfev,
         replays=evaluate.replays,
         wall_time=time.perf_counter() - wall0,
+        cpu_time=sum(cpu_seconds()) - sum(cpu0),
+        worker_cpu_time=cpu_seconds()[1] - cpu0[1],
         residuals=raw,
         final_values=final,
         data=eds,

@@ -28,7 +28,7 @@ def write_scene(source: Path, values: dict[str, float], path: Path, note: str) -
 def format_result(res: CalibrationResult) -> str:
     lines = [
         f"calibration of {len(res.parcels)} parcels, {res.samples} residuals, "
-        f"{res.replays} replays in {res.wall_time:.1f} s",
+        f"{res.replays} replays in {res.wall_time:.1f} s ({res.cpu_time:.1f} CPU s)",
         f"camera frame in the sorter frame: x {res.camera_offset[0]:+.4f} m, "
         f"y {res.camera_offset[1]:+.4f} m, yaw {math.degrees(res.camera_offset[2]):+.3f} deg "
         f"(pre-stroke RMS {res.camera_rms * 1e3:.2f} mm); encoder RMS about the strokes "

@@ -72,8 +72,20 @@ def register(subparsers) -> None:
         metavar="N",
         help="residual evaluations per least-squares stage (default 40)",
     )
+    add_scheduler_argument(parser)
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.set_defaults(func=run)
+
+
+def add_scheduler_argument(parser: argparse.ArgumentParser) -> None:
+    """--scheduler: how the parcels' replays run in parallel (shared with calibrate-bench)."""
+    parser.add_argument(
+        "--scheduler",
+        default="processes",
+        metavar="S",
+        help="processes (default: forked processes), dask (the same processes driven by "
+        "Dask) or a Dask scheduler address, e.g. tcp://127.0.0.1:8786",
+    )
 
 
 def load_bag_and_scene(args):
@@ -107,6 +119,7 @@ def run(args: argparse.Namespace) -> int:
         FitError,
         calibrate,
         check_fit_names,
+        check_scheduler,
     )
     from fence_sorter.calibration.report import format_result, plot_residuals, write_scene
 
@@ -116,6 +129,10 @@ def run(args: argparse.Namespace) -> int:
         return error(f"--max-evaluations must be in [1, inf), got {args.max_evaluations}")
     if not args.max_ci_factor > 1.0:
         return error(f"--max-ci-factor must be in (1, inf), got {args.max_ci_factor}")
+    try:
+        check_scheduler(args.scheduler)
+    except CalibrationInputError as exc:
+        return error(str(exc))
     mb, loaded, code = load_bag_and_scene(args)
     if mb is None:
         return code
@@ -142,6 +159,7 @@ def run(args: argparse.Namespace) -> int:
             mb,
             names,
             workers=args.workers,
+            scheduler=args.scheduler,
             max_log_halfwidth=0.5 * math.log(args.max_ci_factor),
             bootstrap=args.bootstrap,
             seed=args.seed,

@@ -13,6 +13,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+from fence_sorter.cli.calibrate import add_scheduler_argument
 from fence_sorter.cli.simulate import error
 
 
@@ -31,6 +32,7 @@ def register(subparsers) -> None:
         help="parcels of the timed calibration (default 50; 0 skips it)",
     )
     parser.add_argument("--workers", type=int, default=None, help="processes (default: CPUs)")
+    add_scheduler_argument(parser)
     parser.add_argument(
         "--doc", metavar="FILE", help="fill the generated section of FILE (docs/calibration.md)"
     )
@@ -49,14 +51,21 @@ def run(args: argparse.Namespace) -> int:
     ):
         if value < low:
             return error(f"{option} must be in [{low}, inf), got {value}")
+    from fence_sorter.calibration.fit import CalibrationInputError, check_scheduler
+
+    try:
+        check_scheduler(args.scheduler)
+    except CalibrationInputError as exc:
+        return error(str(exc))
     report: dict = {}
+    run_kw = {"workers": args.workers, "scheduler": args.scheduler}
     if args.seeds:
         report["coverage"] = bench.coverage(
-            args.seeds, args.parcels, args.workers, log=lambda s: print(s, file=sys.stderr)
+            args.seeds, args.parcels, log=lambda s: print(s, file=sys.stderr), **run_kw
         )
-    report["flag"] = bench.flag_case(args.workers)
+    report["flag"] = bench.flag_case(**run_kw)
     if args.timing_parcels:
-        report["timing"] = bench.timing(args.timing_parcels, args.workers)
+        report["timing"] = bench.timing(args.timing_parcels, **run_kw)
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
                             text=True, check=False).stdout.strip() or "unknown"  # fmt: skip
     command = "nice -n 10 fence-sorter calibrate-bench " + " ".join(sys.argv[2:])
