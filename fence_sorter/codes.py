@@ -21,7 +21,9 @@ class OutcomeCode(IntEnum):
 
 
 class Stage(IntEnum):
-    """LoadState.stage values."""
+    """A load's motion stage (paper section 2): the LoadState.stage values, the solve loop's
+    stage codes (``kernel.STAGE_CODE_*``) and, by :attr:`label`, the stage strings of results,
+    JSON, CSV and bags."""
 
     ON_BELT = 0
     E1 = 1
@@ -30,6 +32,12 @@ class Stage(IntEnum):
     E4 = 4
     SORTED = 5
     PASSED = 6
+
+    @property
+    def label(self) -> str:
+        """The stage's string in results and files: ``on_belt``, ``E1``-``E4``, ``sorted``,
+        ``passed``."""
+        return self.name if self.name[0] == "E" else self.name.lower()
 
 
 class StartMode(IntEnum):

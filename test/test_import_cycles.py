@@ -109,5 +109,5 @@ def test_relative_and_function_level_imports_are_edges(tmp_path):
 def test_fence_sorter_has_no_import_cycle():
     graph = import_graph()
     assert len(graph) > 50 and "fence_sorter.physics.simulate" in graph
-    assert "fence_sorter.physics.engine" in graph["fence_sorter.physics.simulate"]
+    assert "fence_sorter.physics.stepper" in graph["fence_sorter.physics.simulate"]
     assert cycles(graph) == []

@@ -4,7 +4,7 @@ and the damage risk of every parcel.
 A SortEvent holds every accepted step of one stroke's solve up to the parcel's outcome, so the
 figures the simulator published on /sort_outcomes follow from it again: peak N is the largest N
 of the steps or, where three steps around a local maximum share one contact set, the vertex of
-the parabola through them (the rule of :class:`fence_sorter.physics.simulate.Observer`); peak
+the parabola through them (the rule of the solve loop's reductions, ``kernel.observe``); peak
 a_N = peak N / m_p; peak N_stiff the largest of the impacts' N_stiff; w_n the first impact's
 normal speed. The N_stiff course (Fig. 11c, 12c) is in the message, on its own time grid.
 Times here are sim time [s]; SI units throughout.

@@ -97,7 +97,6 @@ def event_scenario(base: Scenario, ev: ParcelEvent) -> Scenario:
         method="trapezoidal",
         stop_when_sorted=False,
         t_end=ev.t_end,
-        engine="compiled",
     )
     record = ("trajectory", "fence") if base.fence is not None else ("trajectory",)
     return replace(

@@ -6,7 +6,7 @@ A stroke starts when the commanded parcel's front reaches R_s (``START_AT_RS``) 
 time (``START_AT_TIME``); the fence is then busy for one cycle t_c = t1 + t2 = 2 t1. Each stroke
 is one physics :class:`~fence_sorter.physics.simulate.Scenario` (the parcel, DriveParams(alpha_k,
 t1, R_s) with R_s the front position at the start, the line's conveyor/fence/contact/solver)
-stepped by :meth:`Integrator.stepping` / :meth:`Integrator.advance` in step with the line clock,
+stepped by its :class:`~fence_sorter.physics.stepper.Stepper` in step with the line clock,
 so the event is integrated as sim time passes, never precomputed. The solve runs on after the
 parcel is sorted until the fence cycle ends (the fence shape comes from it); a parcel that is not
 sorted stays in its solve to the solver's end (2 t1 + settle_time) and then rides on.
@@ -35,10 +35,8 @@ from fence_sorter.inputs import (
     validate_parcel,
 )
 from fence_sorter.physics import kernel as K
-from fence_sorter.physics.contacts import STAGE_E1, STAGE_E2, STAGE_E3, STAGE_E4, STAGE_SORTED
 from fence_sorter.physics.drive import drive_state
 from fence_sorter.physics.fence import FenceParams, build_fence, node_positions
-from fence_sorter.physics.integrators import Integrator
 from fence_sorter.physics.params import (
     OUR_METHODS,
     ContactParams,
@@ -47,7 +45,8 @@ from fence_sorter.physics.params import (
     SolverParams,
 )
 from fence_sorter.physics.parcel import ParcelBody, initial_pose, parcel_body, world_corners
-from fence_sorter.physics.simulate import Observer, Scenario, SimulationResult, SortingModel
+from fence_sorter.physics.simulate import Scenario, SimulationResult, SortingModel
+from fence_sorter.physics.stepper import Stepper
 
 from .types import (
     NAN,
@@ -66,13 +65,6 @@ from .types import (
     StrokeStarted,
 )
 
-STAGES = {
-    STAGE_E1: Stage.E1,
-    STAGE_E2: Stage.E2,
-    STAGE_E3: Stage.E3,
-    STAGE_E4: Stage.E4,
-    STAGE_SORTED: Stage.SORTED,
-}
 #: nodes drawn along a stiff fence (it has no FEM mesh)
 STIFF_NODES = 11
 #: a parcel corner this far inside the swept sector counts as overlapping [m]
@@ -163,17 +155,16 @@ HELD = 8
 
 
 class _Tap:
-    """Observer wrapper keeping the accepted points a snapshot at the line time may need.
+    """The accepted points of a stroke's solve a snapshot at the line time may need.
 
     The solve may run ahead of the line clock (:meth:`SortingLine.prefetch`), so the points
     from the last one at or before the line time onwards are kept (:meth:`trim` drops older
     ones) and :meth:`at` interpolates between the two around the time asked for.
     """
 
-    __slots__ = ("obs", "ts", "points", "t_sorted", "width", "on_sorted", "trace", "n_sorted")
+    __slots__ = ("ts", "points", "t_sorted", "width", "trace", "n_sorted")
 
-    def __init__(self, obs: Observer, width: float):
-        self.obs = obs
+    def __init__(self, width: float):
         self.ts: list[float] = []
         self.points: list[tuple[np.ndarray, np.ndarray]] = []
         # every accepted point, never trimmed: the event's SortEvent (columns TRACE_COLUMNS)
@@ -181,7 +172,6 @@ class _Tap:
         self.n_sorted: int | None = None  # trace points up to the crossing of y0 = s
         self.t_sorted: float | None = None  # C_s crossing y0 = s (interpolated) [s]
         self.width = width
-        self.on_sorted = None  # called once, at the accepted point where C_s crossed y0 = s
 
     @property
     def cur(self):
@@ -190,10 +180,10 @@ class _Tap:
             return None
         return (self.ts[-1], *self.points[-1])
 
-    def __call__(self, st, on_belt: bool):
-        obs = self.obs
-        out = obs(st, on_belt)
-        res, slots = st.res, st.out
+    def add(self, stepper: Stepper) -> bool:
+        """Keep the stepper's last accepted point; True if C_s crossed y0 = s at it."""
+        t, y = stepper.t, stepper.y.copy()
+        res, slots = stepper.resultants, stepper.contacts
         active = np.flatnonzero(slots[: K.SLOT_BORDER, K.C_ACTIVE])
         if len(active):
             k = active[np.argmax(slots[active, K.C_N])]
@@ -201,6 +191,7 @@ class _Tap:
         else:
             px = py = math.nan
             ddot = 0.0
+        impacts = stepper.impacts
         extra = np.array(
             [
                 res[K.R_ALPHA],
@@ -212,28 +203,26 @@ class _Tap:
                 px,
                 py,
                 # held, not interpolated (:meth:`at`): the stage and the current impact's
-                # N_stiff at this point, as the observer had them when it was taken
-                STAGES.get(obs.stage, Stage.ON_BELT).value,
-                obs.impacts[-1][2] if obs.impacts else 0.0,
+                # N_stiff at this point, as the solve's reductions had them there
+                stepper.stage.value,
+                impacts[-1][2] if impacts else 0.0,
             ]
         )
         prev = (self.ts[-1], self.points[-1][0]) if self.ts else None
-        self.ts.append(st.t)
-        self.points.append((st.y.copy(), extra))
-        y = st.y
+        self.ts.append(t)
+        self.points.append((y, extra))
         self.trace.append((
-            st.t, extra[HELD], res[K.R_ACTIVE_MASK], res[K.R_FENCE_N], res[K.R_MAX_D], ddot,
+            t, extra[HELD], res[K.R_ACTIVE_MASK], res[K.R_FENCE_N], res[K.R_MAX_D], ddot,
             res[K.R_TIP_W], res[K.R_ALPHA], y[0], y[1], y[2], y[3], y[4], y[5],
         ))  # fmt: skip
-        if self.obs.sorted and self.t_sorted is None:
-            t0, y0 = (prev[0], prev[1][1]) if prev is not None else (st.t, 0.0)
-            y1 = st.y[1]
+        if stepper.sorted and self.t_sorted is None:
+            t0, y0 = (prev[0], prev[1][1]) if prev is not None else (t, 0.0)
+            y1 = y[1]
             frac = (self.width - y0) / (y1 - y0) if y1 > y0 else 1.0
-            self.t_sorted = t0 + min(max(frac, 0.0), 1.0) * (st.t - t0)
+            self.t_sorted = t0 + min(max(frac, 0.0), 1.0) * (t - t0)
             self.n_sorted = len(self.trace)
-            if self.on_sorted is not None:
-                self.on_sorted()
-        return out
+            return True
+        return False
 
     def trim(self, t: float) -> None:
         """Forget the points before the last one at or before local time ``t``."""
@@ -261,28 +250,27 @@ class _Tap:
 
 
 class _Stroke:
-    """One running sorting event: its Scenario, model, integrator and generator."""
+    """One running sorting event: its Scenario, model and :class:`Stepper`, stepped one
+    accepted point at a time as the line time passes."""
 
     def __init__(self, parcel: _Parcel, t_start: float, sc: Scenario):
         self.parcel = parcel
         self.t_start = t_start
         self.sc = sc
         self.model = SortingModel(sc)
-        self.integ = Integrator(self.model)
-        self.observer = Observer(self.model)
-        self.tap = _Tap(self.observer, sc.conveyor.width)
-        # the figures of a SORTED outcome: the solve up to the point where C_s crossed y0 = s,
-        # as simulate() reports them, however far the solve has run ahead of the line since
+        self.stepper = Stepper(self.model)
+        self.tap = _Tap(sc.conveyor.width)
+        # the figures of a SORTED outcome: the solve's reductions at the point where C_s
+        # crossed y0 = s, as simulate() reports them, however far the solve runs on since
         self.sorted_result: SimulationResult | None = None
-        self.tap.on_sorted = self._sorted_now
-        self.stepper = self.integ.stepping(self.tap)
-        next(self.stepper, None)  # the initial point (t = 0) and the first step
         self.finished = False  # the solve has ended (maybe ahead of the line time)
-        self.step_cost = 0.0  # wall time of the costliest recent stepper call [s] (prefetch)
+        self.step_cost = 0.0  # wall time of the costliest recent step (prefetch) [s]
         self.alive = True  # the solve covers the line time (False once past its end)
         self.failed: str | None = None
-        if self.integ.outcome is not None:
-            self._ended()
+        self.stepper.start()
+        self._take()  # the initial point (t = 0)
+        self._next()  # and the first step
+        if self.finished:
             self.advance(0.0)
         self.failure_reported = False
         self.steps = 1
@@ -292,48 +280,46 @@ class _Stroke:
     def t_cycle(self) -> float:
         return 2.0 * self.sc.drive.t1
 
+    def _take(self) -> None:
+        if self.tap.add(self.stepper):
+            self.sorted_result = self.result()
+
+    def _next(self) -> None:
+        """One step of the solve; its point is kept unless the solve failed there (a diverged
+        point is never data: no snapshot interpolates towards it)."""
+        if self.stepper.step() is None:
+            self._take()
+        self.finished = not self.stepper.running
+
     def advance(self, t_local: float) -> None:
         """Step the solve to cover local time ``t_local`` (it may already be ahead); the stroke
         stops being ``alive`` once ``t_local`` reaches the end of a finished solve."""
         if not self.alive:
             return
-        if not self.finished and not self.integ.advance(self.stepper, t_local):
-            self._ended()
-        if self.finished and t_local >= self.integ.outcome[0] - 1e-12:
+        stepper = self.stepper
+        while not self.finished and stepper.t < t_local - 1e-12:
+            self._next()
+        if self.finished and t_local >= stepper.t - 1e-12:
             self.alive = False
-            self.failed = self.integ.outcome[1]
+            self.failed = None if stepper.diagnosis is None else stepper.diagnosis.text
         self.tap.trim(t_local)
 
     def prefetch(self, t_local: float, wall_deadline: float, clock) -> None:
-        """Step the solve ahead towards local time ``t_local`` while the costliest recent call
-        of its stepper still fits before ``wall_deadline`` on ``clock()``."""
-        integ = self.integ
+        """Step the solve ahead towards local time ``t_local`` while the costliest recent step
+        still fits before ``wall_deadline`` on ``clock()``."""
         now = clock()
-        # a next() may run a compiled chunk of several steps: go on only while the costliest
-        # recent one still fits before the deadline (the estimate decays 1 % per call and per
-        # prefetch, so one slow chunk does not stop the stepping ahead for good)
+        # go on only while the costliest recent step still fits before the deadline (the
+        # estimate decays 1 % per step and per prefetch, so one slow step does not stop the
+        # stepping ahead for good)
         self.step_cost *= 0.99
         while (
             not self.finished
-            and integ.cur.t < t_local - 1e-12
+            and self.stepper.t < t_local - 1e-12
             and now + self.step_cost < wall_deadline
         ):
-            if next(self.stepper, None) is None:
-                self._ended()
+            self._next()
             then, now = now, clock()
             self.step_cost = max(now - then, 0.99 * self.step_cost)
-
-    def _ended(self) -> None:
-        """The solve has ended; a diverged solve's last point (the observer saw it before the
-        diagnosis) is dropped so no snapshot ever interpolates towards it."""
-        self.finished = True
-        if self.integ.outcome[1] is not None and len(self.tap.ts) > 1:
-            self.tap.ts.pop()
-            self.tap.points.pop()
-            self.tap.trace.pop()
-
-    def _sorted_now(self) -> None:
-        self.sorted_result = self.result()
 
     def trace(self, t: float) -> EventTrace:
         """The event at every accepted step up to its parcel's outcome at line time ``t`` (a
@@ -342,7 +328,7 @@ class _Stroke:
         n = tap.n_sorted if tap.n_sorted is not None else len(tap.trace)
         steps = np.array(tap.trace[:n], dtype=float).reshape(-1, len(TRACE_COLUMNS))
         t_end = steps[-1, 0] if len(steps) else 0.0
-        impacts = [imp for imp in self.observer.impacts if imp[0] <= t_end]
+        impacts = [imp for imp in self.stepper.impacts if imp[0] <= t_end]
         contact = self.sc.contact
         return EventTrace(
             self.parcel.spec.parcel_id, t, self.t_start, self.model.mass, contact.b_p,
@@ -350,17 +336,12 @@ class _Stroke:
         )  # fmt: skip
 
     def close(self) -> None:
-        self.stepper.close()
         self.alive = False
         self.finished = True
 
     def result(self) -> SimulationResult:
-        """The observer's reduction so far (same figures :func:`simulate` reports)."""
-        if self.integ.outcome is not None:
-            t, diagnosis, steps, rejected = self.integ.outcome
-        else:
-            t, diagnosis, steps, rejected = self.integ.cur.t, None, 0, 0
-        return self.observer.result(t, diagnosis, steps, rejected, 0.0)
+        """The solve's reductions so far (the figures :func:`simulate` reports)."""
+        return self.stepper.result(wall=0.0)
 
 
 class _Parcel:

@@ -3,8 +3,9 @@
 ``solver.method = scipy:<name>`` (RK45, DOP853, Radau, BDF, LSODA; ``params.SCIPY_METHODS``)
 integrates the compiled right-hand side ``kernel.rhs`` (the same forces as the steppers, with
 explicit Karnopp friction) with SciPy's ``OdeSolver`` class of that name, stepped one accepted
-step at a time so the run is observed exactly like ours (``result.Observer``: peaks, impacts,
-stages, sorting, recorded series) and stopped by the same divergence checks.
+step at a time so the run is observed exactly like ours: each accepted point goes through the
+solve loop's own reductions (``Stepper.observe``, ``kernel.observe``: peaks, impacts, stages,
+sorting, energy audit, recorded series) and its divergence checks (``kernel.diverged``).
 
 What the baseline does and does not do, on purpose:
 
@@ -15,12 +16,12 @@ What the baseline does and does not do, on purpose:
 - No event location: contact onset and release, the N >= 0 clamp and stick/slip switches fall
   inside steps and are handled by the error control alone; that is the baseline.
 - The solver is restarted (fresh history, same tolerances) at the drive's breakpoints t1 and
-  2 t1 (the integrators end steps there too; the drive acceleration jumps at 2 t1, and a
+  2 t1 (our schemes end steps there too; the drive acceleration jumps at 2 t1, and a
   segment starting there evaluates the right-hand side on its far side) and when the load
   crosses into the chute (belt friction off from then on).
 - Stops: the observer's stop (sorted), the end time (``solver.t_end``, or 2 t1 plus
   ``solver.settle_time``), ``solver.max_wall_time``, a solver failure (SciPy's message) or a
-  diverged state (``Integrator._diverged``: NaN, deep penetration, runaway speed).
+  diverged state (``kernel.diverged``: NaN, deep penetration, runaway speed).
 """
 
 from __future__ import annotations
@@ -33,9 +34,8 @@ import scipy.integrate
 from scipy.optimize import brentq
 
 from . import kernel as K
-from .integrators import Integrator, State
 from .params import SCIPY_METHODS
-from .result import Observer
+from .stepper import Stepper
 
 
 def solver_class(method: str):
@@ -96,17 +96,13 @@ class RightHandSide:
         self.fill(t, y, dy, self.out, self.res, self.modal, self.lam)
         return dy
 
-    def observe_at(self, st: State, t: float, y: np.ndarray) -> None:
-        """Fill ``st`` at an accepted point: state, forces, contacts, belt wrench."""
-        st.t = float(t)
-        st.y[:] = y
+    def observe(self, stepper: Stepper, t: float, y: np.ndarray, on_belt: bool):
+        """Reduce an accepted point (forces, contacts and belt wrench evaluated there) with the
+        solve loop's reductions; ``(stop, on_belt)`` after it."""
+        y = np.ascontiguousarray(y, dtype=np.float64)
         dy = np.empty(self.n)
-        self.fill(st.t, st.y, dy, st.out, st.res, st.modal, st.lam)
-        # accelerations, for anyone reading st.acc (the integrators keep them there)
-        st.acc[:3] = dy[3:6]
-        m = self.model.n_modes
-        if m:
-            st.acc[3:] = dy[6 + m :]
+        self.fill(float(t), y, dy, self.out, self.res, self.modal, self.lam)
+        return stepper.observe(float(t), y, self.lam, self.out, self.res, on_belt)
 
 
 def _edge_crossing(dense, t0: float, t1: float, width: float) -> tuple[float, np.ndarray]:
@@ -131,15 +127,14 @@ def run_solve_ivp(model):
     breaks = sorted({b for b in (sc.drive.t1, 2.0 * sc.drive.t1) if 0.0 < b < t_end})
     breaks.append(t_end)
     fun = RightHandSide(model)
-    check = Integrator(model)  # its divergence checks
-    obs = Observer(model)
-    st = State(model.n_state, model.n_modes)
+    # the reductions and divergence checks of the solve loop, fed SciPy's accepted points
+    reduce = Stepper(model)
     on_belt = True
     fun.on_belt = on_belt
-    fun.observe_at(st, 0.0, model.initial_state())
-    stop, on_belt = obs(st, on_belt)
+    y = model.initial_state()
+    stop, on_belt = fun.observe(reduce, 0.0, y, on_belt)
     t = 0.0
-    y = st.y.copy()
+    y = np.array(y, dtype=np.float64)
     width = sc.conveyor.width
     steps = 0
     diagnosis = None
@@ -176,22 +171,22 @@ def run_solve_ivp(model):
         steps += 1
         if on_belt and y_old1 < width <= y[1]:
             # C_s crossed the belt edge y0 = s inside the step: end the step there (dense
-            # output), as our integrators do, so belt friction stops at the crossing
+            # output), as our schemes do, so belt friction stops at the crossing
             t, y = _edge_crossing(solver.dense_output(), t_old, t, width)
             y[1] = max(y[1], width)
             solver.status = "finished"  # restart from the crossing without belt friction
         fun.on_belt = on_belt
-        fun.observe_at(st, t, y)
         was_on_belt = on_belt
-        stop, on_belt = obs(st, on_belt)
-        diagnosis = check._diverged(st)
+        stop, on_belt = fun.observe(reduce, t, y, on_belt)
+        failure = reduce.diverged()
+        diagnosis = None if failure is None else failure.text
         if solver.status == "finished":
             fun.after = t  # a new segment starts on a drive breakpoint
             solver = None
         elif on_belt != was_on_belt:
             fun.after = -math.inf
             solver = None  # the load left the belt: restart without belt friction
-    return obs.result(t, diagnosis, steps, 0, time.perf_counter() - wall0, 0, 0)
+    return reduce.result(steps=steps, diagnosis=diagnosis, wall=time.perf_counter() - wall0)
 
 
 __all__ = ["RightHandSide", "end_time", "run_solve_ivp", "solver_class"]

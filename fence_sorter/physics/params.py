@@ -143,13 +143,11 @@ class ContactParams:
 
 @dataclass(frozen=True)
 class SolverParams:
-    """Time integration: method, steps or tolerances, end conditions (see ``integrators``).
+    """Time integration: method, steps or tolerances, end conditions (see ``stepper``).
 
     ``method``: ``adaptive`` (default; error-controlled trapezoidal), ``trapezoidal`` or
     ``generalized_alpha`` (fixed step ``dt``), or a SciPy baseline ``scipy:RK45``,
     ``scipy:DOP853``, ``scipy:Radau``, ``scipy:BDF``, ``scipy:LSODA`` (``rtol``/``atol``).
-    ``engine``: ``compiled`` (default) runs the control loop of every scheme in one
-    Numba function (``engine.py``), ``python`` in ``integrators.Integrator``: the same answers.
     """
 
     method: str = "adaptive"
@@ -165,18 +163,11 @@ class SolverParams:
     settle_time: float = 0.5  # [s] after the cycle for a load that is still moving
     stop_when_sorted: bool = True
     max_wall_time: float = 120.0  # [s]; a solve that takes longer is stopped and reported
-    # compiled: the whole solve loop in one Numba function (``engine``);
-    # python: the loop of ``integrators.Integrator`` (same answers)
-    engine: str = "compiled"
 
     def validate(self, prefix: str = "solver") -> None:
         if self.method not in SOLVER_METHODS:
             raise ParameterError(
                 f"{prefix}.method must be one of {', '.join(SOLVER_METHODS)}, got {self.method!r}"
-            )
-        if self.engine not in SOLVER_ENGINES:
-            raise ParameterError(
-                f"{prefix}.engine must be one of {', '.join(SOLVER_ENGINES)}, got {self.engine!r}"
             )
         check_range(f"{prefix}.dt", self.dt, 1e-7, 0.01, unit="s")
         check_range(f"{prefix}.dt_max", self.dt_max, 1e-6, 0.05, unit="s")
@@ -194,7 +185,6 @@ class SolverParams:
 OUR_METHODS = ("adaptive", "trapezoidal", "generalized_alpha")
 SCIPY_METHODS = ("scipy:RK45", "scipy:DOP853", "scipy:Radau", "scipy:BDF", "scipy:LSODA")
 SOLVER_METHODS = OUR_METHODS + SCIPY_METHODS
-SOLVER_ENGINES = ("compiled", "python")
 
 
 def field_names(cls) -> tuple[str, ...]:

@@ -1,6 +1,7 @@
-"""What one sorting event produced: :class:`SimulationResult`, and the :class:`Observer` that
-reduces a run's accepted points to it (peaks, impact speed, N_stiff, stages, and an energy audit:
-the load's energy never rises above the work its power sources did on it).
+"""What one sorting event produced: :class:`SimulationResult` with its :class:`EnergyAudit`
+(the load's energy never rises above the work its power sources did on it). The solve loop's
+reductions (``kernel.observe``: peaks, impact speed, N_stiff, stages, the audit) fill it through
+:func:`make_result`.
 """
 
 from __future__ import annotations
@@ -10,8 +11,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import kernel as K
-from .contacts import STAGE_SORTED, classify
 from .model import SortingModel
 
 
@@ -24,7 +23,8 @@ class EnergyAudit:
     external wrench (trapezoidal quadrature over the accepted points). Energy never rises
     without a source: r never grows over any interval ([t1, t2], ``max_rise``); in the elastic
     limit it stays ~0 both ways. E_flow = E_load(0) + integral |P_sources| dt scales the
-    quadrature's tolerance.
+    quadrature's tolerance. The solve loop updates it at every accepted point
+    (``kernel.loop._audit``).
     """
 
     max_residual: float = 0.0  # max r (the result's energy_excess) [J]
@@ -37,21 +37,6 @@ class EnergyAudit:
     t_rise: tuple[float, float] = (0.0, 0.0)  # that interval [s]
     run_min: float = 0.0
     t_run_min: float = 0.0
-
-    def update(self, t: float, r: float) -> None:
-        if not math.isfinite(r):
-            self.max_residual = self.min_residual = r
-            return
-        if not math.isfinite(self.max_residual):
-            return
-        if r > self.max_residual:
-            self.max_residual, self.t_max = r, t
-        if r < self.min_residual:
-            self.min_residual, self.t_min = r, t
-        if r < self.run_min:
-            self.run_min, self.t_run_min = r, t
-        if r - self.run_min > self.max_rise:
-            self.max_rise, self.t_rise = r - self.run_min, (self.t_run_min, t)
 
 
 @dataclass
@@ -117,157 +102,12 @@ class SimulationResult:
         }
 
 
-class Observer:
-    """Reduces the accepted points of a run to a :class:`SimulationResult` (any method).
-
-    Sorting: C_s crossing y0 = s (interpolated); impacts: a fence contact starting after none,
-    with N_stiff from the rigid-wall solve at its w_n; stages E1-E4 from the contact set; the
-    energy audit: E_load = kinetic + sum k D^5 / 5 must stay below E_load(0) plus the work of the
-    power sources (fence surface velocity times contact force, belt velocity times belt friction)
-    and the external wrench.
-    """
-
-    def __init__(self, model: SortingModel):
-        self.md = model
-        sc = model.sc
-        self.width = sc.conveyor.width
-        self.stop_when_sorted = sc.solver.stop_when_sorted
-        self.want = set(sc.record)
-        self.rec: dict[str, list] = {}
-        self.sorted = False
-        self.touched = False
-        self.had_fence = False
-        self.exit_speed = math.nan
-        self.impact_speed = math.nan
-        self.impacts: list[tuple[float, float, float]] = []
-        self.peak_n = 0.0
-        self.peak_tip = 0.0
-        self.max_depth = 0.0
-        self.y_max = -math.inf
-        self.stage = None
-        self.stages: list[tuple[str, float]] = []
-        self.prev_t = 0.0
-        self.prev_y = np.zeros(6)
-        self.prev_power = 0.0
-        self.work = 0.0
-        self.last_n = [0.0, 0.0, 0.0]
-        self.last_t = [0.0, 0.0, 0.0]
-        self.last_mask = [-1, -1]  # contact masks at the two points before this one
-        self.first = True
-        self.audit = EnergyAudit()
-        self.mask = -1
-
-    def __call__(self, st, on_belt: bool) -> tuple[bool, bool]:
-        md, y, res = self.md, st.y, st.res
-        t = st.t
-        vx, vy, om = y[3], y[4], y[5]
-        energy = 0.5 * md.mass * (vx * vx + vy * vy) + 0.5 * md.inertia * om * om
-        energy += res[K.R_ENERGY_CONTACT]
-        ext = md.sc.external_wrench
-        power = res[K.R_POWER_FENCE] + ext[0] * vx + ext[1] * vy + ext[2] * om
-        if on_belt:
-            power += st.lam[0] * md.belt
-        audit = self.audit
-        if self.first:
-            self.first = False
-            audit.e0 = energy
-            audit.flow = abs(energy)
-            self.y_max = y[1]
-        else:
-            h = t - self.prev_t
-            self.work += 0.5 * h * (power + self.prev_power)
-            audit.flow += 0.5 * h * (abs(power) + abs(self.prev_power))
-            audit.update(t, energy - audit.e0 - self.work)
-            if y[1] >= self.width > self.prev_y[1] and not self.sorted:
-                frac = (self.width - self.prev_y[1]) / (y[1] - self.prev_y[1])
-                self.exit_speed = self.prev_y[4] + frac * (vy - self.prev_y[4])
-                self.sorted = True
-        mask = int(res[K.R_ACTIVE_MASK])
-        fence_on = (mask & 0xFF) != 0
-        if fence_on and not self.had_fence:
-            self.touched = True
-            slots = np.flatnonzero(st.out[: K.SLOT_BORDER, K.C_ACTIVE])
-            w_n = float(st.out[slots, K.C_DDOT].max())
-            if math.isnan(self.impact_speed):
-                self.impact_speed = w_n
-            peak = K.n_stiff(md.mass, w_n, md.sc.contact.b_p, md.sc.contact.k_p)
-            self.impacts.append((t, w_n, peak))
-        self.had_fence = fence_on
-        n = res[K.R_FENCE_N]
-        if n > self.peak_n:
-            self.peak_n = n
-        # a local maximum of N at the previous point: the parabola through the last three
-        # points recovers the peak between steps (third-order accurate; adaptive steps), if
-        # the same contacts carried the force at all three (N is smooth there; across an
-        # event, e.g. a corner sliding off the tip, it is not)
-        n1, n2 = self.last_n[1], self.last_n[2]
-        masks = self.last_mask
-        smooth = masks[0] == masks[1] == mask
-        masks[0], masks[1] = masks[1], mask
-        if smooth and n2 > n1 and n2 >= n and n1 > 0.0:
-            t0, t1 = self.last_t[1], self.last_t[2]
-            peak = K.parabola_peak(t0, n1, t1, n2, t, n)
-            if peak > self.peak_n:
-                self.peak_n = peak
-        self.last_n[1], self.last_n[2] = n2, n
-        self.last_t[1], self.last_t[2] = self.last_t[2], t
-        tip = abs(res[K.R_TIP_W])
-        if tip > self.peak_tip:
-            self.peak_tip = tip
-        if res[K.R_MAX_D] > self.max_depth:
-            self.max_depth = res[K.R_MAX_D]
-        if y[1] > self.y_max:
-            self.y_max = y[1]
-        if mask != self.mask or (self.sorted and self.stage != STAGE_SORTED):
-            self.mask = mask
-            stage = (
-                STAGE_SORTED if self.sorted else classify(st.out, md.normals, y[2], self.touched)
-            )
-            if stage != self.stage:
-                self.stage = stage
-                self.stages.append((stage, t))
-        if self.want:
-            self._record(st)
-        self.prev_t = t
-        self.prev_y[:] = y[:6]
-        self.prev_power = power
-        return self.sorted and self.stop_when_sorted, on_belt and not self.sorted
-
-    def _record(self, st) -> None:
-        rec, want, y = self.rec, self.want, st.y
-        if "trajectory" in want:
-            rec.setdefault("t", []).append(st.t)
-            for k, key in enumerate(("x", "y", "phi", "vx", "vy", "phidot")):
-                rec.setdefault(key, []).append(y[k])
-        if "fence" in want:
-            rec.setdefault("t_fence", []).append(st.t)
-            rec.setdefault("alpha_w", []).append(st.res[K.R_ALPHA])
-            rec.setdefault("tip_deflection", []).append(st.res[K.R_TIP_W])
-        if "forces" in want:
-            rec.setdefault("t_forces", []).append(st.t)
-            rec.setdefault("normal_force", []).append(st.res[K.R_FENCE_N])
-            rec.setdefault("deformation", []).append(st.res[K.R_MAX_D])
-        if "stages" in want:
-            rec.setdefault("t_stage", []).append(st.t)
-            rec.setdefault("stage", []).append(self.stage)
-
-    def result(self, t, diagnosis, steps, rejected, wall, forced=0, events=0) -> SimulationResult:
-        return make_result(
-            self.md, t, diagnosis, steps, rejected, wall, forced, events,
-            sorted_=self.sorted, touched=self.touched, exit_speed=self.exit_speed,
-            impact_speed=self.impact_speed, impacts=self.impacts, peak_n=self.peak_n,
-            peak_tip=self.peak_tip, max_depth=self.max_depth, y_max=self.y_max,
-            stages=self.stages, audit=self.audit,
-            series={k: np.asarray(v) for k, v in self.rec.items()},
-        )  # fmt: skip
-
-
 def make_result(
     md: SortingModel, t, diagnosis, steps, rejected, wall, forced, events, *, sorted_, touched,
     exit_speed, impact_speed, impacts, peak_n, peak_tip, max_depth, y_max, stages, audit, series,
 ) -> SimulationResult:  # fmt: skip
-    """The :class:`SimulationResult` of a run from its reductions (``Observer.result``; the
-    compiled loop's driver calls it with the loop's figures directly)."""
+    """The :class:`SimulationResult` of a run from its reductions (``Stepper.result`` calls it
+    with the solve loop's figures)."""
     width = md.sc.conveyor.width
     success = diagnosis is None
     if not success:

@@ -36,8 +36,6 @@ memory of one event). Per scene:
 - **Compiled kernel**: the same script in two fresh processes, with and without
   ``NUMBA_DISABLE_JIT=1``, on a shortened ``impact_flexible``; and the first call with a cold
   Numba cache (compilation).
-- **Solve loop**: the default ``solver.engine = compiled`` against ``python`` on each scene,
-  interleaved (``verification.engines.compare_engines``).
 
 Functions return plain dataclasses; :func:`render_markdown` turns a :class:`BenchReport` into
 ``docs/benchmarks.md``.
@@ -181,8 +179,8 @@ def timed_run(sc, force_border: bool = False) -> tuple[Outcome, float, float]:
     the timed call, and none runs just before it to leave the caches cold (call :func:`collect`
     before a block of calls instead). Every timed run of the benchmark, ours and SciPy's, goes
     through here."""
-    from fence_sorter.physics.engine import collector_off
     from fence_sorter.physics.simulate import simulate
+    from fence_sorter.physics.stepper import collector_off
 
     with collector_off():
         c0 = time.process_time()
@@ -832,8 +830,6 @@ class BenchReport:
     process_max_rss_kib: int
     total_wall: float
     targets: list[TargetCheck] = field(default_factory=list)
-    # solver.engine python against compiled per scene (verification.engines.compare_engines)
-    engines: list[dict] = field(default_factory=list)
 
 
 def bench_scene(
@@ -1101,10 +1097,6 @@ def run_bench(
     results = []
     for name in scenes:
         results.append(bench_scene(name, repeats, methods, ladder, cap, log))
-    from fence_sorter.verification.engines import compare_engines
-
-    log("solve loop: solver.engine python against compiled")
-    engines = compare_engines(scenes, repeats)
     jit = jit_comparison(
         max(2, repeats if quick else JIT_REPEATS),
         1 if quick else NOJIT_REPEATS,
@@ -1131,7 +1123,6 @@ def run_bench(
         jit=jit,
         process_max_rss_kib=peak_rss_kib(),
         total_wall=time.perf_counter() - t0,
-        engines=engines,
     )
     report.targets = evaluate_targets(results)
     return report
@@ -1701,49 +1692,6 @@ def render_markdown(rep: BenchReport) -> str:
             f"{_ms(j.warm_cache_first_call)} ms (cold compilation not measured in this run)."
         )
     add("")
-
-    if rep.engines:
-        add("## Solve loop: compiled against Python")
-        add("")
-        add(
-            "The default `solver.engine = compiled` runs the whole adaptive loop (step-size "
-            "control, event location, the observer's reductions) in one Numba function "
-            "(`kernel.solve`); `solver.engine = python` runs the same loop in Python "
-            "(`integrators.Integrator`) around the same compiled one-step kernel. Per scene, "
-            f"{rep.options['repeats']} calls of each, interleaved, model build included "
-            "(medians); both give the same answer (test/physics/test_engine.py)."
-        )
-        add("")
-        L += table(
-            (
-                "scene",
-                "steps",
-                "python wall [ms]",
-                "compiled wall [ms]",
-                "python RTF",
-                "compiled RTF",
-                "speed-up",
-                "python CPU [ms]",
-                "compiled CPU [ms]",
-                "same peak N",
-            ),
-            [
-                (
-                    e["scene"],
-                    str(e["steps"]),
-                    f"{e['python_ms']:.2f}",
-                    f"{e['compiled_ms']:.2f}",
-                    f"{e['python_rtf']:.1f}",
-                    f"{e['compiled_rtf']:.1f}",
-                    f"{e['speedup']:.2f}x",
-                    f"{e['python_cpu_ms']:.2f}",
-                    f"{e['compiled_cpu_ms']:.2f}",
-                    "yes" if e["same_peak"] else "NO",
-                )
-                for e in rep.engines
-            ],
-        )
-        add("")
 
     add("What these figures mean: [docs/verification.md](verification.md#benchmarks).")
     return "\n".join(L).rstrip() + "\n"

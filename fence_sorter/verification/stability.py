@@ -15,7 +15,7 @@ Invariants of a successful solve, each recorded as (name, passed, value, limit):
   finite; the exit speed is finite exactly when the load was sorted.
 - ``energy``: the load's energy E_load = kinetic + sum k_p D^5 / 5 never rises above E_load(0)
   plus the work its power sources did on it (fence surface velocity x contact force, belt velocity
-  x belt friction; see ``simulate.Observer``). The audit integrates the source power with the
+  x belt friction; see ``kernel.observe``). The audit integrates the source power with the
   trapezoidal rule at the accepted points, so it carries a quadrature error of the order of the
   solver's local error times the energy that flowed through the load; the tolerance is therefore
   ``ENERGY_ABS + ENERGY_REL x E_flow`` with E_flow = E_load(0) + integral of |P_sources| dt.
@@ -46,6 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fence_sorter.codes import Stage
 from fence_sorter.physics.simulate import EnergyAudit, SortingModel, simulate
 from fence_sorter.verification.machine import git_revision, machine_info
 from fence_sorter.verification.report import table
@@ -78,7 +79,7 @@ CONV_EXIT_REL = 1e-2
 TIME_GRACE = 5.0  # [s] one step past the wall-time check
 DEFAULT_WALL = 60.0  # [s] solver.max_wall_time of a case
 
-# diagnoses the solver names (integrators.Integrator.run and _diverged)
+# diagnoses the solver names (stepper.Failure, stepper.diagnosis_text)
 KNOWN_CAUSES = (
     "step size fell below solver.min_dt",
     "deep penetration",
@@ -463,7 +464,7 @@ CASES: tuple[Case, ...] = (
         "impact_flexible",
         {"parcel.lateral_gap": 0.0},
         item="a parcel exactly on the border (E3)",
-        stage="E3",
+        stage=Stage.E3.label,
     ),
     Case(
         "border_stiff",
@@ -472,7 +473,7 @@ CASES: tuple[Case, ...] = (
         "positioned_stiff",
         {"drive.alpha_k_deg": 75.0},
         item="a parcel exactly on the border (E3)",
-        stage="E3",
+        stage=Stage.E3.label,
     ),
     Case(
         "border_slide",
@@ -480,7 +481,7 @@ CASES: tuple[Case, ...] = (
         "slide_flexible",
         {},
         item="a parcel exactly on the border (E3)",
-        stage="E3",
+        stage=Stage.E3.label,
     ),
     # -- Karnopp thresholds -----------------------------------------------------------------------
     *(
@@ -710,7 +711,7 @@ def _finite_check(r) -> Invariant:
     bad += [k for k, v in scalars.items() if not math.isfinite(v)]
     if r.sorted != math.isfinite(r.exit_speed_y):
         bad.append("exit_speed_y")
-    touched = any(s not in ("on_belt",) for s, _ in r.stages)
+    touched = any(s != Stage.ON_BELT.label for s, _ in r.stages)
     if touched and not math.isfinite(r.impact_normal_speed):
         bad.append("impact_normal_speed")
     bad += [k for k, v in r.series.items() if v.dtype.kind == "f" and not np.isfinite(v).all()]
@@ -796,7 +797,7 @@ def _compare(prefix: str, r, rr, scenario, what: str) -> list[Invariant]:
 
 
 def _touched(r) -> bool:
-    return any(s != "on_belt" for s, _ in r.stages)
+    return any(s != Stage.ON_BELT.label for s, _ in r.stages)
 
 
 def _named_diagnosis(diagnosis: str | None, cause: str = "") -> Invariant:

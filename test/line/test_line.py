@@ -426,7 +426,7 @@ def test_prefetch_steps_ahead_without_changing_anything():
             snaps.append(_snap_key(ln.snapshot()))
             if horizon:
                 ln.prefetch(horizon, math.inf)
-                ahead.extend(s.integ.cur.t + s.t_start - ln.t for s in ln.strokes if s.alive)
+                ahead.extend(s.stepper.t + s.t_start - ln.t for s in ln.strokes if s.alive)
                 solved.update(
                     pid
                     for pid, p in ln.parcels.items()
@@ -455,12 +455,12 @@ def test_prefetch_respects_its_wall_deadline():
     line = _stream_line()
     run(line, 1.5)  # parcel 1's stroke (from t = 1.42 s) is running, not yet sorted
     (s,) = [s for s in line.strokes if s.alive]
-    t_before = s.integ.cur.t
+    t_before = s.stepper.t
     line.prefetch(0.5, 0.0)  # no spare time at all: nothing is stepped
-    assert s.integ.cur.t == t_before
+    assert s.stepper.t == t_before
     ticks = iter(range(10**6))
     line.prefetch(0.5, 3.0, clock=lambda: next(ticks))  # three steps' worth of clock checks
-    assert t_before < s.integ.cur.t
+    assert t_before < s.stepper.t
 
 
 def test_prefetched_diverging_solve_is_reported_at_its_time_with_no_state_past_it():

@@ -100,6 +100,33 @@ def test_a_diverging_solve_stops_with_the_integrators_diagnosis():
     assert r.sim_time < 0.1
 
 
+def test_baseline_points_go_through_the_loops_reductions():
+    """SciPy's accepted points are reduced by the solve loop's own reductions (kernel.observe):
+    one recorded point per accepted step and the initial one; the peak N bounds the recorded N
+    (the parabola between points), y_max is the largest recorded y, the exit speed is vy
+    interpolated where y crosses s, and the stage series enters each stage when the stage list
+    says."""
+    sc = scene("positioned_stiff", method="scipy:LSODA", rtol=1e-5)
+    sc = replace(sc, record=("trajectory", "forces", "stages"))
+    r = simulate(sc)
+    assert r.success and r.sorted
+    s = r.series
+    assert len(s["t"]) == r.steps + 1 and np.all(np.diff(s["t"]) > 0.0)
+    n_max = s["normal_force"].max()
+    assert n_max <= r.peak_contact_force <= 1.05 * n_max
+    assert r.y_max == s["y"].max()
+    width = sc.conveyor.width
+    k = int(np.argmax(s["y"] >= width))
+    frac = (width - s["y"][k - 1]) / (s["y"][k] - s["y"][k - 1])
+    vy = s["vy"][k - 1] + frac * (s["vy"][k] - s["vy"][k - 1])
+    assert r.exit_speed_y == pytest.approx(vy, rel=1e-12)
+    stage = s["stage"]
+    entered = [0] + [i for i in range(1, len(stage)) if stage[i] != stage[i - 1]]
+    assert [(str(stage[i]), float(s["t_stage"][i])) for i in entered] == r.stages
+    assert r.stages[0][0] == "on_belt" and r.stages[-1][0] == "sorted"
+    assert len(r.impacts) >= 1 and r.peak_contact_force_stiff == max(p for *_, p in r.impacts)
+
+
 def test_solver_class_names_the_allowed_methods():
     assert solver_class("scipy:DOP853").__name__ == "DOP853"
     with pytest.raises(ValueError, match="scipy:RK45"):

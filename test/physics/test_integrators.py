@@ -14,8 +14,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from fence_sorter.physics.integrators import Scheme, State, generalized_alpha_coefficients
+from fence_sorter.physics import kernel as K
 from fence_sorter.physics.simulate import SortingModel, simulate
+from fence_sorter.physics.stepper import Failure, Stepper, generalized_alpha_coefficients
 from fence_sorter.scene import load_scene
 
 SMOOTH = load_scene(
@@ -75,29 +76,44 @@ def test_generalized_alpha_coefficients():
 
 @pytest.mark.parametrize("rho_inf", [1.0, 0.6, 0.0])
 def test_generalized_alpha_damps_the_top_fence_mode_by_rho_inf(rho_inf):
-    """No structural damping, drive at rest: the top mode (omega h >> 1) keeps its amplitude
-    at rho_inf = 1 and loses it at the rate rho_inf per step otherwise; mode 1 (omega h ~ 0.2)
-    loses under 10 % over the same 40 steps (the dissipation targets the top of the band)."""
-    sc = load_scene("impact_flexible", ["fence.damping_ratio=0", "drive.r_s=-3"]).scenario
-    sc = replace(sc, solver=replace(sc.solver, method="generalized_alpha", rho_inf=rho_inf))
+    """No structural damping, drive at rest after its cycle, no contact: the top mode
+    (omega h >> 1) keeps its amplitude at rho_inf = 1 and loses it at the rate rho_inf per step
+    otherwise; mode 1 (omega h ~ 0.2) loses under 10 % over the same 40 steps (the dissipation
+    targets the top of the band). The solve loop's own steps, from modal amplitudes set after
+    the fence cycle with accelerations consistent with them."""
+    sc = load_scene(
+        "impact_flexible",
+        [
+            "fence.damping_ratio=0",
+            "drive.r_s=-3",
+            "solver.method=generalized_alpha",
+            "solver.dt=2e-3",
+            f"solver.rho_inf={rho_inf}",
+        ],
+    ).scenario
     model = SortingModel(sc)
-    scheme = Scheme(model, "generalized_alpha")
     m = model.n_modes
-    a, b = State(model.n_state, m), State(model.n_state, m)
-    a.t = 10.0  # long after the fence cycle: the drive is at rest
-    a.y[:] = model.initial_state()
-    a.y[6] = 1e-3  # mode 1
-    a.y[6 + m - 1] = 1e-6  # top mode
-    scheme.initialize(a, on_belt=True)
-    h = 2e-3
+    h = sc.solver.dt
     assert model.omega[-1] * h > 100.0 and model.omega[0] * h < 0.3
+    s = Stepper(model)
+    assert s.advance(2.0 * sc.drive.t1 + 0.05)  # the drive is at rest from 2 t1
+    i = int(s.ctl[K.I_CUR])
+    assert s.RES[i, K.R_FENCE_N] == 0.0 and s.MODAL[i].max() == 0.0  # no load on the modes
+    s.Y[i, 6:] = 0.0
+    s.Y[i, 6] = 1e-3  # mode 1
+    s.Y[i, 6 + m - 1] = 1e-6  # top mode
+    rigid_modal, omega, zeta = s.modes[1], s.modes[2], s.modes[3]
+    K.loop._accelerations(
+        model.P, rigid_modal, omega, zeta, s.Y, s.LAM, s.RES, s.MODAL, s.ACC, i, 0.0
+    )
+    t0 = s.t
     amp1, top = [], []
     for _ in range(40):
-        assert scheme.step(h, a, b, 0.0, True, False) == 0
-        a, b = b, a
-        w1, wd1 = a.y[6], a.y[6 + m]
-        amp1.append(math.hypot(w1, wd1 / model.omega[0]))
-        top.append(math.hypot(a.y[6 + m - 1], a.y[6 + 2 * m - 1] / model.omega[-1]))
+        assert s.step() is None and s.running
+        y = s.y
+        amp1.append(math.hypot(y[6], y[6 + m] / model.omega[0]))
+        top.append(math.hypot(y[6 + m - 1], y[6 + 2 * m - 1] / model.omega[-1]))
+    assert s.t - t0 == pytest.approx(40 * h)  # 40 full fixed steps
     assert amp1[-1] == pytest.approx(1e-3, rel=0.1)  # mode 1 rings on
     if rho_inf == 1.0:
         assert top[-1] == pytest.approx(top[0], rel=0.2)
@@ -119,24 +135,29 @@ def test_modal_truncation_keeps_the_answer_and_drops_the_stiff_modes():
 
 def test_stepping_in_chunks_is_the_same_solve():
     """The soft-real-time simulator advances a solve in publish-period chunks
-    (Integrator.stepping/advance): the chunks must not change the steps taken."""
-    from fence_sorter.physics.integrators import Integrator
-    from fence_sorter.physics.simulate import Observer
-
+    (Stepper.advance) or one accepted point at a time (Stepper.step): neither changes the
+    steps taken."""
     model = SortingModel(SMOOTH)
-    whole = Integrator(model)
-    whole.run(Observer(model))
-    chunked = Integrator(model)
-    stepper = chunked.stepping(Observer(model))
+    whole = Stepper(model)
+    assert whole.advance() is False and whole.status == "finished"
+    chunked = Stepper(model)
     t, alive = 0.0, True
     while alive:
         t += 0.02
-        alive = chunked.advance(stepper, t)
+        alive = chunked.advance(t)
         if alive:
-            assert chunked.cur.t >= t - 1e-12
-    assert chunked.outcome[2] == whole.outcome[2]  # same number of steps
-    assert chunked.cur.t == whole.cur.t
-    np.testing.assert_array_equal(chunked.cur.y, whole.cur.y)
+            assert chunked.t >= t - 1e-12
+    single = Stepper(model)
+    times = [single.t]
+    while single.running:
+        assert single.step() is None
+        assert single.t > times[-1]
+        times.append(single.t)
+    for other in (chunked, single):
+        assert other.status == "finished"
+        assert other.ctl[K.I_STEPS] == whole.ctl[K.I_STEPS] == len(times) - 1
+        assert other.t == whole.t
+        np.testing.assert_array_equal(other.y, whole.y)
 
 
 @pytest.mark.parametrize(
@@ -214,24 +235,48 @@ def test_schemes_stay_second_order_under_coupled_belt_slip(method):
     assert 1.8 < order < 2.3, order
 
 
+class FakeClock:
+    """A wall clock that moves only when told to (``tick`` per reading, ``pause`` by hand)."""
+
+    def __init__(self, tick: float = 0.0):
+        self.now, self.tick = 0.0, tick
+
+    def __call__(self) -> float:
+        self.now += self.tick
+        return self.now
+
+
 def test_wall_time_limit_counts_stepping_not_the_pauses_between_chunks():
     """A soft-real-time caller pauses between chunks; solver.max_wall_time must only count the
     time spent stepping (else a real-time stroke longer than the limit would be cut off)."""
-    import time as _time
-
-    from fence_sorter.physics.integrators import Integrator
-    from fence_sorter.physics.simulate import Observer
-
     sc = replace(SMOOTH, solver=replace(SMOOTH.solver, max_wall_time=0.3))
-    model = SortingModel(sc)
-    integ = Integrator(model)
-    stepper = integ.stepping(Observer(model))
+    clock = FakeClock()
+    stepper = Stepper(SortingModel(sc), clock=clock)
     t = 0.0
-    while integ.advance(stepper, t):
-        _time.sleep(0.1)  # 6 chunks: 0.6 s of pauses in all, twice the limit
+    while stepper.advance(t):
+        clock.now += 0.1  # a pause: 6 chunks, 0.6 s of pauses in all, twice the limit
         t += 0.1
-    assert integ.outcome[1] is None, integ.outcome[1]
-    assert integ.cur.t == pytest.approx(0.6)
+    assert stepper.diagnosis is None and stepper.status == "finished"
+    assert stepper.t == pytest.approx(0.6)
+
+
+def test_wall_time_limit_stops_a_solve_that_steps_too_long():
+    """Each solve-loop call reads the clock twice: at 0.05 s per reading the time spent
+    stepping passes the 0.3 s limit within a few calls; the solve fails with a typed
+    diagnosis at the point it had reached, and simulate reports it."""
+    sc = replace(SMOOTH, solver=replace(SMOOTH.solver, max_wall_time=0.3))
+    stepper = Stepper(SortingModel(sc), clock=FakeClock(tick=0.05))
+    while stepper.step() is None and stepper.running:
+        pass
+    d = stepper.diagnosis
+    assert stepper.status == "failed" and d.kind is Failure.WALL_TIME_LIMIT
+    assert d.value == 0.3 and d.t == stepper.t and 0.0 < d.t < 0.6
+    assert stepper.busy > 0.3 and 1 <= stepper.ctl[K.I_STEPS] <= 7  # ~0.05 s per step
+    assert str(d) == d.text == f"wall-time limit 0.3 s reached at t = {d.t:.4f} s"
+    r = stepper.result()
+    assert not r.success and r.diagnosis == d.text and r.sim_time == d.t
+    with pytest.raises(RuntimeError, match="failed"):
+        stepper.step()
 
 
 def test_oscillation_step_caps_only_lightly_damped_contacts() -> None:

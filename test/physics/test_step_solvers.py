@@ -3,26 +3,24 @@ warm start and the slide-off location (kernel.trapezoidal_step, belt_multiplier,
 
 from __future__ import annotations
 
-import dataclasses as dc
 import math
 
 import numpy as np
 import pytest
 
-from fence_sorter.physics import engine as E
-from fence_sorter.physics import integrators as I
 from fence_sorter.physics import kernel as K
 from fence_sorter.physics.friction import _limits
-from fence_sorter.physics.simulate import SortingModel, simulate
+from fence_sorter.physics.simulate import SortingModel
+from fence_sorter.physics.stepper import Stepper
 from fence_sorter.scene import load_scene
 
 STIFF = load_scene("positioned_stiff").scenario
 
 
 def _state_at(t: float):
-    """positioned_stiff's model and compiled solve advanced to the first accepted point >= t."""
+    """positioned_stiff's model and solve advanced to the first accepted point >= t."""
     md = SortingModel(STIFF)
-    cs = E.CompiledSolve(md)
+    cs = Stepper(md)
     cs.advance(t)
     return md, cs, int(cs.ctl[K.I_CUR])
 
@@ -121,38 +119,43 @@ def test_belt_multiplier_from_any_start_is_the_same_root(u) -> None:
     assert lam[0] == pytest.approx(-1.0)  # -u/W
 
 
-def test_a_slide_off_is_located_once_before_and_once_across() -> None:
+def test_a_slide_off_is_located_once_before_and_once_across(monkeypatch) -> None:
     """A corner sliding off the fence tip: one location ends the step just before it (within
     the iteration tolerance of the tip, so the force there is not skipped), the next ends just
     past it (within the tolerance); no further steps creep up on the tip (positioned_stiff
     slides one corner off). The end position jumps at a friction switch inside the trial
     step just past the tip; the secant on the smooth side before it reaches the tolerance in
     at most 5 trial steps (the Illinois secant across the jump took 10)."""
-    sc = dc.replace(STIFF, solver=dc.replace(STIFF.solver, engine="python"))
+    loop = K.loop
     seen = []
     trials = []
-    orig = I.Integrator._locate
-    orig_step = I.Scheme.step
+    locate, step = loop._locate, loop._step
 
-    def spy(self, h, on_belt, slot, kind, g0, g1):
+    def spy(*args):
+        # the located trial is left in the trial row; its event function (slot, kind, g0, g1
+        # are the last four arguments)
         trials.append(0)
-        taken = orig(self, h, on_belt, slot, kind, g0, g1)
+        taken = locate.py_func(*args)  # as Python: its trial steps go through the spy below
+        P, ctl, OUT = args[0], args[8], args[12]
+        slot, kind, g0 = args[-4], args[-3], args[-2]
         if kind == K.EVENT_SLIDE_OFF:
-            seen.append((g0, K.event_value(self.model.P, self.trial.out, slot, kind), trials[-1]))
+            seen.append((g0, K.event_value(P, OUT[ctl[K.I_TRIAL]], slot, kind), trials[-1]))
         return taken
 
-    def step(self, *args):
+    def counted(*args):
         if trials:
             trials[-1] += 1
-        return orig_step(self, *args)
+        return step(*args)
 
-    I.Integrator._locate = spy
-    I.Scheme.step = step
-    try:
-        r = simulate(sc)
-    finally:
-        I.Integrator._locate = orig
-        I.Scheme.step = orig_step
+    # the loop's source run as Python (its callees compiled), with the spies in its module
+    monkeypatch.setattr(loop, "_locate", spy)
+    monkeypatch.setattr(loop, "_step", counted)
+    stepper = Stepper(SortingModel(STIFF))
+    model, state = stepper._loop_arrays()
+    while loop.solve.py_func(model, state, 1 << 30, math.inf) != K.SOLVE_DONE:
+        stepper._grow()
+        model, state = stepper._loop_arrays()
+    r = stepper.result()
     assert r.success
     assert len(seen) == 2, seen
     assert seen[0][2] <= 5, seen

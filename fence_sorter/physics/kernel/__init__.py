@@ -35,10 +35,9 @@ and the profile showed the callers pushing ~150 words per ``_evaluate`` call and
 docs/numerics.md).
 
 The time-stepping schemes built on it (trapezoidal, generalized-alpha) are the ``*_step``
-functions of ``steps``. The control loop (events, step size, stages, recording) exists twice:
-:func:`solve` runs it compiled (``solver.engine = compiled``, the default, driven by
-``engine.py``), ``integrators.Integrator`` in Python (``solver.engine = python``, the
-soft-real-time line); test/physics/test_engine.py checks they agree.
+functions of ``steps``. :func:`solve` is the one control loop of every scheme (events, step
+size, stages, recording), driven by ``stepper.Stepper`` (``simulate`` and the soft-real-time
+line); under NUMBA_DISABLE_JIT=1 the same source is the Python reference.
 """
 
 from __future__ import annotations
@@ -256,7 +255,6 @@ from .loop import (  # noqa: E402 (after the cache directory is set)
     I_N_PROPS,
     I_N_REC,
     I_N_STAGES,
-    I_N_TRACE,
     I_NEXT_BREAK,
     I_ON_BELT,
     I_REJECTED,
@@ -290,21 +288,17 @@ from .loop import (  # noqa: E402 (after the cache directory is set)
     SOLVE_GROW,
     SOLVE_PAUSED,
     SOLVE_REACHED,
-    SOLVE_TRACED,
     STAGE_CODE_E1,
     STAGE_CODE_E2,
     STAGE_CODE_E3,
     STAGE_CODE_E4,
     STAGE_CODE_ON_BELT,
     STAGE_CODE_SORTED,
-    TR_ON_BELT,
-    TR_T,
-    TR_Y,
-    _diverged,
     classify_code,
+    diverged,
+    observe,
     parabola_peak,
     solve,
-    trace_width,
 )
 from .rhs import (  # noqa: E402 (after the cache directory is set)
     rhs,
@@ -415,7 +409,7 @@ __all__ = [
     "OSC_ZETA",
     "oscillation_step",
     "time_to_contact",
-    "_diverged",
+    "diverged",
     "classify_code",
     "DIAG_DEEP",
     "DIAG_MIN_DT",
@@ -499,7 +493,6 @@ __all__ = [
     "I_N_PROPS",
     "I_N_REC",
     "I_N_STAGES",
-    "I_N_TRACE",
     "I_NEXT_BREAK",
     "I_ON_BELT",
     "I_REJECTED",
@@ -516,6 +509,7 @@ __all__ = [
     "N_PROP_CACHE",
     "N_REC_COLS",
     "N_STATES",
+    "observe",
     "parabola_peak",
     "REC_ALPHA",
     "REC_FENCE_N",
@@ -535,15 +529,10 @@ __all__ = [
     "SOLVE_GROW",
     "SOLVE_PAUSED",
     "SOLVE_REACHED",
-    "SOLVE_TRACED",
     "STAGE_CODE_E1",
     "STAGE_CODE_E2",
     "STAGE_CODE_E3",
     "STAGE_CODE_E4",
     "STAGE_CODE_ON_BELT",
     "STAGE_CODE_SORTED",
-    "TR_ON_BELT",
-    "TR_T",
-    "TR_Y",
-    "trace_width",
 ]

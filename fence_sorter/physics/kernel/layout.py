@@ -149,6 +149,5 @@ LoopState = namedtuple(
         "impacts",  # rows (t, w_n, N_stiff)
         "stages",  # rows (t, stage code)
         "record",  # recorded series REC_*, a column per accepted point
-        "trace",  # accepted points for a Python observer (no rows: none)
     ],
 )

@@ -1,5 +1,6 @@
-"""The compiled solve loop (:func:`solve`): events, step size, stages, recording, the observer's
-reductions."""
+"""The solve loop (:func:`solve`): the one loop of every scheme (adaptive, trapezoidal,
+generalized-alpha): step size, events, drive breakpoints, divergence checks, and the reductions
+of a run (:func:`observe`: energy audit, peak N, impacts with N_stiff, stages, recorded series)."""
 
 from __future__ import annotations
 
@@ -26,7 +27,6 @@ from .layout import (
     C_NX,
     C_NY,
     N_COLS,
-    N_RES,
     N_SLOTS,
     P_ALPHA_K,
     P_BELT,
@@ -48,13 +48,13 @@ from .layout import (
 )
 from .steps import STEP_FORCED, STEP_REJECTED, generalized_alpha_step, trapezoidal_step
 
-# -- the compiled solve loop --------------------------------------------------------------------
-# ``integrators.Integrator.stepping`` (adaptive and fixed-step trapezoidal) and the reductions of
-# ``result.Observer`` as one compiled loop over flat arrays; ``engine.py`` builds the arrays,
-# calls :func:`solve` in chunks (wall-time limit, growing the output buffers) and turns the
-# figures into a ``SimulationResult``. The package's cache directory is keyed on all of its
-# sources (``kernel.cache_directory``), so the loop's cached code goes with the kernels it inlines.
-# It is the same algorithm step for step: test/physics/test_engine.py checks both loops agree.
+# -- the solve loop -------------------------------------------------------------------------------
+# One compiled loop over flat arrays; ``stepper.Stepper`` builds the arrays, calls :func:`solve`
+# one accepted step or a chunk of attempts at a time (wall-time limit, growing the output
+# buffers) and turns the figures into a ``SimulationResult``. The package's cache directory is
+# keyed on all of its sources (``kernel.cache_directory``), so the loop's cached code goes with
+# the kernels it inlines. NUMBA_DISABLE_JIT=1 runs the same source as Python (the reference,
+# test/physics/test_jit_reference.py).
 
 EVENT_TOL = 1e-10  # a located onset's step ends with 0 < D <= EVENT_TOL [m]
 EVENT_SORT = 3  # C_s crossing the sorting line y0 = s (belt friction ends there)
@@ -123,8 +123,7 @@ I_N_IMPACTS = 21
 I_N_STAGES = 22
 I_N_REC = 23
 I_N_PROPS = 24  # entries of the propagator cache in use
-I_N_TRACE = 25  # rows of the trace in use
-N_CTL = 26
+N_CTL = 25
 
 # float control ``fc``
 F_H = 0
@@ -171,9 +170,8 @@ SOLVE_DONE = 0
 SOLVE_PAUSED = 1  # attempt budget used up (the caller checks the wall-time limit)
 SOLVE_GROW = 2  # an output buffer is full
 SOLVE_REACHED = 3  # the accepted time reached t_target
-SOLVE_TRACED = 4  # the trace is full (the caller replays and empties it)
 
-# stages (contacts.STAGE_*, in this order) and the recorded row
+# stages: the values of fence_sorter.codes.Stage (the stepper checks them), and the recorded row
 STAGE_CODE_ON_BELT = 0
 STAGE_CODE_E1 = 1
 STAGE_CODE_E2 = 2
@@ -194,16 +192,6 @@ REC_T_FORCES = 13
 REC_T_STAGE = 14
 N_REC_COLS = 15
 N_PROP_CACHE = 256
-# a trace row: an accepted point as the Python observer sees it (``integrators.State``) and the
-# on_belt flag it was observed with: [t, on_belt, y, lam, out (row-major), res, modal, acc]
-TR_T = 0
-TR_ON_BELT = 1
-TR_Y = 2
-
-
-def trace_width(n_state, m):
-    """Columns of a trace row for a model with n_state states and m modes."""
-    return 2 + n_state + 3 + N_SLOTS * N_COLS + N_RES + m + 3 + m
 
 
 @njit(cache=True, _nrt=False)
@@ -223,7 +211,11 @@ def _remainder(x, y):
 
 @njit(cache=True, _nrt=False)
 def classify_code(out, normals, phi, touched, flush):
-    """``contacts.classify`` on the stage codes STAGE_CODE_*."""
+    """Stage E1-E4 (or on_belt before the first touch) from the contact slots ``out``: E3 with
+    a corner on the border wall, E2 with the fence tip inside the load, both corners of one face
+    on the fence, or a single corner whose face lies within ``flush`` of the fence tangent
+    (that face's contact pair holds it flush, the moment the paper's E2 (46) imposes by slaving
+    phi to the fence), E1 another single corner, E4 no contact after one; codes STAGE_CODE_*."""
     n_corners = 0
     first = -1
     for k in range(4):
@@ -294,7 +286,7 @@ def _copy_state(T, Y, LAM, OUT, RES, MODAL, ACC, dst, src):
 @njit(cache=True, _nrt=False)
 def _propagator_slot(omega, zeta, h, ctl, PK, PA, PG0, PG1):
     """Row of the exact modal maps for step h in the cache (computed on a miss; the cache is
-    emptied when full, like ``integrators.Propagators``)."""
+    emptied when full)."""
     if omega.shape[0] == 0:
         return 0
     n = ctl[I_N_PROPS]
@@ -318,7 +310,8 @@ def _jump_at(P, t):
 
 @njit(cache=True, _nrt=False)
 def _snap(h_nom, h):
-    """``Integrator._snap``: round a step down onto the ladder dt_max 2^(-k/4)."""
+    """Round an adaptive step down onto the ladder dt_max 2^(-k/4), so the exact modal
+    propagators (a matrix exponential per mode) are reused instead of recomputed."""
     if h == h_nom:  # k = 0 (most steps: no log2 and pow calls)
         return h_nom
     k = math.ceil(4.0 * math.log2(h_nom / h) - 1e-9)
@@ -330,7 +323,7 @@ def _trap(
     P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT, RES, MODAL, ACC,
     w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h, a, b, jump, on_belt, force,
 ):  # fmt: skip
-    """``Scheme.step`` of the trapezoidal scheme from state row a into row b."""
+    """One trapezoidal step from state row a into row b (exact modal maps for step h)."""
     k = _propagator_slot(omega, zeta, h, ctl, PK, PA, PG0, PG1)
     status = trapezoidal_step(
         P, corners, normals, phi, rigid_modal, (PA[k], PG0[k], PG1[k]), h, T[a], Y[a], RES[a],
@@ -390,8 +383,13 @@ def _locate(
     P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT, RES, MODAL, ACC,
     w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h, on_belt, slot, kind, g0, g1,
 ):  # fmt: skip
-    """``Integrator._locate``: Illinois regula falsi onto the event; the located trial is left
-    in the trial row; returns the step taken."""
+    """Shorten the step to end just past the sign change of ``slot``'s event function (or the
+    sort crossing): Illinois regula falsi until an onset step ends within EVENT_TOL of D = 0
+    (so w_n is read at the onset), a slide-off or sort crossing step ends within the iteration
+    tolerance of its line, or the bracket is below 1e-7 of the step. A corner sliding off the
+    tip ends one step just before the slide-off (the force there is the peak the step would
+    otherwise skip) and the next just past it. The located trial is left in the trial row;
+    returns the step taken."""
     a = ctl[I_CUR]
     trial = ctl[I_TRIAL]
     onset = kind == EVENT_ONSET
@@ -409,7 +407,7 @@ def _locate(
     before = 0.0
     have_before = False
     f_lo, f_hi, last = g0, g1, 0
-    lo_prev, g_lo_prev = 0.0, g0  # the lo end before the last (Integrator._locate)
+    lo_prev, g_lo_prev = 0.0, g0  # the lo end before the last (the secant on the smooth side)
     for _ in range(60):
         if hi - lo <= 1e-7 * h or (onset and g_hi <= EVENT_TOL):
             break
@@ -464,7 +462,7 @@ def _locate(
 
 @njit(cache=True, _nrt=False)
 def _audit(fc, t, r):
-    """``result.EnergyAudit.update``."""
+    """Update the energy audit (``result.EnergyAudit``) with the balance r at t."""
     if not math.isfinite(r):
         fc[F_MAX_RES] = r
         fc[F_MIN_RES] = r
@@ -487,8 +485,12 @@ def _audit(fc, t, r):
 
 
 @njit(cache=True, _nrt=False)
-def _observe(P, normals, cfg, ctl, fc, T, Y, LAM, OUT, RES, IMP, STG, REC, i, on_belt):
-    """``result.Observer.__call__`` at state row i; returns (stop, on_belt)."""
+def observe(P, normals, cfg, ctl, fc, T, Y, LAM, OUT, RES, IMP, STG, REC, i, on_belt):
+    """The reductions of a run at the accepted point in state row i: sorting (C_s crossing
+    y0 = s, exit speed interpolated), impacts (a fence contact after none, N_stiff at its w_n),
+    peak N (with the parabola through the last three points when the contact set held), tip
+    deflection, depth, y_max, stages, the energy audit and the recorded series; returns
+    (stop, on_belt). The SciPy baselines call it from Python on their own points."""
     t = T[i]
     y = Y[i]
     res = RES[i]
@@ -592,39 +594,9 @@ def _observe(P, normals, cfg, ctl, fc, T, Y, LAM, OUT, RES, IMP, STG, REC, i, on
 
 
 @njit(cache=True, _nrt=False)
-def _trace(ctl, TR, T, Y, LAM, OUT, RES, MODAL, ACC, i, on_belt):
-    """Append state row i and the on_belt flag it is observed with to the trace (if kept)."""
-    if TR.shape[0] == 0:
-        return
-    row = TR[ctl[I_N_TRACE]]
-    ctl[I_N_TRACE] += 1
-    row[TR_T] = T[i]
-    row[TR_ON_BELT] = 1.0 if on_belt else 0.0
-    k = TR_Y
-    for v in Y[i]:
-        row[k] = v
-        k += 1
-    for v in LAM[i]:
-        row[k] = v
-        k += 1
-    for r in range(N_SLOTS):
-        for c in range(N_COLS):
-            row[k] = OUT[i, r, c]
-            k += 1
-    for v in RES[i]:
-        row[k] = v
-        k += 1
-    for v in MODAL[i]:
-        row[k] = v
-        k += 1
-    for v in ACC[i]:
-        row[k] = v
-        k += 1
-
-
-@njit(cache=True, _nrt=False)
-def _diverged(P, cfg, fc, t, y, res):
-    """``Integrator._diverged``: a DIAG_* code (value and time left in fc)."""
+def diverged(P, cfg, fc, t, y, res):
+    """Divergence checks at an accepted point: a DIAG_* code (non-finite state, deep
+    penetration, runaway speed; time and value left in fc)."""
     total = 0.0
     for k in range(y.shape[0]):
         total += y[k]
@@ -643,30 +615,29 @@ def _diverged(P, cfg, fc, t, y, res):
 
 @njit(cache=True, _nrt=False)
 def solve(model, state, max_attempts, t_target):
-    """Run the solve loop (``Integrator.stepping`` with ``Observer``) on ``model``
-    (:data:`LoopModel`) from where ``state`` (:data:`LoopState`) left it: until it ends
-    (SOLVE_DONE, the diagnosis in counters[I_DIAG]), ``max_attempts`` step attempts
-    (SOLVE_PAUSED), an output buffer (impacts, stages rows; record columns, one row per recorded
-    quantity REC_*) without a free entry (SOLVE_GROW), the accepted time reaching ``t_target``
-    (SOLVE_REACHED) or a full trace (SOLVE_TRACED: a trace with rows keeps every observed point
-    for a Python observer, ``integrators.Integrator``; no rows, no trace). Row 0 of the states
-    holds the initial state on the first call, which zeroes the other state rows and the
-    scratch arrays."""
+    """Run the solve loop on ``model`` (:data:`LoopModel`) from where ``state``
+    (:data:`LoopState`) left it: until it ends (SOLVE_DONE, the diagnosis in counters[I_DIAG]),
+    ``max_attempts`` step attempts (SOLVE_PAUSED; 1: at most one accepted step), an output
+    buffer (impacts, stages rows; record columns, one row per recorded quantity REC_*) without a
+    free entry (SOLVE_GROW) or the accepted time reaching ``t_target`` (SOLVE_REACHED). Row 0 of
+    the states holds the initial state on the first call, which zeroes the other state rows and
+    the scratch arrays, evaluates the forces there and observes it (``max_attempts`` 0: only
+    that)."""
     P, corners, normals, phi, rigid_modal, omega, zeta, cfg, breaks = model
     (
         ctl, fc, T, Y, LAM, OUT, RES, MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1,
-        IMP, STG, REC, TR,
+        IMP, STG, REC,
     ) = state  # fmt: skip
     adaptive = cfg[G_ADAPTIVE] != 0.0
     h_nom = cfg[G_H_NOM]
     min_dt = cfg[G_MIN_DT]
     width = cfg[G_WIDTH]
     if ctl[I_STARTED] == 0:
-        # Scheme.initialize: forces at t = 0, belt wrench by Karnopp, accelerations
+        # forces at t = 0, belt wrench by Karnopp, consistent accelerations
         ctl[I_STARTED] = 1
         a = ctl[I_CUR]
         # the state rows other than the initial state, and the scratch arrays, start at zero
-        # (the caller may pass arrays of an earlier solve: engine reuses them)
+        # (the caller may pass arrays of an earlier solve: the stepper reuses them)
         T[:] = 0.0
         for i in range(Y.shape[0]):
             if i != a:
@@ -693,8 +664,7 @@ def solve(model, state, max_attempts, t_target):
             bx, by, bz = stick_wrench(P, r[0], r[1], r[2])
             LAM[a, 0], LAM[a, 1], LAM[a, 2] = bx, by, bz
         _accelerations(P, rigid_modal, omega, zeta, Y, LAM, RES, MODAL, ACC, a, 0.0)
-        _trace(ctl, TR, T, Y, LAM, OUT, RES, MODAL, ACC, a, True)
-        stop, on_belt = _observe(
+        stop, on_belt = observe(
             P, normals, cfg, ctl, fc, T, Y, LAM, OUT, RES, IMP, STG, REC, a, True
         )
         ctl[I_STOP] = 1 if stop else 0
@@ -719,8 +689,6 @@ def solve(model, state, max_attempts, t_target):
             or ctl[I_N_REC] >= REC.shape[1]
         ):
             return SOLVE_GROW
-        if TR.shape[0] > 0 and ctl[I_N_TRACE] >= TR.shape[0]:
-            return SOLVE_TRACED
         attempts += 1
         on_belt = ctl[I_ON_BELT] != 0
         nb = ctl[I_NEXT_BREAK]
@@ -811,13 +779,12 @@ def solve(model, state, max_attempts, t_target):
         ctl[I_TRIAL] = a
         a = b
         ctl[I_STEPS] += 1
-        _trace(ctl, TR, T, Y, LAM, OUT, RES, MODAL, ACC, a, on_belt)
-        stop, on_belt = _observe(
+        stop, on_belt = observe(
             P, normals, cfg, ctl, fc, T, Y, LAM, OUT, RES, IMP, STG, REC, a, on_belt
         )
         ctl[I_STOP] = 1 if stop else 0
         ctl[I_ON_BELT] = 1 if on_belt else 0
-        diag = _diverged(P, cfg, fc, T[a], Y[a], RES[a])
+        diag = diverged(P, cfg, fc, T[a], Y[a], RES[a])
         if diag != DIAG_NONE:
             ctl[I_DIAG] = diag
             ctl[I_DONE] = 1

@@ -1,0 +1,601 @@
+"""Stepping one sorting event through the solve loop, as scipy's ``OdeSolver`` steps an ODE:
+:class:`Stepper`.
+
+Our schemes (``solver.method``; docs/accuracy/ measures each):
+
+- ``trapezoidal`` (fixed step ``solver.dt``): load by the trapezoidal rule, implicit in the
+  contact forces and belt friction; fence modes propagated exactly (Van Loan) for a modal force
+  linear over the step. A-stable, no numerical damping, second order.
+- ``generalized_alpha`` (fixed step): Chung-Hulbert generalized-alpha on load and modes with
+  high-frequency dissipation set by ``solver.rho_inf`` (1: none, 0: asymptotic annihilation);
+  second order. The structural-dynamics standard (as in Chrono's HHT and Abaqus).
+- ``adaptive`` (the default): the trapezoidal step with local error control: Milne's device
+  (the difference between the trapezoidal corrector and a variable-step Adams-Bashforth-2
+  predictor estimates the local error), ``solver.rtol``/``solver.atol`` on the load's state,
+  steps between ``solver.min_dt`` and ``solver.dt_max``.
+
+All three run in one loop, ``kernel.solve``, and share the events that would otherwise cost the
+schemes their order: contact onset and release (a fence contact's law (16) crossing N = 0,
+which includes the N >= 0 clamp engaging) are located by regula falsi so a step ends on them;
+the drive's acceleration jumps (0, t1, 2 t1) are step ends (generalized-alpha restarts from
+consistent accelerations after each); belt and fence stick/slip is implicit (exact stick, the
+paper's 1e-6 m/s Karnopp window kept); C_s crossing the sorting line y0 = s ends a step (the belt
+stops carrying the load there). A step whose contact iteration fails is halved; a step this
+small that still fails straddles a switch and is taken and counted (forced). Divergence (NaN,
+runaway speed, deep penetration, step below min_dt, wall-time limit) stops the solve with a
+:class:`Diagnosis`; nothing past it is returned as data.
+
+The loop works on flat arrays, so an accepted step costs no Python at all. A :class:`Stepper`
+holds them for one :class:`~.model.SortingModel` and drives the loop: :meth:`Stepper.step` to
+the next accepted point (the soft-real-time line), :meth:`Stepper.advance` to a time
+(``simulate``, in chunks of step attempts: between them it checks ``solver.max_wall_time``,
+which compiled code cannot read, and grows the output buffers); :meth:`Stepper.result` is the
+:class:`~.result.SimulationResult` from the loop's own reductions (peaks, impacts with N_stiff,
+stages, energy audit, recorded series). :meth:`Stepper.observe` feeds a point integrated
+elsewhere (the SciPy baselines) to the same reductions. A one-shot solve (:func:`run`) reuses
+the arrays of the previous solve of the same shape.
+"""
+
+from __future__ import annotations
+
+import gc
+import math
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from enum import Enum
+
+import numpy as np
+
+from fence_sorter.codes import Stage
+
+from . import kernel as K
+from .contacts import FLUSH_ANGLE
+from .model import SortingModel
+from .result import EnergyAudit, SimulationResult, make_result
+
+# the solve loop's stage codes are the Stage values; the result's stage names their labels
+assert (K.STAGE_CODE_ON_BELT, K.STAGE_CODE_E1, K.STAGE_CODE_E2, K.STAGE_CODE_E3) == (
+    Stage.ON_BELT,
+    Stage.E1,
+    Stage.E2,
+    Stage.E3,
+) and (K.STAGE_CODE_E4, K.STAGE_CODE_SORTED) == (Stage.E4, Stage.SORTED), "kernel stage codes"
+STAGE_NAMES = tuple(s.label for s in Stage)
+_STAGE_LENGTHS = np.array([len(n) for n in STAGE_NAMES])
+# the names as arrays of each string width (a recorded series takes the width of its longest)
+_STAGE_BY_WIDTH = {
+    w: np.array(STAGE_NAMES, dtype=f"<U{w}") for w in range(1, 1 + max(map(len, STAGE_NAMES)))
+}
+CHUNK = 512  # step attempts between two wall-time checks (~5-50 ms of solving)
+
+
+class Failure(Enum):
+    """Why a solve stopped short: the kind of a :class:`Diagnosis`."""
+
+    NON_FINITE = "non_finite"
+    DEEP_PENETRATION = "deep_penetration"
+    RUNAWAY_SPEED = "runaway_speed"
+    STEP_BELOW_MIN_DT = "step_below_min_dt"
+    WALL_TIME_LIMIT = "wall_time_limit"
+
+
+@dataclass(frozen=True)
+class Diagnosis:
+    """A failed solve: its kind, the time it was found, the value that failed (D [m], speed
+    [m/s], the step [s] or the wall-time limit [s]; nan for a non-finite state) and the text
+    the result and the line report."""
+
+    kind: Failure
+    t: float
+    value: float
+    text: str
+
+    def __str__(self) -> str:
+        return self.text
+
+
+_FAILURES = {
+    K.DIAG_NONFINITE: Failure.NON_FINITE,
+    K.DIAG_DEEP: Failure.DEEP_PENETRATION,
+    K.DIAG_SPEED: Failure.RUNAWAY_SPEED,
+    K.DIAG_MIN_DT: Failure.STEP_BELOW_MIN_DT,
+}
+
+
+def diagnosis_text(model: SortingModel, kind: Failure, t: float, value: float) -> str:
+    """The one-line text of a failure."""
+    sv = model.sc.solver
+    if kind is Failure.WALL_TIME_LIMIT:
+        return f"wall-time limit {value:g} s reached at t = {t:.4f} s"
+    if kind is Failure.STEP_BELOW_MIN_DT:
+        return (
+            f"step size fell below solver.min_dt={sv.min_dt:g} s at t = {t:.6f} s: "
+            "the contact iteration does not converge (contact too stiff for the step?)"
+        )
+    if kind is Failure.NON_FINITE:
+        return f"non-finite state at t = {t:.6f} s"
+    if kind is Failure.DEEP_PENETRATION:
+        return (
+            f"deep penetration D = {value:.4g} m > {model.deep:.4g} m "
+            f"at t = {t:.6f} s: the solve diverged or the load passed through the fence"
+        )
+    return (
+        f"load speed {value:.4g} m/s exceeds {model.speed_limit:.4g} "
+        f"m/s at t = {t:.6f} s: runaway energy, the solve diverged"
+    )
+
+
+def generalized_alpha_coefficients(rho_inf: float) -> np.ndarray:
+    """(alpha_m, alpha_f, beta, gamma) of Chung and Hulbert (1993) for spectral radius rho_inf."""
+    am = (2.0 * rho_inf - 1.0) / (rho_inf + 1.0)
+    af = rho_inf / (rho_inf + 1.0)
+    gamma = 0.5 - am + af
+    beta = 0.25 * (1.0 - am + af) ** 2
+    return np.array([am, af, beta, gamma])
+
+
+_PROPAGATORS: dict[int, tuple] = {}  # id(omega) -> (omega, zeta, cache arrays)
+_NO_MODES = (
+    np.full(1, math.nan),
+    np.zeros((1, 0, 2, 2)),
+    np.zeros((1, 0, 2)),
+    np.zeros((1, 0, 2)),
+    np.zeros(1, dtype=np.int64),
+)
+
+
+def _propagator_cache(model):
+    """The exact modal maps by step size: shared by every model of the same modal basis (the
+    FEM and modes are cached per fence, ``model._fence_modes``, so the line, the optimiser
+    and the benchmarks, which build a model per event, do not recompute the matrix exponentials
+    of the step-size ladder on every event). The maps depend on (omega, zeta, h) only."""
+    if model.n_modes == 0:  # a stiff fence: nothing to propagate
+        return _NO_MODES
+    key = id(model.omega)
+    hit = _PROPAGATORS.get(key)
+    if hit is not None and hit[0] is model.omega and hit[1] is model.zeta:
+        return hit[2]
+    m, n = model.n_modes, K.N_PROP_CACHE
+    cache = (
+        np.full(n, math.nan),
+        np.zeros((n, m, 2, 2)),
+        np.zeros((n, m, 2)),
+        np.zeros((n, m, 2)),
+        np.zeros(1, dtype=np.int64),
+    )
+    if len(_PROPAGATORS) >= 16:
+        _PROPAGATORS.pop(next(iter(_PROPAGATORS)))
+    # the entry keeps omega and zeta alive, so their id cannot be reused while it is here
+    _PROPAGATORS[key] = (model.omega, model.zeta, cache)
+    return cache
+
+
+_UP, _DOWN = 2.0**0.25, 2.0**-0.25  # the adaptive step's ladder rungs
+_CFG_ORDER = (
+    "G_H_NOM G_T_END G_DT G_MIN_DT G_TOL G_MAX_ITER G_ATOL G_RTOL G_V_REF G_OM_REF G_WIDTH "
+    "G_ADAPTIVE G_STOP_SORTED G_RECORD G_BP G_KP G_DEEP G_SPEED_LIMIT G_VMIN G_PHIDOT_MIN G_UP "
+    "G_DOWN G_FLUSH G_GEN_ALPHA G_ALPHA_M G_ALPHA_F G_BETA G_GAMMA"
+).split()
+assert [getattr(K, g) for g in _CFG_ORDER] == list(range(K.N_CFG)), "Stepper's settings order"
+# the control integers and figures at the start of a solve
+_CTL0 = np.zeros(K.N_CTL, dtype=np.int64)
+_CTL0[K.I_TRIAL] = _CTL0[K.I_ON_BELT] = _CTL0[K.I_FIRST] = 1
+_CTL0[[K.I_MASK, K.I_STAGE, K.I_LAST_MASK0, K.I_LAST_MASK1]] = -1
+_FC0 = np.zeros(K.N_FC)
+_FC0[[K.F_EXIT_SPEED, K.F_IMPACT_SPEED, K.F_FLOW, K.F_E0]] = math.nan
+_FC0[K.F_Y_MAX] = -math.inf
+
+# per (n_state, modes, elements): the arrays of finished solves, reused by the next one (an
+# event of the optimiser, the line or the benchmark builds ~20 small arrays otherwise: ~6 us
+# of NumPy calls, ~15 us on a cold cache, per ~0.3 ms stiff event)
+_WORKSPACES: dict[tuple, list[tuple]] = {}
+
+
+def _workspace(n: int, m: int, n_el: int) -> tuple:
+    """The arrays of one solve, in the order ``Stepper`` unpacks them."""
+    s = K.N_STATES
+    return (
+        np.zeros(K.N_CTL, dtype=np.int64),
+        np.zeros(K.N_FC),
+        np.zeros(s),
+        np.zeros((s, n)),
+        np.zeros((s, 3)),
+        np.zeros((s, K.N_SLOTS, K.N_COLS)),
+        np.zeros((s, K.N_RES)),
+        np.zeros((s, m)),
+        np.zeros((s, 3 + m)),
+        np.zeros(max(2 * n_el, 2)),
+        np.zeros(max(2 * n_el, 2)),
+        np.zeros((n_el + 1, 2)),
+        np.zeros(K.N_SLOTS),
+        np.zeros(K.trapezoidal_work_shape(m)),
+        np.zeros((8, 3)),
+        np.zeros((16, 2)),
+    )
+
+
+class Stepper:
+    """One sorting event in the compiled solve loop, stepped like scipy's ``OdeSolver``.
+
+    ``t``, ``y``: the last accepted point (the initial state before the first step);
+    ``status``: ``running``, ``finished`` (the end time, or sorted with
+    ``solver.stop_when_sorted``) or ``failed`` (``diagnosis`` says why; ``t`` and ``y`` are where
+    the divergence was found). ``clock``: the wall clock ``solver.max_wall_time`` is measured
+    on; it counts only the time spent in :meth:`step` and :meth:`advance`, not the pauses of a
+    soft-real-time caller between them.
+    """
+
+    def __init__(self, model: SortingModel, clock: Callable[[], float] = time.perf_counter):
+        self.model = model
+        self.clock = clock
+        self.wall0 = clock()
+        sc = model.sc
+        sv = sc.solver
+        adaptive = sv.method == "adaptive"
+        h_nom = sv.dt_max if adaptive else sv.dt
+        t_cycle = 2.0 * sc.drive.t1
+        self.t_end = t_end = sv.t_end if sv.t_end > 0 else t_cycle + sv.settle_time
+        t1 = sc.drive.t1
+        breaks = [b for b in ((t1, t_cycle) if t1 < t_cycle else (t_cycle,)) if 0.0 < b < t_end]
+        breaks.append(t_end)
+        self.breaks = np.array(breaks, dtype=float)
+        body = model.body
+        contact = sc.contact
+        v_ref = max(model.belt, 0.1)
+        # one list in the order of the G_* indices (checked at import), one array
+        self.cfg = np.array(
+            [
+                h_nom,
+                t_end,
+                sv.dt,
+                sv.min_dt,
+                sv.tolerance,
+                sv.max_iterations,
+                sv.atol,
+                sv.rtol,
+                v_ref,
+                v_ref / min(body.length_a, body.width_b),
+                sc.conveyor.width,
+                float(adaptive),
+                float(sv.stop_when_sorted),
+                float(bool(sc.record)),
+                contact.b_p,
+                contact.k_p,
+                model.deep,
+                model.speed_limit,
+                contact.v_min,
+                contact.phidot_min,
+                _UP,
+                _DOWN,
+                FLUSH_ANGLE,
+                float(sv.method == "generalized_alpha"),
+                *generalized_alpha_coefficients(sv.rho_inf),
+            ],
+            dtype=float,
+        )
+        n, m = model.n_state, model.n_modes
+        self._key = (n, m, model.n_el)
+        pool = _WORKSPACES.get(self._key)
+        arrays = pool.pop() if pool else None  # (list.pop: atomic under the GIL)
+        if arrays is None:
+            arrays = _workspace(n, m, model.n_el)
+        (
+            self.ctl, self.fc, self.T, self.Y, self.LAM, self.OUT, self.RES, self.MODAL,
+            self.ACC, self.w, self.wdot, self.nodes, self.prev, self.work, self.IMP, self.STG,
+        ) = arrays  # fmt: skip
+        # kernel.solve zeroes the other state rows and the scratch arrays on its first call
+        ctl = self.ctl
+        ctl[:] = _CTL0
+        self.fc[:] = _FC0
+        self.T[0] = 0.0
+        y0 = self.Y[0]
+        y0.fill(0.0)
+        y0[:3] = model.initial
+        v = sc.initial_velocity
+        y0[3:6] = v if v is not None else (model.belt, 0.0, 0.0)
+        self.PK, self.PA, self.PG0, self.PG1, n_props = _propagator_cache(model)
+        self._n_props = n_props
+        ctl[K.I_N_PROPS] = n_props[0]
+        # a column per accepted point when anything is recorded (one otherwise: none is written);
+        # not reused: the result's series are views of it
+        cols = int(1.5 * t_end / h_nom) + 64 if sc.record else 1
+        self.REC = np.zeros((K.N_REC_COLS, min(cols, 1 << 16)))
+        # the modal basis of a flexible fence is read-only (cached per fence): writable copies
+        # keep one signature of kernel.solve for stiff and flexible models (one compiled
+        # specialisation to load from Numba's cache per process, ~0.3 s, instead of two)
+        modes = (model.phi, model.rigid_modal, model.omega, model.zeta)
+        if model.flexible:
+            modes = tuple(a if a.flags.writeable else a.copy() for a in modes)
+        self.modes = modes
+        self._args: tuple | None = None
+        self.busy = 0.0
+        self.status = "running"
+        self.diagnosis: Diagnosis | None = None
+
+    # -- the OdeSolver interface -------------------------------------------------------------
+
+    @property
+    def t(self) -> float:
+        return float(self.T[self.ctl[K.I_CUR]])
+
+    @property
+    def y(self) -> np.ndarray:
+        """The state vector at :attr:`t` (a view: copy it to keep it)."""
+        return self.Y[self.ctl[K.I_CUR]]
+
+    @property
+    def running(self) -> bool:
+        return self.status == "running"
+
+    def step(self) -> str | None:
+        """Advance to the next accepted point; None, or the diagnosis text when the solve
+        failed (as ``OdeSolver.step``). Raises once the solve has ended."""
+        if self.status != "running":
+            raise RuntimeError(f"step() on a {self.status} solve")
+        steps = self.ctl[K.I_STEPS]
+        while self.status == "running" and self.ctl[K.I_STEPS] == steps:
+            if self._over_time():
+                break
+            self._call(1, math.inf)
+        if self.status == "running" and self._at_end():
+            self.status = "finished"
+        return None if self.diagnosis is None else self.diagnosis.text
+
+    def advance(self, t_target: float = math.inf) -> bool:
+        """Solve until the accepted time reaches ``t_target`` (or the end); False once the
+        solve has ended."""
+        while self.status == "running":
+            if self._call(CHUNK, t_target) == K.SOLVE_REACHED:
+                return True
+            self._over_time()
+        return False
+
+    def start(self) -> None:
+        """Evaluate the forces and reductions at the initial point (the first :meth:`step` or
+        :meth:`advance` does it otherwise), for a caller reading the point before stepping."""
+        if not self.ctl[K.I_STARTED]:
+            self._call(0, math.inf)
+
+    # -- the loop's figures at the last accepted point ----------------------------------------
+
+    @property
+    def resultants(self) -> np.ndarray:
+        """The resultants R_* at :attr:`t`."""
+        return self.RES[self.ctl[K.I_CUR]]
+
+    @property
+    def contacts(self) -> np.ndarray:
+        """The contact slots C_* at :attr:`t`."""
+        return self.OUT[self.ctl[K.I_CUR]]
+
+    @property
+    def stage(self) -> Stage:
+        """The motion stage at :attr:`t`."""
+        return Stage(int(self.ctl[K.I_STAGE]))
+
+    @property
+    def sorted(self) -> bool:
+        """C_s has crossed the sorting line y0 = s."""
+        return bool(self.ctl[K.I_SORTED])
+
+    @property
+    def impacts(self) -> list[tuple[float, float, float]]:
+        """(onset time [s], w_n [m/s], N_stiff [N]) of every impact so far."""
+        return [(t, w, p) for t, w, p in self.IMP[: self.ctl[K.I_N_IMPACTS]].tolist()]
+
+    # -- the driver --------------------------------------------------------------------------
+
+    def _at_end(self) -> bool:
+        return bool(self.ctl[K.I_STOP]) or not self.t < self.t_end - 1e-12
+
+    def _over_time(self) -> bool:
+        """Fail the solve once the time spent stepping exceeds ``solver.max_wall_time``."""
+        limit = self.model.sc.solver.max_wall_time
+        if self.status != "running" or self.busy <= limit:
+            return False
+        self._fail(Failure.WALL_TIME_LIMIT, self.t, limit)
+        return True
+
+    def _fail(self, kind: Failure, t: float, value: float) -> None:
+        text = diagnosis_text(self.model, kind, t, value)
+        self.diagnosis = Diagnosis(kind, t, value, text)
+        self.status = "failed"
+
+    def _loop_arrays(self) -> tuple:
+        if self._args is None:
+            md = self.model
+            model = K.LoopModel(md.P, md.corners, md.normals, *self.modes, self.cfg, self.breaks)
+            state = K.LoopState(
+                self.ctl, self.fc, self.T, self.Y, self.LAM, self.OUT, self.RES, self.MODAL,
+                self.ACC, self.w, self.wdot, self.nodes, self.prev, self.work, self.PK, self.PA,
+                self.PG0, self.PG1, self.IMP, self.STG, self.REC,
+            )  # fmt: skip
+            self._args = (model, state)
+        return self._args
+
+    def _call(self, attempts: int, t_target: float) -> int:
+        """One call of ``kernel.solve`` (at most ``attempts`` step attempts); grows a full
+        buffer, ends the solve when the loop ends it."""
+        model, state = self._loop_arrays()
+        t0 = self.clock()
+        status = K.solve(model, state, attempts, float(t_target))
+        self.busy += self.clock() - t0
+        self._n_props[0] = self.ctl[K.I_N_PROPS]
+        if status == K.SOLVE_GROW:
+            self._grow()
+        elif status == K.SOLVE_DONE:
+            code = int(self.ctl[K.I_DIAG])
+            if code == K.DIAG_NONE:
+                self.status = "finished"
+            else:
+                self._fail(_FAILURES[code], self.fc[K.F_DIAG_T], self._diag_value(code))
+        return status
+
+    def _diag_value(self, code: int) -> float:
+        if code == K.DIAG_NONFINITE:
+            return math.nan
+        if code == K.DIAG_MIN_DT:
+            return self.model.sc.solver.min_dt
+        return float(self.fc[K.F_DIAG_V])
+
+    def _grow(self) -> None:
+        for name in ("IMP", "STG"):
+            arr = getattr(self, name)
+            used = self.ctl[K.I_N_IMPACTS if name == "IMP" else K.I_N_STAGES]
+            if used >= arr.shape[0]:
+                bigger = np.zeros((2 * arr.shape[0], arr.shape[1]))
+                bigger[:used] = arr[:used]
+                setattr(self, name, bigger)
+        used = self.ctl[K.I_N_REC]
+        if used >= self.REC.shape[1]:
+            bigger = np.zeros((self.REC.shape[0], 2 * self.REC.shape[1]))
+            bigger[:, :used] = self.REC[:, :used]
+            self.REC = bigger
+        self._args = None
+
+    def release(self) -> None:
+        """Hand the arrays back for the next solve of the same shape (:func:`run`, once it
+        has copied out everything it returns; nothing may use this stepper afterwards)."""
+        if self._key is None:
+            return
+        pool = _WORKSPACES.setdefault(self._key, [])
+        if len(pool) < 4:
+            pool.append(
+                (
+                    self.ctl, self.fc, self.T, self.Y, self.LAM, self.OUT, self.RES, self.MODAL,
+                    self.ACC, self.w, self.wdot, self.nodes, self.prev, self.work, self.IMP,
+                    self.STG,
+                )
+            )  # fmt: skip
+        self._key = None
+
+    # -- a point integrated elsewhere --------------------------------------------------------
+
+    def observe(self, t: float, y: np.ndarray, lam, out, res, on_belt: bool) -> tuple[bool, bool]:
+        """Reduce a point integrated elsewhere (a SciPy baseline's accepted point: state, belt
+        wrench, contact slots, resultants) with the loop's own reductions (``kernel.observe``);
+        ``(stop, on_belt)`` as the loop has them after it. Then :meth:`diverged` checks it."""
+        ctl = self.ctl
+        if (
+            ctl[K.I_N_IMPACTS] >= self.IMP.shape[0]
+            or ctl[K.I_N_STAGES] >= self.STG.shape[0]
+            or ctl[K.I_N_REC] >= self.REC.shape[1]
+        ):
+            self._grow()  # a point adds at most one row to each
+        i = int(self.ctl[K.I_CUR])
+        self.T[i] = t
+        self.Y[i] = y
+        self.LAM[i] = lam
+        self.OUT[i] = out
+        self.RES[i] = res
+        stop, on_belt = K.observe(
+            self.model.P, self.model.normals, self.cfg, self.ctl, self.fc, self.T, self.Y,
+            self.LAM, self.OUT, self.RES, self.IMP, self.STG, self.REC, i, on_belt,
+        )  # fmt: skip
+        return bool(stop), bool(on_belt)
+
+    def diverged(self) -> Diagnosis | None:
+        """The loop's divergence checks (NaN, deep penetration, runaway speed) on the last
+        observed point; fails the solve on one."""
+        i = int(self.ctl[K.I_CUR])
+        code = K.diverged(self.model.P, self.cfg, self.fc, self.T[i], self.Y[i], self.RES[i])
+        if code != K.DIAG_NONE:
+            self.ctl[K.I_DIAG] = code
+            self._fail(_FAILURES[code], self.fc[K.F_DIAG_T], self._diag_value(code))
+        return self.diagnosis
+
+    # -- the result --------------------------------------------------------------------------
+
+    def result(
+        self, *, steps: int | None = None, diagnosis: str | None = None, wall: float | None = None
+    ) -> SimulationResult:
+        """The :class:`SimulationResult` of the solve so far from the loop's reductions
+        (``result.make_result``). ``steps``, ``diagnosis``, ``wall``: a caller integrating
+        elsewhere (:meth:`observe`) gives its own."""
+        ctl, fc = self.ctl.tolist(), self.fc.tolist()  # Python numbers, read once each
+        stages = [(STAGE_NAMES[int(c)], t) for t, c in self.STG[: ctl[K.I_N_STAGES]].tolist()]
+        audit = EnergyAudit(
+            max_residual=fc[K.F_MAX_RES],
+            min_residual=fc[K.F_MIN_RES],
+            flow=fc[K.F_FLOW],
+            e0=fc[K.F_E0],
+            t_max=fc[K.F_T_MAX],
+            t_min=fc[K.F_T_MIN],
+            max_rise=fc[K.F_MAX_RISE],
+            t_rise=(fc[K.F_T_RISE0], fc[K.F_T_RISE1]),
+            run_min=fc[K.F_RUN_MIN],
+            t_run_min=fc[K.F_T_RUN_MIN],
+        )
+        md = self.model
+        if diagnosis is None and self.diagnosis is not None:
+            diagnosis = self.diagnosis.text
+        return make_result(
+            md, float(self.T[ctl[K.I_CUR]]), diagnosis,
+            ctl[K.I_STEPS] if steps is None else steps, ctl[K.I_REJECTED],
+            self.clock() - self.wall0 if wall is None else wall, ctl[K.I_FORCED],
+            ctl[K.I_EVENTS], sorted_=bool(ctl[K.I_SORTED]), touched=bool(ctl[K.I_TOUCHED]),
+            exit_speed=fc[K.F_EXIT_SPEED], impact_speed=fc[K.F_IMPACT_SPEED],
+            impacts=[(t, w, p) for t, w, p in self.IMP[: ctl[K.I_N_IMPACTS]].tolist()],
+            peak_n=fc[K.F_PEAK_N], peak_tip=fc[K.F_PEAK_TIP], max_depth=fc[K.F_MAX_DEPTH],
+            y_max=fc[K.F_Y_MAX], stages=stages, audit=audit,
+            series=self.series(md.sc.record, stages),
+        )  # fmt: skip
+
+    def series(self, want, stages=None) -> dict[str, np.ndarray]:
+        """The recorded series (each its own array: a row of the loop's REC, which records the
+        time once per group); ``stages``: the run's stage list, if known (the recorded stage
+        names are the names in it)."""
+        if not want:
+            return {}
+        cols = self.REC[:, : self.ctl[K.I_N_REC]]  # one row per recorded quantity, contiguous
+        out: dict[str, np.ndarray] = {}
+        if "trajectory" in want:
+            out["t"] = cols[K.REC_T]
+            for k, key in enumerate(("x", "y", "phi", "vx", "vy", "phidot")):
+                out[key] = cols[K.REC_Y + k]
+        if "fence" in want:
+            out["t_fence"] = cols[K.REC_T_FENCE]
+            out["alpha_w"] = cols[K.REC_ALPHA]
+            out["tip_deflection"] = cols[K.REC_TIP_W]
+        if "forces" in want:
+            out["t_forces"] = cols[K.REC_T_FORCES]
+            out["normal_force"] = cols[K.REC_FENCE_N]
+            out["deformation"] = cols[K.REC_MAX_D]
+        if "stages" in want:
+            out["t_stage"] = cols[K.REC_T_STAGE]
+            codes = cols[K.REC_STAGE].astype(np.intp)
+            # the names' string width: the longest present (every stage the run entered was
+            # recorded at the point it was entered)
+            if not len(codes):
+                width = 1
+            elif stages:
+                width = max(len(name) for name, _ in stages)
+            else:
+                width = int(_STAGE_LENGTHS[codes].max())
+            out["stage"] = _STAGE_BY_WIDTH[width][codes]
+        return out
+
+
+def run(model: SortingModel) -> SimulationResult:
+    """:func:`simulate.simulate` of one of our schemes: the model solved to its end."""
+    stepper = Stepper(model)
+    stepper.advance()
+    result = stepper.result()
+    stepper.release()
+    return result
+
+
+@contextmanager
+def collector_off() -> Iterator[None]:
+    """The garbage collector off for a timed call (as ``timeit`` does) and back in its previous
+    state after it, also when the call raises. A collection belongs before a block of timed
+    calls, not before each: it walks every live object and leaves the CPU caches cold."""
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()
