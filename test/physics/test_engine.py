@@ -184,8 +184,8 @@ def test_a_reused_workspace_gives_the_same_solve() -> None:
         np.testing.assert_array_equal(again.series[k], v, err_msg=k)
 
 
-def test_a_scene_setting_the_removed_engine_field_is_refused() -> None:
-    """``solver.engine`` is gone with the second loop: a scene that still sets it gets the
+def test_a_scene_setting_an_engine_is_refused() -> None:
+    """There is one solve loop and no ``solver.engine`` field: a scene that sets it gets the
     loader's one-line error naming the field."""
     with pytest.raises(SceneError, match=r"solver\.engine") as err:
         load_scene("impact_flexible", ["solver.engine=compiled"])

@@ -80,7 +80,7 @@ def test_wall_time_limit_bounds_a_slow_solve(warm: None) -> None:
 
 
 def test_energy_audit_matches_the_observer(warm: None) -> None:
-    """The two-sided audit recomputes the Observer's balance: same largest excess."""
+    """The two-sided audit recomputes the solve loop's balance: same largest excess."""
     for name in ("elastic_stiff", "mass_1"):
         case = next(c for c in S.CASES if c.name == name)
         cr = S.run_case(case, convergence=False)
