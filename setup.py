@@ -57,6 +57,7 @@ setup(
             "scanner = fence_sorter.nodes.scanner:main",
             "controller = fence_sorter.nodes.controller:main",
             "recorder = fence_sorter.nodes.recorder:main",
+            "sensors = fence_sorter.nodes.sensors:main",
             "fence-sorter = fence_sorter.cli.main:main",
         ],
     },

@@ -50,14 +50,62 @@ class MeasuredBagError(ValueError):
 
 
 def _stamp(ts, t: float):
-    sec = math.floor(t)
-    return ts.types["builtin_interfaces/msg/Time"](
-        sec=int(sec), nanosec=int(round((t - sec) * 1e9))
-    )
+    sec, nanosec = divmod(int(round(t * 1e9)), 10**9)
+    return ts.types["builtin_interfaces/msg/Time"](sec=int(sec), nanosec=int(nanosec))
 
 
 def _header(ts, t: float, frame: str):
     return ts.types["std_msgs/msg/Header"](stamp=_stamp(ts, t), frame_id=frame)
+
+
+def encoder_msg(ts, t: float, alpha_w: float):
+    """The drive encoder's sample: JointState of joint ``fence_drive`` stamped ``t``."""
+    T = ts.types
+    return T["sensor_msgs/msg/JointState"](
+        header=_header(ts, t, "sorter"),
+        name=[DRIVE_JOINT],
+        position=np.array([alpha_w]),
+        velocity=np.zeros(0),
+        effort=np.zeros(0),
+    )
+
+
+def camera_msg(ts, t: float, parcel_id: int, x: float, y: float, yaw: float):
+    """The camera's pose of a parcel: LoadState in frame ``camera`` stamped with the capture
+    time; geometric centre and yaw, every other field NaN (not measured)."""
+    T = ts.types
+    vec, point = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Point"]
+    return T["fence_sorter_msgs/msg/LoadState"](
+        header=_header(ts, t, "camera"),
+        parcel_id=int(parcel_id),
+        stage=0,
+        pose=T["geometry_msgs/msg/Pose"](
+            position=point(x=float(x), y=float(y), z=0.0),
+            orientation=T["geometry_msgs/msg/Quaternion"](
+                x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2)
+            ),
+        ),
+        twist=T["geometry_msgs/msg/Twist"](
+            linear=vec(x=math.nan, y=math.nan, z=0.0), angular=vec(x=0.0, y=0.0, z=math.nan)
+        ),
+        contact_normal_force=math.nan,
+        contact_normal_force_stiff=math.nan,
+        deformation=math.nan,
+        deformation_rate=math.nan,
+        contact_point=point(x=math.nan, y=math.nan, z=math.nan),
+    )
+
+
+def moment_msg(ts, t: float, moment: float):
+    """The strain gauge's sample: WrenchStamped in frame ``fence_root``, torque.z [N m]."""
+    T = ts.types
+    vec = T["geometry_msgs/msg/Vector3"]
+    return T["geometry_msgs/msg/WrenchStamped"](
+        header=_header(ts, t, "fence_root"),
+        wrench=T["geometry_msgs/msg/Wrench"](
+            force=vec(x=0.0, y=0.0, z=0.0), torque=vec(x=0.0, y=0.0, z=float(moment))
+        ),
+    )
 
 
 def write_measured_bag(
@@ -66,7 +114,6 @@ def write_measured_bag(
     """Write the measured topics and each event's parcel and command into a bag at ``path``."""
     ts = make_typestore()
     T = ts.types
-    vec = T["geometry_msgs/msg/Vector3"]
     msgs: list[tuple[float, str, object]] = []
     for ev in events:
         p = ev.parcel
@@ -102,43 +149,11 @@ def write_measured_bag(
         msgs.append((t_scan, PARCELS, parcel))
         msgs.append((t_scan, FENCE_COMMANDS, cmd))
     for t, a in zip(m.enc_t, m.enc_angle, strict=True):
-        js = T["sensor_msgs/msg/JointState"](
-            header=_header(ts, t, "sorter"),
-            name=[DRIVE_JOINT],
-            position=np.array([a]),
-            velocity=np.zeros(0),
-            effort=np.zeros(0),
-        )
-        msgs.append((t, DRIVE_ENCODER, js))
-    pose_t, quat_t = T["geometry_msgs/msg/Pose"], T["geometry_msgs/msg/Quaternion"]
-    point, twist = T["geometry_msgs/msg/Point"], T["geometry_msgs/msg/Twist"]
+        msgs.append((t, DRIVE_ENCODER, encoder_msg(ts, t, a)))
     for t, pid, x, y, yaw in zip(m.cam_t, m.cam_id, m.cam_x, m.cam_y, m.cam_yaw, strict=True):
-        state = T["fence_sorter_msgs/msg/LoadState"](
-            header=_header(ts, t, "camera"),
-            parcel_id=int(pid),
-            stage=0,
-            pose=pose_t(
-                position=point(x=x, y=y, z=0.0),
-                orientation=quat_t(x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2)),
-            ),
-            twist=twist(
-                linear=vec(x=math.nan, y=math.nan, z=0.0), angular=vec(x=0.0, y=0.0, z=math.nan)
-            ),
-            contact_normal_force=math.nan,
-            contact_normal_force_stiff=math.nan,
-            deformation=math.nan,
-            deformation_rate=math.nan,
-            contact_point=point(x=math.nan, y=math.nan, z=math.nan),
-        )
-        msgs.append((t + m.cam_latency, CAMERA_POSES, state))
+        msgs.append((t + m.cam_latency, CAMERA_POSES, camera_msg(ts, t, int(pid), x, y, yaw)))
     for t, mz in zip(m.str_t, m.str_moment, strict=True):
-        w = T["geometry_msgs/msg/WrenchStamped"](
-            header=_header(ts, t, "fence_root"),
-            wrench=T["geometry_msgs/msg/Wrench"](
-                force=vec(x=0.0, y=0.0, z=0.0), torque=vec(x=0.0, y=0.0, z=mz)
-            ),
-        )
-        msgs.append((t, FENCE_ROOT_MOMENT, w))
+        msgs.append((t, FENCE_ROOT_MOMENT, moment_msg(ts, t, mz)))
     msgs.sort(key=lambda item: item[0])
     custom = {TRUTH_KEY: json.dumps(truth)} if truth is not None else None
     writer = SegmentedBagWriter(path, custom_data=custom, clock=lambda: 0.0)

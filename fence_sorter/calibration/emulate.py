@@ -65,6 +65,21 @@ def truth_values(base: Scenario) -> dict[str, float]:
     return {n: scene_value(base, n) for n in PARAMETERS if scene_value(base, n) is not None}
 
 
+def truth_record(
+    scene_name: str, base: Scenario, sensors: SensorConfig, seed: int, **extra
+) -> dict:
+    """What a measured bag was made from, for its metadata (:data:`bag.TRUTH_KEY`): the
+    scene, its fit parameters' values, the sensors, the noise seed and the camera frame."""
+    return {
+        "scene": scene_name,
+        "sensors": sensors.name,
+        "seed": seed,
+        "values": truth_values(base),
+        "camera_offset": list(sensors.camera.offset),
+        **extra,
+    }
+
+
 def emulate(
     base: Scenario,
     sensors: SensorConfig,
@@ -100,11 +115,5 @@ def emulate_bag(
 ) -> Path:
     """:func:`emulate` written to a bag, with the truth in its metadata."""
     events, m = emulate(base, sensors, stream=stream, count=count, seed=seed, workers=workers)
-    truth = {
-        "scene": scene_name,
-        "sensors": sensors.name,
-        "seed": seed,
-        "values": truth_values(base),
-        "camera_offset": list(sensors.camera.offset),
-    }
+    truth = truth_record(scene_name, base, sensors, seed)
     return write_measured_bag(path, events, m, truth)

@@ -20,6 +20,7 @@ this one function, so every path yields the same measured samples.
 
 from __future__ import annotations
 
+import heapq
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -288,9 +289,58 @@ def drive_angle(events, t: np.ndarray) -> np.ndarray:
     return out
 
 
-def _grid(t0: float, t1: float, rate: float) -> np.ndarray:
+def grid(t0: float, t1: float, rate: float) -> np.ndarray:
+    """The sample instants k / rate of a sensor in [t0, t1] (every sensor samples on the
+    multiples of its period, in bag time)."""
     n0, n1 = math.ceil(t0 * rate), math.floor(t1 * rate)
     return np.arange(n0, n1 + 1) / rate
+
+
+def encoder_readings(enc: EncoderSpec, rng: np.random.Generator, angle) -> np.ndarray:
+    """The encoder's readings of the true drive angles ``angle`` [rad]: plus Gaussian noise."""
+    angle = np.asarray(angle, dtype=float)
+    return angle + rng.normal(0.0, 1.0, angle.size) * enc.noise
+
+
+def in_view(cam: CameraSpec, x, y) -> np.ndarray:
+    """Whether a geometric centre (sorter frame) lies inside the camera's field of view."""
+    x, y = np.asarray(x), np.asarray(y)
+    return (x >= cam.fov_x[0]) & (x <= cam.fov_x[1]) & (y >= cam.fov_y[0]) & (y <= cam.fov_y[1])
+
+
+def camera_frames(cam: CameraSpec, rng: np.random.Generator, x, y, yaw):
+    """One parcel's frames as the camera sees them, from its true geometric centre and yaw
+    (sorter frame): the frames it lies in the field of view, minus the dropped ones (probability
+    ``dropout`` each), in the camera frame, plus Gaussian noise.
+
+    Returns (seen, kept, cx, cy, cyaw): ``seen``, ``kept`` boolean masks over the frames (kept:
+    seen and not dropped), the measured poses of the kept frames.
+    """
+    x, y, yaw = (np.asarray(v, dtype=float) for v in (x, y, yaw))
+    seen = in_view(cam, x, y)
+    kept = seen & (rng.random(x.size) >= cam.dropout)
+    n = int(kept.sum())
+    cx, cy, cyaw = sorter_to_camera(cam.offset, x[kept], y[kept], yaw[kept])
+    cx = cx + rng.normal(0.0, 1.0, n) * cam.noise_position
+    cy = cy + rng.normal(0.0, 1.0, n) * cam.noise_position
+    cyaw = cyaw + rng.normal(0.0, 1.0, n) * cam.noise_yaw
+    return seen, kept, cx, cy, cyaw
+
+
+def strain_readings(strain: StrainSpec, rng: np.random.Generator, moment) -> np.ndarray:
+    """The strain gauge's readings of the true root moments ``moment`` [N m]: plus noise."""
+    moment = np.asarray(moment, dtype=float)
+    return moment + rng.normal(0.0, 1.0, moment.size) * strain.noise
+
+
+def geometric_centre(x, y, yaw, cog_offset_x: float, cog_offset_y: float):
+    """A parcel's geometric centre from its centre of gravity C_s (x, y) and yaw: C_s - R(yaw)
+    (x_p, y_p), the point a camera sees."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    return (
+        x - (c * cog_offset_x - s * cog_offset_y),
+        y - (s * cog_offset_x + c * cog_offset_y),
+    )
 
 
 def measure(
@@ -304,36 +354,211 @@ def measure(
     """
     rng = np.random.default_rng(seed)
     m = Measurements(cam_latency=cfg.camera.latency)
-    m.enc_t = _grid(0.0, t_bag_end, cfg.encoder.rate)
-    m.enc_angle = drive_angle(events, m.enc_t) + rng.normal(0.0, 1.0, m.enc_t.size) * (
-        cfg.encoder.noise
-    )
+    m.enc_t = grid(0.0, t_bag_end, cfg.encoder.rate)
+    m.enc_angle = encoder_readings(cfg.encoder, rng, drive_angle(events, m.enc_t))
     cam = cfg.camera
     ts, ids, xs, ys, yaws = [], [], [], [], []
     for ev in events:
-        tt = _grid(ev.t_start - pre_time, ev.t_start + ev.track.t_end, cam.rate)
-        tau = tt - ev.t_start
-        x, y, yaw = ev.track.pose_at(tau)
-        seen = (
-            (x >= cam.fov_x[0]) & (x <= cam.fov_x[1]) & (y >= cam.fov_y[0]) & (y <= cam.fov_y[1])
-        )
-        kept = seen & (rng.random(tt.size) >= cam.dropout)
-        n = int(kept.sum())
-        cx, cy, cyaw = sorter_to_camera(cam.offset, x[kept], y[kept], yaw[kept])
+        tt = grid(ev.t_start - pre_time, ev.t_start + ev.track.t_end, cam.rate)
+        _, kept, cx, cy, cyaw = camera_frames(cam, rng, *ev.track.pose_at(tt - ev.t_start))
         ts.append(tt[kept])
-        ids.append(np.full(n, ev.parcel_id, dtype=np.int64))
-        xs.append(cx + rng.normal(0.0, 1.0, n) * cam.noise_position)
-        ys.append(cy + rng.normal(0.0, 1.0, n) * cam.noise_position)
-        yaws.append(cyaw + rng.normal(0.0, 1.0, n) * cam.noise_yaw)
+        ids.append(np.full(cx.size, ev.parcel_id, dtype=np.int64))
+        xs.append(cx)
+        ys.append(cy)
+        yaws.append(cyaw)
     if events:
         m.cam_t, m.cam_id = np.concatenate(ts), np.concatenate(ids)
         m.cam_x, m.cam_y, m.cam_yaw = np.concatenate(xs), np.concatenate(ys), np.concatenate(yaws)
     if cfg.strain is not None and any(len(ev.track.t_fence) for ev in events):
         st, sm = [], []
         for ev in events:
-            tt = _grid(ev.t_start - pre_time, ev.t_start + ev.track.t_end, cfg.strain.rate)
+            tt = grid(ev.t_start - pre_time, ev.t_start + ev.track.t_end, cfg.strain.rate)
             st.append(tt)
             sm.append(ev.track.moment_at(tt - ev.t_start))
         m.str_t = np.concatenate(st)
-        m.str_moment = np.concatenate(sm) + rng.normal(0.0, 1.0, m.str_t.size) * cfg.strain.noise
+        m.str_moment = strain_readings(cfg.strain, rng, np.concatenate(sm))
     return m
+
+
+# -- the sensors of a run ----------------------------------------------------------------------
+def _instants(t0: float, t1: float, rate: float) -> np.ndarray:
+    """The sample instants k / rate with floor(t0 rate) < k <= floor(t1 rate): consecutive
+    intervals (t0, t1] of a state stream yield each instant once."""
+    return np.arange(math.floor(t0 * rate) + 1, math.floor(t1 * rate) + 1) / rate
+
+
+def hermite(t: np.ndarray, t0: float, t1: float, y0: float, y1: float, v0: float, v1: float):
+    """Cubic Hermite interpolation of a quantity with values y and rates v at t0 and t1."""
+    h = t1 - t0
+    s = (np.asarray(t) - t0) / h
+    s2, s3 = s * s, s * s * s
+    return (
+        (2 * s3 - 3 * s2 + 1) * y0
+        + (s3 - 2 * s2 + s) * h * v0
+        + (-2 * s3 + 3 * s2) * y1
+        + (s3 - s2) * h * v1
+    )
+
+
+@dataclass(frozen=True)
+class CameraFrame:
+    """One measured pose: capture stamp [s], parcel, geometric centre and yaw (camera frame)."""
+
+    t: float
+    parcel_id: int
+    x: float
+    y: float
+    yaw: float
+
+
+#: what :class:`SensorStream` counts: samples published, and samples dropped by cause
+STREAM_COUNTERS = (
+    "encoder_published",
+    "encoder_dropped_state_gap",
+    "camera_frames_in_view",
+    "camera_published",
+    "camera_dropped_dropout",
+    "camera_dropped_state_gap",
+    "camera_dropped_overload",
+    "camera_dropped_unknown_parcel",
+    "strain_published",
+    "strain_dropped_state_gap",
+    "states_dropped_out_of_order",
+)
+
+
+class SensorStream:
+    """The sensors of ``cfg`` fed with the twin's state as a run publishes it (the sensors
+    node, :mod:`fence_sorter.nodes.sensors`), with the noise and dropout model of
+    :func:`measure`.
+
+    Each sensor samples at its instants k / rate. Between two consecutive states of the same
+    source (the fence; one parcel) the truth is interpolated: the drive angle and a parcel's
+    centre of gravity and yaw by cubic Hermite interpolation with their rates, the root moment
+    linearly. Across a gap longer than ``max_gap`` no sample is taken and the missed instants
+    are counted (``*_dropped_state_gap``). Camera frames are held until the state clock
+    reaches capture + latency (:meth:`release`); beyond ``max_pending`` held frames a new
+    frame is dropped and counted (``camera_dropped_overload``). Three generators (encoder,
+    camera, strain) spawned from ``seed``. ``moment_factor``: root moment per tip deflection
+    [N m / m] (None: a stiff fence, no gauge).
+    """
+
+    def __init__(
+        self,
+        cfg: SensorConfig,
+        seed: int,
+        moment_factor: float | None,
+        max_gap: float,
+        max_pending: int = 10000,
+    ) -> None:
+        self.cfg = cfg
+        self.strain = cfg.strain if moment_factor is not None else None
+        self.moment_factor = moment_factor
+        self.max_gap = float(max_gap)
+        self.max_pending = int(max_pending)
+        rngs = [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(3)]
+        self.rng_encoder, self.rng_camera, self.rng_strain = rngs
+        self.counts: dict[str, int] = dict.fromkeys(STREAM_COUNTERS, 0)
+        self._fence: tuple[float, float, float, float] | None = None  # t, alpha, rate, moment
+        self._poses: dict[int, tuple[float, ...]] = {}  # t, x, y, yaw, vx, vy, yaw rate
+        self._cog: dict[int, tuple[float, float]] = {}
+        self._pending: list[tuple[float, int, CameraFrame]] = []  # heap of (due, seq, frame)
+        self._seq = 0
+        self.clock = -math.inf  # the newest state stamp [s]
+        #: shortest and longest delay of a released frame: state clock - capture time [s]
+        self.delay_range = (math.inf, -math.inf)
+
+    def parcel(self, parcel_id: int, cog_offset_x: float, cog_offset_y: float) -> None:
+        """A scanned parcel: its centre of gravity offset, to place its geometric centre."""
+        self._cog[int(parcel_id)] = (float(cog_offset_x), float(cog_offset_y))
+
+    def _span(self, prev_t: float, t: float, rate: float, gap_key: str) -> np.ndarray | None:
+        tt = _instants(prev_t, t, rate)
+        if t - prev_t > self.max_gap:
+            self.counts[gap_key] += tt.size
+            return None
+        return tt
+
+    def fence_state(self, t: float, alpha_w: float, rate: float, tip_deflection: float):
+        """The fence at ``t`` (drive angle and rate, tip deflection): the encoder's samples
+        (times, angles) and the gauge's (times, moments) since the previous fence state."""
+        self.clock = max(self.clock, t)
+        moment = self.moment_factor * tip_deflection if self.moment_factor is not None else 0.0
+        prev, empty = self._fence, np.zeros(0)
+        if prev is not None and t <= prev[0]:
+            self.counts["states_dropped_out_of_order"] += 1
+            return (empty, empty), (empty, empty)
+        self._fence = (t, alpha_w, rate, moment)
+        if prev is None:
+            return (empty, empty), (empty, empty)
+        enc = (empty, empty)
+        tt = self._span(prev[0], t, self.cfg.encoder.rate, "encoder_dropped_state_gap")
+        if tt is not None and tt.size:
+            true = hermite(tt, prev[0], t, prev[1], alpha_w, prev[2], rate)
+            enc = (tt, encoder_readings(self.cfg.encoder, self.rng_encoder, true))
+            self.counts["encoder_published"] += tt.size
+        gauge = (empty, empty)
+        if self.strain is not None:
+            tt = self._span(prev[0], t, self.strain.rate, "strain_dropped_state_gap")
+            if tt is not None and tt.size:
+                true = np.interp(tt, (prev[0], t), (prev[3], moment))
+                gauge = (tt, strain_readings(self.strain, self.rng_strain, true))
+                self.counts["strain_published"] += tt.size
+        return enc, gauge
+
+    def parcel_state(self, parcel_id: int, t: float, pose, velocity) -> None:
+        """A parcel's centre of gravity and yaw ``pose`` (x, y, yaw) and their rates
+        ``velocity`` at ``t`` (sorter frame): the camera's frames since its previous state are
+        measured and held for their latency."""
+        self.clock = max(self.clock, t)
+        pid = int(parcel_id)
+        cam = self.cfg.camera
+        prev = self._poses.get(pid)
+        if prev is not None and t <= prev[0]:
+            self.counts["states_dropped_out_of_order"] += 1
+            return
+        state = (float(t), *map(float, pose), *map(float, velocity))
+        self._poses[pid] = state
+        if prev is None:
+            return
+        tt = _instants(prev[0], t, cam.rate)
+        if not tt.size:
+            return
+        x, y, yaw = (hermite(tt, prev[0], t, prev[k], state[k], prev[k + 3], state[k + 3])
+                     for k in (1, 2, 3))  # fmt: skip
+        cog = self._cog.get(pid)
+        gx, gy = geometric_centre(x, y, yaw, *(cog or (0.0, 0.0)))
+        if t - prev[0] > self.max_gap:
+            self.counts["camera_dropped_state_gap"] += int(in_view(cam, gx, gy).sum())
+            return
+        if cog is None:
+            self.counts["camera_dropped_unknown_parcel"] += int(in_view(cam, gx, gy).sum())
+            return
+        seen, kept, cx, cy, cyaw = camera_frames(cam, self.rng_camera, gx, gy, yaw)
+        self.counts["camera_frames_in_view"] += int(seen.sum())
+        self.counts["camera_dropped_dropout"] += int((seen & ~kept).sum())
+        for t_k, x_k, y_k, yaw_k in zip(tt[kept], cx, cy, cyaw, strict=True):
+            if len(self._pending) >= self.max_pending:
+                self.counts["camera_dropped_overload"] += 1
+                continue
+            frame = CameraFrame(float(t_k), pid, float(x_k), float(y_k), float(yaw_k))
+            heapq.heappush(self._pending, (frame.t + cam.latency, self._seq, frame))
+            self._seq += 1
+
+    def release(self) -> list[CameraFrame]:
+        """The held frames whose capture + latency the state clock has reached, in order."""
+        out = []
+        while self._pending and self._pending[0][0] <= self.clock + 1e-9:
+            out.append(heapq.heappop(self._pending)[2])
+        if out:
+            lo, hi = self.delay_range
+            delays = [self.clock - f.t for f in out]
+            self.delay_range = (min(lo, *delays), max(hi, *delays))
+        self.counts["camera_published"] += len(out)
+        return out
+
+    def forget_before(self, t: float) -> None:
+        """Drop the parcels whose last state is older than ``t`` (they left the line)."""
+        for pid in [p for p, s in self._poses.items() if s[0] < t]:
+            del self._poses[pid]
+            self._cog.pop(pid, None)

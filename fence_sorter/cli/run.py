@@ -39,6 +39,13 @@ def register(subparsers) -> None:
         help="save a Rerun recording of the run (the simulator logs it live; view: rerun FILE)",
     )
     parser.add_argument(
+        "--sensors",
+        metavar="FILE",
+        help="sensors file or name under config/sensors/ (e.g. camera60): the sensors node "
+        "publishes the measured topics from the twin's state; with --bag a calibration bag "
+        "(the truth in its metadata; docs/calibration.md)",
+    )
+    parser.add_argument(
         "--stream", default="default", help="stream config (YAML) or CSV manifest, or a name"
     )
     parser.add_argument("--seed", type=int, help="seed of a random stream (default: the file's)")
@@ -90,6 +97,7 @@ def run(args: argparse.Namespace) -> int:
         params=args.params,
         domain=args.domain,
         keep_logs=args.keep_logs,
+        sensors=args.sensors,
     )
     say = (lambda s: print(s, file=sys.stderr)) if args.json else print
     # from here to the exit SIGINT/SIGTERM are flags the job checks (no traceback, no

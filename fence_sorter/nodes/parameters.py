@@ -551,6 +551,50 @@ RECORDER_PARAMETERS: tuple[ParamSpec, ...] = (
         "MCAP chunk compression: zstd or none (sqlite3: none)",
         read_only=True,
     ),
+    ParamSpec(
+        "custom_data_file",
+        "",
+        "A JSON object file of strings whose entries go into the bag's metadata custom_data "
+        "(fence-sorter run --sensors: the calibration truth); empty: none",
+        read_only=True,
+    ),
+)
+
+SENSORS_PARAMETERS: tuple[ParamSpec, ...] = (
+    RUN_ID_PARAMETER,
+    ParamSpec(
+        "scene",
+        DEFAULT_SCENE,
+        "Scene (name in config/scenes or YAML path) the simulator runs: its fence gives the "
+        "strain gauge's root moment per tip deflection (a stiff fence has no gauge)",
+        read_only=True,
+    ),
+    ParamSpec(
+        "sensors",
+        "camera60",
+        "Sensors file (name in config/sensors or YAML path): rate, noise, dropouts, latency "
+        "and camera frame of the drive encoder, the camera and the strain gauge",
+        read_only=True,
+    ),
+    ParamSpec("seed", 0, "Seed of the sensors' noise and dropouts", True, 0, 2**31 - 1),
+    ParamSpec(
+        "max_state_gap",
+        0.01,
+        "Longest sim time between two states of the fence or of a parcel across which the "
+        "sensors interpolate [s]; the samples of a longer gap are dropped and counted",
+        True,
+        1e-4,
+        10.0,
+    ),
+    ParamSpec(
+        "max_pending",
+        10000,
+        "Camera frames held for their latency at most; beyond it a frame is dropped and "
+        "counted (camera_dropped_overload)",
+        True,
+        1,
+        10**7,
+    ),
 )
 
 
@@ -560,6 +604,7 @@ NODE_PARAMETERS: dict[str, tuple[ParamSpec, ...]] = {
     "scanner": COMMON_PARAMETERS + SCANNER_PARAMETERS,
     "controller": COMMON_PARAMETERS + CONTROLLER_PARAMETERS,
     "recorder": COMMON_PARAMETERS + RECORDER_PARAMETERS,
+    "sensors": COMMON_PARAMETERS + SENSORS_PARAMETERS,
 }
 
 

@@ -27,9 +27,9 @@ def profile(spec: QosSpec) -> QoSProfile:
 
 
 def topic_qos(name: str, depth: int | None = None) -> QoSProfile:
-    """The profile a suite topic is published and subscribed with (``depth``: another
+    """The profile a suite or measured topic is published and subscribed with (``depth``: another
     keep-last depth, e.g. the recorder's)."""
-    spec = topics.TOPICS[name].qos
+    spec = topics.ALL_TOPICS[name].qos
     return profile(spec if depth is None else spec.with_depth(depth))
 
 

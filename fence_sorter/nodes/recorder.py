@@ -22,6 +22,7 @@ order of every topic (what ``rerun mcap check --full`` checks).
 from __future__ import annotations
 
 import importlib
+import json
 import os
 import queue
 import sys
@@ -48,7 +49,7 @@ from fence_sorter.nodes.base import FenceSorterNode, run_node
 from fence_sorter.nodes.parameters import RECORDER_PARAMETERS
 from fence_sorter.nodes.qos import topic_qos
 from fence_sorter.recording.logtime import SettleBuffer
-from fence_sorter.recording.topics import RECORDER_DEPTH, TOPICS, QosSpec
+from fence_sorter.recording.topics import ALL_TOPICS, RECORDER_DEPTH, TOPICS, QosSpec
 from fence_sorter.recording.writer import COMPRESSIONS
 
 DEFAULT_TOPICS = list(TOPICS)
@@ -100,6 +101,24 @@ def bag_path(output_dir: str) -> Path:
     return candidate
 
 
+def read_custom_data_file(path: str) -> dict[str, str]:
+    """The string entries a JSON object file adds to the bag's metadata ``custom_data`` (what
+    ``fence-sorter run --sensors`` knows of the truth); ValueError names the file."""
+    if not path:
+        return {}
+    try:
+        data = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"recorder: custom_data_file {path}: cannot read: {exc}") from None
+    if not isinstance(data, dict) or not all(
+        isinstance(k, str) and isinstance(v, str) for k, v in data.items()
+    ):
+        raise ValueError(
+            f"recorder: custom_data_file {path}: must be a JSON object of strings to strings"
+        )
+    return data
+
+
 @dataclass
 class _Topic:
     name: str
@@ -133,7 +152,11 @@ class RecorderNode(FenceSorterNode):
             max_segment_duration=float(p["max_segment_duration"]),
             flush_period=float(p["flush_period"]),
             compression=str(p["compression"]),
-            custom_data={"recorder": "fence_sorter", "node": self.get_fully_qualified_name()},
+            custom_data={
+                "recorder": "fence_sorter",
+                "node": self.get_fully_qualified_name(),
+                **read_custom_data_file(str(p["custom_data_file"])),
+            },
         ).open()
         self.stamp_order = StampOrder()
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
@@ -142,12 +165,12 @@ class RecorderNode(FenceSorterNode):
         self.write_error: str | None = None
         self.topics: list[_Topic] = []
         for name in p["topics"]:
-            if name not in TOPICS:
+            if name not in ALL_TOPICS:
                 raise ValueError(
-                    f"recorder: topics: {name} is not one of the suite's topics "
-                    f"({', '.join(TOPICS)})"
+                    f"recorder: topics: {name} is not one of the suite's or measured topics "
+                    f"({', '.join(ALL_TOPICS)})"
                 )
-            msgtype, spec = TOPICS[name].msgtype, TOPICS[name].qos
+            msgtype, spec = ALL_TOPICS[name].msgtype, ALL_TOPICS[name].qos
             handle = self.writer.add_topic(name, msgtype, [bag_qos(spec)])
             topic = _Topic(
                 name, msgtype, handle, starts_with_header(self.writer.typestore, msgtype)

@@ -116,10 +116,23 @@ NODE_SUBSCRIPTIONS: dict[str, tuple[str, ...]] = {
     "simulator": (PARCELS, FENCE_COMMANDS, SCAN_PROGRESS),
     "controller": (PARCELS,),
     "recorder": tuple(SUITE_TOPICS),
+    "sensors": (FENCE_STATE, LOAD_STATES, PARCELS),
 }
-#: measured topics (calibration bags, not recorded by the recorder): topic -> (type, reliable)
+#: the measured topics a real sorter's sensors publish (docs/calibration.md), published in a
+#: run by the sensors node (``fence-sorter run --sensors``) and recorded with the suite's
+#: topics then: reliable, so a calibration bag holds every sample the sensors took
+MEASURED_QOS = QosSpec(reliable=True, depth=EVENT_DEPTH)
+MEASURED: dict[str, Topic] = {
+    t.name: t
+    for t in (
+        Topic(DRIVE_ENCODER, "sensor_msgs/msg/JointState", MEASURED_QOS),
+        Topic(CAMERA_POSES, "fence_sorter_msgs/msg/LoadState", MEASURED_QOS),
+        Topic(FENCE_ROOT_MOMENT, "geometry_msgs/msg/WrenchStamped", MEASURED_QOS),
+    )
+}
+#: measured topics: topic -> (type, reliable)
 MEASURED_TOPICS: dict[str, tuple[str, bool]] = {
-    DRIVE_ENCODER: ("sensor_msgs/msg/JointState", False),
-    CAMERA_POSES: ("fence_sorter_msgs/msg/LoadState", False),
-    FENCE_ROOT_MOMENT: ("geometry_msgs/msg/WrenchStamped", False),
+    t.name: (t.msgtype, t.qos.reliable) for t in MEASURED.values()
 }
+#: every topic a node of fence_sorter publishes or records
+ALL_TOPICS: dict[str, Topic] = {**TOPICS, **MEASURED}

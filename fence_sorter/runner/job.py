@@ -39,16 +39,18 @@ SCAN_LINE_X = -3.0
 START_DELAY = 0.5
 #: sim time a parcel needs after its scan to leave the line (line end ~3 m) plus margin [s]
 LINE_END_X = 3.0
-STOP_ORDER = ("scanner", "controller", "simulator", "recorder")
+STOP_ORDER = ("scanner", "controller", "simulator", "sensors", "recorder")
 #: controller parameters the simulator takes too (the limits of its outcomes' damage margins)
 DAMAGE_LIMITS = ("w_dop", "a_ndop")
 #: the nodes that share the run's id (parameter run_id) on /parcels and /fence_commands
-RUN_ID_NODES = ("scanner", "controller", "simulator")
+RUN_ID_NODES = ("scanner", "controller", "simulator", "sensors")
 #: wall time after the scanner's start without any parcel on /parcels before the run gives up
 NO_PARCEL_TIMEOUT = 60.0
 #: nodes the run restarts when they die (the others end the run with exit 1), and how often
 RESTARTABLE = ("controller",)
 MAX_CONTROLLER_RESTARTS = 3
+#: the highest rate of the simulator's state in a run with sensors [Hz of sim time]
+MAX_STATE_RATE = 1000.0
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 #: the node logs of a run without --log-dir
@@ -75,6 +77,7 @@ class RunOptions:
     params: list[str] = field(default_factory=list)  # NODE:KEY=VALUE
     domain: int | None = None  # ROS domain (None: ROS_DOMAIN_ID if set, else a free one)
     keep_logs: bool = False  # keep the node logs of a clean run too
+    sensors: str | None = None  # sensors file or name: the sensors node runs (and is recorded)
 
 
 @dataclass
@@ -102,6 +105,9 @@ class Plan:
     node_params: dict[str, dict[str, ParamValue]]  # checked --param values by node
     domain: int  # ROS_DOMAIN_ID of the run, free when checked
     divert_ids: list[int] = field(default_factory=list)
+    sensors_path: Path | None = None  # the sensors file of a run with sensors
+    truth: dict | None = None  # what a calibration bag of the run is made from (its metadata)
+    state_rate: float = 0.0  # the state's rate the sensors need [Hz of sim time]; 0: default
     #: the run's identity on the wire (drawn per run; messages with another are foreign)
     run_id: int = field(default_factory=lambda: 1 + secrets.randbelow(2**63 - 1))
 
@@ -153,6 +159,13 @@ def prepare(opts: RunOptions) -> Plan:
         given = node_params.get("controller", {})
         if key in given and key not in node_params.get("simulator", {}):
             node_params.setdefault("simulator", {})[key] = given[key]
+    sensors_path, truth, state_rate = None, None, 0.0
+    if opts.sensors is not None:
+        sensors_path, truth = _sensors_truth(opts, scene_path, base, stream)
+        spec = truth["sensors_spec"]
+        rates = [spec["encoder"]["rate"], spec["camera"]["rate"]]
+        rates += [spec["strain"]["rate"]] if spec["strain"] and base.fence is not None else []
+        state_rate = min(max(rates), MAX_STATE_RATE)
     sim_duration = START_DELAY + stream[-1].arrival_time + (LINE_END_X - SCAN_LINE_X) / v + 5.0
     try:
         domain = choose_domain(opts.domain)
@@ -168,7 +181,53 @@ def prepare(opts: RunOptions) -> Plan:
         node_params,
         domain,
         [s.parcel_id for s in stream if s.divert],
+        sensors_path=sensors_path,
+        truth=truth,
+        state_rate=state_rate,
     )
+
+
+def state_publish_rate(state_rate: float, rtf: float) -> float:
+    """The simulator's publish_rate for ``state_rate`` Hz of sim time: wall Hz when paced (sim
+    Hz x rtf), sim Hz when unpaced; within the parameter's [1, 1000]."""
+    return min(max(state_rate * rtf if rtf > 0.0 else state_rate, 1.0), 1000.0)
+
+
+def _sensors_truth(opts: RunOptions, scene_path: Path, base, stream) -> tuple[Path, dict]:
+    """The sensors file of the run and the truth its bag carries: the scene's fit parameters
+    (a friction the stream sets per parcel is no single truth and is left out), the sensors,
+    the noise seed and the stream."""
+    import math
+    from dataclasses import asdict
+
+    from fence_sorter.calibration.emulate import truth_record
+    from fence_sorter.calibration.sensors import load_sensors, resolve_sensors
+
+    try:
+        path = resolve_sensors(opts.sensors).resolve()
+        sensors = load_sensors(path)
+    except ParameterError as exc:
+        raise BadInput(f"--sensors: {exc}") from None
+    truth = truth_record(
+        scene_path.stem,
+        base,
+        sensors,
+        sensors_seed(opts),
+        source="fence-sorter run",
+        sensors_file=str(path),
+        sensors_spec=asdict(sensors),
+        stream=opts.stream,
+        stream_seed=opts.seed,
+    )
+    for key in ("mu_belt", "mu_fence"):
+        if any(not math.isnan(getattr(s, key)) for s in stream):
+            truth["values"].pop(key, None)
+    return path, truth
+
+
+def sensors_seed(opts: RunOptions) -> int:
+    """The sensors' noise seed: the run's --seed + 1 (as ``fence-sorter emulate``), else 1."""
+    return (opts.seed if opts.seed is not None else 0) + 1
 
 
 def _ros_args(node: str, plan: Plan, opts: RunOptions, extra: list[str]) -> list[str]:
@@ -319,23 +378,38 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None], stop: StopReq
         # the stream starts once these nodes subscribe to their topics (by name in the graph)
         gate = ["simulator", "controller", monitor.node.get_name()]
         gate += ["recorder"] if opts.bag else []
+        gate += ["sensors"] if plan.sensors_path else []
         if opts.bag:
             Path(opts.bag).mkdir(parents=True, exist_ok=True)
+            rec_args = _recorder_args(plan, opts, log_dir)
             group.start(
                 "recorder",
+                node_command("recorder", _ros_args("recorder", plan, opts, rec_args)),
+            )
+        if plan.sensors_path:
+            group.start(
+                "sensors",
                 node_command(
-                    "recorder",
+                    "sensors",
                     _ros_args(
-                        "recorder",
+                        "sensors",
                         plan,
                         opts,
-                        [f"output_dir:={Path(opts.bag).resolve()}", "use_sim_time:=true"],
+                        [
+                            scene,
+                            f"sensors:={plan.sensors_path}",
+                            f"seed:={sensors_seed(opts)}",
+                            # two consecutive states may be lost
+                            f"max_state_gap:={3.0 / plan.state_rate}",
+                        ],
                     ),
                 ),
             )
         _wait_for(monitor, group, stop, "controller", 120.0)
         if opts.bag:
             _wait_for(monitor, group, stop, "recorder", 60.0)
+        if plan.sensors_path:
+            _wait_for(monitor, group, stop, "sensors", 60.0)
         group.start(
             "simulator",
             node_command(
@@ -346,6 +420,12 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None], stop: StopReq
                     opts,
                     [scene, f"real_time_factor:={opts.rtf}"]
                     + ([f"loop_cpu:={pinned}"] if set_here else [])
+                    + (
+                        [f"publish_rate:={state_publish_rate(plan.state_rate, opts.rtf)}"]
+                        if plan.state_rate
+                        and "publish_rate" not in plan.node_params.get("simulator", {})
+                        else []
+                    )
                     + (
                         [
                             f"rrd_path:={Path(opts.rrd).resolve()}",
@@ -500,6 +580,25 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None], stop: StopReq
     summary["process_groups"] = list(group.pgids)
     summary["leftover_processes"] = left
     return RunResult(code, summary, message, log_dir, list(group.pgids), left, exit_codes, records)
+
+
+def _recorder_args(plan: Plan, opts: RunOptions, log_dir: Path) -> list[str]:
+    """The recorder's parameters: the bag; with sensors the measured topics too and the truth
+    in the bag's metadata (custom_data, :data:`fence_sorter.calibration.bag.TRUTH_KEY`)."""
+    import json
+
+    args = [f"output_dir:={Path(opts.bag).resolve()}", "use_sim_time:=true"]
+    if plan.truth is not None and "topics" not in plan.node_params.get("recorder", {}):
+        from fence_sorter.calibration.bag import TRUTH_KEY
+        from fence_sorter.recording.topics import MEASURED, TOPICS
+
+        truth_file = log_dir / "calibration_truth.json"
+        truth_file.write_text(json.dumps({TRUTH_KEY: json.dumps(plan.truth)}), encoding="utf-8")
+        args += [
+            f"topics:={ros_value([*TOPICS, *MEASURED])}",
+            f"custom_data_file:={truth_file}",
+        ]
+    return args
 
 
 class _StartFailure(RuntimeError):

@@ -86,6 +86,7 @@ def summarise(records, belt_speed: float, expected_ids=None, divert_ids=None) ->
     ctrl = records.diagnostics.get("fence_sorter/controller")
     sim = records.diagnostics.get("fence_sorter/simulator")
     scanner = records.diagnostics.get("fence_sorter/scanner")
+    sensors = records.diagnostics.get("fence_sorter/sensors")
     expected = sorted(expected_ids) if expected_ids is not None else None
     return {
         "parcels_expected": len(expected) if expected is not None else None,
@@ -130,6 +131,7 @@ def summarise(records, belt_speed: float, expected_ids=None, divert_ids=None) ->
         "controller": ctrl or {},
         "simulator": sim or {},
         "scanner": scanner or {},
+        "sensors": sensors or {},
         "sim_time_s": records.sim_time,
     }
 

@@ -11,7 +11,7 @@ from catkin_pkg.package import parse_package
 from fence_sorter import __version__
 
 ROOT = Path(__file__).resolve().parents[2]
-NODES = {"simulator", "scanner", "controller", "recorder"}
+NODES = {"simulator", "scanner", "controller", "recorder", "sensors"}
 
 
 @pytest.mark.parametrize("path", ["package.xml", "msg_defs/package.xml"])
