@@ -19,6 +19,14 @@ from fence_sorter.scene import SceneError, load_scene
 from fence_sorter.verification import stability as S
 
 S_ALL = ("trajectory", "fence", "forces", "stages")
+# a contact far too stiff for the fixed step: the iteration fails down to min_dt
+TOO_STIFF = [
+    "contact.k_p=1e16",
+    "solver.method=trapezoidal",
+    "solver.dt=5e-3",
+    "solver.min_dt=1e-3",
+    "solver.max_iterations=2",
+]
 
 
 def test_every_series_is_recorded_at_every_accepted_point() -> None:
@@ -100,16 +108,7 @@ def test_each_divergence_check_names_its_kind() -> None:
 
 
 def test_a_step_below_min_dt_fails_the_solve() -> None:
-    sc = load_scene(
-        "positioned_stiff",
-        [
-            "contact.k_p=1e16",
-            "solver.method=trapezoidal",
-            "solver.dt=5e-3",
-            "solver.min_dt=1e-3",
-            "solver.max_iterations=2",
-        ],
-    ).scenario
+    sc = load_scene("positioned_stiff", TOO_STIFF).scenario
     stepper = Stepper(SortingModel(sc))
     while stepper.step() is None and stepper.running:
         pass
@@ -157,16 +156,7 @@ def test_a_reused_workspace_gives_the_same_solve() -> None:
     others = [
         load_scene("arbitrary_stiff").scenario,
         load_scene("positioned_stiff", ["drive.alpha_k_deg=5"]).scenario,
-        load_scene(
-            "positioned_stiff",
-            [
-                "contact.k_p=1e16",
-                "solver.method=trapezoidal",
-                "solver.dt=5e-3",
-                "solver.min_dt=1e-3",
-                "solver.max_iterations=2",
-            ],
-        ).scenario,
+        load_scene("positioned_stiff", TOO_STIFF).scenario,
     ]
     outcomes = [simulate(other) for other in others]
     assert [(r.sorted, r.success) for r in outcomes] == [

@@ -99,9 +99,15 @@ def modal_propagators(omega, zeta, h, a_out, g0_out, g1_out):
 
 @njit(cache=True, _nrt=False)
 def milne_error(y0, acc0, y1, prev_v, prev_a, r, h, atol, rtol, v_ref, om_ref):
-    """Scaled local error of a trapezoidal step y0 -> y1 on the load's state: Milne's device
-    (see ``integrators._local_error``), corrector minus variable-step AB2 (r > 0) or Euler
-    (r = 0) predictor, each component over atol + rtol * its block magnitude."""
+    """Scaled local error of a trapezoidal step y0 -> y1 on the load's state: Milne's device,
+    corrector minus variable-step AB2 (r > 0) or Euler (r = 0) predictor, each component over
+    atol + rtol * its block magnitude. With history (r = h / h_prev > 0) TR's local error is
+    -h^3 y'''/12, the AB2 predictor's h^3 y''' (1/6 + 1/(4r)), so the error is r/(3(r+1)) times
+    corrector minus predictor (order 3); without (the start, after an event or a drive
+    breakpoint) the Euler predictor gives the conservative order-2 estimate. The block
+    magnitudes: position |r| or 1 m, yaw |phi| or 1 rad, velocity |v| or the belt speed, yaw
+    rate |phidot| or belt / load size, so a component passing through zero does not shrink the
+    tolerance to atol."""
     if r > 0.0:
         c1, c2 = 1.0 + 0.5 * r, 0.5 * r
         fac = r / (3.0 * (r + 1.0))

@@ -80,7 +80,7 @@ def stiff_impact_peak_force(mass, approach_speed, b_p, k_p, steps):
     stopped at the first step past the deepest compression whose force is below the peak: with
     v = D' < 0 and N > 0, law (16) gives k D^2 > b |v| and so dN/dt = -b N D^2 / m + 2 b D v^2
     + 4 k D^3 v < -b N D^2 / m - 2 k D^3 |v| < 0, the force only falls from there (about half
-    the steps of the whole impact; the observer needs one per impact)."""
+    the steps of the whole impact; the loop's reductions need one per impact)."""
     if approach_speed <= 0.0:
         return 0.0
     b = b_p * mass**0.4
@@ -112,7 +112,7 @@ def stiff_impact_peak_force(mass, approach_speed, b_p, k_p, steps):
 # u = c / (1 + c) (analytic in c; the coefficients from :func:`n_stiff_coefficients`, RK4 with
 # N_STIFF_FIT_STEPS steps; test_contact_friction regenerates them), so an impact costs ~30
 # multiplications instead of ~400 RK4 steps (35-50 us called alone; 2 % of a stiff event).
-# Beyond N_STIFF_C_MAX (very heavy damping) the observers integrate as before.
+# Beyond N_STIFF_C_MAX (very heavy damping) the peak is integrated (stiff_impact_peak_force).
 N_STIFF_C_MAX = 8.0
 N_STIFF_DEGREE = 32
 N_STIFF_FIT_STEPS = 6400
