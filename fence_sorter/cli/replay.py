@@ -69,4 +69,9 @@ def run(args: argparse.Namespace) -> int:
         f"{result.wall_time:.2f} s wall for {result.bag_time:.2f} s of bag; max lateness "
         f"{1e3 * result.max_lateness:.1f} ms"
     )
+    if result.unacknowledged:
+        print(
+            "not acknowledged by every reliable subscriber: " + " ".join(result.unacknowledged),
+            file=sys.stderr,
+        )
     return 1 if contents.issues else 0

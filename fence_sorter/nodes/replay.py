@@ -4,7 +4,9 @@ with ``use_sim_time:=true`` follow the recorded sim time.
 
 Timing: message k goes out at wall ``start + (t_k - t_0) / rate`` (t = bag timestamp, the
 recorder's reception time), paced on the steady clock. QoS per topic as recorded (reliable or
-best effort, fence_sorter.recording.topics); unknown topics are published reliable.
+best effort, fence_sorter.recording.topics; reliable ones offered transient local, see
+:func:`offered`); unknown topics are published reliable. The node ends once its reliable
+subscribers have acknowledged every message (at most ``ACK_WAIT``).
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from fence_sorter.recording.bagread import BagContents
 from fence_sorter.recording.topics import REPLAY_DEPTH, TOPICS
 
 NODE_NAME = "replay"
+ACK_WAIT = 10.0  # [s] the longest wait for reliable subscribers to acknowledge the last messages
 
 
 @dataclass
@@ -26,6 +29,24 @@ class ReplayResult:
     wall_time: float = 0.0
     bag_time: float = 0.0  # span of the bag timestamps replayed [s]
     max_lateness: float = 0.0  # [s]
+    unacknowledged: list[str] = field(default_factory=list)  # topics not acked within ACK_WAIT
+
+
+def offered(qos):
+    """The recorded ``qos``, transient local when reliable: a subscriber asking for transient
+    local gets every message from the first, even when its side of the match completes after
+    the replay has started (a volatile reader drops what arrives before); volatile
+    subscribers are matched and served as before."""
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    if qos.reliability != ReliabilityPolicy.RELIABLE:
+        return qos
+    return QoSProfile(
+        history=qos.history,
+        depth=qos.depth,
+        reliability=qos.reliability,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL,
+    )
 
 
 def replay(
@@ -41,6 +62,7 @@ def replay(
     replayed topic before starting (so a node started just before does not miss the start).
     """
     import rclpy
+    from rclpy.duration import Duration
 
     from fence_sorter.nodes.qos import RELIABLE_QOS, topic_qos
     from fence_sorter.nodes.recorder import message_class
@@ -60,7 +82,7 @@ def replay(
         for topic in sorted({m.topic for m in msgs}):
             msgtype = next(m.msgtype for m in msgs if m.topic == topic)
             qos = topic_qos(topic, REPLAY_DEPTH) if topic in TOPICS else RELIABLE_QOS
-            pubs[topic] = node.create_publisher(message_class(msgtype), topic, qos)
+            pubs[topic] = node.create_publisher(message_class(msgtype), topic, offered(qos))
         if wait_for_subscribers > 0:
             deadline = time.monotonic() + wait_for_subscribers
             while time.monotonic() < deadline and not any(
@@ -83,8 +105,12 @@ def replay(
                 result.max_lateness = max(result.max_lateness, now - due)
             pubs[m.topic].publish(m.raw)
             result.published[m.topic] += 1
-        time.sleep(0.2)  # let reliable writers deliver the tail before the node goes
         result.wall_time = time.monotonic() - start
+        # the node goes only once its reliable subscribers have acknowledged every message
+        # (a repair of the tail can take a heartbeat period on a loaded machine)
+        result.unacknowledged = sorted(
+            t for t, p in pubs.items() if not p.wait_for_all_acked(Duration(seconds=ACK_WAIT))
+        )
     finally:
         node.destroy_node()
         rclpy.try_shutdown()

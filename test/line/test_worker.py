@@ -242,12 +242,15 @@ def test_unpaced_lockstep_holds_a_parcel_to_divert_for_its_command():
     by default) before its command came, for up to command_wait of wall time; a command that
     comes while it waits is accepted and the parcel sorted; one that never comes lets the
     line go on after command_wait (NO_COMMAND, counted)."""
+    # the loop is held at t = 0 (the scanner's progress, Gauges.SCAN_LIMIT) until the parcel is
+    # in its inbox: unpaced, it would otherwise run on while the parcel is on its way
     settings = LoopSettings(period=1e-3, rtf=0.0, warm_up=False, command_wait=5.0)
-    lp = LineProcess(CONFIG, None, settings)
+    lp = LineProcess(CONFIG, None, settings, scan_limit=0.0)
     try:
         lp.wait_ready(60.0)
         lp.send(("parcel", heavy(1, scan_position_x=-3.0)))  # front at -0.5 m at t = 2.5 s
         g = lp.gauges
+        g.header[Gauges.SCAN_LIMIT] = math.inf
         wait_until(
             lambda: g.value(Gauges.WAITING) == Gauges.WAIT_COMMAND,
             30.0,
@@ -264,10 +267,11 @@ def test_unpaced_lockstep_holds_a_parcel_to_divert_for_its_command():
         lp.close()
 
     settings = LoopSettings(period=1e-3, rtf=0.0, warm_up=False, command_wait=0.2)
-    lp = LineProcess(CONFIG, None, settings)
+    lp = LineProcess(CONFIG, None, settings, scan_limit=0.0)
     try:
         lp.wait_ready(60.0)
         lp.send(("parcel", heavy(2, scan_position_x=-3.0)))
+        lp.gauges.header[Gauges.SCAN_LIMIT] = math.inf
         frames = _collect(lp, lambda got: 2 in _outcomes(got))
         assert _outcomes(frames)[2].code is OutcomeCode.NO_COMMAND
         lp.send(("stop",))

@@ -374,17 +374,25 @@ def test_analysis_of_the_run_matches_the_live_outcomes(recorded_run, tmp_path):
 
 
 def test_replay_republishes_the_run(recorded_run, ros_node, env):
+    from rclpy.qos import DurabilityPolicy
     from rosgraph_msgs.msg import Clock
 
     from fence_sorter.nodes.qos import topic_qos
+    from fence_sorter.recording.topics import REPLAY_DEPTH
     from fence_sorter_msgs.msg import SortOutcome
 
     bag, _ = recorded_run
     counts = read_bag(bag).counts()
     clocks, outcomes = [], []
-    ros_node.create_subscription(Clock, "/clock", clocks.append, topic_qos("/clock"))
+    # transient local: the replay may start before our side has matched its writers (a volatile
+    # reader drops what comes before); as deep as the replay's history: a keep-last reader of
+    # depth 10 overwrites what a loaded test process has not taken yet
+    qos = {t: topic_qos(t, REPLAY_DEPTH) for t in ("/clock", "/sort_outcomes")}
+    for q in qos.values():
+        q.durability = DurabilityPolicy.TRANSIENT_LOCAL
+    ros_node.create_subscription(Clock, "/clock", clocks.append, qos["/clock"])
     ros_node.create_subscription(
-        SortOutcome, "/sort_outcomes", outcomes.append, topic_qos("/sort_outcomes")
+        SortOutcome, "/sort_outcomes", outcomes.append, qos["/sort_outcomes"]
     )
     from rclpy.executors import SingleThreadedExecutor
 
