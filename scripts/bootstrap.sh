@@ -7,7 +7,8 @@
 #                  cmake + rosidl, install into .venv
 #   4. package     pip install -e . (editable fence_sorter)
 #   5. ament       lib/fence_sorter/<executables>, ament index marker, share/fence_sorter
-#   6. kernel      compile the Numba physics kernel into its on-disk cache (about a minute once)
+#   6. kernel      compile the Numba physics kernel into its on-disk cache and its solve loop
+#                  into an ahead-of-time extension (about a minute once; one line per part)
 #
 # Every step is skipped when the sha256 of its inputs matches the stamp it left behind in
 # .venv/.fence_sorter_stamps/, so a rerun with nothing changed takes a second or two.
@@ -197,7 +198,8 @@ step_ament() {
 }
 
 # -- 6. kernel ---------------------------------------------------------------------------------
-# Keyed on the physics sources: the first simulate after set-up then loads cached machine code.
+# Keyed on the physics sources: no simulate after set-up compiles, and a new process's first
+# solve runs the ahead-of-time extension (kernel/aot.py) instead of Numba's dispatcher.
 step_kernel() {
   local key sources
   mapfile -t sources < <(find "$ROOT/fence_sorter/physics" -name '*.py' | sort)

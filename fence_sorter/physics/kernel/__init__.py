@@ -4,9 +4,10 @@ This package is the one implementation of the forces of one sorting event: the f
 (21)-(32), the contact law (16) with fence and border friction (37), belt friction (34)-(36) and
 the fence's modal load (20). Its modules: ``layout`` (the arrays' indices, :func:`pack`),
 ``forces`` (:func:`evaluate`), ``steps`` (the one-step maps), ``rhs`` (the ODE form of the
-SciPy baselines), ``impact`` (N_stiff), ``control`` (propagators, error estimate, events) and
-``loop`` (:func:`solve`); every name is importable from the package. Everything works on flat
-float arrays so that Numba compiles it:
+SciPy baselines), ``impact`` (N_stiff), ``control`` (propagators, error estimate, events),
+``loop`` (:func:`solve`) and ``aot`` (the loop compiled ahead of time into an extension module,
+which :data:`solve` calls when it is built for these sources); every name is importable from
+the package. Everything works on flat float arrays so that Numba compiles it:
 
 - ``P``: packed scalar parameters (indices ``P_*`` of ``layout``), built by :func:`pack`;
 - ``y``: the state [x, y, phi, vx, vy, phidot, eta_1..m, etadot_1..m] (C_s over ground, yaw,
@@ -50,6 +51,16 @@ from pathlib import Path
 import numba
 
 
+def source_digest(package: Path = Path(__file__).parent) -> str:
+    """A hash of every module of this package: the key of Numba's cache and of the
+    ahead-of-time solve (``aot``)."""
+    digest = hashlib.sha256()
+    for path in sorted(package.glob("*.py")):
+        digest.update(path.name.encode())
+        digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
 def cache_directory(package: Path = Path(__file__).parent) -> Path:
     """Numba's on-disk cache of this package, keyed on a hash of all its sources.
 
@@ -57,19 +68,16 @@ def cache_directory(package: Path = Path(__file__).parent) -> Path:
     another module (``forces._evaluate`` inlined into ``steps.trapezoidal_step``) would leave
     the caller's cached machine code stale. With the directory named after the hash of every
     module here, any change starts a fresh cache. Under NUMBA_CACHE_DIR when that is set, else
-    in the package's __pycache__, where the caches of earlier sources are removed."""
-    digest = hashlib.sha256()
-    for path in sorted(package.glob("*.py")):
-        digest.update(path.name.encode())
-        digest.update(path.read_bytes())
-    name = "numba-" + digest.hexdigest()[:16]
+    in the package's __pycache__, where the caches (and ahead-of-time builds, ``aot-*``) of
+    earlier sources are removed."""
+    name = "numba-" + source_digest(package)[:16]
     user = os.environ.get("NUMBA_CACHE_DIR")
     if user:
         return Path(user) / name
     base = package / "__pycache__"
     if base.is_dir():
-        for old in base.glob("numba-*"):
-            if old.name != name:
+        for old in (*base.glob("numba-*"), *base.glob("aot-*")):
+            if old.name not in (name, "aot-" + name[6:]):
                 shutil.rmtree(old, ignore_errors=True)
     return base / name
 
@@ -77,6 +85,7 @@ def cache_directory(package: Path = Path(__file__).parent) -> Path:
 # before the modules below are imported: their decorators read it (cache=True)
 numba.config.CACHE_DIR = str(cache_directory())
 
+from .aot import Solve, aot_directory  # noqa: E402 (after the cache directory is set)
 from .control import (  # noqa: E402 (after the cache directory is set)
     EVENT_ONSET,
     EVENT_RELEASE,
@@ -298,8 +307,8 @@ from .loop import (  # noqa: E402 (after the cache directory is set)
     diverged,
     observe,
     parabola_peak,
-    solve,
 )
+from .loop import solve as _solve_jit  # noqa: E402 (after the cache directory is set)
 from .rhs import (  # noqa: E402 (after the cache directory is set)
     rhs,
 )
@@ -312,6 +321,10 @@ from .steps import (  # noqa: E402 (after the cache directory is set)
     trapezoidal_step,
     trapezoidal_work_shape,
 )
+
+# the loop's entry: the ahead-of-time extension when it is built for these sources (a first
+# solve without Numba's dispatcher, ``aot``), the JIT dispatcher otherwise
+solve = Solve(_solve_jit, aot_directory(Path(numba.config.CACHE_DIR)), source_digest())
 
 __all__ = [
     "LoopModel",
