@@ -6,7 +6,8 @@ Each round starts a fresh interpreter per scene that times, in order: importing 
 SciPy's linear algebra, Numba, the physics (``physics.simulate``: the kernel's dispatchers, no
 compilation), loading a scene, the first ``simulate`` (through the loop's ahead-of-time
 extension when it is built for the current sources, else Numba's first-use set-up and the
-cached machine code) and a second ``simulate`` (the solve itself); and, in its own
+cached machine code) and a second ``simulate`` (the solve itself); the first ``simulate``
+once more through the JIT (FENCE_SORTER_AOT=0) for comparison; and, in its own
 interpreter, ``import rclpy``, which every node process pays. Medians over the rounds, printed
 and written as ``startup.json`` and ``README.md`` (rendered from the JSON) into ``--out``
 (default docs/startup/), with the command, the revision and the load average. The kernel must
@@ -57,20 +58,28 @@ RCLPY = "import time; t = time.perf_counter(); import rclpy; print(time.perf_cou
 FIRST_SOLVE_TARGET = 0.050  # [s] issue 19: a new process's first solve
 
 
+def _probe(scene: str, aot: bool) -> dict:
+    env = dict(os.environ, FENCE_SORTER_AOT="1" if aot else "0")
+    out = subprocess.run(
+        [sys.executable, "-c", PROBE, scene], check=True, capture_output=True, text=True, env=env
+    )
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
 def measure(scene: str, rounds: int) -> dict:
     """Median seconds of each part over ``rounds`` fresh interpreters; whether the first
-    solve went through the ahead-of-time extension in every round."""
+    solve went through the ahead-of-time extension in every round; the median first solve
+    through the JIT dispatcher (FENCE_SORTER_AOT=0), for comparison."""
     samples: list[list[float]] = []
+    jit: list[float] = []
     aot = True
     for _ in range(rounds):
-        out = subprocess.run(
-            [sys.executable, "-c", PROBE, scene], check=True, capture_output=True, text=True
-        )
-        probe = json.loads(out.stdout.strip().splitlines()[-1])
+        probe = _probe(scene, aot=True)
         samples.append(probe["parts"])
         aot = aot and probe["aot"]
+        jit.append(_probe(scene, aot=False)["parts"][PARTS.index("first simulate")])
     medians = {name: statistics.median(s[k] for s in samples) for k, name in enumerate(PARTS)}
-    return {"scene": scene, "aot": aot, "seconds": medians}
+    return {"scene": scene, "aot": aot, "seconds": medians, "jit_first": statistics.median(jit)}
 
 
 def measure_rclpy(rounds: int) -> float | None:
@@ -93,6 +102,10 @@ def render(data: dict) -> str:
     rows.append(
         ["first solve through the ahead-of-time extension"]
         + ["yes" if s["aot"] else "no (JIT)" for s in scenes]
+    )
+    rows.append(
+        ["first simulate through the JIT dispatcher (FENCE_SORTER_AOT=0)"]
+        + [fmt(1e3 * s["jit_first"], ".1f") for s in scenes]
     )
     m = data["machine"]
     lines = [
