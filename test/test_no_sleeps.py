@@ -21,10 +21,6 @@ PACED = {
     ("test/ros/test_recording.py", "publish"): (
         "a 1 kHz /clock publisher: the recorder closes segments and flushes on wall time"
     ),
-    (
-        "test/physics/test_integrators.py",
-        "test_wall_time_limit_counts_stepping_not_the_pauses_between_chunks",
-    ): ("the wall-time limit of a solve is the subject"),
 }
 
 

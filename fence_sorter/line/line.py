@@ -393,8 +393,9 @@ class SortingLine:
 
     def __init__(self, config: LineConfig, t0: float = 0.0):
         config.validate()
-        # the line steps solves in wall time: the solver's wall-clock limit counts elapsed
-        # time since the stroke began, so lift it to its maximum (see docs/simulator.md)
+        # the line steps solves as its clock moves: a stroke's solve is not cut off by the
+        # solver's wall-clock limit (the pacer reports a slow one), so lift it to its maximum
+        # (see docs/simulator.md)
         solver = replace(config.solver, stop_when_sorted=False, max_wall_time=3600.0)
         self.config = replace(config, solver=solver)
         self.t = float(t0)
