@@ -174,10 +174,9 @@ def _init_worker(base: Scenario, eds: list[EventData]) -> None:
     _WORKER["base"], _WORKER["eds"] = base, eds
 
 
-def _run_chunk(idx: list[int], values_list: list[dict[str, float]]):
-    """Predictions of the worker's parcels ``idx`` for each parameter set, or the message of
-    the first replay that failed."""
-    base, eds = _WORKER["base"], _WORKER["eds"]
+def _predict_all(base: Scenario, eds: list[EventData], idx, values_list):
+    """Predictions of parcels ``idx`` of ``eds`` for each parameter set, or the message of the
+    first replay that failed."""
     out = []
     for values in values_list:
         row = []
@@ -190,11 +189,15 @@ def _run_chunk(idx: list[int], values_list: list[dict[str, float]]):
     return out
 
 
+def _run_chunk(idx: list[int], values_list: list[dict[str, float]]):
+    """:func:`_predict_all` of the parcels this worker process holds (:func:`_init_worker`)."""
+    return _predict_all(_WORKER["base"], _WORKER["eds"], idx, values_list)
+
+
 def _run_detached(base: Scenario, eds: list[EventData], values_list):
-    """:func:`_run_chunk` for a worker that holds no parcels (a Dask cluster's): all of
-    ``eds``."""
-    _init_worker(base, eds)
-    return _run_chunk(list(range(len(eds))), values_list)
+    """:func:`_predict_all` of every parcel of ``eds``, for a worker that holds none (a Dask
+    cluster's)."""
+    return _predict_all(base, eds, range(len(eds)), values_list)
 
 
 #: how parcels' replays are run in parallel: ``processes`` (a pool of forked processes),

@@ -46,25 +46,49 @@ def test_interval_counts_each_channel_with_its_own_noise():
     assert factors[0] == pytest.approx(4.0, rel=0.5) and factors[1] == pytest.approx(1.0, rel=0.1)
 
 
-def test_dask_scheduler_gives_the_estimates_of_the_process_pool(tmp_path):
-    """The parcels' replays run by Dask's scheduler over two worker processes: the same
-    replays, so the same estimates and intervals as the process pool's, to the last bits."""
+NAMES = ["mu_fence", "mu_belt"]
+
+
+@pytest.fixture(scope="module")
+def stiff_fit(tmp_path_factory):
+    """Three parcels on the stiff fence, camera60; the fit by the process pool."""
     base = load_scene("arbitrary_stiff").scenario
     truth = with_values(base, {"mu_fence": 0.40, "mu_belt": 0.55})
     bag = emulate_bag(
-        tmp_path / "b", truth, load_sensors("camera60"), scene_name="x", stream="default",
-        count=3, seed=8,
+        tmp_path_factory.mktemp("fit") / "b", truth, load_sensors("camera60"), scene_name="x",
+        stream="default", count=3, seed=8,
     )  # fmt: skip
     mb = read_measured_bag(bag)
-    names = ["mu_fence", "mu_belt"]
-    pool = calibrate(base, mb, names, workers=2)
-    dask = calibrate(base, mb, names, workers=2, scheduler="dask")
-    assert dask.replays == pool.replays and dask.nfev == pool.nfev
-    for a, b in zip(pool.estimates, dask.estimates, strict=True):
-        assert a.verdict == b.verdict == "identified"
-        assert b.value == pytest.approx(a.value, rel=1e-12)
-        assert b.ci95 == pytest.approx(a.ci95, rel=1e-9)
-    assert dask.estimates[0].ci95[0] < 0.40 < dask.estimates[0].ci95[1]
+    return base, mb, calibrate(base, mb, NAMES, workers=2)
+
+
+def _same_fit(a, b) -> None:
+    assert b.replays == a.replays and b.nfev == a.nfev
+    for x, y in zip(a.estimates, b.estimates, strict=True):
+        assert x.verdict == y.verdict == "identified"
+        assert y.value == pytest.approx(x.value, rel=1e-12)
+        assert y.ci95 == pytest.approx(x.ci95, rel=1e-9)
+    assert b.estimates[0].ci95[0] < 0.40 < b.estimates[0].ci95[1]
+
+
+def test_dask_scheduler_gives_the_estimates_of_the_process_pool(stiff_fit):
+    """The parcels' replays run by Dask's scheduler over two worker processes: the same
+    replays, so the same estimates and intervals as the process pool's, to the last bits."""
+    base, mb, pool = stiff_fit
+    _same_fit(pool, calibrate(base, mb, NAMES, workers=2, scheduler="dask"))
+
+
+def test_dask_cluster_gives_the_estimates_of_the_process_pool(stiff_fit):
+    """The replays shipped to a Dask distributed cluster (one worker process, by its
+    scheduler's address) give the process pool's estimates."""
+    from dask.distributed import LocalCluster
+
+    base, mb, pool = stiff_fit
+    with LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None
+    ) as cluster:
+        remote = calibrate(base, mb, NAMES, workers=2, scheduler=cluster.scheduler_address)
+    _same_fit(pool, remote)
 
 
 def test_unknown_scheduler_exits_2(capsys):
