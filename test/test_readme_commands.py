@@ -40,6 +40,9 @@ COVERED: dict[str, str] = {
     "fence-sorter run --stream config/streams/example_manifest.csv": HERE,
     "fence-sorter run --rtf 0 --json": HERE,
     "fence-sorter run --param controller:a_ndop=150": HERE,
+    "fence-sorter run --sensors camera60 --bag bags/cal": (
+        "test/ros/test_sensors_run.py::test_the_bag_carries_the_truth_and_calibrate_fits_it"
+    ),
     "fence-sorter bench-suite": HERE,
     "fence-sorter analyze bags/example_4_parcels": HERE,
     "fence-sorter analyze bags/example_4_parcels --json --out /tmp/ex": (

@@ -435,7 +435,8 @@ class SensorStream:
     Each sensor samples at its instants k / rate. Between two consecutive states of the same
     source (the fence; one parcel) the truth is interpolated: the drive angle and a parcel's
     centre of gravity and yaw by cubic Hermite interpolation with their rates, the root moment
-    linearly. Across a gap longer than ``max_gap`` no sample is taken and the missed instants
+    (no rate in the state) by the cubic through the four states around the sample, one state
+    interval later. Across a gap longer than ``max_gap`` no sample is taken and the missed instants
     are counted (``*_dropped_state_gap``). Camera frames are held until the state clock
     reaches capture + latency (:meth:`release`); beyond ``max_pending`` held frames a new
     frame is dropped and counted (``camera_dropped_overload``). Three generators (encoder,
@@ -459,7 +460,7 @@ class SensorStream:
         rngs = [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(3)]
         self.rng_encoder, self.rng_camera, self.rng_strain = rngs
         self.counts: dict[str, int] = dict.fromkeys(STREAM_COUNTERS, 0)
-        self._fence: tuple[float, float, float, float] | None = None  # t, alpha, rate, moment
+        self._fence: list[tuple[float, ...]] = []  # the last states: t, alpha, rate, moment
         self._poses: dict[int, tuple[float, ...]] = {}  # t, x, y, yaw, vx, vy, yaw rate
         self._cog: dict[int, tuple[float, float]] = {}
         self._pending: list[tuple[float, int, CameraFrame]] = []  # heap of (due, seq, frame)
@@ -481,30 +482,51 @@ class SensorStream:
 
     def fence_state(self, t: float, alpha_w: float, rate: float, tip_deflection: float):
         """The fence at ``t`` (drive angle and rate, tip deflection): the encoder's samples
-        (times, angles) and the gauge's (times, moments) since the previous fence state."""
+        (times, angles) since the previous fence state, and the gauge's (times, moments) one
+        state interval behind (its cubic interpolation needs the state after it)."""
         self.clock = max(self.clock, t)
         moment = self.moment_factor * tip_deflection if self.moment_factor is not None else 0.0
-        prev, empty = self._fence, np.zeros(0)
-        if prev is not None and t <= prev[0]:
+        hist, empty = self._fence, (np.zeros(0), np.zeros(0))
+        if hist and t <= hist[-1][0]:
             self.counts["states_dropped_out_of_order"] += 1
-            return (empty, empty), (empty, empty)
-        self._fence = (t, alpha_w, rate, moment)
-        if prev is None:
-            return (empty, empty), (empty, empty)
-        enc = (empty, empty)
+            return empty, empty
+        hist.append((t, alpha_w, rate, moment))
+        if len(hist) > 4:
+            hist.pop(0)
+        if len(hist) < 2:
+            return empty, empty
+        prev = hist[-2]
+        enc = empty
         tt = self._span(prev[0], t, self.cfg.encoder.rate, "encoder_dropped_state_gap")
         if tt is not None and tt.size:
             true = hermite(tt, prev[0], t, prev[1], alpha_w, prev[2], rate)
             enc = (tt, encoder_readings(self.cfg.encoder, self.rng_encoder, true))
             self.counts["encoder_published"] += tt.size
-        gauge = (empty, empty)
-        if self.strain is not None:
-            tt = self._span(prev[0], t, self.strain.rate, "strain_dropped_state_gap")
-            if tt is not None and tt.size:
-                true = np.interp(tt, (prev[0], t), (prev[3], moment))
-                gauge = (tt, strain_readings(self.strain, self.rng_strain, true))
-                self.counts["strain_published"] += tt.size
+        gauge = empty
+        if self.strain is not None and len(hist) >= 3:
+            gauge = self._gauge(hist)
         return enc, gauge
+
+    def _gauge(self, hist: list[tuple[float, ...]]):
+        """The gauge's samples in the interval before the newest state: the root moment by the
+        cubic through the four states around it (two each side; linear where a neighbour is
+        more than ``max_gap`` away), so a ringing fence is followed between states."""
+        a, b = hist[-3], hist[-2]
+        tt = self._span(a[0], b[0], self.strain.rate, "strain_dropped_state_gap")
+        if tt is None or not tt.size:
+            return np.zeros(0), np.zeros(0)
+        pts = hist[-4:] if len(hist) == 4 else hist[-3:]
+        if all(q[0] - p[0] <= self.max_gap for p, q in zip(pts, pts[1:], strict=False)):
+            ts, ms = [p[0] for p in pts], [p[3] for p in pts]
+            true = sum(
+                ms[i] * np.prod([(tt - ts[j]) / (ts[i] - ts[j]) for j in range(len(ts)) if j != i],
+                                axis=0)
+                for i in range(len(ts))
+            )  # fmt: skip
+        else:
+            true = np.interp(tt, (a[0], b[0]), (a[3], b[3]))
+        self.counts["strain_published"] += tt.size
+        return tt, strain_readings(self.strain, self.rng_strain, true)
 
     def parcel_state(self, parcel_id: int, t: float, pose, velocity) -> None:
         """A parcel's centre of gravity and yaw ``pose`` (x, y, yaw) and their rates

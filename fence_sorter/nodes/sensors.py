@@ -12,11 +12,11 @@ the rates, noise, dropouts and camera frame of the sensors file. The sensor mode
 
 Time is the simulator's: the stamps of its states (the node needs no /clock). Every sample is
 stamped with its capture time, an instant k / rate of its sensor, the truth interpolated
-between the two states around it
-(``fence-sorter run --sensors`` raises the simulator's publish_rate to the highest sensor rate,
-at most 1 kHz of sim time). Latency is delayed publication in sim time: a camera frame goes out
-once the state stream has reached its capture time + ``camera.latency``; the encoder and gauge
-samples go out at once. Every sample not published is counted on /diagnostics (``*_dropped_*``,
+between the states around it (``fence-sorter run --sensors`` sets the simulator's
+publish_rate to the highest sensor rate, at most 250 Hz of sim time). Latency is delayed
+publication in sim time: a camera frame goes out once the state stream has reached its capture
+time + ``camera.latency``; the encoder samples go out at once, the gauge's one state later.
+Every sample not published is counted on /diagnostics (``*_dropped_*``,
 in the run's summary under "dropped"): ``camera_dropped_dropout`` (the dropout model),
 ``*_dropped_state_gap`` (the state stream had a gap longer than ``max_state_gap``: the
 node fell behind or the middleware lost states), ``camera_dropped_overload`` (more than
