@@ -1227,16 +1227,8 @@ def render_markdown(rep: BenchReport) -> str:
     L += table(("", ""), rows)
     add("")
     add(
-        "Wall times are `time.perf_counter` around `simulate(scenario)` (the `SortingModel` build "
-        "included), medians of the repeats; every figure in a ratio was measured in this same "
-        "run. Our runs and every SciPy run are timed the same way (`bench.timed_run`): the "
-        "garbage collector is disabled during each timed call and a collection runs before each "
-        "block of repeats, not before each call (as `timeit` does; a collection right before a "
-        "call leaves the CPU caches cold, which an optimiser running events back to back does "
-        "not see). The solver is single-threaded: the median process CPU time of the default "
-        "runs is shown next to the wall time (CPU <= wall means one core). Other processes were "
-        "running on this machine (see the load average), so single timings are noisy; the "
-        "medians and the interleaving of compared runs are the defence."
+        "How the figures are measured and how to read them: "
+        "[verification.md](verification.md#benchmarks)."
     )
     add("")
 
@@ -1252,12 +1244,6 @@ def render_markdown(rep: BenchReport) -> str:
     add("")
 
     add("## Default configuration per scene")
-    add("")
-    add(
-        "The scene exactly as loaded from `config/scenes/` (method, tolerances, stop rule, "
-        "recorded series). First call: the warm-up call in this process (the Numba kernels "
-        "loaded from the on-disk cache; compilation itself is in the JIT section)."
-    )
     add("")
     rows = []
     for s in sc:
@@ -1303,16 +1289,13 @@ def render_markdown(rep: BenchReport) -> str:
 
     add("## References")
     add("")
-    add(
-        f"Our reference is the `trapezoidal` scheme at dt = {REFERENCE_DT:g} s (fixed step, "
-        "events located; the same stop rule as the scene; contact iteration converged to "
-        f"{REFERENCE_TOLERANCE:g} in at most {REFERENCE_MAX_ITERATIONS} iterations instead of "
-        "the default 1e-9), checked against dt / 2. The SciPy reference "
-        f"is `{SCIPY_REFERENCE[0]}` at rtol = {SCIPY_REFERENCE[1]:g} (atol = rtol x "
-        f"{ATOL_FACTOR:g}), checked against rtol / 10: the converged answer of the ODE form "
-        "`kernel.rhs` that every SciPy baseline integrates."
-    )
-    add("")
+    if sc:
+        o, r = sc[0].ours, sc[0].scipy_ref
+        add(
+            f"Our reference: {o.label}, checked at {o.check_label}. SciPy's: {r.label}, "
+            f"checked at {r.check_label}."
+        )
+        add("")
     rows = []
     for s in sc:
         o, r = s.ours, s.scipy_ref
@@ -1344,31 +1327,12 @@ def render_markdown(rep: BenchReport) -> str:
         rows,
     )
     add("")
-    add(
-        "Last column: when the two references differ by more than ten times their own "
-        "convergence check, both are run again without belt friction (`--set "
-        "conveyor.mu_belt=0`, no check runs) to see where the difference comes from."
-    )
-    add("")
-
     add("## SciPy baselines at the same error")
     add("")
     add(
-        "Each SciPy method runs down the rtol ladder "
-        f"({', '.join(f'{x:g}' for x in rep.options['rtol_ladder'])}; atol = rtol x "
-        f"{ATOL_FACTOR:g}; max_step = solver.dt_max as in `baselines.py`), loosest first, each "
-        f"run capped at {rep.options['scipy_cap_s']:g} s wall time (`solver.max_wall_time`); a "
-        'capped run ends that method\'s ladder. "The same error" is a relative peak-force error '
-        "no larger than the default configuration's; when no method reaches it, the 1e-3 target "
-        "is used instead and the table says so. The loosest rung that reaches it is timed "
-        f"again, median of {BASELINE_REPEATS}, interleaved with the default's timed runs. The "
-        "error is measured against our reference and against the SciPy reference (how close a "
-        "solver gets to the converged answer of the model it integrates); the second is the "
-        "like-for-like measure of solver speed. A rung that reaches the error while the next "
-        'tighter one does not got there by a cancellation of errors ("not sustained") and is '
-        "not chosen: the fastest candidate always has its next tighter rung run, and a method "
-        "whose candidate loses the error there goes on down its ladder; slower methods' "
-        'candidates are not confirmed ("not run").'
+        "rtol ladder "
+        f"{', '.join(f'{x:g}' for x in rep.options['rtol_ladder'])}; every SciPy run capped at "
+        f"{rep.options['scipy_cap_s']:g} s of wall time."
     )
     add("")
     rows = []
@@ -1515,15 +1479,6 @@ def render_markdown(rep: BenchReport) -> str:
 
     add("## Peak memory")
     add("")
-    add(
-        "tracemalloc: the peak of Python and NumPy allocations made during one default run in "
-        "the bench process (allocations inside the compiled kernel are not traced; its arrays "
-        "are allocated by Python). Max RSS: the peak resident set size (`VmHWM` of "
-        "/proc/self/status) of a fresh process that imports fence_sorter, loads the scene and "
-        "runs one event (the whole process: interpreter, NumPy, SciPy, Numba/LLVM and the "
-        "cached kernels)."
-    )
-    add("")
     rows = [
         (
             s.scene,
@@ -1551,20 +1506,6 @@ def render_markdown(rep: BenchReport) -> str:
     add("")
 
     add("## Model parts: what each scene leaves out")
-    add("")
-    add(
-        "`SortingModel` builds only what a scene needs: no FEM for a stiff fence, no border "
-        "contact for a load that cannot reach the border, only the modes `fence.modes` keeps, "
-        "no time series nobody asked for. Each row adds back what the built model leaves out "
-        f"(the rows are timed round-robin, {PARTS_ROUNDS * rep.options['repeats']} rounds, "
-        "medians). Border "
-        "contact is forced on by setting the packed switch after the build (the model has no "
-        "option for it). A stiff scene's rigid fence is a different physical model from any "
-        f"flexible one; the nearest flexible fence is the default PA6 geometry at the largest "
-        f"Young's modulus the parameters allow ({STIFF_FEM_MODULUS:g} Pa) with every mode, and "
-        'its outcome is shown against the rigid one ("same physics: no"). The last row of '
-        "a flexible scene truncates the modes, which the scene does not do."
-    )
     add("")
     rows = []
     for s in sc:
