@@ -45,6 +45,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from enum import Enum
+from functools import lru_cache
 
 import numpy as np
 
@@ -127,13 +128,15 @@ def diagnosis_text(model: SortingModel, kind: Failure, t: float, value: float) -
     )
 
 
-def generalized_alpha_coefficients(rho_inf: float) -> np.ndarray:
-    """(alpha_m, alpha_f, beta, gamma) of Chung and Hulbert (1993) for spectral radius rho_inf."""
+@lru_cache(maxsize=64)
+def generalized_alpha_coefficients(rho_inf: float) -> tuple[float, float, float, float]:
+    """(alpha_m, alpha_f, beta, gamma) of Chung and Hulbert (1993) for spectral radius rho_inf
+    (cached: a solve's settings are built per event)."""
     am = (2.0 * rho_inf - 1.0) / (rho_inf + 1.0)
     af = rho_inf / (rho_inf + 1.0)
     gamma = 0.5 - am + af
     beta = 0.25 * (1.0 - am + af) ** 2
-    return np.array([am, af, beta, gamma])
+    return am, af, beta, gamma
 
 
 _PROPAGATORS: dict[int, tuple] = {}  # id(omega) -> (omega, zeta, cache arrays)

@@ -71,7 +71,7 @@ def test_generalized_alpha_coefficients():
         assert beta == pytest.approx(0.25 * (0.5 + gamma) ** 2)
         assert am <= af <= 0.5
     # rho_inf = 1: the average-acceleration (trapezoidal) Newmark rule
-    assert generalized_alpha_coefficients(1.0) == pytest.approx([0.5, 0.5, 0.25, 0.5])
+    assert generalized_alpha_coefficients(1.0) == pytest.approx((0.5, 0.5, 0.25, 0.5))
 
 
 @pytest.mark.parametrize("rho_inf", [1.0, 0.6, 0.0])

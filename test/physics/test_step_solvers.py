@@ -129,7 +129,7 @@ def test_a_slide_off_is_located_once_before_and_once_across(monkeypatch) -> None
     loop = K.loop
     seen = []
     trials = []
-    locate, step = loop._locate, loop._step
+    locate, step = loop._locate, loop._trap
 
     def spy(*args):
         # the located trial is left in the trial row; its event function (slot, kind, g0, g1
@@ -149,7 +149,7 @@ def test_a_slide_off_is_located_once_before_and_once_across(monkeypatch) -> None
 
     # the loop's source run as Python (its callees compiled), with the spies in its module
     monkeypatch.setattr(loop, "_locate", spy)
-    monkeypatch.setattr(loop, "_step", counted)
+    monkeypatch.setattr(loop, "_trap", counted)
     stepper = Stepper(SortingModel(STIFF))
     model, state = stepper._loop_arrays()
     while loop.solve.py_func(model, state, 1 << 30, math.inf) != K.SOLVE_DONE:

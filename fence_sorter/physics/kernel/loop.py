@@ -339,24 +339,19 @@ def _trap(
 
 
 @njit(cache=True, _nrt=False)
-def _step(
-    P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT, RES, MODAL, ACC,
-    w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h, a, b, jump, on_belt, force,
+def _alpha(
+    P, corners, normals, phi, rigid_modal, omega, zeta, cfg, T, Y, LAM, OUT, RES, MODAL, ACC, w,
+    wdot, nodes, prev, h, a, b, on_belt, force,
 ):  # fmt: skip
-    """One step of the solver's scheme from state row a into row b: generalized-alpha
-    (``cfg[G_GEN_ALPHA]``) or the trapezoidal rule (adaptive and fixed step)."""
-    if cfg[G_GEN_ALPHA] != 0.0:
-        status = generalized_alpha_step(
-            P, corners, normals, phi, rigid_modal, omega, zeta, cfg[G_ALPHA_M : G_GAMMA + 1], h,
-            T[a], Y[a], ACC[a], LAM[a], on_belt, cfg[G_TOL], int(cfg[G_MAX_ITER]), force, Y[b],
-            ACC[b], LAM[b], OUT[b], RES[b], MODAL[b], w, wdot, nodes, prev, Y[S_ALPHA],
-        )  # fmt: skip
-        T[b] = T[a] + h
-        return status
-    return _trap(
-        P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT, RES, MODAL,
-        ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h, a, b, jump, on_belt, force,
+    """One generalized-alpha step from state row a into row b (``cfg[G_GEN_ALPHA]``; the
+    loop calls it where the other schemes call :func:`_trap`)."""
+    status = generalized_alpha_step(
+        P, corners, normals, phi, rigid_modal, omega, zeta, cfg[G_ALPHA_M : G_GAMMA + 1], h, T[a],
+        Y[a], ACC[a], LAM[a], on_belt, cfg[G_TOL], int(cfg[G_MAX_ITER]), force, Y[b], ACC[b],
+        LAM[b], OUT[b], RES[b], MODAL[b], w, wdot, nodes, prev, Y[S_ALPHA],
     )  # fmt: skip
+    T[b] = T[a] + h
+    return status
 
 
 @njit(cache=True, _nrt=False)
@@ -422,11 +417,17 @@ def _locate(
             h_sec = lo + (g_lo - 0.5 * tol) * (lo - lo_prev) / (g_lo_prev - g_lo)
             if lo < h_sec < hi:
                 h_loc = h_sec
-        st = _step(
-            P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT, RES,
-            MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h_loc, a, S_LOC, jump,
-            on_belt, False,
-        )  # fmt: skip
+        if cfg[G_GEN_ALPHA] != 0.0:
+            st = _alpha(
+                P, corners, normals, phi, rigid_modal, omega, zeta, cfg, T, Y, LAM, OUT, RES,
+                MODAL, ACC, w, wdot, nodes, prev, h_loc, a, S_LOC, on_belt, False,
+            )  # fmt: skip
+        else:
+            st = _trap(
+                P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT,
+                RES, MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h_loc, a, S_LOC,
+                jump, on_belt, False,
+            )  # fmt: skip
         if st == STEP_REJECTED:
             break
         if kind == EVENT_SORT:
@@ -703,11 +704,17 @@ def solve(model, state, max_attempts, t_target):
             tiny = h_try <= 4.0 * min_dt
         else:
             tiny = h_try <= 1e-3 * h_nom
-        status = _step(
-            P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT, RES,
-            MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h_try, a, b,
-            _jump_at(P, T[a]), on_belt, tiny,
-        )  # fmt: skip
+        if cfg[G_GEN_ALPHA] != 0.0:
+            status = _alpha(
+                P, corners, normals, phi, rigid_modal, omega, zeta, cfg, T, Y, LAM, OUT, RES,
+                MODAL, ACC, w, wdot, nodes, prev, h_try, a, b, on_belt, tiny,
+            )  # fmt: skip
+        else:
+            status = _trap(
+                P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT,
+                RES, MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h_try, a, b,
+                _jump_at(P, T[a]), on_belt, tiny,
+            )  # fmt: skip
         if status == STEP_REJECTED:
             ctl[I_REJECTED] += 1
             fc[F_H] = h_try / 2.0
