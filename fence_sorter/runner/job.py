@@ -164,6 +164,7 @@ def prepare(opts: RunOptions) -> Plan:
     sensors_path, truth, state_rate = None, None, 0.0
     if opts.sensors is not None:
         sensors_path, truth = _sensors_truth(opts, scene_path, base, stream)
+        truth["seed"] = node_params.get("sensors", {}).get("seed", truth["seed"])
         spec = truth["sensors_spec"]
         rates = [spec["encoder"]["rate"], spec["camera"]["rate"]]
         rates += [spec["strain"]["rate"]] if spec["strain"] and base.fence is not None else []

@@ -171,3 +171,25 @@ def test_every_node_table_is_ros_free_and_declarable() -> None:
     )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert proc.stdout.strip() == "ok", proc.stderr
+
+
+def test_a_run_with_sensors_plans_their_state_rate_and_truth() -> None:
+    """--sensors: the state at the highest sensor rate (at most 250 Hz of sim time, in the
+    simulator's publish_rate units: wall Hz paced, sim Hz unpaced) and the truth the bag gets:
+    the scene's fit values, the sensors file's content, the noise seed as the node gets it."""
+    from fence_sorter.calibration.sensors import load_sensors
+    from fence_sorter.runner.job import RunOptions, prepare, state_publish_rate
+    from fence_sorter.scene import load_scene
+
+    plan = prepare(RunOptions(parcels=2, sensors="camera25", seed=4))
+    assert plan.state_rate == 200.0  # camera25: 200 Hz encoder, no gauge
+    assert plan.truth["seed"] == 5 and plan.truth["sensors"] == "camera25"
+    assert plan.truth["sensors_spec"]["camera"]["rate"] == load_sensors("camera25").camera.rate
+    base = load_scene("impact_flexible").scenario
+    assert plan.truth["values"]["mu_belt"] == base.conveyor.mu_belt
+    assert plan.truth["values"]["fence.damping_ratio"] == base.fence.damping_ratio
+    plan = prepare(RunOptions(parcels=2, sensors="camera60", params=["sensors:seed=9"]))
+    assert plan.state_rate == 250.0 and plan.truth["seed"] == 9  # a 1 kHz gauge: capped
+    assert state_publish_rate(250.0, 2.0) == 500.0 and state_publish_rate(250.0, 0.0) == 250.0
+    assert state_publish_rate(250.0, 8.0) == 1000.0  # the parameter's upper end
+    assert prepare(RunOptions(parcels=2)).truth is None
