@@ -1,10 +1,12 @@
-"""Tests wait on conditions, never sleep for a guessed time and then assert.
+"""Tests wait on conditions, never sleep for a guessed time and then assert, and never assert
+a time measured on the wall clock (timing belongs in the benchmark commands).
 
 Every module under test/ is parsed and searched for calls of ``time.sleep`` (under any name
-the module imports it as). A child process's script written as a string is not code of the
-module and is not searched (a child that must hang uses ``signal.pause()`` or
-``threading.Event().wait()``). The few functions where the pacing itself is the subject are
-named in PACED, each with its reason.
+the module imports it as), and for asserts on a value read from a clock (``perf_counter``,
+``monotonic``, ``time``, ``process_time``) or computed from one in the same function. A child
+process's script written as a string is not code of the module and is not searched (a child
+that must hang uses ``signal.pause()`` or ``threading.Event().wait()``). The few functions
+where the pacing itself is the subject are named in PACED, each with its reason.
 """
 
 from __future__ import annotations
@@ -61,6 +63,68 @@ def sleeps(source: str) -> list[tuple[int, str]]:
 
     visit(tree, "<module>")
     return found
+
+
+CLOCKS = {"perf_counter", "monotonic", "time", "process_time", "perf_counter_ns", "monotonic_ns"}
+
+
+def clock_asserts(source: str) -> list[int]:
+    """Lines of asserts on a clock reading, or on a name assigned from one (or from such a
+    name) earlier in the same function."""
+    found: list[int] = []
+    for func in ast.walk(ast.parse(source)):
+        if not isinstance(func, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            continue
+        timed: set[str] = set()
+
+        def from_clock(expr: ast.AST, timed: set[str] = timed) -> bool:
+            for n in ast.walk(expr):
+                if isinstance(n, ast.Call):
+                    f = n.func
+                    name = f.attr if isinstance(f, ast.Attribute) else getattr(f, "id", "")
+                    if name in CLOCKS:
+                        return True
+                if isinstance(n, ast.Name) and n.id in timed:
+                    return True
+            return False
+
+        for node in ast.walk(func):
+            if isinstance(node, ast.Assign) and from_clock(node.value):
+                timed |= {t.id for t in node.targets if isinstance(t, ast.Name)}
+            elif isinstance(node, ast.Assert) and from_clock(node.test):
+                found.append(node.lineno)
+    return found
+
+
+@pytest.mark.parametrize(
+    "source",
+    [
+        "import time\ndef test_x():\n    t0 = time.perf_counter()\n    f()\n"
+        "    wall = time.perf_counter() - t0\n    assert wall < 1.0\n",
+        "import time\ndef test_x():\n    assert time.monotonic() - T0 < 5\n",
+    ],
+)
+def test_an_assert_on_a_clock_reading_is_found(source: str) -> None:
+    assert len(clock_asserts(source)) == 1
+
+
+def test_a_deadline_of_a_wait_is_not_an_assert() -> None:
+    source = (
+        "import time\ndef wait(p):\n    end = time.monotonic() + 5\n"
+        "    while time.monotonic() < end:\n        if p():\n            return\n"
+        "    raise AssertionError('timed out')\n"
+    )
+    assert clock_asserts(source) == []
+
+
+def test_no_test_asserts_a_wall_clock_time() -> None:
+    report = [
+        f"{f.relative_to(ROOT)}:{line}"
+        for f in sorted((ROOT / "test").rglob("*.py"))
+        if f.resolve() != Path(__file__).resolve()
+        for line in clock_asserts(f.read_text(encoding="utf-8"))
+    ]
+    assert not report, "asserts on wall-clock times (a benchmark's figures):\n" + "\n".join(report)
 
 
 @pytest.mark.parametrize(

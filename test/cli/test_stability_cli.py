@@ -44,7 +44,6 @@ def test_quick_writes_the_report(tmp_path: Path) -> None:
         assert r.returncode == 0
     for c in data["cases"]:
         assert c["verdict"] in ("PASS", "DIAGNOSED", "FAIL")
-        assert c["wall_time_s"] < 2 * c["max_wall_time_s"] + 10
     by_name = {c["name"]: c for c in data["cases"]}
     assert by_name["diverging_trapezoidal"]["verdict"] == "DIAGNOSED"
     assert "min_dt" in by_name["diverging_trapezoidal"]["diagnosis"]

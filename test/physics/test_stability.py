@@ -75,8 +75,9 @@ def test_diverging_case_expected_to_pass_is_reported_unmet(warm: None) -> None:
 def test_wall_time_limit_bounds_a_slow_solve(warm: None) -> None:
     case = next(c for c in S.CASES if c.name == "wall_time_limit")
     cr = S.run_case(case)
+    # how soon after the limit a solve stops is tested on an injected clock (test_integrators)
     assert cr.verdict == S.DIAGNOSED and "wall-time" in cr.diagnosis
-    assert cr.result.wall_time < case.max_wall_time + S.TIME_GRACE
+    assert not cr.result.success and cr.result.diagnosis.startswith("wall-time limit 0.5 s")
 
 
 def test_energy_audit_matches_the_observer(warm: None) -> None:
