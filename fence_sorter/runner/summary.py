@@ -210,4 +210,12 @@ def format_summary(s: dict) -> str:
         + (", ".join(f"{k} {v}" for k, v in {**deadline, **lateness, **rtf}.items()) or "n/a"),
         f"sim time          {f(s['sim_time_s'], '.2f', 's')}",
     ]
+    sensors = s.get("sensors") or {}
+    if sensors:  # published samples (what they dropped is under "dropped")
+        lines.append(
+            f"sensors           {sensors.get('sensors', '?')}: encoder "
+            f"{sensors.get('encoder_published', '?')}, camera "
+            f"{sensors.get('camera_published', '?')}, gauge "
+            f"{sensors.get('strain_published', '?')} samples published"
+        )
     return "\n".join(lines)

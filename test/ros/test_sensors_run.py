@@ -120,6 +120,7 @@ def run(tmp_path_factory):
 def test_encoder_and_gauge_rates_and_noise_about_the_recorded_truth(run):
     s, b, diag, cfg = run["summary"], run["bag_contents"], run["diag"], run["cfg"]
     assert s["by_reason"] == {"SORTED": 4} and set(s["exit_codes"]) >= {"sensors", "recorder"}
+    assert s["sensors"]["sensors"] == "test250"  # the node's figures in the run's summary
     fence = b.by_topic(FENCE_STATE)
     tf = np.array([_t(m.msg.header.stamp) for m in fence])
     # the simulator's state at the sensors' highest rate (250 Hz of sim time)
