@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from fence_sorter.verification import accuracy, bench, faults, stability, versus
+from fence_sorter.verification import accuracy, bench, faults, stability, startup, versus
 from fence_sorter.verification.report import fmt, table, tables
 
 DOCS = Path(__file__).resolve().parents[2] / "docs"
@@ -191,3 +191,10 @@ def test_reliability_md_is_its_json_rendered() -> None:
 def test_versus_md_is_its_json_rendered() -> None:
     data = json.loads((DOCS / "versus.json").read_text(encoding="utf-8"))
     assert (DOCS / "versus.md").read_text(encoding="utf-8") == versus.render(data)
+
+
+def test_startup_readme_is_its_json_rendered() -> None:
+    data = json.loads((DOCS / "startup" / "startup.json").read_text(encoding="utf-8"))
+    rendered = startup.render(data)
+    assert len(tables(rendered)) >= 1
+    assert (DOCS / "startup" / "README.md").read_text(encoding="utf-8") == rendered
