@@ -1,24 +1,35 @@
 """Capacity and constraints of section 3 (ROS-free): W_t (1), Delta_c (2), (7)-(12) margins,
-one stroke evaluated on the twin, and the controller's planner (reused by the optimiser)."""
+one stroke evaluated on the twin, and the controller's planner (reused by the optimiser).
 
-from fence_sorter.capacity.constraints import CONSTRAINT_IDS, ConstraintProfile, margins
-from fence_sorter.capacity.evaluate import StrokeEvaluation, evaluate_stroke, planning_scenario
-from fence_sorter.capacity.formulas import capacity, pitch, scraping_time, stroke_capacity
-from fence_sorter.capacity.planner import LoadRequest, Plan, Planner, PlannerConfig
+The names below are loaded on first use (PEP 562): importing ``capacity.constraints`` (every
+node's parameters do) must not import the physics and Numba through ``evaluate`` and
+``planner``, ~1 s of a node process's start that the scanner and the recorder never use.
+"""
 
-__all__ = [
-    "CONSTRAINT_IDS",
-    "ConstraintProfile",
-    "LoadRequest",
-    "Plan",
-    "Planner",
-    "PlannerConfig",
-    "StrokeEvaluation",
-    "capacity",
-    "evaluate_stroke",
-    "margins",
-    "pitch",
-    "planning_scenario",
-    "scraping_time",
-    "stroke_capacity",
-]
+from importlib import import_module
+
+_WHERE = {
+    "CONSTRAINT_IDS": "constraints",
+    "ConstraintProfile": "constraints",
+    "margins": "constraints",
+    "StrokeEvaluation": "evaluate",
+    "evaluate_stroke": "evaluate",
+    "planning_scenario": "evaluate",
+    "capacity": "formulas",
+    "pitch": "formulas",
+    "scraping_time": "formulas",
+    "stroke_capacity": "formulas",
+    "LoadRequest": "planner",
+    "Plan": "planner",
+    "Planner": "planner",
+    "PlannerConfig": "planner",
+}
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name: str):
+    if name not in _WHERE:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(import_module(f"{__name__}.{_WHERE[name]}"), name)
+    globals()[name] = value
+    return value

@@ -2,59 +2,47 @@
 
 See :class:`SortingLine`; data types in :mod:`fence_sorter.line.types`, input checks in
 :mod:`fence_sorter.inputs`. Nothing here imports rclpy.
+
+The names below are loaded on first use (PEP 562): ``line.types`` is imported by every node
+(``nodes.convert``) and must not import the line's physics, the kernel and Numba through
+``line.line``, ~1 s of the start of a node process that does not simulate.
 """
 
-from fence_sorter.codes import StartMode
-from fence_sorter.inputs import (
-    PARCEL_REASONS,
-    InputError,
-    ParcelSpec,
-    StrokeCommand,
-    validate_command,
-    validate_parcel,
-)
+from importlib import import_module
 
-from .line import LineConfig, SortingLine, in_swept_sector
-from .pacing import LatenessHistogram, Pacer, Tick
-from .types import (
-    CommandResult,
-    EventTrace,
-    FenceSnapshot,
-    LineEvent,
-    LineSnapshot,
-    Outcome,
-    OutcomeCode,
-    OverlapWarning,
-    ParcelSnapshot,
-    SolverWarning,
-    Stage,
-    StrokeStarted,
-)
+_WHERE = {
+    "StartMode": "fence_sorter.codes",
+    "PARCEL_REASONS": "fence_sorter.inputs",
+    "InputError": "fence_sorter.inputs",
+    "ParcelSpec": "fence_sorter.inputs",
+    "StrokeCommand": "fence_sorter.inputs",
+    "validate_command": "fence_sorter.inputs",
+    "validate_parcel": "fence_sorter.inputs",
+    "LineConfig": ".line",
+    "SortingLine": ".line",
+    "in_swept_sector": ".line",
+    "LatenessHistogram": ".pacing",
+    "Pacer": ".pacing",
+    "Tick": ".pacing",
+    "CommandResult": ".types",
+    "EventTrace": ".types",
+    "FenceSnapshot": ".types",
+    "LineEvent": ".types",
+    "LineSnapshot": ".types",
+    "Outcome": ".types",
+    "OutcomeCode": ".types",
+    "OverlapWarning": ".types",
+    "ParcelSnapshot": ".types",
+    "SolverWarning": ".types",
+    "Stage": ".types",
+    "StrokeStarted": ".types",
+}
+__all__ = sorted(_WHERE)
 
-__all__ = [
-    "PARCEL_REASONS",
-    "CommandResult",
-    "EventTrace",
-    "FenceSnapshot",
-    "InputError",
-    "LatenessHistogram",
-    "LineConfig",
-    "LineEvent",
-    "LineSnapshot",
-    "Outcome",
-    "OutcomeCode",
-    "OverlapWarning",
-    "ParcelSnapshot",
-    "Pacer",
-    "ParcelSpec",
-    "SolverWarning",
-    "SortingLine",
-    "Stage",
-    "StartMode",
-    "StrokeCommand",
-    "StrokeStarted",
-    "Tick",
-    "in_swept_sector",
-    "validate_command",
-    "validate_parcel",
-]
+
+def __getattr__(name: str):
+    if name not in _WHERE:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(import_module(_WHERE[name], __name__), name)
+    globals()[name] = value
+    return value

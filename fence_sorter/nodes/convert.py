@@ -36,7 +36,6 @@ from fence_sorter.line.types import (
     OutcomeCode,
     ParcelSnapshot,
 )
-from fence_sorter.physics.contact import stiff_course
 from fence_sorter.physics.params import ContactParams
 from fence_sorter.stamps import time_to_sec
 from fence_sorter_msgs.msg import (
@@ -259,6 +258,9 @@ def event_to_msg(e: EventTrace, frame_id: str = FRAME_ID) -> SortEvent:
     msg.impact_speed = np.ascontiguousarray(e.impacts[:, 1])
     msg.impact_force_stiff = np.ascontiguousarray(e.impacts[:, 2])
     contact = ContactParams(b_p=e.b_p, k_p=e.k_p)
+    # scipy.integrate (~0.5 s) on first use: every node imports this module, few call this
+    from fence_sorter.physics.contact import stiff_course
+
     courses = [stiff_course(e.mass, w_n, contact, t0) for t0, w_n, _ in e.impacts]
     msg.stiff_t = np.concatenate([c[0] for c in courses]) if courses else np.zeros(0)
     msg.stiff_force = np.concatenate([c[1] for c in courses]) if courses else np.zeros(0)

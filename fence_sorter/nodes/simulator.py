@@ -57,6 +57,7 @@ from fence_sorter.nodes.intake import TopicIntake
 from fence_sorter.nodes.parameters import SIMULATOR_PARAMETERS
 from fence_sorter.nodes.qos import INPUT_QOS, topic_qos
 from fence_sorter.nodes.tf_publisher import TfPublisher
+from fence_sorter.physics import contact  # noqa: F401 (convert.event_to_msg's N_stiff courses)
 from fence_sorter.recording import topics
 from fence_sorter.scene import load_scene
 from fence_sorter.stamps import time_to_sec

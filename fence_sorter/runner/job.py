@@ -408,11 +408,8 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None], stop: StopReq
                     ),
                 ),
             )
-        _wait_for(monitor, group, stop, "controller", 120.0)
-        if opts.bag:
-            _wait_for(monitor, group, stop, "recorder", 60.0)
-        if plan.sensors_path:
-            _wait_for(monitor, group, stop, "sensors", 60.0)
+        # every node process starts at once, the scanner too (their imports and DDS discovery
+        # overlap): its start gate holds the stream until each node subscribes to its topics
         group.start(
             "simulator",
             node_command(
@@ -440,9 +437,6 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None], stop: StopReq
                 ),
             ),
         )
-        _wait_for(monitor, group, stop, "simulator", 60.0)
-        # the controller listens to /parcels once the simulator has matched its commands
-        _wait_for(monitor, group, stop, "controller", 30.0, listening=True)
         scanner_args = [
             scene,
             "use_sim_time:=true",
@@ -460,8 +454,21 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None], stop: StopReq
         group.start(
             "scanner", node_command("scanner", _ros_args("scanner", plan, opts, scanner_args))
         )
-        scanner_started = time.monotonic()
-        say(f"nodes up in {time.monotonic() - wall0:.1f} s; running")
+        up = {}  # node -> seconds from the start to its first heartbeat seen here
+        for node, timeout in (
+            ("controller", 120.0),
+            *((("recorder", 60.0),) if opts.bag else ()),
+            *((("sensors", 60.0),) if plan.sensors_path else ()),
+            ("simulator", 60.0),
+            ("scanner", 60.0),
+        ):
+            _wait_for(monitor, group, stop, node, timeout)
+            up[node] = time.monotonic() - wall0
+        # the controller listens to /parcels once the simulator has matched its commands
+        _wait_for(monitor, group, stop, "controller", 30.0, listening=True)
+        scanner_started = time.monotonic()  # the stream may start from here
+        beats = ", ".join(f"{node} {t:.1f} s" for node, t in up.items())
+        say(f"nodes up in {time.monotonic() - wall0:.1f} s (heartbeats: {beats}); running")
         timeout = opts.timeout or 120.0 + 3.0 * plan.sim_duration / max(opts.rtf, 1.0)
         deadline = time.monotonic() + timeout
         expected = set(plan.expected_ids)
