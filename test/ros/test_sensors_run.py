@@ -244,8 +244,8 @@ def test_the_bag_carries_the_truth_and_calibrate_fits_it(run):
     res = json.loads(proc.stdout)
     (est,) = res["estimates"]
     assert est["verdict"] == "identified"
-    # the run's line (its own solve, strokes starting on the pacing loop's cycles) and the
-    # replays differ by about the interval's width (docs/calibration.md): within 5 %
+    # within 5 %; the 95 % interval is narrower than the estimate's scatter on a run's bag
+    # (docs/calibration.md, Limits), so the truth inside it is not asserted
     assert est["value"] == pytest.approx(truth["values"]["mu_fence"], rel=0.05), est
     lo, hi = est["ci95"]
     assert lo < est["value"] < hi and hi / lo < 1.2, est
