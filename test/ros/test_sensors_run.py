@@ -291,3 +291,28 @@ def test_the_sensors_node_exits_2_naming_the_bad_key(tmp_path, env):
     assert proc.returncode == 2, proc.stderr
     last = proc.stderr.strip().splitlines()[-1]
     assert last == "sensors: sensors bad.yaml: camera.dropout must be in [0, 0.9], got 1.5"
+
+
+def test_the_mcap_library_reads_the_measured_topics_alike(run):
+    """An independent reader (mcap + mcap_ros2) over every segment of the run's bag: the
+    measured topics with our reader's counts, stamps and values."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    b = run["bag_contents"]
+    topics = [DRIVE_ENCODER, CAMERA_POSES, FENCE_ROOT_MOMENT]
+    seen: dict[str, list] = {t: [] for t in topics}
+    for segment in sorted(run["bag"].glob("*.mcap")):
+        with segment.open("rb") as f:
+            reader = make_reader(f, decoder_factories=[DecoderFactory()])
+            for _, channel, message, decoded in reader.iter_decoded_messages(topics=topics):
+                seen[channel.topic].append((message.log_time, _t(decoded.header.stamp), decoded))
+    for topic in topics:
+        ours = sorted((m.t_ns, _t(m.msg.header.stamp)) for m in b.by_topic(topic))
+        theirs = sorted((t_ns, stamp) for t_ns, stamp, _ in seen[topic])
+        assert len(theirs) == len(ours) > 0 and theirs == ours, topic
+    poses = {(_t(m.msg.header.stamp), m.msg.parcel_id): m.msg.pose.position.x
+             for m in b.by_topic(CAMERA_POSES)}  # fmt: skip
+    assert all(
+        poses[(stamp, d.parcel_id)] == d.pose.position.x for _, stamp, d in seen[CAMERA_POSES]
+    )
