@@ -19,7 +19,7 @@ PACKAGE = "fence_sorter"
 MSG_PACKAGE = "fence_sorter_msgs"
 EXPECTED_RMW = "rmw_fastrtps_cpp"
 #: Node executables, used when the installed distribution metadata cannot be read.
-NODE_EXECUTABLES: tuple[str, ...] = ("simulator", "scanner", "controller", "recorder")
+NODE_EXECUTABLES: tuple[str, ...] = ("simulator", "scanner", "controller", "recorder", "sensors")
 FIX = "run `make run` or scripts/bootstrap.sh, then `source scripts/env.sh`"
 
 
