@@ -193,3 +193,20 @@ def test_a_run_with_sensors_plans_their_state_rate_and_truth() -> None:
     assert state_publish_rate(250.0, 2.0) == 500.0 and state_publish_rate(250.0, 0.0) == 250.0
     assert state_publish_rate(250.0, 8.0) == 1000.0  # the parameter's upper end
     assert prepare(RunOptions(parcels=2)).truth is None
+
+
+def test_the_recorders_custom_data_file_is_checked(tmp_path: Path) -> None:
+    """What --sensors hands the recorder for the bag's metadata: a JSON object of strings;
+    anything else is refused with a line naming the file (the recorder exits 2)."""
+    from fence_sorter.nodes.recorder import read_custom_data_file
+
+    good = tmp_path / "truth.json"
+    good.write_text('{"fence_sorter.calibration_truth": "{\\"seed\\": 1}"}')
+    assert read_custom_data_file(str(good)) == {"fence_sorter.calibration_truth": '{"seed": 1}'}
+    assert read_custom_data_file("") == {}
+    for text in ('{"a": 1}', "[1]", "{"):
+        good.write_text(text)
+        with pytest.raises(ValueError, match=f"custom_data_file {good}"):
+            read_custom_data_file(str(good))
+    with pytest.raises(ValueError, match="cannot read"):
+        read_custom_data_file(str(tmp_path / "missing.json"))
