@@ -142,7 +142,7 @@ def generalized_alpha_coefficients(rho_inf: float) -> tuple[float, float, float,
 _PROPAGATORS: dict[int, tuple] = {}  # id(omega) -> (omega, zeta, cache arrays)
 _NO_MODES = (
     np.full(1, math.nan),
-    np.zeros((1, 0, 2, 2)),
+    np.zeros((1, 0, 2, 3)),
     np.zeros((1, 0, 2)),
     np.zeros((1, 0, 2)),
     np.zeros(1, dtype=np.int64),
@@ -163,7 +163,7 @@ def _propagator_cache(model):
     m, n = model.n_modes, K.N_PROP_CACHE
     cache = (
         np.full(n, math.nan),
-        np.zeros((n, m, 2, 2)),
+        np.zeros((n, m, 2, 3)),
         np.zeros((n, m, 2)),
         np.zeros((n, m, 2)),
         np.zeros(1, dtype=np.int64),

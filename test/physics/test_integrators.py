@@ -51,7 +51,10 @@ def test_fixed_step_schemes_are_second_order(method):
 
 
 def test_adaptive_error_follows_its_tolerance():
-    """Local error per step ~ rtol => h ~ rtol^(1/3) and the global error ~ rtol^(2/3)."""
+    """On a flexible fence the local error per step is held at rtol (rtol / 1e-4)^(1/2)
+    below the default (tolerance proportionality, ``kernel.tolerance_scale``) and the step in a
+    contact at dt_max (rtol / 1e-4)^(1/2): h ~ rtol^(1/2), so the global error ~ rtol (the plain
+    rtol^(2/3) of a second-order scheme is a slope below 0.75)."""
     ref = _end_state(method="trapezoidal", dt=2.5e-5)
     errors, steps = [], []
     for rtol in (1e-4, 1e-6):
@@ -59,7 +62,7 @@ def test_adaptive_error_follows_its_tolerance():
         errors.append(np.abs(_end_state(method="adaptive", rtol=rtol) - ref)[:2].max())
         steps.append(simulate(replace(sc, record=())).steps)
     slope = math.log10(errors[0] / errors[1]) / 2.0
-    assert 0.45 < slope < 0.9, (errors, slope)
+    assert 0.85 < slope < 1.2, (errors, slope)
     assert steps[1] > steps[0]
 
 

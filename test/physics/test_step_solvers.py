@@ -30,10 +30,11 @@ def _step(md, cs, a, h, max_iter, force, tol=1e-14):
     flag NEWTON is read at call time); (status, y1, iterations)."""
     y1, lam1 = np.zeros(md.n_state), np.zeros(3)
     out, res = np.zeros((K.N_SLOTS, K.N_COLS)), np.zeros(K.N_RES)
-    props = (np.zeros((0, 2, 2)), np.zeros((0, 2)), np.zeros((0, 2)))
+    props = (np.zeros((0, 2, 3)), np.zeros((0, 2)), np.zeros((0, 2)))
     status = K.trapezoidal_step.py_func(
         md.P, md.corners, md.normals, cs.modes[0], cs.modes[1], props, h, cs.T[a], cs.Y[a],
-        cs.RES[a], cs.LAM[a], cs.MODAL[a], cs.OUT[a], 0.0, bool(cs.ctl[K.I_ON_BELT]), tol,
+        cs.RES[a], cs.LAM[a], cs.MODAL[a], cs.OUT[a], np.zeros(0), 0.0, 0.0,
+        bool(cs.ctl[K.I_ON_BELT]), tol,
         max_iter, force, y1, lam1, out, res, np.zeros(0), cs.w, cs.wdot, cs.nodes, cs.prev,
         cs.work,
     )  # fmt: skip
@@ -176,10 +177,11 @@ def _free_step(gap):
     h = STIFF.solver.dt_max
     y1, lam1 = np.zeros(md.n_state), np.zeros(3)
     out, res = np.zeros((K.N_SLOTS, K.N_COLS)), np.zeros(K.N_RES)
-    props = (np.zeros((0, 2, 2)), np.zeros((0, 2)), np.zeros((0, 2)))
+    props = (np.zeros((0, 2, 3)), np.zeros((0, 2)), np.zeros((0, 2)))
     status = K.trapezoidal_step(
         md.P, md.corners, md.normals, cs.modes[0], cs.modes[1], props, h, cs.T[a], cs.Y[a],
-        cs.RES[a], cs.LAM[a], cs.MODAL[a], cs.OUT[a], 0.0, True, STIFF.solver.tolerance, 50,
+        cs.RES[a], cs.LAM[a], cs.MODAL[a], cs.OUT[a], np.zeros(0), 0.0, 0.0, True,
+        STIFF.solver.tolerance, 50,
         False, y1, lam1, out, res, np.zeros(0), cs.w, cs.wdot, cs.nodes, cs.prev, cs.work,
     )  # fmt: skip
     assert status == K.STEP_OK and res[K.R_ITERATIONS] == 1

@@ -94,10 +94,12 @@ from .control import (  # noqa: E402 (after the cache directory is set)
     OSC_ZETA,
     event_value,
     first_event,
+    flexible_contact_step,
     milne_error,
     modal_propagators,
     oscillation_step,
     time_to_contact,
+    tolerance_scale,
 )
 from .forces import (  # noqa: E402 (after the cache directory is set)
     belt_multiplier,
@@ -417,6 +419,8 @@ __all__ = [
     "event_value",
     "first_event",
     "milne_error",
+    "flexible_contact_step",
+    "tolerance_scale",
     "modal_propagators",
     "OSC_PHASE",
     "OSC_ZETA",

@@ -14,10 +14,12 @@ from .control import (
     EVENT_SLIDE_OFF,
     event_value,
     first_event,
+    flexible_contact_step,
     milne_error,
     modal_propagators,
     oscillation_step,
     time_to_contact,
+    tolerance_scale,
 )
 from .forces import evaluate, karnopp_belt, stick_wrench
 from .impact import n_stiff
@@ -60,11 +62,13 @@ EVENT_TOL = 1e-10  # a located onset's step ends with 0 < D <= EVENT_TOL [m]
 EVENT_SORT = 3  # C_s crossing the sorting line y0 = s (belt friction ends there)
 
 # states: rows of T, Y, LAM, OUT, RES, MODAL, ACC; cur and trial swap, loc and before are fixed;
-# the generalized-alpha step's state at its alpha point goes in Y[S_ALPHA] (scratch)
+# the generalized-alpha step's state at its alpha point goes in Y[S_ALPHA] (scratch);
+# MODAL[S_PREV]: the modal force at the accepted point before cur (the modes' quadratic force)
 S_LOC = 2
 S_BEFORE = 3
 S_ALPHA = 4
-N_STATES = 5
+S_PREV = 5
+N_STATES = 6
 
 # configuration ``cfg``
 G_H_NOM = 0  # dt_max (adaptive) or dt (fixed step) [s]
@@ -321,14 +325,16 @@ def _snap(h_nom, h):
 @njit(cache=True, _nrt=False)
 def _trap(
     P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT, RES, MODAL, ACC,
-    w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h, a, b, jump, on_belt, force,
+    w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h, h_prev, a, b, jump, on_belt, force,
 ):  # fmt: skip
-    """One trapezoidal step from state row a into row b (exact modal maps for step h)."""
+    """One trapezoidal step from state row a into row b (exact modal maps for step h;
+    ``h_prev``: the step before a, 0 without history)."""
     k = _propagator_slot(omega, zeta, h, ctl, PK, PA, PG0, PG1)
     status = trapezoidal_step(
         P, corners, normals, phi, rigid_modal, (PA[k], PG0[k], PG1[k]), h, T[a], Y[a], RES[a],
-        LAM[a], MODAL[a], OUT[a], jump, on_belt, cfg[G_TOL], int(cfg[G_MAX_ITER]), force, Y[b],
-        LAM[b], OUT[b], RES[b], MODAL[b], w, wdot, nodes, prev, work,
+        LAM[a], MODAL[a], OUT[a], MODAL[S_PREV], h_prev, jump, on_belt, cfg[G_TOL],
+        int(cfg[G_MAX_ITER]), force, Y[b], LAM[b], OUT[b], RES[b], MODAL[b], w, wdot, nodes, prev,
+        work,
     )  # fmt: skip
     if status != STEP_REJECTED:
         ACC[b, 0] = (RES[b, 0] + LAM[b, 0]) / P[P_MASS]
@@ -376,7 +382,7 @@ def _accelerations(P, rigid_modal, omega, zeta, Y, LAM, RES, MODAL, ACC, i, jump
 @njit(cache=True, _nrt=False)
 def _locate(
     P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT, RES, MODAL, ACC,
-    w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h, on_belt, slot, kind, g0, g1,
+    w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h, h_prev, on_belt, slot, kind, g0, g1,
 ):  # fmt: skip
     """Shorten the step to end just past the sign change of ``slot``'s event function (or the
     sort crossing): Illinois regula falsi until an onset step ends within EVENT_TOL of D = 0
@@ -425,8 +431,8 @@ def _locate(
         else:
             st = _trap(
                 P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT,
-                RES, MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h_loc, a, S_LOC,
-                jump, on_belt, False,
+                RES, MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h_loc, h_prev, a,
+                S_LOC, jump, on_belt, False,
             )  # fmt: skip
         if st == STEP_REJECTED:
             break
@@ -633,6 +639,10 @@ def solve(model, state, max_attempts, t_target):
     h_nom = cfg[G_H_NOM]
     min_dt = cfg[G_MIN_DT]
     width = cfg[G_WIDTH]
+    m = omega.shape[0]
+    # tolerance proportionality, the flexible contact's step and the event restart: the
+    # modes' error, which Milne's estimate on the load does not see (a stiff fence: 1)
+    tol_scale = tolerance_scale(cfg[G_RTOL]) if m > 0 else 1.0
     if ctl[I_STARTED] == 0:
         # forces at t = 0, belt wrench by Karnopp, consistent accelerations
         ctl[I_STARTED] = 1
@@ -700,10 +710,14 @@ def solve(model, state, max_attempts, t_target):
         h_try = min(fc[F_H], to_break)
         if adaptive:
             cap = min(time_to_contact(OUT[a]), oscillation_step(P, OUT[a], cfg[G_RTOL]))
+            if m > 0:
+                cap = min(cap, flexible_contact_step(OUT[a], h_nom, tol_scale))
             h_try = min(h_try, max(cap, 10.0 * min_dt))
             tiny = h_try <= 4.0 * min_dt
         else:
             tiny = h_try <= 1e-3 * h_nom
+        # the modes' force is quadratic through the previous point (adaptive)
+        h_hist = fc[F_H_PREV] if adaptive else 0.0
         if cfg[G_GEN_ALPHA] != 0.0:
             status = _alpha(
                 P, corners, normals, phi, rigid_modal, omega, zeta, cfg, T, Y, LAM, OUT, RES,
@@ -712,8 +726,8 @@ def solve(model, state, max_attempts, t_target):
         else:
             status = _trap(
                 P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT,
-                RES, MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h_try, a, b,
-                _jump_at(P, T[a]), on_belt, tiny,
+                RES, MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h_try, h_hist, a,
+                b, _jump_at(P, T[a]), on_belt, tiny,
             )  # fmt: skip
         if status == STEP_REJECTED:
             ctl[I_REJECTED] += 1
@@ -736,8 +750,8 @@ def solve(model, state, max_attempts, t_target):
         if (slot >= 0 or kind == EVENT_SORT) and h_try > 1e-9:
             h_taken = _locate(
                 P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT,
-                RES, MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h_try, on_belt,
-                slot, kind, g0, g1,
+                RES, MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h_try, h_hist,
+                on_belt, slot, kind, g0, g1,
             )  # fmt: skip
             located = True
         if adaptive:
@@ -745,7 +759,8 @@ def solve(model, state, max_attempts, t_target):
             r = h_taken / h_prev if h_prev > 0.0 else 0.0
             err = milne_error(
                 Y[a], ACC[a], Y[b], fc[F_PREV_V : F_PREV_V + 3], fc[F_PREV_A : F_PREV_A + 3], r,
-                h_taken, cfg[G_ATOL], cfg[G_RTOL], cfg[G_V_REF], cfg[G_OM_REF],
+                h_taken, tol_scale * cfg[G_ATOL], tol_scale * cfg[G_RTOL], cfg[G_V_REF],
+                cfg[G_OM_REF],
             )  # fmt: skip
             order = 3.0 if r > 0.0 else 2.0
             if err > 1.0 and h_taken > 4.0 * min_dt:
@@ -769,12 +784,20 @@ def solve(model, state, max_attempts, t_target):
                     grow = min(4.0, 0.9 * max(err, 1e-12) ** (-1.0 / order))
                     h_next = min(cap, h_taken * grow)
                 fc[F_H] = _snap(h_nom, h_next)
+            elif m > 0:
+                # the error history restarts at an event and the next step's estimate (order
+                # 2, the load's) is blind to a contact force rising from zero as t^2 while the
+                # fence's fast modes take its rate: restart no longer than the step that met
+                # the event (at an onset the approach's time_to_contact) times tol_scale
+                fc[F_H] = _snap(h_nom, h_try * tol_scale)
         else:
             fc[F_H] = min(h_nom, 2.0 * h_try)
         # accept
         for k in range(3):
             fc[F_PREV_V + k] = Y[a, 3 + k]
             fc[F_PREV_A + k] = ACC[a, k]
+        for j in range(m):
+            MODAL[S_PREV, j] = MODAL[a, j]
         fc[F_H_PREV] = h_taken
         if located or abs(T[a] + h_taken - breaks[nb]) <= 1e-12:
             fc[F_H_PREV] = 0.0

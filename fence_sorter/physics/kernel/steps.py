@@ -229,6 +229,8 @@ def trapezoidal_step(
     lam0,
     modal0,
     out0,
+    modal_prev,
+    h_prev,
     jump,
     on_belt,
     tol,
@@ -252,8 +254,13 @@ def trapezoidal_step(
     (``_newton_load``), an Anderson-accelerated fixed point with the fence's modes; lambda1
     solves the belt law at the step end (stick exact; its multiplier warm-started from the
     previous iterate's). Fence: each mode
-    propagated exactly for a modal force linear over the step (``props`` = (A, G0, G1) from
-    Van Loan's matrix exponential). ``f0``/``lam0``/``modal0``: forces at the step start.
+    propagated exactly for a modal force quadratic over the step, through the previous point's
+    force ``modal_prev`` a step ``h_prev`` earlier, or linear (h_prev = 0: the start, after an
+    event or a drive breakpoint, a fixed step): ``props`` = (A | g2, G0, G1) from Van Loan's
+    matrix exponential. The exact modes then carry the force's curvature, an O(h^3) error of
+    a linear force that the load's error estimate does not see; the contact iteration is
+    unchanged, the curvature's share of f1 folded into G1. ``f0``/``lam0``/``modal0``: forces
+    at the step start.
     Returns STEP_OK, STEP_REJECTED or STEP_FORCED; the end-of-step forces are left in out/res/
     modal1 and the belt wrench in lam1 (the stick wrench when stuck).
 
@@ -294,14 +301,27 @@ def trapezoidal_step(
     g_prev = work[9]
     f_cur = work[10]
     phi_scale = 0.0
+    # the modal base and f1's coefficient (row 0-1 entries m..2m-1): f(s) = f0 + (f1 - f0) s / h
+    # + kappa s (s - h), kappa = ((f1 - f0) / h - (f0 - f_prev) / h_prev) / (h + h_prev)
+    k1 = k0 = 0.0
+    if h_prev > 0.0:
+        k1 = 1.0 / (h * (h + h_prev))
+        k0 = 1.0 / (h_prev * (h + h_prev))
     for j in range(m):
         fm = modal0[j] - rigid_modal[j] * jump
         e0 = y0[6 + j]
         e1 = y0[6 + m + j]
-        base0[j] = a_mat[j, 0, 0] * e0 + a_mat[j, 0, 1] * e1 + g0[j, 0] * fm
-        base1[j] = a_mat[j, 1, 0] * e0 + a_mat[j, 1, 1] * e1 + g0[j, 1] * fm
-        y1[6 + j] = base0[j] + g1[j, 0] * fm
-        y1[6 + m + j] = base1[j] + g1[j, 1] * fm
+        curv = -k1 * fm - k0 * (fm - modal_prev[j]) if h_prev > 0.0 else 0.0
+        base0[j] = (
+            a_mat[j, 0, 0] * e0 + a_mat[j, 0, 1] * e1 + g0[j, 0] * fm + a_mat[j, 0, 2] * curv
+        )
+        base1[j] = (
+            a_mat[j, 1, 0] * e0 + a_mat[j, 1, 1] * e1 + g0[j, 1] * fm + a_mat[j, 1, 2] * curv
+        )
+        base0[m + j] = g1[j, 0] + k1 * a_mat[j, 0, 2]
+        base1[m + j] = g1[j, 1] + k1 * a_mat[j, 1, 2]
+        y1[6 + j] = base0[j] + base0[m + j] * fm
+        y1[6 + m + j] = base1[j] + base1[m + j] * fm
     if m > 0:
         for i in range(phi.shape[0]):
             for j in range(m):
@@ -372,9 +392,9 @@ def trapezoidal_step(
         err = max(err, abs(q2 - y1[2]) + h * abs(vi2 - y1[5]))
         g_new[0], g_new[1], g_new[2], g_new[3], g_new[4], g_new[5] = q0, q1, q2, vi0, vi1, vi2
         for j in range(m):
-            z0 = base0[j] + g1[j, 0] * modal1[j]
+            z0 = base0[j] + base0[m + j] * modal1[j]
             g_new[6 + j] = z0
-            g_new[6 + m + j] = base1[j] + g1[j, 1] * modal1[j]
+            g_new[6 + m + j] = base1[j] + base1[m + j] * modal1[j]
             err = max(err, abs(z0 - y1[6 + j]) * phi_scale)
         if err <= tol:
             for k in range(n):

@@ -1,0 +1,136 @@
+"""Convergence of the adaptive scheme with rtol: peak-force error against the committed references.
+
+Each bench scene is solved by its default method (``adaptive``) with ``solver.rtol`` replaced
+(atol = 1e-2 rtol, as ``accuracy.configure`` sets it) and its peak contact force compared with
+the one of docs/accuracy/reference/<scene>.npz (``fence-sorter accuracy`` writes them). Run
+``python -m fence_sorter.verification.convergence`` for the markdown table of docs/numerics.md
+("Convergence of the adaptive scheme with rtol"); test/physics/test_convergence.py asserts it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from fence_sorter.verification.accuracy import ATOL_PER_RTOL, SCENES
+
+REFERENCE_DIR = Path(__file__).resolve().parents[2] / "docs" / "accuracy" / "reference"
+RTOLS = (1e-4, 1e-5, 1e-6, 1e-7)
+GAIN = 100.0  # the error at the tightest rtol at least this much below the loosest's
+MONOTONE = 2.0  # ... and no error more than this above the one of the looser rtol before it
+
+
+@dataclass
+class ConvergencePoint:
+    """One solve of a scene at one rtol."""
+
+    scene: str
+    rtol: float
+    error: float  # |N_peak - N_ref| / N_ref
+    steps: int
+    rejected: int
+    wall: float  # median wall time of simulate() [s]
+
+
+def reference_peak(scene: str, directory: Path = REFERENCE_DIR) -> float:
+    """The peak contact force [N] of the scene's committed reference solution."""
+    with np.load(directory / f"{scene}.npz") as data:
+        return float(data["peak_contact_force"])
+
+
+def solve_at(scene: str, rtol: float, repeats: int = 1, ref_peak: float | None = None):
+    """The scene's default solved at ``rtol``: its :class:`ConvergencePoint`."""
+    from fence_sorter.physics.simulate import simulate
+    from fence_sorter.physics.stepper import collector_off
+    from fence_sorter.scene import load_scene
+
+    sc = load_scene(scene).scenario
+    sv = replace(sc.solver, rtol=rtol, atol=rtol * ATOL_PER_RTOL)
+    sv.validate()
+    sc = replace(sc, solver=sv, record=())
+    walls = []
+    for _ in range(max(1, repeats)):
+        with collector_off():  # docs/numerics.md's timing protocol
+            t0 = time.perf_counter()
+            result = simulate(sc)
+            walls.append(time.perf_counter() - t0)
+    if result.diagnosis is not None:
+        raise RuntimeError(f"{scene} at rtol {rtol:g}: {result.diagnosis}")
+    ref = reference_peak(scene) if ref_peak is None else ref_peak
+    return ConvergencePoint(
+        scene,
+        rtol,
+        abs(result.peak_contact_force - ref) / ref,
+        result.steps,
+        result.rejected_steps,
+        statistics.median(walls),
+    )
+
+
+def converges(errors: list[float], resolution: float = 0.0) -> tuple[bool, bool]:
+    """(gain, monotone) of errors over tightening rtols: the last at least GAIN below the first
+    (or at the reference's ``resolution``), and none above MONOTONE times the one before."""
+    gain = errors[-1] <= max(errors[0] / GAIN, resolution)
+    floor = max(resolution, 1e-300)
+    monotone = all(
+        max(b, floor) <= MONOTONE * max(a, floor) for a, b in zip(errors, errors[1:], strict=False)
+    )
+    return gain, monotone
+
+
+def table(points: list[ConvergencePoint], rtols=RTOLS) -> list[str]:
+    """Markdown rows: per scene, error / steps / wall ms at each rtol."""
+    head = "| scene | " + " | ".join(f"rtol {r:.0e}" for r in rtols) + " | gain |"
+    lines = [head, "|---|" + "---|" * (len(rtols) + 1)]
+    for scene in dict.fromkeys(p.scene for p in points):
+        row = {p.rtol: p for p in points if p.scene == scene}
+        cells = [
+            f"{row[r].error:.1e} / {row[r].steps} / {1e3 * row[r].wall:.1f}" if r in row else ""
+            for r in rtols
+        ]
+        gain = ""
+        if rtols[0] in row and rtols[-1] in row and row[rtols[-1]].error > 0:
+            gain = f"{row[rtols[0]].error / row[rtols[-1]].error:.0f}x"
+        lines.append(f"| {scene} | " + " | ".join(cells) + f" | {gain} |")
+    return lines
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(
+        prog="python -m fence_sorter.verification.convergence",
+        description="Peak-force error of the adaptive default against the committed "
+        "references over rtol (error / steps / wall ms per cell).",
+    )
+    ap.add_argument("--scenes", nargs="*", default=list(SCENES))
+    ap.add_argument("--rtols", nargs="*", type=float, default=list(RTOLS))
+    ap.add_argument("--repeats", type=int, default=3, help="timed solves per point (median)")
+    args = ap.parse_args(argv)
+    for scene in args.scenes:
+        if scene not in SCENES:
+            print(f"--scenes: unknown scene {scene!r}; one of {', '.join(SCENES)}")
+            return 2
+    points = []
+    for scene in args.scenes:
+        ref = reference_peak(scene)
+        solve_at(scene, args.rtols[0], 1, ref)  # warm-up (the kernel loads or compiles)
+        for rtol in args.rtols:
+            p = solve_at(scene, rtol, args.repeats, ref)
+            print(
+                f"{scene} rtol {rtol:.0e}: error {p.error:.2e}, {p.steps} steps, "
+                f"{p.rejected} rejected, {1e3 * p.wall:.1f} ms",
+                file=sys.stderr,
+                flush=True,
+            )
+            points.append(p)
+    print("\n".join(table(points, tuple(args.rtols))))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
