@@ -91,7 +91,7 @@ def table(points: list[ConvergencePoint], rtols=RTOLS) -> list[str]:
     for scene in dict.fromkeys(p.scene for p in points):
         row = {p.rtol: p for p in points if p.scene == scene}
         cells = [
-            f"{row[r].error:.1e} / {row[r].steps} / {1e3 * row[r].wall:.1f}" if r in row else ""
+            f"{row[r].error:.1e} / {row[r].steps} / {1e3 * row[r].wall:.2f}" if r in row else ""
             for r in rtols
         ]
         gain = ""
@@ -123,7 +123,7 @@ def main(argv: list[str] | None = None) -> int:
             p = solve_at(scene, rtol, args.repeats, ref)
             print(
                 f"{scene} rtol {rtol:.0e}: error {p.error:.2e}, {p.steps} steps, "
-                f"{p.rejected} rejected, {1e3 * p.wall:.1f} ms",
+                f"{p.rejected} rejected, {1e3 * p.wall:.3f} ms",
                 file=sys.stderr,
                 flush=True,
             )
