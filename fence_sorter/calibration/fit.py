@@ -39,7 +39,7 @@ from fence_sorter.physics.simulate import Scenario
 
 from .bag import MeasuredBag
 from .replay import PARAMETERS, ParcelEvent, ReplayError, replay, scene_value
-from .sensors import camera_to_sorter, sorter_to_camera
+from .sensors import camera_to_sorter, geometric_centre, sorter_to_camera
 
 Z95 = 1.959964
 #: seconds before a stroke where the root moment is read as the gauge's noise
@@ -81,10 +81,7 @@ def pre_stroke_centre(base: Scenario, ev: ParcelEvent, tau: np.ndarray):
     """Geometric centre and yaw of a parcel riding the belt before its stroke (tau <= 0)."""
     body = parcel_body(ev.parcel, base.conveyor)
     xc, yc, yaw = initial_pose(body, ev.r_s, ev.parcel.lateral_gap, ev.parcel.yaw)
-    c, s = math.cos(yaw), math.sin(yaw)
-    p = ev.parcel
-    x0 = xc - (c * p.cog_offset_x - s * p.cog_offset_y)
-    y0 = yc - (s * p.cog_offset_x + c * p.cog_offset_y)
+    x0, y0 = geometric_centre(xc, yc, yaw, ev.parcel.cog_offset_x, ev.parcel.cog_offset_y)
     v = base.conveyor.belt_speed
     return x0 + v * tau, np.full_like(tau, y0), np.full_like(tau, yaw)
 

@@ -16,7 +16,7 @@ import numpy as np
 from fence_sorter.physics.params import DriveParams, ParcelParams
 from fence_sorter.physics.simulate import Scenario, simulate
 
-from .sensors import Track
+from .sensors import Track, geometric_centre
 
 #: fit name -> (scene key, lower bound, upper bound): the parameters a calibration may fit.
 PARAMETERS: dict[str, tuple[str, float, float]] = {
@@ -128,10 +128,7 @@ def replay(base: Scenario, ev: ParcelEvent, values: dict[str, float] | None = No
     s = res.series
     p = ev.parcel
     phi = s["phi"]
-    c, sn = np.cos(phi), np.sin(phi)
-    # geometric centre = C_s - R(phi) (x_p, y_p)
-    x = s["x"] - (c * p.cog_offset_x - sn * p.cog_offset_y)
-    y = s["y"] - (sn * p.cog_offset_x + c * p.cog_offset_y)
+    x, y = geometric_centre(s["x"], s["y"], phi, p.cog_offset_x, p.cog_offset_y)
     # before the stroke the parcel rides the belt: prepend the straight line
     v = sc.conveyor.belt_speed
     lead = 5.0
