@@ -14,7 +14,8 @@ Steps (docs/calibration.md):
    parameter, every parcel's replays run in parallel (:class:`Evaluator`).
 3. **Judge.** The covariance of the estimate over the parameters and the camera frame is the
    M-estimator's sandwich with each channel's noise level re-estimated from its residuals
-   (:func:`_covariance`); 95 % intervals exp(z +- 1.96 sd) and the correlation matrix. A
+   (:func:`_covariance`), the Jacobian by central differences over +- 1 sd
+   (:meth:`_Problem.secant_jac`); 95 % intervals exp(z +- 1.96 sd) and the correlation matrix. A
    parameter whose interval spans more than a factor exp(2 ``max_log_halfwidth``) (or that
    ends on a bound) is flagged as not identifiable by this data, fixed at the scene's value,
    and the others are refitted without it.
@@ -490,6 +491,29 @@ class _Problem:
             cols.append((weighted(self.eds, base, tuple(o), self.sigma) - f0) / OFFSET_STEP[j])
         return np.column_stack(cols)
 
+    def secant_jac(self, z, widths) -> np.ndarray:
+        """The Jacobian by central differences over +- ``widths`` (log parameter; one-sided
+        where a bound is nearer), the camera columns as in :meth:`jac`: the slope over the
+        interval's own scale. The replays' response to a contact parameter is piecewise
+        smooth, with small steps that a 1e-4 difference can straddle, which makes that
+        column, and the interval, far off; a difference across +- 1 sd averages over them."""
+        z = np.asarray(z, dtype=float)
+        lo, hi = self.bounds()
+        plus, minus = [], []
+        for j in range(self.k):
+            plus.append(z.copy())
+            minus.append(z.copy())
+            plus[j][j] = min(z[j] + float(widths[j]), hi[j])
+            minus[j][j] = max(z[j] - float(widths[j]), lo[j])
+        preds = self.evaluate([self.values(v) for v in plus + minus]) if self.k else []
+        off = tuple(z[self.k :])
+        jac = self.jac(z)
+        for j in range(self.k):
+            fp = weighted(self.eds, preds[j], off, self.sigma)
+            fm = weighted(self.eds, preds[self.k + j], off, self.sigma)
+            jac[:, j] = (fp - fm) / (plus[j][j] - minus[j][j])
+        return jac
+
     def bounds(self):
         lo = [math.log(PARAMETERS[n][1]) for n in self.names] + [-np.inf] * 3
         hi = [math.log(PARAMETERS[n][2]) for n in self.names] + [np.inf] * 3
@@ -621,7 +645,12 @@ def calibrate(
             prob = _Problem(evaluate, eds, active, fixed, sigma)
             sol = _solve(prob, z, max_nfev)
             nfev += sol.nfev
-            cov, sv, factors = _covariance(prob.jac(sol.x), prob.fun(sol.x), sizes, F_SCALE)
+            r = prob.fun(sol.x)
+            cov, sv, factors = _covariance(prob.jac(sol.x), r, sizes, F_SCALE)
+            # the interval from the slope over +- 1 sd of each parameter
+            sd = np.nan_to_num(np.sqrt(np.diag(cov))[: len(active)], nan=0.1, posinf=0.1)
+            jac = prob.secant_jac(sol.x, np.clip(sd, FD_STEP, 0.1))
+            cov, sv, factors = _covariance(jac, r, sizes, F_SCALE)
             sd = np.sqrt(np.diag(cov))
             lo, hi = prob.bounds()
             bad = {}
