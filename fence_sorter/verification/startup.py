@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import statistics
 import subprocess
 import sys
@@ -55,6 +56,13 @@ PARTS = (
     "second simulate",
 )
 RCLPY = "import time; t = time.perf_counter(); import rclpy; print(time.perf_counter() - t)"
+NODE = (
+    "import sys, time; t = time.perf_counter(); import importlib; "
+    "importlib.import_module(sys.argv[1]); print(time.perf_counter() - t)"
+)
+NODES = ("controller", "simulator", "scanner", "recorder")
+#: fence-sorter run's line "nodes up in 4.2 s (heartbeats: controller 3.1 s, ...); running"
+NODES_UP = re.compile(r"nodes up in ([0-9.]+) s \(heartbeats: ([^)]*)\)")
 FIRST_SOLVE_TARGET = 0.050  # [s] issue 19: a new process's first solve
 
 
@@ -93,6 +101,43 @@ def measure_rclpy(rounds: int) -> float | None:
     return statistics.median(times)
 
 
+def measure_nodes(rounds: int) -> dict[str, float]:
+    """Median seconds of importing each node's module in a fresh interpreter."""
+    out = {}
+    for node in NODES:
+        times = []
+        for _ in range(rounds):
+            proc = subprocess.run(
+                [sys.executable, "-c", NODE, f"fence_sorter.nodes.{node}"],
+                check=True,
+                capture_output=True,
+                text=True,
+            )
+            times.append(float(proc.stdout.strip().splitlines()[-1]))
+        out[node] = statistics.median(times)
+    return out
+
+
+def measure_run(rounds: int) -> list[dict]:
+    """``fence-sorter run --parcels 1`` ``rounds`` times: seconds to "nodes up" and to each
+    node's first heartbeat, as the run prints them."""
+    runs = []
+    for _ in range(rounds):
+        proc = subprocess.run(
+            [sys.executable, "-m", "fence_sorter.cli.main", "run", "--parcels", "1"],
+            capture_output=True,
+            text=True,
+        )
+        found = NODES_UP.search(proc.stdout)
+        if proc.returncode != 0 or not found:
+            raise RuntimeError(
+                f"fence-sorter run failed ({proc.returncode}): {proc.stdout[-800:]}"
+            )
+        beats = dict(b.rsplit(" ", 2)[:2] for b in found.group(2).split(", "))
+        runs.append({"nodes_up": float(found.group(1)), **{k: float(v) for k, v in beats.items()}})
+    return runs
+
+
 def render(data: dict) -> str:
     """README.md of the start-up figures, from ``startup.json`` alone."""
     scenes = data["scenes"]
@@ -126,6 +171,28 @@ def render(data: dict) -> str:
             f"{1e3 * data['import_rclpy']:.1f} ms.",
             "",
         ]
+    if data.get("node_imports"):
+        lines += [
+            "Importing each node's module in a fresh interpreter (median, ms): "
+            + ", ".join(f"{n} {1e3 * t:.0f}" for n, t in data["node_imports"].items())
+            + ".",
+            "",
+        ]
+    if data.get("runs"):
+        keys = list(data["runs"][0])
+        lines += [
+            "`fence-sorter run --parcels 1` (real-time factor 1), seconds from the runner's start "
+            'to each node\'s first heartbeat and to "nodes up":',
+            "",
+            *table(
+                ["run", *keys],
+                [
+                    [k + 1, *(fmt(r.get(c), ".1f") for c in keys)]
+                    for k, r in enumerate(data["runs"])
+                ],
+            ),
+            "",
+        ]
     target = 1e3 * data["first_solve_target"]
     worst = max(1e3 * s["seconds"]["first simulate"] for s in scenes)
     verdict = "met" if worst <= target else "not met"
@@ -139,6 +206,7 @@ def main(argv=None) -> int:
         "--scene", action="append", help="bench scene (repeatable; default two scenes)"
     )
     ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--runs", type=int, default=3, help="fence-sorter runs to time (0: none)")
     ap.add_argument("--out", default=str(REPO / "docs" / "startup"), help="'' writes nothing")
     args = ap.parse_args(argv)
     if args.rounds < 1:
@@ -155,6 +223,8 @@ def main(argv=None) -> int:
         "first_solve_target": FIRST_SOLVE_TARGET,
         "scenes": [measure(scene, args.rounds) for scene in scenes],
         "import_rclpy": measure_rclpy(args.rounds),
+        "node_imports": measure_nodes(args.rounds),
+        "runs": measure_run(args.runs),
     }
     data["command"] = data["command"].rstrip()
     print(render(data))
