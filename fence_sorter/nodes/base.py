@@ -159,7 +159,13 @@ def spin_node(node: FenceSorterNode, executor: Executor | None = None) -> None:
     if executor is None:
         executor = make_executor(bool(node.get_parameter("events_executor").value))
         executor.add_node(node)
+    announced = False
     while rclpy.ok():
+        if not announced and node._diagnostics_pub.get_subscription_count() > 0:
+            # a first heartbeat as soon as a listener (the runner's monitor) has matched, not
+            # a heartbeat_period after the start: the run's nodes are up up to 1 s sooner
+            announced = True
+            node.publish_heartbeat()
         try:
             executor.spin_once(timeout_sec=0.1)
         except (KeyboardInterrupt, ExternalShutdownException):

@@ -454,7 +454,7 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None], stop: StopReq
         group.start(
             "scanner", node_command("scanner", _ros_args("scanner", plan, opts, scanner_args))
         )
-        up = {}  # node -> seconds from the start to its first heartbeat seen here
+        up = {}  # node -> seconds from the start to the arrival of its first heartbeat
         for node, timeout in (
             ("controller", 120.0),
             *((("recorder", 60.0),) if opts.bag else ()),
@@ -463,7 +463,8 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None], stop: StopReq
             ("scanner", 60.0),
         ):
             _wait_for(monitor, group, stop, node, timeout)
-            up[node] = time.monotonic() - wall0
+            first = monitor.records.diagnostics_history[f"fence_sorter/{node}"][0]
+            up[node] = float(first["_wall"]) - wall0
         # the controller listens to /parcels once the simulator has matched its commands
         _wait_for(monitor, group, stop, "controller", 30.0, listening=True)
         scanner_started = time.monotonic()  # the stream may start from here
