@@ -6,30 +6,14 @@ node's parameters do) must not import the physics and Numba through ``evaluate``
 ``planner``, ~1 s of a node process's start that the scanner and the recorder never use.
 """
 
-from importlib import import_module
+from fence_sorter.lazy import lazy_names
 
-_WHERE = {
-    "CONSTRAINT_IDS": "constraints",
-    "ConstraintProfile": "constraints",
-    "margins": "constraints",
-    "StrokeEvaluation": "evaluate",
-    "evaluate_stroke": "evaluate",
-    "planning_scenario": "evaluate",
-    "capacity": "formulas",
-    "pitch": "formulas",
-    "scraping_time": "formulas",
-    "stroke_capacity": "formulas",
-    "LoadRequest": "planner",
-    "Plan": "planner",
-    "Planner": "planner",
-    "PlannerConfig": "planner",
-}
-__all__ = sorted(_WHERE)
-
-
-def __getattr__(name: str):
-    if name not in _WHERE:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(import_module(f"{__name__}.{_WHERE[name]}"), name)
-    globals()[name] = value
-    return value
+__getattr__, __all__ = lazy_names(
+    __name__,
+    {
+        ".constraints": ("CONSTRAINT_IDS", "ConstraintProfile", "margins"),
+        ".evaluate": ("StrokeEvaluation", "evaluate_stroke", "planning_scenario"),
+        ".formulas": ("capacity", "pitch", "scraping_time", "stroke_capacity"),
+        ".planner": ("LoadRequest", "Plan", "Planner", "PlannerConfig"),
+    },
+)

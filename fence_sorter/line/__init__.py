@@ -8,41 +8,35 @@ The names below are loaded on first use (PEP 562): ``line.types`` is imported by
 ``line.line``, ~1 s of the start of a node process that does not simulate.
 """
 
-from importlib import import_module
+from fence_sorter.lazy import lazy_names
 
-_WHERE = {
-    "StartMode": "fence_sorter.codes",
-    "PARCEL_REASONS": "fence_sorter.inputs",
-    "InputError": "fence_sorter.inputs",
-    "ParcelSpec": "fence_sorter.inputs",
-    "StrokeCommand": "fence_sorter.inputs",
-    "validate_command": "fence_sorter.inputs",
-    "validate_parcel": "fence_sorter.inputs",
-    "LineConfig": ".line",
-    "SortingLine": ".line",
-    "in_swept_sector": ".line",
-    "LatenessHistogram": ".pacing",
-    "Pacer": ".pacing",
-    "Tick": ".pacing",
-    "CommandResult": ".types",
-    "EventTrace": ".types",
-    "FenceSnapshot": ".types",
-    "LineEvent": ".types",
-    "LineSnapshot": ".types",
-    "Outcome": ".types",
-    "OutcomeCode": ".types",
-    "OverlapWarning": ".types",
-    "ParcelSnapshot": ".types",
-    "SolverWarning": ".types",
-    "Stage": ".types",
-    "StrokeStarted": ".types",
-}
-__all__ = sorted(_WHERE)
-
-
-def __getattr__(name: str):
-    if name not in _WHERE:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(import_module(_WHERE[name], __name__), name)
-    globals()[name] = value
-    return value
+__getattr__, __all__ = lazy_names(
+    __name__,
+    {
+        "fence_sorter.codes": ("StartMode",),
+        "fence_sorter.inputs": (
+            "PARCEL_REASONS",
+            "InputError",
+            "ParcelSpec",
+            "StrokeCommand",
+            "validate_command",
+            "validate_parcel",
+        ),
+        ".line": ("LineConfig", "SortingLine", "in_swept_sector"),
+        ".pacing": ("LatenessHistogram", "Pacer", "Tick"),
+        ".types": (
+            "CommandResult",
+            "EventTrace",
+            "FenceSnapshot",
+            "LineEvent",
+            "LineSnapshot",
+            "Outcome",
+            "OutcomeCode",
+            "OverlapWarning",
+            "ParcelSnapshot",
+            "SolverWarning",
+            "Stage",
+            "StrokeStarted",
+        ),
+    },
+)
