@@ -20,16 +20,18 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
-from fence_sorter.physics.fence import MAX_ELEMENTS, PROFILES, FenceParams
-from fence_sorter.physics.model import RECORDABLE, Scenario
 from fence_sorter.physics.params import (
+    MAX_ELEMENTS,
+    PROFILES,
     ContactParams,
     ConveyorParams,
     DriveParams,
+    FenceParams,
     ParameterError,
     ParcelParams,
     SolverParams,
 )
+from fence_sorter.physics.scenario import RECORDABLE, Scenario
 from fence_sorter.resources import ResourceNotFound, data_path, find_data
 from fence_sorter.textinput import TextInputError, load_yaml, read_text
 

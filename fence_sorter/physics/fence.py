@@ -41,6 +41,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 
+from .params import FenceParams  # defined with the other parameters; imported from here too
+
 __all__ = [
     "FenceModel",
     "FenceParams",
@@ -55,68 +57,6 @@ __all__ = [
     "point_on_fence",
     "static_tip_deflection",
 ]
-
-PROFILES = ("constant_strength", "uniform")
-MAX_ELEMENTS = 200
-
-
-@dataclass(frozen=True)
-class FenceParams:
-    """Geometry, material (PA6) and discretisation of the flexible fence (section 4.3)."""
-
-    length: float = 1.2  # R_z [m]
-    height: float = 0.1  # z [m]
-    root_thickness: float = 0.08  # h1 [m]
-    profile: str = "constant_strength"  # h(s) = h1 sqrt(1 - s / R_z), or "uniform": h = h1
-    youngs_modulus: float = 3.0e9  # E [Pa]
-    poisson_ratio: float = 0.39  # nu [-]; only for the reported shear modulus
-    density: float = 1140.0  # rho_b [kg/m^3]
-    elements: int = 10  # n_E
-    damping_ratio: float = 0.05  # zeta on modes 1 and 2 (Rayleigh)
-
-    @property
-    def shear_modulus(self) -> float:
-        """G = E / (2 (1 + nu)) [Pa]; reported only, Euler-Bernoulli ignores shear."""
-        return self.youngs_modulus / (2.0 * (1.0 + self.poisson_ratio))
-
-    def validate(self) -> None:
-        """Raise ValueError naming the first field outside its allowed range."""
-        # (field, low, high, low inclusive, high inclusive, unit)
-        ranges = (
-            ("length", 0.0, 10.0, False, True, "m"),
-            ("height", 0.0, 1.0, False, True, "m"),
-            ("root_thickness", 0.0, 1.0, False, True, "m"),
-            ("youngs_modulus", 0.0, 1.0e12, False, True, "Pa"),
-            ("poisson_ratio", -1.0, 0.5, False, False, ""),
-            ("density", 0.0, 1.0e5, False, True, "kg/m^3"),
-            ("damping_ratio", 0.0, 1.0, True, False, ""),
-        )
-        for name, lo, hi, lo_in, hi_in, unit in ranges:
-            value = getattr(self, name)
-            span = f"{'[' if lo_in else '('}{lo:g}, {hi:g}{']' if hi_in else ')'}"
-            ok = (
-                isinstance(value, (int, float))
-                and not isinstance(value, bool)
-                and math.isfinite(value)
-                and (value >= lo if lo_in else value > lo)
-                and (value <= hi if hi_in else value < hi)
-            )
-            if not ok:
-                unit_txt = f" {unit}" if unit else ""
-                raise ValueError(
-                    f"fence.{name} must be a finite number in {span}{unit_txt}, got {value!r}"
-                )
-        n = self.elements
-        if (
-            isinstance(n, bool)
-            or not isinstance(n, (int, np.integer))
-            or not 1 <= n <= MAX_ELEMENTS
-        ):
-            raise ValueError(
-                f"fence.elements must be an integer in [1, {MAX_ELEMENTS}], got {n!r}"
-            )
-        if self.profile not in PROFILES:
-            raise ValueError(f"fence.profile must be one of {PROFILES}, got {self.profile!r}")
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:

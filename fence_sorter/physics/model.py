@@ -1,49 +1,26 @@
-"""The model of one sorting event: the scenario a user describes and the model packed from it.
+"""The model of one sorting event packed from the scenario a user describes.
 
-:class:`Scenario` holds everything one event needs (the scene loader builds it from YAML);
-:class:`SortingModel` packs the parts a scenario needs into the compiled kernel's arrays (no FEM
-for a stiff fence, no border contact for a load that cannot reach it, only the modes kept by
-``fence.modes``, no time series nobody asked for).
+:class:`Scenario` (``scenario.py``, imported here too) holds everything one event needs (the
+scene loader builds it from YAML); :class:`SortingModel` packs the parts a scenario needs into
+the compiled kernel's arrays (no FEM for a stiff fence, no border contact for a load that cannot
+reach it, only the modes kept by ``fence.modes``, no time series nobody asked for).
 """
 
 from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
 from . import kernel as K
 from .drive import peak_rate
-from .fence import FenceParams, build_fence, modal_basis
-from .params import ContactParams, ConveyorParams, DriveParams, ParcelParams, SolverParams
+from .fence import build_fence, modal_basis
+from .params import ConveyorParams, FenceParams, ParcelParams
 from .parcel import ParcelBody, initial_pose, parcel_body
+from .scenario import RECORDABLE, Scenario
 
-RECORDABLE = ("trajectory", "fence", "forces", "stages")
-
-
-@dataclass(frozen=True)
-class Scenario:
-    """Everything one sorting event needs (the scene loader builds it from YAML)."""
-
-    conveyor: ConveyorParams = ConveyorParams()
-    parcel: ParcelParams = ParcelParams()
-    drive: DriveParams = DriveParams()
-    contact: ContactParams = ContactParams()
-    solver: SolverParams = SolverParams()
-    fence: FenceParams | None = None  # None: stiff fence on a stiff drive
-    fence_length: float = 1.2  # R_z [m] of a stiff fence (a flexible one uses fence.length)
-    fence_modes: int | None = None  # modal truncation; None keeps every mode
-    record: tuple[str, ...] = ()
-    # initial (vx, vy, phidot) of C_s over ground; None = riding the belt at belt speed
-    initial_velocity: tuple[float, float, float] | None = None
-    # constant applied wrench (F_x, F_y, M_z) on the load, for checks and disturbances
-    external_wrench: tuple[float, float, float] = (0.0, 0.0, 0.0)
-
-    @property
-    def length(self) -> float:
-        return self.fence.length if self.fence is not None else self.fence_length
+__all__ = ["RECORDABLE", "Scenario", "SortingModel"]
 
 
 class SortingModel:
