@@ -221,3 +221,23 @@ def test_shipped_scene_sorts(name: str) -> None:
     r = simulate(load_scene(name, ["solver.stop_when_sorted=true", "record=[]"]).scenario)
     assert r.success, r.diagnosis
     assert r.sorted, r.reason
+
+
+def test_reading_a_scene_loads_neither_the_kernel_nor_numba_nor_scipy():
+    """The scanner reads its scene at start-up: that must not cost the kernel's imports."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "from fence_sorter.scene import load_scene\n"
+        "sc = load_scene('impact_flexible').scenario\n"
+        "assert sc.fence is not None and sc.fence.elements > 0\n"
+        "heavy = ('numba', 'scipy', 'fence_sorter.physics.kernel')\n"
+        "print(','.join(m for m in heavy if m in sys.modules))\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=False
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.strip() == "", proc.stdout
