@@ -24,7 +24,7 @@ class EnergyAudit:
     without a source: r never grows over any interval ([t1, t2], ``max_rise``); in the elastic
     limit it stays ~0 both ways. E_flow = E_load(0) + integral |P_sources| dt scales the
     quadrature's tolerance. The solve loop updates it at every accepted point
-    (``kernel.loop._audit``).
+    (``kernel.observer._audit``).
     """
 
     max_residual: float = 0.0  # max r (the result's energy_excess) [J]

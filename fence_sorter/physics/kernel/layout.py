@@ -1,5 +1,7 @@
 """Layout of the kernel's flat arrays: packed parameters ``P_*`` (:func:`pack`), contact slot
-columns ``C_*``, resultants ``R_*``."""
+columns ``C_*``, resultants ``R_*``, and the solve loop's arrays (:data:`LoopModel`,
+:data:`LoopState`): state rows ``S_*``, settings ``G_*``, counters ``I_*``, scalars ``F_*``,
+diagnoses ``DIAG_*``, recorded rows ``REC_*``."""
 
 from __future__ import annotations
 
@@ -108,6 +110,133 @@ def pack(
     p[P_MARGIN] = margin
     return np.array(p, dtype=float)
 
+
+# -- the solve loop's arrays ---------------------------------------------------------------
+# states: rows of T, Y, LAM, OUT, RES, MODAL, ACC; cur and trial swap, loc and before are fixed;
+# the generalized-alpha step's state at its alpha point goes in Y[S_ALPHA] (scratch);
+# MODAL[S_PREV]: the modal force at the accepted point before cur (the modes' quadratic force)
+S_LOC = 2
+S_BEFORE = 3
+S_ALPHA = 4
+S_PREV = 5
+N_STATES = 6
+
+# configuration ``cfg``
+G_H_NOM = 0  # dt_max (adaptive) or dt (fixed step) [s]
+G_T_END = 1
+G_DT = 2  # first adaptive step [s]
+G_MIN_DT = 3
+G_TOL = 4  # contact iteration tolerance
+G_MAX_ITER = 5
+G_ATOL = 6
+G_RTOL = 7
+G_V_REF = 8
+G_OM_REF = 9
+G_WIDTH = 10  # s [m]
+G_ADAPTIVE = 11
+G_STOP_SORTED = 12
+G_RECORD = 13
+G_BP = 14  # b_p, k_p of the stiff reference (stiff_impact_peak)
+G_KP = 15
+G_DEEP = 16
+G_SPEED_LIMIT = 17
+G_VMIN = 18
+G_PHIDOT_MIN = 19
+G_UP = 20  # 2^(1/4)
+G_DOWN = 21  # 2^(-1/4)
+G_FLUSH = 22  # contacts.FLUSH_ANGLE [rad]
+G_GEN_ALPHA = 23  # 1: the generalized-alpha step (fixed step), 0: the trapezoidal one
+G_ALPHA_M = 24  # generalized-alpha (alpha_m, alpha_f, beta, gamma), in this order
+G_ALPHA_F = 25
+G_BETA = 26
+G_GAMMA = 27
+N_CFG = 28
+
+# integer control ``ctl``
+I_CUR = 0
+I_TRIAL = 1
+I_STARTED = 2
+I_DONE = 3
+I_DIAG = 4  # DIAG_*
+I_STEPS = 5
+I_REJECTED = 6
+I_FORCED = 7
+I_EVENTS = 8
+I_NEXT_BREAK = 9
+I_CLEAN = 10
+I_ON_BELT = 11
+I_STOP = 12
+I_SORTED = 13  # the reductions (observe)
+I_TOUCHED = 14
+I_HAD_FENCE = 15
+I_FIRST = 16
+I_MASK = 17
+I_STAGE = 18
+I_LAST_MASK0 = 19
+I_LAST_MASK1 = 20
+I_N_IMPACTS = 21
+I_N_STAGES = 22
+I_N_REC = 23
+I_N_PROPS = 24  # entries of the propagator cache in use
+N_CTL = 25
+
+# float control ``fc``
+F_H = 0
+F_H_CAP = 1
+F_H_PREV = 2
+F_PREV_V = 3  # 3 values
+F_PREV_A = 6  # 3 values
+F_EXIT_SPEED = 9  # the reductions (observe)
+F_IMPACT_SPEED = 10
+F_PEAK_N = 11
+F_PEAK_TIP = 12
+F_MAX_DEPTH = 13
+F_Y_MAX = 14
+F_PREV_T = 15
+F_PREV_Y = 16  # 6 values
+F_PREV_POWER = 22
+F_WORK = 23
+F_LAST_N1 = 24
+F_LAST_N2 = 25
+F_LAST_T1 = 26
+F_LAST_T2 = 27
+F_MAX_RES = 28  # energy audit (result.EnergyAudit)
+F_MIN_RES = 29
+F_FLOW = 30
+F_E0 = 31
+F_T_MAX = 32
+F_T_MIN = 33
+F_MAX_RISE = 34
+F_T_RISE0 = 35
+F_T_RISE1 = 36
+F_RUN_MIN = 37
+F_T_RUN_MIN = 38
+F_DIAG_T = 39  # where a diagnosis was made, and its value (D or speed)
+F_DIAG_V = 40
+N_FC = 41
+
+# diagnoses (counters[I_DIAG])
+DIAG_NONE = 0
+DIAG_NONFINITE = 1
+DIAG_DEEP = 2
+DIAG_SPEED = 3
+DIAG_MIN_DT = 4
+
+# rows of the recorded series
+REC_T = 0
+REC_Y = 1  # x, y, phi, vx, vy, phidot
+REC_ALPHA = 7
+REC_TIP_W = 8
+REC_FENCE_N = 9
+REC_MAX_D = 10
+REC_STAGE = 11
+# the time again, once per series group that has its own time array (fence, forces, stages), so
+# each recorded array is a row of REC of its own
+REC_T_FENCE = 12
+REC_T_FORCES = 13
+REC_T_STAGE = 14
+N_REC_COLS = 15
+N_PROP_CACHE = 256
 
 # The loop's arrays in two groups, as MuJoCo's MjModel and MjData: what one event is (read only)
 # and what the loop writes as it runs (rows of accepted and trial states, counters, outputs).

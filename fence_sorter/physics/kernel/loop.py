@@ -1,12 +1,11 @@
 """The solve loop (:func:`solve`): the one loop of every scheme (adaptive, trapezoidal,
-generalized-alpha): step size, events, drive breakpoints, divergence checks, and the reductions
-of a run (:func:`observe`: energy audit, peak N, impacts with N_stiff, stages, recorded series)."""
+generalized-alpha): step size, events, drive breakpoints; each accepted point goes to the
+observer (``observe``: the run's reductions and divergence checks)."""
 
 from __future__ import annotations
 
 import math
 
-import numpy as np
 from numba import njit
 
 from .control import (
@@ -22,32 +21,64 @@ from .control import (
     tolerance_scale,
 )
 from .forces import evaluate, karnopp_belt, stick_wrench
-from .impact import n_stiff
 from .layout import (
-    C_ACTIVE,
-    C_DDOT,
-    C_NX,
-    C_NY,
+    DIAG_MIN_DT,
+    DIAG_NONE,
+    F_DIAG_T,
+    F_H,
+    F_H_CAP,
+    F_H_PREV,
+    F_PREV_A,
+    F_PREV_V,
+    G_ADAPTIVE,
+    G_ALPHA_M,
+    G_ATOL,
+    G_DOWN,
+    G_DT,
+    G_GAMMA,
+    G_GEN_ALPHA,
+    G_H_NOM,
+    G_MAX_ITER,
+    G_MIN_DT,
+    G_OM_REF,
+    G_PHIDOT_MIN,
+    G_RTOL,
+    G_T_END,
+    G_TOL,
+    G_UP,
+    G_V_REF,
+    G_VMIN,
+    G_WIDTH,
+    I_CLEAN,
+    I_CUR,
+    I_DIAG,
+    I_DONE,
+    I_EVENTS,
+    I_FORCED,
+    I_N_IMPACTS,
+    I_N_PROPS,
+    I_N_REC,
+    I_N_STAGES,
+    I_NEXT_BREAK,
+    I_ON_BELT,
+    I_REJECTED,
+    I_STARTED,
+    I_STEPS,
+    I_STOP,
+    I_TRIAL,
     N_COLS,
     N_SLOTS,
     P_ALPHA_K,
     P_BELT,
-    P_EXT_M,
-    P_EXT_X,
-    P_EXT_Y,
     P_INERTIA,
     P_MASS,
     P_T1,
-    R_ACTIVE_MASK,
-    R_ALPHA,
-    R_ENERGY_CONTACT,
-    R_FENCE_N,
-    R_MAX_D,
-    R_POWER_FENCE,
-    R_TIP_W,
-    SLOT_BORDER,
-    SLOT_TIP,
+    S_ALPHA,
+    S_BEFORE,
+    S_LOC,
+    S_PREV,
 )
+from .observer import diverged, observe
 from .steps import STEP_FORCED, STEP_REJECTED, generalized_alpha_step, trapezoidal_step
 
 # -- the solve loop -------------------------------------------------------------------------------
@@ -60,212 +91,10 @@ from .steps import STEP_FORCED, STEP_REJECTED, generalized_alpha_step, trapezoid
 
 EVENT_TOL = 1e-10  # a located onset's step ends with 0 < D <= EVENT_TOL [m]
 EVENT_SORT = 3  # C_s crossing the sorting line y0 = s (belt friction ends there)
-
-# states: rows of T, Y, LAM, OUT, RES, MODAL, ACC; cur and trial swap, loc and before are fixed;
-# the generalized-alpha step's state at its alpha point goes in Y[S_ALPHA] (scratch);
-# MODAL[S_PREV]: the modal force at the accepted point before cur (the modes' quadratic force)
-S_LOC = 2
-S_BEFORE = 3
-S_ALPHA = 4
-S_PREV = 5
-N_STATES = 6
-
-# configuration ``cfg``
-G_H_NOM = 0  # dt_max (adaptive) or dt (fixed step) [s]
-G_T_END = 1
-G_DT = 2  # first adaptive step [s]
-G_MIN_DT = 3
-G_TOL = 4  # contact iteration tolerance
-G_MAX_ITER = 5
-G_ATOL = 6
-G_RTOL = 7
-G_V_REF = 8
-G_OM_REF = 9
-G_WIDTH = 10  # s [m]
-G_ADAPTIVE = 11
-G_STOP_SORTED = 12
-G_RECORD = 13
-G_BP = 14  # b_p, k_p of the stiff reference (stiff_impact_peak)
-G_KP = 15
-G_DEEP = 16
-G_SPEED_LIMIT = 17
-G_VMIN = 18
-G_PHIDOT_MIN = 19
-G_UP = 20  # 2^(1/4)
-G_DOWN = 21  # 2^(-1/4)
-G_FLUSH = 22  # contacts.FLUSH_ANGLE [rad]
-G_GEN_ALPHA = 23  # 1: the generalized-alpha step (fixed step), 0: the trapezoidal one
-G_ALPHA_M = 24  # generalized-alpha (alpha_m, alpha_f, beta, gamma), in this order
-G_ALPHA_F = 25
-G_BETA = 26
-G_GAMMA = 27
-N_CFG = 28
-
-# integer control ``ctl``
-I_CUR = 0
-I_TRIAL = 1
-I_STARTED = 2
-I_DONE = 3
-I_DIAG = 4  # DIAG_*
-I_STEPS = 5
-I_REJECTED = 6
-I_FORCED = 7
-I_EVENTS = 8
-I_NEXT_BREAK = 9
-I_CLEAN = 10
-I_ON_BELT = 11
-I_STOP = 12
-I_SORTED = 13  # the reductions (observe)
-I_TOUCHED = 14
-I_HAD_FENCE = 15
-I_FIRST = 16
-I_MASK = 17
-I_STAGE = 18
-I_LAST_MASK0 = 19
-I_LAST_MASK1 = 20
-I_N_IMPACTS = 21
-I_N_STAGES = 22
-I_N_REC = 23
-I_N_PROPS = 24  # entries of the propagator cache in use
-N_CTL = 25
-
-# float control ``fc``
-F_H = 0
-F_H_CAP = 1
-F_H_PREV = 2
-F_PREV_V = 3  # 3 values
-F_PREV_A = 6  # 3 values
-F_EXIT_SPEED = 9  # the reductions (observe)
-F_IMPACT_SPEED = 10
-F_PEAK_N = 11
-F_PEAK_TIP = 12
-F_MAX_DEPTH = 13
-F_Y_MAX = 14
-F_PREV_T = 15
-F_PREV_Y = 16  # 6 values
-F_PREV_POWER = 22
-F_WORK = 23
-F_LAST_N1 = 24
-F_LAST_N2 = 25
-F_LAST_T1 = 26
-F_LAST_T2 = 27
-F_MAX_RES = 28  # energy audit (result.EnergyAudit)
-F_MIN_RES = 29
-F_FLOW = 30
-F_E0 = 31
-F_T_MAX = 32
-F_T_MIN = 33
-F_MAX_RISE = 34
-F_T_RISE0 = 35
-F_T_RISE1 = 36
-F_RUN_MIN = 37
-F_T_RUN_MIN = 38
-F_DIAG_T = 39  # where a diagnosis was made, and its value (D or speed)
-F_DIAG_V = 40
-N_FC = 41
-
-# diagnoses and stop reasons
-DIAG_NONE = 0
-DIAG_NONFINITE = 1
-DIAG_DEEP = 2
-DIAG_SPEED = 3
-DIAG_MIN_DT = 4
 SOLVE_DONE = 0
 SOLVE_PAUSED = 1  # attempt budget used up (the caller checks the wall-time limit)
 SOLVE_GROW = 2  # an output buffer is full
 SOLVE_REACHED = 3  # the accepted time reached t_target
-
-# stages: the values of fence_sorter.codes.Stage (the stepper checks them), and the recorded row
-STAGE_CODE_ON_BELT = 0
-STAGE_CODE_E1 = 1
-STAGE_CODE_E2 = 2
-STAGE_CODE_E3 = 3
-STAGE_CODE_E4 = 4
-STAGE_CODE_SORTED = 5
-REC_T = 0
-REC_Y = 1  # x, y, phi, vx, vy, phidot
-REC_ALPHA = 7
-REC_TIP_W = 8
-REC_FENCE_N = 9
-REC_MAX_D = 10
-REC_STAGE = 11
-# the time again, once per series group that has its own time array (fence, forces, stages), so
-# each recorded array is a row of REC of its own
-REC_T_FENCE = 12
-REC_T_FORCES = 13
-REC_T_STAGE = 14
-N_REC_COLS = 15
-N_PROP_CACHE = 256
-
-
-@njit(cache=True, _nrt=False)
-def _remainder(x, y):
-    """IEEE remainder of x by y > 0 (CPython's ``math.remainder``, exact like it)."""
-    absx = abs(x)
-    m = np.fmod(absx, y)
-    c = y - m
-    if m < c:
-        r = m
-    elif m > c:
-        r = -c
-    else:
-        r = m - 2.0 * np.fmod(0.5 * (absx - m), y)
-    return math.copysign(1.0, x) * r
-
-
-@njit(cache=True, _nrt=False)
-def classify_code(out, normals, phi, touched, flush):
-    """Stage E1-E4 (or on_belt before the first touch) from the contact slots ``out``: E3 with
-    a corner on the border wall, E2 with the fence tip inside the load, both corners of one face
-    on the fence, or a single corner whose face lies within ``flush`` of the fence tangent
-    (that face's contact pair holds it flush, the moment the paper's E2 (46) imposes by slaving
-    phi to the fence), E1 another single corner, E4 no contact after one; codes STAGE_CODE_*."""
-    n_corners = 0
-    first = -1
-    for k in range(4):
-        if out[k, C_ACTIVE] != 0.0:
-            n_corners += 1
-            if first < 0:
-                first = k
-    tip = False
-    for k in range(SLOT_TIP, SLOT_BORDER):
-        if out[k, C_ACTIVE] != 0.0:
-            tip = True
-    border = False
-    for k in range(SLOT_BORDER, N_SLOTS):
-        if out[k, C_ACTIVE] != 0.0:
-            border = True
-    if n_corners == 0 and not tip:
-        return STAGE_CODE_E4 if touched else STAGE_CODE_ON_BELT
-    if border:
-        return STAGE_CODE_E3
-    if tip:
-        return STAGE_CODE_E2
-    for k in range(4):
-        if out[k, C_ACTIVE] != 0.0 and out[(k + 1) % 4, C_ACTIVE] != 0.0:
-            return STAGE_CODE_E2
-    tangent_angle = math.atan2(out[first, C_NX], -out[first, C_NY])
-    for face in (first, (first - 1) % 4):
-        face_angle = phi + math.atan2(normals[face, 0], -normals[face, 1])
-        if abs(_remainder(face_angle - tangent_angle, math.pi)) < flush:
-            return STAGE_CODE_E2
-    return STAGE_CODE_E1
-
-
-@njit(cache=True, _nrt=False)
-def parabola_peak(t0, n0, t1, n1, t2, n2):
-    """Vertex value of the parabola through three points with n1 >= n0, n2 (else n1)."""
-    d0, d2 = t0 - t1, t2 - t1
-    if d0 >= 0.0 or d2 <= 0.0:
-        return n1
-    c = ((n0 - n1) / d0 - (n2 - n1) / d2) / (d0 - d2)
-    b = (n0 - n1) / d0 - c * d0
-    if c >= 0.0:
-        return n1
-    d = -b / (2.0 * c)
-    if not d0 <= d <= d2:
-        return n1
-    return n1 + b * d + c * d * d
 
 
 @njit(cache=True, _nrt=False)
@@ -465,159 +294,6 @@ def _locate(
         _copy_state(T, Y, LAM, OUT, RES, MODAL, ACC, trial, S_BEFORE)
         return before
     return best if have_best else h
-
-
-@njit(cache=True, _nrt=False)
-def _audit(fc, t, r):
-    """Update the energy audit (``result.EnergyAudit``) with the balance r at t."""
-    if not math.isfinite(r):
-        fc[F_MAX_RES] = r
-        fc[F_MIN_RES] = r
-        return
-    if not math.isfinite(fc[F_MAX_RES]):
-        return
-    if r > fc[F_MAX_RES]:
-        fc[F_MAX_RES] = r
-        fc[F_T_MAX] = t
-    if r < fc[F_MIN_RES]:
-        fc[F_MIN_RES] = r
-        fc[F_T_MIN] = t
-    if r < fc[F_RUN_MIN]:
-        fc[F_RUN_MIN] = r
-        fc[F_T_RUN_MIN] = t
-    if r - fc[F_RUN_MIN] > fc[F_MAX_RISE]:
-        fc[F_MAX_RISE] = r - fc[F_RUN_MIN]
-        fc[F_T_RISE0] = fc[F_T_RUN_MIN]
-        fc[F_T_RISE1] = t
-
-
-@njit(cache=True, _nrt=False)
-def observe(P, normals, cfg, ctl, fc, T, Y, LAM, OUT, RES, IMP, STG, REC, i, on_belt):
-    """The reductions of a run at the accepted point in state row i: sorting (C_s crossing
-    y0 = s, exit speed interpolated), impacts (a fence contact after none, N_stiff at its w_n),
-    peak N (with the parabola through the last three points when the contact set held), tip
-    deflection, depth, y_max, stages, the energy audit and the recorded series; returns
-    (stop, on_belt). The SciPy baselines call it from Python on their own points."""
-    t = T[i]
-    y = Y[i]
-    res = RES[i]
-    out = OUT[i]
-    mass = P[P_MASS]
-    vx, vy, om = y[3], y[4], y[5]
-    energy = 0.5 * mass * (vx * vx + vy * vy) + 0.5 * P[P_INERTIA] * om * om
-    energy += res[R_ENERGY_CONTACT]
-    power = res[R_POWER_FENCE] + P[P_EXT_X] * vx + P[P_EXT_Y] * vy + P[P_EXT_M] * om
-    if on_belt:
-        power += LAM[i, 0] * P[P_BELT]
-    width = cfg[G_WIDTH]
-    if ctl[I_FIRST] != 0:
-        ctl[I_FIRST] = 0
-        fc[F_E0] = energy
-        fc[F_FLOW] = abs(energy)
-        fc[F_Y_MAX] = y[1]
-    else:
-        h = t - fc[F_PREV_T]
-        fc[F_WORK] += 0.5 * h * (power + fc[F_PREV_POWER])
-        fc[F_FLOW] += 0.5 * h * (abs(power) + abs(fc[F_PREV_POWER]))
-        _audit(fc, t, energy - fc[F_E0] - fc[F_WORK])
-        py1 = fc[F_PREV_Y + 1]
-        if y[1] >= width > py1 and ctl[I_SORTED] == 0:
-            frac = (width - py1) / (y[1] - py1)
-            fc[F_EXIT_SPEED] = fc[F_PREV_Y + 4] + frac * (vy - fc[F_PREV_Y + 4])
-            ctl[I_SORTED] = 1
-    mask = int(res[R_ACTIVE_MASK])
-    fence_on = (mask & 0xFF) != 0
-    if fence_on and ctl[I_HAD_FENCE] == 0:
-        ctl[I_TOUCHED] = 1
-        w_n = -math.inf
-        for k in range(SLOT_BORDER):
-            if out[k, C_ACTIVE] != 0.0:
-                v = out[k, C_DDOT]
-                if math.isnan(v) or math.isnan(w_n):
-                    w_n = math.nan
-                elif v > w_n:
-                    w_n = v
-        if math.isnan(fc[F_IMPACT_SPEED]):
-            fc[F_IMPACT_SPEED] = w_n
-        peak = n_stiff(mass, w_n, cfg[G_BP], cfg[G_KP])
-        n_imp = ctl[I_N_IMPACTS]
-        IMP[n_imp, 0] = t
-        IMP[n_imp, 1] = w_n
-        IMP[n_imp, 2] = peak
-        ctl[I_N_IMPACTS] = n_imp + 1
-    ctl[I_HAD_FENCE] = 1 if fence_on else 0
-    n = res[R_FENCE_N]
-    if n > fc[F_PEAK_N]:
-        fc[F_PEAK_N] = n
-    n1, n2 = fc[F_LAST_N1], fc[F_LAST_N2]
-    smooth = ctl[I_LAST_MASK0] == ctl[I_LAST_MASK1] and ctl[I_LAST_MASK1] == mask
-    ctl[I_LAST_MASK0] = ctl[I_LAST_MASK1]
-    ctl[I_LAST_MASK1] = mask
-    if smooth and n2 > n1 and n2 >= n and n1 > 0.0:
-        peak = parabola_peak(fc[F_LAST_T1], n1, fc[F_LAST_T2], n2, t, n)
-        if peak > fc[F_PEAK_N]:
-            fc[F_PEAK_N] = peak
-    fc[F_LAST_N1], fc[F_LAST_N2] = n2, n
-    fc[F_LAST_T1], fc[F_LAST_T2] = fc[F_LAST_T2], t
-    tip = abs(res[R_TIP_W])
-    if tip > fc[F_PEAK_TIP]:
-        fc[F_PEAK_TIP] = tip
-    if res[R_MAX_D] > fc[F_MAX_DEPTH]:
-        fc[F_MAX_DEPTH] = res[R_MAX_D]
-    if y[1] > fc[F_Y_MAX]:
-        fc[F_Y_MAX] = y[1]
-    sorted_ = ctl[I_SORTED] != 0
-    if mask != ctl[I_MASK] or (sorted_ and ctl[I_STAGE] != STAGE_CODE_SORTED):
-        ctl[I_MASK] = mask
-        if sorted_:
-            stage = STAGE_CODE_SORTED
-        else:
-            stage = classify_code(out, normals, y[2], ctl[I_TOUCHED] != 0, cfg[G_FLUSH])
-        if stage != ctl[I_STAGE]:
-            ctl[I_STAGE] = stage
-            n_stg = ctl[I_N_STAGES]
-            STG[n_stg, 0] = t
-            STG[n_stg, 1] = stage
-            ctl[I_N_STAGES] = n_stg + 1
-    if cfg[G_RECORD] != 0.0:
-        n_rec = ctl[I_N_REC]
-        REC[REC_T, n_rec] = t
-        REC[REC_T_FENCE, n_rec] = t
-        REC[REC_T_FORCES, n_rec] = t
-        REC[REC_T_STAGE, n_rec] = t
-        for k in range(6):
-            REC[REC_Y + k, n_rec] = y[k]
-        REC[REC_ALPHA, n_rec] = res[R_ALPHA]
-        REC[REC_TIP_W, n_rec] = res[R_TIP_W]
-        REC[REC_FENCE_N, n_rec] = res[R_FENCE_N]
-        REC[REC_MAX_D, n_rec] = res[R_MAX_D]
-        REC[REC_STAGE, n_rec] = ctl[I_STAGE]
-        ctl[I_N_REC] = n_rec + 1
-    fc[F_PREV_T] = t
-    for k in range(6):
-        fc[F_PREV_Y + k] = y[k]
-    fc[F_PREV_POWER] = power
-    return sorted_ and cfg[G_STOP_SORTED] != 0.0, on_belt and not sorted_
-
-
-@njit(cache=True, _nrt=False)
-def diverged(P, cfg, fc, t, y, res):
-    """Divergence checks at an accepted point: a DIAG_* code (non-finite state, deep
-    penetration, runaway speed; time and value left in fc)."""
-    total = 0.0
-    for k in range(y.shape[0]):
-        total += y[k]
-    fc[F_DIAG_T] = t
-    if not math.isfinite(total):
-        return DIAG_NONFINITE
-    if res[R_MAX_D] > cfg[G_DEEP]:
-        fc[F_DIAG_V] = res[R_MAX_D]
-        return DIAG_DEEP
-    speed = math.hypot(y[3], y[4])
-    if speed > cfg[G_SPEED_LIMIT]:
-        fc[F_DIAG_V] = speed
-        return DIAG_SPEED
-    return DIAG_NONE
 
 
 @njit(cache=True, _nrt=False)

@@ -1,0 +1,328 @@
+"""The observer of the solve loop: the reductions of a run at each accepted point
+(:func:`observe`: sorting and exit speed, impacts with N_stiff, peak N, tip deflection, depth,
+y_max, stages, the energy audit, the recorded series) and its divergence checks
+(:func:`diverged`). A module of its own, apart from the step control, because they serve every
+source of points: the compiled loop calls them per accepted step, the SciPy baselines from
+Python on their own points (``Stepper.observe``), so every scheme's result is reduced alike."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .impact import n_stiff
+from .layout import (
+    C_ACTIVE,
+    C_DDOT,
+    C_NX,
+    C_NY,
+    DIAG_DEEP,
+    DIAG_NONE,
+    DIAG_NONFINITE,
+    DIAG_SPEED,
+    F_DIAG_T,
+    F_DIAG_V,
+    F_E0,
+    F_EXIT_SPEED,
+    F_FLOW,
+    F_IMPACT_SPEED,
+    F_LAST_N1,
+    F_LAST_N2,
+    F_LAST_T1,
+    F_LAST_T2,
+    F_MAX_DEPTH,
+    F_MAX_RES,
+    F_MAX_RISE,
+    F_MIN_RES,
+    F_PEAK_N,
+    F_PEAK_TIP,
+    F_PREV_POWER,
+    F_PREV_T,
+    F_PREV_Y,
+    F_RUN_MIN,
+    F_T_MAX,
+    F_T_MIN,
+    F_T_RISE0,
+    F_T_RISE1,
+    F_T_RUN_MIN,
+    F_WORK,
+    F_Y_MAX,
+    G_BP,
+    G_DEEP,
+    G_FLUSH,
+    G_KP,
+    G_RECORD,
+    G_SPEED_LIMIT,
+    G_STOP_SORTED,
+    G_WIDTH,
+    I_FIRST,
+    I_HAD_FENCE,
+    I_LAST_MASK0,
+    I_LAST_MASK1,
+    I_MASK,
+    I_N_IMPACTS,
+    I_N_REC,
+    I_N_STAGES,
+    I_SORTED,
+    I_STAGE,
+    I_TOUCHED,
+    N_SLOTS,
+    P_BELT,
+    P_EXT_M,
+    P_EXT_X,
+    P_EXT_Y,
+    P_INERTIA,
+    P_MASS,
+    R_ACTIVE_MASK,
+    R_ALPHA,
+    R_ENERGY_CONTACT,
+    R_FENCE_N,
+    R_MAX_D,
+    R_POWER_FENCE,
+    R_TIP_W,
+    REC_ALPHA,
+    REC_FENCE_N,
+    REC_MAX_D,
+    REC_STAGE,
+    REC_T,
+    REC_T_FENCE,
+    REC_T_FORCES,
+    REC_T_STAGE,
+    REC_TIP_W,
+    REC_Y,
+    SLOT_BORDER,
+    SLOT_TIP,
+)
+
+# stages: the values of fence_sorter.codes.Stage (the stepper checks them)
+STAGE_CODE_ON_BELT = 0
+STAGE_CODE_E1 = 1
+STAGE_CODE_E2 = 2
+STAGE_CODE_E3 = 3
+STAGE_CODE_E4 = 4
+STAGE_CODE_SORTED = 5
+
+
+@njit(cache=True, _nrt=False)
+def _remainder(x, y):
+    """IEEE remainder of x by y > 0 (CPython's ``math.remainder``, exact like it)."""
+    absx = abs(x)
+    m = np.fmod(absx, y)
+    c = y - m
+    if m < c:
+        r = m
+    elif m > c:
+        r = -c
+    else:
+        r = m - 2.0 * np.fmod(0.5 * (absx - m), y)
+    return math.copysign(1.0, x) * r
+
+
+@njit(cache=True, _nrt=False)
+def classify_code(out, normals, phi, touched, flush):
+    """Stage E1-E4 (or on_belt before the first touch) from the contact slots ``out``: E3 with
+    a corner on the border wall, E2 with the fence tip inside the load, both corners of one face
+    on the fence, or a single corner whose face lies within ``flush`` of the fence tangent
+    (that face's contact pair holds it flush, the moment the paper's E2 (46) imposes by slaving
+    phi to the fence), E1 another single corner, E4 no contact after one; codes STAGE_CODE_*."""
+    n_corners = 0
+    first = -1
+    for k in range(4):
+        if out[k, C_ACTIVE] != 0.0:
+            n_corners += 1
+            if first < 0:
+                first = k
+    tip = False
+    for k in range(SLOT_TIP, SLOT_BORDER):
+        if out[k, C_ACTIVE] != 0.0:
+            tip = True
+    border = False
+    for k in range(SLOT_BORDER, N_SLOTS):
+        if out[k, C_ACTIVE] != 0.0:
+            border = True
+    if n_corners == 0 and not tip:
+        return STAGE_CODE_E4 if touched else STAGE_CODE_ON_BELT
+    if border:
+        return STAGE_CODE_E3
+    if tip:
+        return STAGE_CODE_E2
+    for k in range(4):
+        if out[k, C_ACTIVE] != 0.0 and out[(k + 1) % 4, C_ACTIVE] != 0.0:
+            return STAGE_CODE_E2
+    tangent_angle = math.atan2(out[first, C_NX], -out[first, C_NY])
+    for face in (first, (first - 1) % 4):
+        face_angle = phi + math.atan2(normals[face, 0], -normals[face, 1])
+        if abs(_remainder(face_angle - tangent_angle, math.pi)) < flush:
+            return STAGE_CODE_E2
+    return STAGE_CODE_E1
+
+
+@njit(cache=True, _nrt=False)
+def parabola_peak(t0, n0, t1, n1, t2, n2):
+    """Vertex value of the parabola through three points with n1 >= n0, n2 (else n1)."""
+    d0, d2 = t0 - t1, t2 - t1
+    if d0 >= 0.0 or d2 <= 0.0:
+        return n1
+    c = ((n0 - n1) / d0 - (n2 - n1) / d2) / (d0 - d2)
+    b = (n0 - n1) / d0 - c * d0
+    if c >= 0.0:
+        return n1
+    d = -b / (2.0 * c)
+    if not d0 <= d <= d2:
+        return n1
+    return n1 + b * d + c * d * d
+
+
+@njit(cache=True, _nrt=False)
+def _audit(fc, t, r):
+    """Update the energy audit (``result.EnergyAudit``) with the balance r at t."""
+    if not math.isfinite(r):
+        fc[F_MAX_RES] = r
+        fc[F_MIN_RES] = r
+        return
+    if not math.isfinite(fc[F_MAX_RES]):
+        return
+    if r > fc[F_MAX_RES]:
+        fc[F_MAX_RES] = r
+        fc[F_T_MAX] = t
+    if r < fc[F_MIN_RES]:
+        fc[F_MIN_RES] = r
+        fc[F_T_MIN] = t
+    if r < fc[F_RUN_MIN]:
+        fc[F_RUN_MIN] = r
+        fc[F_T_RUN_MIN] = t
+    if r - fc[F_RUN_MIN] > fc[F_MAX_RISE]:
+        fc[F_MAX_RISE] = r - fc[F_RUN_MIN]
+        fc[F_T_RISE0] = fc[F_T_RUN_MIN]
+        fc[F_T_RISE1] = t
+
+
+@njit(cache=True, _nrt=False)
+def observe(P, normals, cfg, ctl, fc, T, Y, LAM, OUT, RES, IMP, STG, REC, i, on_belt):
+    """The reductions of a run at the accepted point in state row i: sorting (C_s crossing
+    y0 = s, exit speed interpolated), impacts (a fence contact after none, N_stiff at its w_n),
+    peak N (with the parabola through the last three points when the contact set held), tip
+    deflection, depth, y_max, stages, the energy audit and the recorded series; returns
+    (stop, on_belt). The SciPy baselines call it from Python on their own points."""
+    t = T[i]
+    y = Y[i]
+    res = RES[i]
+    out = OUT[i]
+    mass = P[P_MASS]
+    vx, vy, om = y[3], y[4], y[5]
+    energy = 0.5 * mass * (vx * vx + vy * vy) + 0.5 * P[P_INERTIA] * om * om
+    energy += res[R_ENERGY_CONTACT]
+    power = res[R_POWER_FENCE] + P[P_EXT_X] * vx + P[P_EXT_Y] * vy + P[P_EXT_M] * om
+    if on_belt:
+        power += LAM[i, 0] * P[P_BELT]
+    width = cfg[G_WIDTH]
+    if ctl[I_FIRST] != 0:
+        ctl[I_FIRST] = 0
+        fc[F_E0] = energy
+        fc[F_FLOW] = abs(energy)
+        fc[F_Y_MAX] = y[1]
+    else:
+        h = t - fc[F_PREV_T]
+        fc[F_WORK] += 0.5 * h * (power + fc[F_PREV_POWER])
+        fc[F_FLOW] += 0.5 * h * (abs(power) + abs(fc[F_PREV_POWER]))
+        _audit(fc, t, energy - fc[F_E0] - fc[F_WORK])
+        py1 = fc[F_PREV_Y + 1]
+        if y[1] >= width > py1 and ctl[I_SORTED] == 0:
+            frac = (width - py1) / (y[1] - py1)
+            fc[F_EXIT_SPEED] = fc[F_PREV_Y + 4] + frac * (vy - fc[F_PREV_Y + 4])
+            ctl[I_SORTED] = 1
+    mask = int(res[R_ACTIVE_MASK])
+    fence_on = (mask & 0xFF) != 0
+    if fence_on and ctl[I_HAD_FENCE] == 0:
+        ctl[I_TOUCHED] = 1
+        w_n = -math.inf
+        for k in range(SLOT_BORDER):
+            if out[k, C_ACTIVE] != 0.0:
+                v = out[k, C_DDOT]
+                if math.isnan(v) or math.isnan(w_n):
+                    w_n = math.nan
+                elif v > w_n:
+                    w_n = v
+        if math.isnan(fc[F_IMPACT_SPEED]):
+            fc[F_IMPACT_SPEED] = w_n
+        peak = n_stiff(mass, w_n, cfg[G_BP], cfg[G_KP])
+        n_imp = ctl[I_N_IMPACTS]
+        IMP[n_imp, 0] = t
+        IMP[n_imp, 1] = w_n
+        IMP[n_imp, 2] = peak
+        ctl[I_N_IMPACTS] = n_imp + 1
+    ctl[I_HAD_FENCE] = 1 if fence_on else 0
+    n = res[R_FENCE_N]
+    if n > fc[F_PEAK_N]:
+        fc[F_PEAK_N] = n
+    n1, n2 = fc[F_LAST_N1], fc[F_LAST_N2]
+    smooth = ctl[I_LAST_MASK0] == ctl[I_LAST_MASK1] and ctl[I_LAST_MASK1] == mask
+    ctl[I_LAST_MASK0] = ctl[I_LAST_MASK1]
+    ctl[I_LAST_MASK1] = mask
+    if smooth and n2 > n1 and n2 >= n and n1 > 0.0:
+        peak = parabola_peak(fc[F_LAST_T1], n1, fc[F_LAST_T2], n2, t, n)
+        if peak > fc[F_PEAK_N]:
+            fc[F_PEAK_N] = peak
+    fc[F_LAST_N1], fc[F_LAST_N2] = n2, n
+    fc[F_LAST_T1], fc[F_LAST_T2] = fc[F_LAST_T2], t
+    tip = abs(res[R_TIP_W])
+    if tip > fc[F_PEAK_TIP]:
+        fc[F_PEAK_TIP] = tip
+    if res[R_MAX_D] > fc[F_MAX_DEPTH]:
+        fc[F_MAX_DEPTH] = res[R_MAX_D]
+    if y[1] > fc[F_Y_MAX]:
+        fc[F_Y_MAX] = y[1]
+    sorted_ = ctl[I_SORTED] != 0
+    if mask != ctl[I_MASK] or (sorted_ and ctl[I_STAGE] != STAGE_CODE_SORTED):
+        ctl[I_MASK] = mask
+        if sorted_:
+            stage = STAGE_CODE_SORTED
+        else:
+            stage = classify_code(out, normals, y[2], ctl[I_TOUCHED] != 0, cfg[G_FLUSH])
+        if stage != ctl[I_STAGE]:
+            ctl[I_STAGE] = stage
+            n_stg = ctl[I_N_STAGES]
+            STG[n_stg, 0] = t
+            STG[n_stg, 1] = stage
+            ctl[I_N_STAGES] = n_stg + 1
+    if cfg[G_RECORD] != 0.0:
+        n_rec = ctl[I_N_REC]
+        REC[REC_T, n_rec] = t
+        REC[REC_T_FENCE, n_rec] = t
+        REC[REC_T_FORCES, n_rec] = t
+        REC[REC_T_STAGE, n_rec] = t
+        for k in range(6):
+            REC[REC_Y + k, n_rec] = y[k]
+        REC[REC_ALPHA, n_rec] = res[R_ALPHA]
+        REC[REC_TIP_W, n_rec] = res[R_TIP_W]
+        REC[REC_FENCE_N, n_rec] = res[R_FENCE_N]
+        REC[REC_MAX_D, n_rec] = res[R_MAX_D]
+        REC[REC_STAGE, n_rec] = ctl[I_STAGE]
+        ctl[I_N_REC] = n_rec + 1
+    fc[F_PREV_T] = t
+    for k in range(6):
+        fc[F_PREV_Y + k] = y[k]
+    fc[F_PREV_POWER] = power
+    return sorted_ and cfg[G_STOP_SORTED] != 0.0, on_belt and not sorted_
+
+
+@njit(cache=True, _nrt=False)
+def diverged(P, cfg, fc, t, y, res):
+    """Divergence checks at an accepted point: a DIAG_* code (non-finite state, deep
+    penetration, runaway speed; time and value left in fc)."""
+    total = 0.0
+    for k in range(y.shape[0]):
+        total += y[k]
+    fc[F_DIAG_T] = t
+    if not math.isfinite(total):
+        return DIAG_NONFINITE
+    if res[R_MAX_D] > cfg[G_DEEP]:
+        fc[F_DIAG_V] = res[R_MAX_D]
+        return DIAG_DEEP
+    speed = math.hypot(y[3], y[4])
+    if speed > cfg[G_SPEED_LIMIT]:
+        fc[F_DIAG_V] = speed
+        return DIAG_SPEED
+    return DIAG_NONE
