@@ -15,6 +15,7 @@ from .layout import (
     C_GAP,
     C_NRAW,
     C_S,
+    C_SLACK,
     N_SLOTS,
     P_BEFF,
     P_KP,
@@ -116,8 +117,8 @@ def tolerance_scale(rtol):
     ~tol^(2/3): from rtol 1e-4 to 1e-7 that is 100x only in the limit, and the peak force of an
     impact, set by the steps near it, gains less. Holding the local error at
     rtol (rtol / 1e-4)^(1/2) makes the global error fall about as rtol while the default is
-    unchanged. On a stiff fence it is left out: it brings a friction chatter (a stick/slip
-    switch of a fence contact inside a step, arbitrary_stiff) from rtol 1e-6 to 1e-5."""
+    unchanged. On a stiff fence it needs the stick/slip switches located (``first_event``'s
+    ``friction``): without, a switch inside a step chatters from rtol 1e-5 (arbitrary_stiff)."""
     if rtol >= RTOL_DEFAULT:
         return 1.0
     return math.sqrt(rtol / RTOL_DEFAULT)
@@ -156,11 +157,14 @@ def milne_error(y0, acc0, y1, prev_v, prev_a, r, h, atol, rtol, v_ref, om_ref):
 EVENT_ONSET = 0  # event function D: a separated candidate starts to push
 EVENT_RELEASE = 1  # the law (16) unclipped: the force falls to zero (or the clip engages)
 EVENT_SLIDE_OFF = 2  # R_z - s: a pushing corner slides past the fence tip
+EVENT_STICK = 4  # mu N - |f_stick|: a pushing corner's fence friction switches stick <-> slip
 
 
 @njit(cache=True, _nrt=False)
 def event_value(P, out, slot, kind):
     """The event function of ``kind`` for ``slot`` at a point (nan where it is not defined)."""
+    if kind == EVENT_STICK:
+        return out[slot, C_SLACK] if out[slot, C_ACTIVE] != 0.0 else math.nan
     if kind == EVENT_SLIDE_OFF:
         s_arc = out[slot, C_S]
         return P[P_LENGTH] - s_arc if s_arc > 0.0 else math.nan
@@ -170,13 +174,15 @@ def event_value(P, out, slot, kind):
 
 
 @njit(cache=True, _nrt=False)
-def first_event(P, out_a, out_b):
+def first_event(P, out_a, out_b, friction):
     """The fence slot whose event function changes sign first between two points, or -1.
 
     A slot without force at a can start one (onset; the function is D), a slot with force can
     lose it (release or the N >= 0 clamp engaging; the function is the law (16) unclipped), and
-    a pushing corner can slide past the fence tip (the function is R_z - s); only functions
-    defined at both points count. The first is estimated by linear interpolation.
+    a pushing corner can slide past the fence tip (the function is R_z - s); with ``friction``
+    a pushing corner's fence friction can switch between slip and stick (the function is
+    mu N - |the implicit stick force|, ``C_SLACK``); only functions defined at both points
+    count. The first is estimated by linear interpolation.
     Returns (slot, kind, g_a, g_b).
     """
     best = -1
@@ -190,6 +196,10 @@ def first_event(P, out_a, out_b):
             kind = EVENT_SLIDE_OFF
         ga = event_value(P, out_a, k, kind)
         gb = event_value(P, out_b, k, kind)
+        if friction and kind == EVENT_RELEASE and not (ga > 0.0) != (gb > 0.0):
+            kind = EVENT_STICK
+            ga = event_value(P, out_a, k, kind)
+            gb = event_value(P, out_b, k, kind)
         if math.isnan(ga) or math.isnan(gb) or (ga > 0.0) == (gb > 0.0):
             continue
         fr = ga / (ga - gb)

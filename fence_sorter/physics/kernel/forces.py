@@ -20,6 +20,7 @@ from .layout import (
     C_PX,
     C_PY,
     C_S,
+    C_SLACK,
     C_VSX,
     C_VSY,
     P_ALPHA_K,
@@ -373,10 +374,12 @@ def _add(
         slip_free = slide - w_eff * f_prev
         limit = mu2 * n
         ft = -slip_free / w_eff
+        slack = limit - abs(ft)
         if abs(ft) > limit:
             ft = -math.copysign(limit, slip_free)
     else:
         ft = _fence_friction(n, slide, lam_x * tx + lam_y * ty, mu2, P[P_VMIN])
+        slack = math.nan
     fx = n * nx + ft * tx
     fy = n * ny + ft * ty
     res[R_FX] += fx
@@ -399,6 +402,7 @@ def _add(
     row[C_N] = n
     row[C_NRAW] = n_raw
     row[C_FT] = ft
+    row[C_SLACK] = slack
     row[C_PX] = px
     row[C_PY] = py
     row[C_NX] = nx

@@ -11,6 +11,7 @@ from numba import njit
 from .control import (
     EVENT_ONSET,
     EVENT_SLIDE_OFF,
+    EVENT_STICK,
     event_value,
     first_event,
     flexible_contact_step,
@@ -22,6 +23,8 @@ from .control import (
 )
 from .forces import evaluate, karnopp_belt, stick_wrench
 from .layout import (
+    C_FT,
+    C_SLACK,
     DIAG_MIN_DT,
     DIAG_NONE,
     F_DIAG_T,
@@ -79,7 +82,13 @@ from .layout import (
     S_PREV,
 )
 from .observer import diverged, observe
-from .steps import STEP_FORCED, STEP_REJECTED, generalized_alpha_step, trapezoidal_step
+from .steps import (
+    STEP_FORCED,
+    STEP_REJECTED,
+    generalized_alpha_step,
+    shift_friction,
+    trapezoidal_step,
+)
 
 # -- the solve loop -------------------------------------------------------------------------------
 # One compiled loop over flat arrays; ``stepper.Stepper`` builds the arrays, calls :func:`solve`
@@ -208,6 +217,36 @@ def _accelerations(P, rigid_modal, omega, zeta, Y, LAM, RES, MODAL, ACC, i, jump
         )
 
 
+STICK_PROBE = 1e-3  # the probe step of a located stick start, relative to the step that met it
+
+
+@njit(cache=True, _nrt=False)
+def _consistent_stick(
+    P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT, RES, MODAL, ACC,
+    w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h, b, slot, on_belt,
+):  # fmt: skip
+    """Replace the friction of ``slot`` at a located stick start (row b) by the stick force.
+
+    The trapezoidal rule's stick force is a constraint force it rings on (F1 = 2 F_mean - F0):
+    a step that starts at the slip limit mu N ends at 2 F_stick - mu N, the next from there at
+    mu N again, and a located slip -> stick switch would alternate with stick -> slip at every
+    step. The stick force at b is the mean force of a short probe step from b that sticks
+    (its F_mean -> F_stick as the probe shrinks), so the step after the switch starts from a
+    force consistent with sticking and the error history restarts there."""
+    st = _trap(
+        P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT, RES, MODAL,
+        ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, STICK_PROBE * h, 0.0, b, S_LOC,
+        _jump_at(P, T[b]), on_belt, False,
+    )  # fmt: skip
+    if st == STEP_REJECTED or not OUT[S_LOC, slot, C_SLACK] > 0.0:
+        return
+    d = 0.5 * (OUT[S_LOC, slot, C_FT] - OUT[b, slot, C_FT])
+    shift_friction(P, phi, OUT[b], RES[b], MODAL[b], Y[b, 0], Y[b, 1], slot, d)
+    ACC[b, 0] = (RES[b, 0] + LAM[b, 0]) / P[P_MASS]
+    ACC[b, 1] = (RES[b, 1] + LAM[b, 1]) / P[P_MASS]
+    ACC[b, 2] = (RES[b, 2] + LAM[b, 2]) / P[P_INERTIA]
+
+
 @njit(cache=True, _nrt=False)
 def _locate(
     P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT, RES, MODAL, ACC,
@@ -316,9 +355,11 @@ def solve(model, state, max_attempts, t_target):
     min_dt = cfg[G_MIN_DT]
     width = cfg[G_WIDTH]
     m = omega.shape[0]
-    # tolerance proportionality, the flexible contact's step and the event restart: the
-    # modes' error, which Milne's estimate on the load does not see (a stiff fence: 1)
-    tol_scale = tolerance_scale(cfg[G_RTOL]) if m > 0 else 1.0
+    # tolerance proportionality (and on a flexible fence the contact's step and the event
+    # restart: the modes' error, which Milne's estimate on the load does not see); below the
+    # default rtol a stiff fence's stick/slip switches are located (control.first_event)
+    tol_scale = tolerance_scale(cfg[G_RTOL])
+    friction_events = adaptive and m == 0 and tol_scale < 1.0
     if ctl[I_STARTED] == 0:
         # forces at t = 0, belt wrench by Karnopp, consistent accelerations
         ctl[I_STARTED] = 1
@@ -419,7 +460,7 @@ def solve(model, state, max_attempts, t_target):
         if status == STEP_FORCED:
             ctl[I_FORCED] += 1
         h_taken = h_try
-        slot, kind, g0, g1 = first_event(P, OUT[a], OUT[b])
+        slot, kind, g0, g1 = first_event(P, OUT[a], OUT[b], friction_events)
         if slot < 0 and on_belt and Y[a, 1] < width <= Y[b, 1]:
             slot, kind, g0, g1 = -1, EVENT_SORT, width - Y[a, 1], width - Y[b, 1]
         located = False
@@ -468,6 +509,12 @@ def solve(model, state, max_attempts, t_target):
                 fc[F_H] = _snap(h_nom, h_try * tol_scale)
         else:
             fc[F_H] = min(h_nom, 2.0 * h_try)
+        if located and kind == EVENT_STICK and OUT[b, slot, C_SLACK] > 0.0:
+            _consistent_stick(
+                P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT,
+                RES, MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h_taken, b, slot,
+                on_belt,
+            )  # fmt: skip
         # accept
         for k in range(3):
             fc[F_PREV_V + k] = Y[a, 3 + k]

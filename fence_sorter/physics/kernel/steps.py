@@ -495,17 +495,22 @@ def _unring_stick(P, phi, out0, out, res, modal, x, y):
             continue
         if abs(ft0) >= mu2 * out0[k, C_N] * (1.0 - 1e-9):
             continue
-        d = 0.5 * (ft0 + ft1) - ft1
-        tx, ty = out[k, C_NY], -out[k, C_NX]  # n = (-t_y, t_x)
-        dfx, dfy = d * tx, d * ty
-        res[R_FX] += dfx
-        res[R_FY] += dfy
-        res[R_MZ] += (out[k, C_PX] - x) * dfy - (out[k, C_PY] - y) * dfx
-        if k < SLOT_BORDER:
-            res[R_POWER_FENCE] += dfx * out[k, C_VSX] + dfy * out[k, C_VSY]
-            if P[P_FLEX] != 0.0:
-                _modal_share(P, phi, out[k, C_S], res[R_ALPHA], -dfx, -dfy, modal)
-        out[k, C_FT] += d
+        shift_friction(P, phi, out, res, modal, x, y, k, 0.5 * (ft0 + ft1) - ft1)
+
+
+@njit(cache=True, _nrt=False)
+def shift_friction(P, phi, out, res, modal, x, y, k, d):
+    """Add d to slot k's friction force and to the resultants it enters."""
+    tx, ty = out[k, C_NY], -out[k, C_NX]  # n = (-t_y, t_x)
+    dfx, dfy = d * tx, d * ty
+    res[R_FX] += dfx
+    res[R_FY] += dfy
+    res[R_MZ] += (out[k, C_PX] - x) * dfy - (out[k, C_PY] - y) * dfx
+    if k < SLOT_BORDER:
+        res[R_POWER_FENCE] += dfx * out[k, C_VSX] + dfy * out[k, C_VSY]
+        if P[P_FLEX] != 0.0:
+            _modal_share(P, phi, out[k, C_S], res[R_ALPHA], -dfx, -dfy, modal)
+    out[k, C_FT] += d
 
 
 @njit(cache=True, _nrt=True)
