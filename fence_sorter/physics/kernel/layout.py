@@ -113,16 +113,17 @@ def pack(
 
 
 # -- the solve loop's arrays ---------------------------------------------------------------
-# states: rows of T, Y, LAM, OUT, RES, MODAL, ACC; cur and trial swap, loc and before are fixed;
-# the generalized-alpha step's state at its alpha point goes in Y[S_ALPHA] (scratch);
-# MODAL[S_PREV]: the modal force at the accepted point before cur (the modes' quadratic force)
+# state rows of times, states, belt_wrench, contacts, resultants, modal_forces, accelerations;
+# cur and trial swap, loc and before are fixed; the generalized-alpha step's state at its
+# alpha point goes in states[S_ALPHA] (scratch); modal_forces[S_PREV]: the modal force at
+# the accepted point before cur (the modes' quadratic force)
 S_LOC = 2
 S_BEFORE = 3
 S_ALPHA = 4
 S_PREV = 5
 N_STATES = 6
 
-# configuration ``cfg``
+# the solver settings ``settings``
 G_H_NOM = 0  # dt_max (adaptive) or dt (fixed step) [s]
 G_T_END = 1
 G_DT = 2  # first adaptive step [s]
@@ -153,7 +154,7 @@ G_BETA = 26
 G_GAMMA = 27
 N_CFG = 28
 
-# integer control ``ctl``
+# the integer state of the loop ``counters``
 I_CUR = 0
 I_TRIAL = 1
 I_STARTED = 2
@@ -181,7 +182,7 @@ I_N_REC = 23
 I_N_PROPS = 24  # entries of the propagator cache in use
 N_CTL = 25
 
-# float control ``fc``
+# the float state of the loop ``figures``
 F_H = 0
 F_H_CAP = 1
 F_H_PREV = 2
@@ -232,7 +233,7 @@ REC_FENCE_N = 9
 REC_MAX_D = 10
 REC_STAGE = 11
 # the time again, once per series group that has its own time array (fence, forces, stages), so
-# each recorded array is a row of REC of its own
+# each recorded array is a row of ``record`` of its own
 REC_T_FENCE = 12
 REC_T_FORCES = 13
 REC_T_STAGE = 14
@@ -247,25 +248,25 @@ LoopModel = namedtuple(
         "params",  # packed parameters P_* (layout.pack)
         "corners",  # the load's corners relative to C_s [m]
         "normals",  # the load's face normals
-        "phi",  # modal shapes at the fence nodes (flexible; else empty)
+        "mode_shapes",  # modal shapes at the fence nodes (flexible; else empty)
         "rigid_modal",  # modal load of a unit drive acceleration
         "omega",  # modal angular frequencies [rad/s]
         "zeta",  # modal damping ratios
         "settings",  # solver settings G_*
-        "breaks",  # drive breakpoints and the end time [s]
+        "breakpoints",  # drive breakpoints and the end time [s]
     ],
 )
 LoopState = namedtuple(
     "LoopState",
     [
         "counters",  # integer state of the loop I_* (rows in use, steps, events, diagnosis)
-        "scalars",  # float state of the loop F_* (step sizes, history, peaks, energy audit)
+        "figures",  # float state of the loop F_* (step sizes, history, peaks, energy audit)
         "times",  # t of the state rows S_* [s]
         "states",  # state vectors of the rows
         "belt_wrench",  # belt friction (F_x, F_y, M_z) of the rows
         "contacts",  # contact slots C_* of the rows
         "resultants",  # resultants R_* of the rows
-        "modal_force",  # modal force of the rows
+        "modal_forces",  # modal force of the rows
         "accelerations",  # accelerations of the rows
         "deflection",  # nodal deflection and slope of the fence (scratch)
         "deflection_rate",

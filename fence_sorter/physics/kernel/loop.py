@@ -107,46 +107,50 @@ SOLVE_REACHED = 3  # the accepted time reached t_target
 
 
 @njit(cache=True, _nrt=False)
-def _copy_row(A, dst, src):
-    for k in range(A.shape[1]):
-        A[dst, k] = A[src, k]
+def _copy_row(rows, dst, src):
+    for k in range(rows.shape[1]):
+        rows[dst, k] = rows[src, k]
 
 
 @njit(cache=True, _nrt=False)
-def _copy_state(T, Y, LAM, OUT, RES, MODAL, ACC, dst, src):
-    T[dst] = T[src]
-    _copy_row(Y, dst, src)
-    _copy_row(LAM, dst, src)
+def _copy_state(
+    times, states, belt_wrench, contacts, resultants, modal_forces, accelerations, dst, src
+):
+    times[dst] = times[src]
+    _copy_row(states, dst, src)
+    _copy_row(belt_wrench, dst, src)
     for r in range(N_SLOTS):
         for c in range(N_COLS):
-            OUT[dst, r, c] = OUT[src, r, c]
-    _copy_row(RES, dst, src)
-    _copy_row(MODAL, dst, src)
-    _copy_row(ACC, dst, src)
+            contacts[dst, r, c] = contacts[src, r, c]
+    _copy_row(resultants, dst, src)
+    _copy_row(modal_forces, dst, src)
+    _copy_row(accelerations, dst, src)
 
 
 @njit(cache=True, _nrt=False)
-def _propagator_slot(omega, zeta, h, ctl, PK, PA, PG0, PG1):
+def _propagator_slot(
+    omega, zeta, h, counters, propagator_keys, propagators, propagator_g0, propagator_g1
+):
     """Row of the exact modal maps for step h in the cache (computed on a miss; the cache is
     emptied when full)."""
     if omega.shape[0] == 0:
         return 0
-    n = ctl[I_N_PROPS]
+    n = counters[I_N_PROPS]
     for i in range(n):
-        if PK[i] == h:
+        if propagator_keys[i] == h:
             return i
-    if n >= PK.shape[0]:
+    if n >= propagator_keys.shape[0]:
         n = 0
-    modal_propagators(omega, zeta, h, PA[n], PG0[n], PG1[n])
-    PK[n] = h
-    ctl[I_N_PROPS] = n + 1
+    modal_propagators(omega, zeta, h, propagators[n], propagator_g0[n], propagator_g1[n])
+    propagator_keys[n] = h
+    counters[I_N_PROPS] = n + 1
     return n
 
 
 @njit(cache=True, _nrt=False)
-def _jump_at(P, t):
-    if abs(t - 2.0 * P[P_T1]) <= 1e-12:
-        return -0.5 * P[P_ALPHA_K] * (math.pi / P[P_T1]) ** 2
+def _jump_at(params, t):
+    if abs(t - 2.0 * params[P_T1]) <= 1e-12:
+        return -0.5 * params[P_ALPHA_K] * (math.pi / params[P_T1]) ** 2
     return 0.0
 
 
@@ -162,55 +166,67 @@ def _snap(h_nom, h):
 
 @njit(cache=True, _nrt=False)
 def _trap(
-    P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT, RES, MODAL, ACC,
-    w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h, h_prev, a, b, jump, on_belt, force,
+    params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings, counters, times,
+    states, belt_wrench, contacts, resultants, modal_forces, accelerations, deflection,
+    deflection_rate, nodes, friction_prev, work, propagator_keys, propagators, propagator_g0,
+    propagator_g1, h, h_prev, a, b, jump, on_belt, force,
 ):  # fmt: skip
     """One trapezoidal step from state row a into row b (exact modal maps for step h;
     ``h_prev``: the step before a, 0 without history)."""
-    k = _propagator_slot(omega, zeta, h, ctl, PK, PA, PG0, PG1)
+    k = _propagator_slot(
+        omega, zeta, h, counters, propagator_keys, propagators, propagator_g0, propagator_g1
+    )
     status = trapezoidal_step(
-        P, corners, normals, phi, rigid_modal, (PA[k], PG0[k], PG1[k]), h, T[a], Y[a], RES[a],
-        LAM[a], MODAL[a], OUT[a], MODAL[S_PREV], h_prev, jump, on_belt, cfg[G_TOL],
-        int(cfg[G_MAX_ITER]), force, Y[b], LAM[b], OUT[b], RES[b], MODAL[b], w, wdot, nodes, prev,
-        work,
+        params, corners, normals, mode_shapes, rigid_modal,
+        (propagators[k], propagator_g0[k], propagator_g1[k]), h, times[a], states[a],
+        resultants[a], belt_wrench[a], modal_forces[a], contacts[a], modal_forces[S_PREV], h_prev,
+        jump, on_belt, settings[G_TOL], int(settings[G_MAX_ITER]), force, states[b],
+        belt_wrench[b], contacts[b], resultants[b], modal_forces[b], deflection, deflection_rate,
+        nodes, friction_prev, work,
     )  # fmt: skip
     if status != STEP_REJECTED:
-        ACC[b, 0] = (RES[b, 0] + LAM[b, 0]) / P[P_MASS]
-        ACC[b, 1] = (RES[b, 1] + LAM[b, 1]) / P[P_MASS]
-        ACC[b, 2] = (RES[b, 2] + LAM[b, 2]) / P[P_INERTIA]
-    T[b] = T[a] + h
+        accelerations[b, 0] = (resultants[b, 0] + belt_wrench[b, 0]) / params[P_MASS]
+        accelerations[b, 1] = (resultants[b, 1] + belt_wrench[b, 1]) / params[P_MASS]
+        accelerations[b, 2] = (resultants[b, 2] + belt_wrench[b, 2]) / params[P_INERTIA]
+    times[b] = times[a] + h
     return status
 
 
 @njit(cache=True, _nrt=False)
 def _alpha(
-    P, corners, normals, phi, rigid_modal, omega, zeta, cfg, T, Y, LAM, OUT, RES, MODAL, ACC, w,
-    wdot, nodes, prev, h, a, b, on_belt, force,
+    params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings, times, states,
+    belt_wrench, contacts, resultants, modal_forces, accelerations, deflection, deflection_rate,
+    nodes, friction_prev, h, a, b, on_belt, force,
 ):  # fmt: skip
-    """One generalized-alpha step from state row a into row b (``cfg[G_GEN_ALPHA]``; the
+    """One generalized-alpha step from state row a into row b (``settings[G_GEN_ALPHA]``; the
     loop calls it where the other schemes call :func:`_trap`)."""
     status = generalized_alpha_step(
-        P, corners, normals, phi, rigid_modal, omega, zeta, cfg[G_ALPHA_M : G_GAMMA + 1], h, T[a],
-        Y[a], ACC[a], LAM[a], on_belt, cfg[G_TOL], int(cfg[G_MAX_ITER]), force, Y[b], ACC[b],
-        LAM[b], OUT[b], RES[b], MODAL[b], w, wdot, nodes, prev, Y[S_ALPHA],
+        params, corners, normals, mode_shapes, rigid_modal, omega, zeta,
+        settings[G_ALPHA_M : G_GAMMA + 1], h, times[a], states[a], accelerations[a],
+        belt_wrench[a], on_belt, settings[G_TOL], int(settings[G_MAX_ITER]), force, states[b],
+        accelerations[b], belt_wrench[b], contacts[b], resultants[b], modal_forces[b], deflection,
+        deflection_rate, nodes, friction_prev, states[S_ALPHA],
     )  # fmt: skip
-    T[b] = T[a] + h
+    times[b] = times[a] + h
     return status
 
 
 @njit(cache=True, _nrt=False)
-def _accelerations(P, rigid_modal, omega, zeta, Y, LAM, RES, MODAL, ACC, i, jump):
+def _accelerations(
+    params, rigid_modal, omega, zeta, states, belt_wrench, resultants, modal_forces, accelerations,
+    i, jump,
+):  # fmt: skip
     """Accelerations of state row i consistent with its forces (the start, and
     generalized-alpha's restart after an event or a drive breakpoint; ``jump``: the drive's
     acceleration jump at 2 t1, which the forces at the breakpoint do not contain yet)."""
     m = omega.shape[0]
-    y = Y[i]
-    ACC[i, 0] = (RES[i, 0] + LAM[i, 0]) / P[P_MASS]
-    ACC[i, 1] = (RES[i, 1] + LAM[i, 1]) / P[P_MASS]
-    ACC[i, 2] = (RES[i, 2] + LAM[i, 2]) / P[P_INERTIA]
+    y = states[i]
+    accelerations[i, 0] = (resultants[i, 0] + belt_wrench[i, 0]) / params[P_MASS]
+    accelerations[i, 1] = (resultants[i, 1] + belt_wrench[i, 1]) / params[P_MASS]
+    accelerations[i, 2] = (resultants[i, 2] + belt_wrench[i, 2]) / params[P_INERTIA]
     for j in range(m):
-        ACC[i, 3 + j] = (
-            MODAL[i, j]
+        accelerations[i, 3 + j] = (
+            modal_forces[i, j]
             - rigid_modal[j] * jump
             - omega[j] ** 2 * y[6 + j]
             - 2.0 * zeta[j] * omega[j] * y[6 + m + j]
@@ -222,8 +238,10 @@ STICK_PROBE = 1e-3  # the probe step of a located stick start, relative to the s
 
 @njit(cache=True, _nrt=False)
 def _consistent_stick(
-    P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT, RES, MODAL, ACC,
-    w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h, b, slot, on_belt,
+    params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings, counters, times,
+    states, belt_wrench, contacts, resultants, modal_forces, accelerations, deflection,
+    deflection_rate, nodes, friction_prev, work, propagator_keys, propagators, propagator_g0,
+    propagator_g1, h, b, slot, on_belt,
 ):  # fmt: skip
     """Replace the friction of ``slot`` at a located stick start (row b) by the stick force.
 
@@ -234,23 +252,36 @@ def _consistent_stick(
     (its F_mean -> F_stick as the probe shrinks), so the step after the switch starts from a
     force consistent with sticking and the error history restarts there."""
     st = _trap(
-        P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT, RES, MODAL,
-        ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, STICK_PROBE * h, 0.0, b, S_LOC,
-        _jump_at(P, T[b]), on_belt, False,
+        params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings, counters, times,
+        states, belt_wrench, contacts, resultants, modal_forces, accelerations, deflection,
+        deflection_rate, nodes, friction_prev, work, propagator_keys, propagators, propagator_g0,
+        propagator_g1, STICK_PROBE * h, 0.0, b, S_LOC, _jump_at(params, times[b]), on_belt, False,
     )  # fmt: skip
-    if st == STEP_REJECTED or not OUT[S_LOC, slot, C_SLACK] > 0.0:
+    if st == STEP_REJECTED or not contacts[S_LOC, slot, C_SLACK] > 0.0:
         return
-    d = 0.5 * (OUT[S_LOC, slot, C_FT] - OUT[b, slot, C_FT])
-    shift_friction(P, phi, OUT[b], RES[b], MODAL[b], Y[b, 0], Y[b, 1], slot, d)
-    ACC[b, 0] = (RES[b, 0] + LAM[b, 0]) / P[P_MASS]
-    ACC[b, 1] = (RES[b, 1] + LAM[b, 1]) / P[P_MASS]
-    ACC[b, 2] = (RES[b, 2] + LAM[b, 2]) / P[P_INERTIA]
+    d = 0.5 * (contacts[S_LOC, slot, C_FT] - contacts[b, slot, C_FT])
+    shift_friction(
+        params,
+        mode_shapes,
+        contacts[b],
+        resultants[b],
+        modal_forces[b],
+        states[b, 0],
+        states[b, 1],
+        slot,
+        d,
+    )
+    accelerations[b, 0] = (resultants[b, 0] + belt_wrench[b, 0]) / params[P_MASS]
+    accelerations[b, 1] = (resultants[b, 1] + belt_wrench[b, 1]) / params[P_MASS]
+    accelerations[b, 2] = (resultants[b, 2] + belt_wrench[b, 2]) / params[P_INERTIA]
 
 
 @njit(cache=True, _nrt=False)
 def _locate(
-    P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT, RES, MODAL, ACC,
-    w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h, h_prev, on_belt, slot, kind, g0, g1,
+    params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings, counters, times,
+    states, belt_wrench, contacts, resultants, modal_forces, accelerations, deflection,
+    deflection_rate, nodes, friction_prev, work, propagator_keys, propagators, propagator_g0,
+    propagator_g1, h, h_prev, on_belt, slot, kind, g0, g1,
 ):  # fmt: skip
     """Shorten the step to end just past the sign change of ``slot``'s event function (or the
     sort crossing): Illinois regula falsi until an onset step ends within EVENT_TOL of D = 0
@@ -259,16 +290,16 @@ def _locate(
     tip ends one step just before the slide-off (the force there is the peak the step would
     otherwise skip) and the next just past it. The located trial is left in the trial row;
     returns the step taken."""
-    a = ctl[I_CUR]
-    trial = ctl[I_TRIAL]
+    a = counters[I_CUR]
+    trial = counters[I_TRIAL]
     onset = kind == EVENT_ONSET
     sign0 = g0 > 0.0
     lo = 0.0
     hi, g_hi = h, g1
-    jump = _jump_at(P, T[a])
+    jump = _jump_at(params, times[a])
     best = 0.0
     have_best = False
-    tol = cfg[G_TOL]
+    tol = settings[G_TOL]
     keep_before = kind == EVENT_SLIDE_OFF and g0 > tol
     cross = kind == EVENT_SLIDE_OFF and not keep_before
     sort = kind == EVENT_SORT
@@ -291,23 +322,26 @@ def _locate(
             h_sec = lo + (g_lo - 0.5 * tol) * (lo - lo_prev) / (g_lo_prev - g_lo)
             if lo < h_sec < hi:
                 h_loc = h_sec
-        if cfg[G_GEN_ALPHA] != 0.0:
+        if settings[G_GEN_ALPHA] != 0.0:
             st = _alpha(
-                P, corners, normals, phi, rigid_modal, omega, zeta, cfg, T, Y, LAM, OUT, RES,
-                MODAL, ACC, w, wdot, nodes, prev, h_loc, a, S_LOC, on_belt, False,
+                params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings, times,
+                states, belt_wrench, contacts, resultants, modal_forces, accelerations, deflection,
+                deflection_rate, nodes, friction_prev, h_loc, a, S_LOC, on_belt, False,
             )  # fmt: skip
         else:
             st = _trap(
-                P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT,
-                RES, MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h_loc, h_prev, a,
+                params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings,
+                counters, times, states, belt_wrench, contacts, resultants, modal_forces,
+                accelerations, deflection, deflection_rate, nodes, friction_prev, work,
+                propagator_keys, propagators, propagator_g0, propagator_g1, h_loc, h_prev, a,
                 S_LOC, jump, on_belt, False,
             )  # fmt: skip
         if st == STEP_REJECTED:
             break
         if kind == EVENT_SORT:
-            g = cfg[G_WIDTH] - Y[S_LOC, 1]
+            g = settings[G_WIDTH] - states[S_LOC, 1]
         else:
-            g = event_value(P, OUT[S_LOC], slot, kind)
+            g = event_value(params, contacts[S_LOC], slot, kind)
         if math.isnan(g):
             break
         if (g > 0.0) != sign0:
@@ -317,7 +351,10 @@ def _locate(
             last = 1
             best = h_loc
             have_best = True
-            _copy_state(T, Y, LAM, OUT, RES, MODAL, ACC, trial, S_LOC)
+            _copy_state(
+                times, states, belt_wrench, contacts, resultants, modal_forces, accelerations,
+                trial, S_LOC,
+            )  # fmt: skip
         else:
             lo_prev, g_lo_prev = lo, g_lo
             lo, g_lo, f_lo = h_loc, g, g
@@ -327,10 +364,16 @@ def _locate(
             if keep_before:
                 before = h_loc
                 have_before = True
-                _copy_state(T, Y, LAM, OUT, RES, MODAL, ACC, S_BEFORE, S_LOC)
-    ctl[I_EVENTS] += 1
+                _copy_state(
+                    times, states, belt_wrench, contacts, resultants, modal_forces, accelerations,
+                    S_BEFORE, S_LOC,
+                )  # fmt: skip
+    counters[I_EVENTS] += 1
     if have_before:
-        _copy_state(T, Y, LAM, OUT, RES, MODAL, ACC, trial, S_BEFORE)
+        _copy_state(
+            times, states, belt_wrench, contacts, resultants, modal_forces, accelerations, trial,
+            S_BEFORE,
+        )  # fmt: skip
         return before
     return best if have_best else h
 
@@ -345,151 +388,170 @@ def solve(model, state, max_attempts, t_target):
     the states holds the initial state on the first call, which zeroes the other state rows and
     the scratch arrays, evaluates the forces there and observes it (``max_attempts`` 0: only
     that)."""
-    P, corners, normals, phi, rigid_modal, omega, zeta, cfg, breaks = model
     (
-        ctl, fc, T, Y, LAM, OUT, RES, MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1,
-        IMP, STG, REC,
+        params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings, breakpoints,
+    ) = model  # fmt: skip
+    (
+        counters, figures, times, states, belt_wrench, contacts, resultants, modal_forces,
+        accelerations, deflection, deflection_rate, nodes, friction_prev, work, propagator_keys,
+        propagators, propagator_g0, propagator_g1, impacts, stages, record,
     ) = state  # fmt: skip
-    adaptive = cfg[G_ADAPTIVE] != 0.0
-    h_nom = cfg[G_H_NOM]
-    min_dt = cfg[G_MIN_DT]
-    width = cfg[G_WIDTH]
+    adaptive = settings[G_ADAPTIVE] != 0.0
+    h_nom = settings[G_H_NOM]
+    min_dt = settings[G_MIN_DT]
+    width = settings[G_WIDTH]
     m = omega.shape[0]
     # tolerance proportionality (and on a flexible fence the contact's step and the event
     # restart: the modes' error, which Milne's estimate on the load does not see); below the
     # default rtol a stiff fence's stick/slip switches are located (control.first_event)
-    tol_scale = tolerance_scale(cfg[G_RTOL])
+    tol_scale = tolerance_scale(settings[G_RTOL])
     friction_events = adaptive and m == 0 and tol_scale < 1.0
-    if ctl[I_STARTED] == 0:
+    if counters[I_STARTED] == 0:
         # forces at t = 0, belt wrench by Karnopp, consistent accelerations
-        ctl[I_STARTED] = 1
-        a = ctl[I_CUR]
+        counters[I_STARTED] = 1
+        a = counters[I_CUR]
         # the state rows other than the initial state, and the scratch arrays, start at zero
         # (the caller may pass arrays of an earlier solve: the stepper reuses them)
-        T[:] = 0.0
-        for i in range(Y.shape[0]):
+        times[:] = 0.0
+        for i in range(states.shape[0]):
             if i != a:
-                Y[i, :] = 0.0
-        LAM[:, :] = 0.0
-        OUT[:, :, :] = 0.0
-        RES[:, :] = 0.0
-        MODAL[:, :] = 0.0
-        ACC[:, :] = 0.0
-        w[:] = 0.0
-        wdot[:] = 0.0
+                states[i, :] = 0.0
+        belt_wrench[:, :] = 0.0
+        contacts[:, :, :] = 0.0
+        resultants[:, :] = 0.0
+        modal_forces[:, :] = 0.0
+        accelerations[:, :] = 0.0
+        deflection[:] = 0.0
+        deflection_rate[:] = 0.0
         nodes[:, :] = 0.0
         work[:, :] = 0.0
         for k in range(N_SLOTS):
-            prev[k] = math.nan
+            friction_prev[k] = math.nan
         evaluate(
-            P, corners, normals, phi, rigid_modal, T[a], 0.0, Y[a], LAM[a], 0.0, prev, OUT[a],
-            RES[a], MODAL[a], w, wdot, nodes,
+            params, corners, normals, mode_shapes, rigid_modal, times[a], 0.0, states[a],
+            belt_wrench[a], 0.0, friction_prev, contacts[a], resultants[a], modal_forces[a],
+            deflection, deflection_rate, nodes,
         )  # fmt: skip
-        y, r = Y[a], RES[a]
-        bx, by, bz = karnopp_belt(P, y[3] - P[P_BELT], y[4], y[5], r[0], r[1], r[2])
-        LAM[a, 0], LAM[a, 1], LAM[a, 2] = bx, by, bz
-        if math.hypot(y[3] - P[P_BELT], y[4]) <= cfg[G_VMIN] and abs(y[5]) <= cfg[G_PHIDOT_MIN]:
-            bx, by, bz = stick_wrench(P, r[0], r[1], r[2])
-            LAM[a, 0], LAM[a, 1], LAM[a, 2] = bx, by, bz
-        _accelerations(P, rigid_modal, omega, zeta, Y, LAM, RES, MODAL, ACC, a, 0.0)
+        y, r = states[a], resultants[a]
+        bx, by, bz = karnopp_belt(params, y[3] - params[P_BELT], y[4], y[5], r[0], r[1], r[2])
+        belt_wrench[a, 0], belt_wrench[a, 1], belt_wrench[a, 2] = bx, by, bz
+        if (
+            math.hypot(y[3] - params[P_BELT], y[4]) <= settings[G_VMIN]
+            and abs(y[5]) <= settings[G_PHIDOT_MIN]
+        ):
+            bx, by, bz = stick_wrench(params, r[0], r[1], r[2])
+            belt_wrench[a, 0], belt_wrench[a, 1], belt_wrench[a, 2] = bx, by, bz
+        _accelerations(
+            params, rigid_modal, omega, zeta, states, belt_wrench, resultants, modal_forces,
+            accelerations, a, 0.0,
+        )  # fmt: skip
         stop, on_belt = observe(
-            P, normals, cfg, ctl, fc, T, Y, LAM, OUT, RES, IMP, STG, REC, a, True
-        )
-        ctl[I_STOP] = 1 if stop else 0
-        ctl[I_ON_BELT] = 1 if on_belt else 0
-        fc[F_H] = h_nom if not adaptive else min(h_nom, cfg[G_DT])
-        fc[F_H_CAP] = h_nom
-        fc[F_H_PREV] = 0.0
+            params, normals, settings, counters, figures, times, states, belt_wrench, contacts,
+            resultants, impacts, stages, record, a, True,
+        )  # fmt: skip
+        counters[I_STOP] = 1 if stop else 0
+        counters[I_ON_BELT] = 1 if on_belt else 0
+        figures[F_H] = h_nom if not adaptive else min(h_nom, settings[G_DT])
+        figures[F_H_CAP] = h_nom
+        figures[F_H_PREV] = 0.0
     attempts = 0
     while True:
-        a = ctl[I_CUR]
-        b = ctl[I_TRIAL]
-        if ctl[I_STOP] != 0 or not T[a] < cfg[G_T_END] - 1e-12:
-            ctl[I_DONE] = 1
+        a = counters[I_CUR]
+        b = counters[I_TRIAL]
+        if counters[I_STOP] != 0 or not times[a] < settings[G_T_END] - 1e-12:
+            counters[I_DONE] = 1
             return SOLVE_DONE
-        if T[a] >= t_target - 1e-12:
+        if times[a] >= t_target - 1e-12:
             return SOLVE_REACHED
         if attempts >= max_attempts:
             return SOLVE_PAUSED
         if (
-            ctl[I_N_IMPACTS] >= IMP.shape[0]
-            or ctl[I_N_STAGES] >= STG.shape[0]
-            or ctl[I_N_REC] >= REC.shape[1]
+            counters[I_N_IMPACTS] >= impacts.shape[0]
+            or counters[I_N_STAGES] >= stages.shape[0]
+            or counters[I_N_REC] >= record.shape[1]
         ):
             return SOLVE_GROW
         attempts += 1
-        on_belt = ctl[I_ON_BELT] != 0
-        nb = ctl[I_NEXT_BREAK]
-        while breaks[nb] <= T[a] + 1e-12:
+        on_belt = counters[I_ON_BELT] != 0
+        nb = counters[I_NEXT_BREAK]
+        while breakpoints[nb] <= times[a] + 1e-12:
             nb += 1
-        ctl[I_NEXT_BREAK] = nb
-        to_break = breaks[nb] - T[a]
-        h_try = min(fc[F_H], to_break)
+        counters[I_NEXT_BREAK] = nb
+        to_break = breakpoints[nb] - times[a]
+        h_try = min(figures[F_H], to_break)
         if adaptive:
-            cap = min(time_to_contact(OUT[a]), oscillation_step(P, OUT[a], cfg[G_RTOL]))
+            cap = min(
+                time_to_contact(contacts[a]),
+                oscillation_step(params, contacts[a], settings[G_RTOL]),
+            )
             if m > 0:
-                cap = min(cap, flexible_contact_step(OUT[a], h_nom, tol_scale))
+                cap = min(cap, flexible_contact_step(contacts[a], h_nom, tol_scale))
             h_try = min(h_try, max(cap, 10.0 * min_dt))
             tiny = h_try <= 4.0 * min_dt
         else:
             tiny = h_try <= 1e-3 * h_nom
         # the modes' force is quadratic through the previous point (adaptive)
-        h_hist = fc[F_H_PREV] if adaptive else 0.0
-        if cfg[G_GEN_ALPHA] != 0.0:
+        h_hist = figures[F_H_PREV] if adaptive else 0.0
+        if settings[G_GEN_ALPHA] != 0.0:
             status = _alpha(
-                P, corners, normals, phi, rigid_modal, omega, zeta, cfg, T, Y, LAM, OUT, RES,
-                MODAL, ACC, w, wdot, nodes, prev, h_try, a, b, on_belt, tiny,
+                params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings, times,
+                states, belt_wrench, contacts, resultants, modal_forces, accelerations, deflection,
+                deflection_rate, nodes, friction_prev, h_try, a, b, on_belt, tiny,
             )  # fmt: skip
         else:
             status = _trap(
-                P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT,
-                RES, MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h_try, h_hist, a,
-                b, _jump_at(P, T[a]), on_belt, tiny,
+                params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings,
+                counters, times, states, belt_wrench, contacts, resultants, modal_forces,
+                accelerations, deflection, deflection_rate, nodes, friction_prev, work,
+                propagator_keys, propagators, propagator_g0, propagator_g1, h_try, h_hist, a, b,
+                _jump_at(params, times[a]), on_belt, tiny,
             )  # fmt: skip
         if status == STEP_REJECTED:
-            ctl[I_REJECTED] += 1
-            fc[F_H] = h_try / 2.0
-            fc[F_H_CAP] = h_try * cfg[G_DOWN]
-            ctl[I_CLEAN] = 0
-            if fc[F_H] < min_dt:
-                ctl[I_DIAG] = DIAG_MIN_DT
-                fc[F_DIAG_T] = T[a]
-                ctl[I_DONE] = 1
+            counters[I_REJECTED] += 1
+            figures[F_H] = h_try / 2.0
+            figures[F_H_CAP] = h_try * settings[G_DOWN]
+            counters[I_CLEAN] = 0
+            if figures[F_H] < min_dt:
+                counters[I_DIAG] = DIAG_MIN_DT
+                figures[F_DIAG_T] = times[a]
+                counters[I_DONE] = 1
                 return SOLVE_DONE
             continue
         if status == STEP_FORCED:
-            ctl[I_FORCED] += 1
+            counters[I_FORCED] += 1
         h_taken = h_try
-        slot, kind, g0, g1 = first_event(P, OUT[a], OUT[b], friction_events)
-        if slot < 0 and on_belt and Y[a, 1] < width <= Y[b, 1]:
-            slot, kind, g0, g1 = -1, EVENT_SORT, width - Y[a, 1], width - Y[b, 1]
+        slot, kind, g0, g1 = first_event(params, contacts[a], contacts[b], friction_events)
+        if slot < 0 and on_belt and states[a, 1] < width <= states[b, 1]:
+            slot, kind, g0, g1 = -1, EVENT_SORT, width - states[a, 1], width - states[b, 1]
         located = False
         if (slot >= 0 or kind == EVENT_SORT) and h_try > 1e-9:
             h_taken = _locate(
-                P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT,
-                RES, MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h_try, h_hist,
-                on_belt, slot, kind, g0, g1,
+                params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings,
+                counters, times, states, belt_wrench, contacts, resultants, modal_forces,
+                accelerations, deflection, deflection_rate, nodes, friction_prev, work,
+                propagator_keys, propagators, propagator_g0, propagator_g1, h_try, h_hist, on_belt,
+                slot, kind, g0, g1,
             )  # fmt: skip
             located = True
         if adaptive:
-            h_prev = fc[F_H_PREV]
+            h_prev = figures[F_H_PREV]
             r = h_taken / h_prev if h_prev > 0.0 else 0.0
             err = milne_error(
-                Y[a], ACC[a], Y[b], fc[F_PREV_V : F_PREV_V + 3], fc[F_PREV_A : F_PREV_A + 3], r,
-                h_taken, tol_scale * cfg[G_ATOL], tol_scale * cfg[G_RTOL], cfg[G_V_REF],
-                cfg[G_OM_REF],
+                states[a], accelerations[a], states[b], figures[F_PREV_V : F_PREV_V + 3],
+                figures[F_PREV_A : F_PREV_A + 3], r, h_taken, tol_scale * settings[G_ATOL],
+                tol_scale * settings[G_RTOL], settings[G_V_REF], settings[G_OM_REF],
             )  # fmt: skip
             order = 3.0 if r > 0.0 else 2.0
             if err > 1.0 and h_taken > 4.0 * min_dt:
-                ctl[I_REJECTED] += 1
-                fc[F_H] = _snap(h_nom, h_taken * max(0.2, 0.9 * err ** (-1.0 / order)))
+                counters[I_REJECTED] += 1
+                figures[F_H] = _snap(h_nom, h_taken * max(0.2, 0.9 * err ** (-1.0 / order)))
                 continue
             if not located:
-                ctl[I_CLEAN] += 1
-                if ctl[I_CLEAN] >= 4 and fc[F_H_CAP] < h_nom:
-                    fc[F_H_CAP] = fc[F_H_CAP] * cfg[G_UP]
-                    ctl[I_CLEAN] = 0
-                cap = min(h_nom, fc[F_H_CAP])
+                counters[I_CLEAN] += 1
+                if counters[I_CLEAN] >= 4 and figures[F_H_CAP] < h_nom:
+                    figures[F_H_CAP] = figures[F_H_CAP] * settings[G_UP]
+                    counters[I_CLEAN] = 0
+                cap = min(h_nom, figures[F_H_CAP])
                 # h_taken grow >= cap when err <= (0.9 h_taken / cap)^order (and cap <= 4
                 # h_taken); with a 1 % margin for pow's rounding that decides without the pow
                 # call (most steps: at the cap with a small error); the same step otherwise
@@ -500,45 +562,51 @@ def solve(model, state, max_attempts, t_target):
                 else:
                     grow = min(4.0, 0.9 * max(err, 1e-12) ** (-1.0 / order))
                     h_next = min(cap, h_taken * grow)
-                fc[F_H] = _snap(h_nom, h_next)
+                figures[F_H] = _snap(h_nom, h_next)
             elif m > 0:
                 # the error history restarts at an event and the next step's estimate (order
                 # 2, the load's) is blind to a contact force rising from zero as t^2 while the
                 # fence's fast modes take its rate: restart no longer than the step that met
                 # the event (at an onset the approach's time_to_contact) times tol_scale
-                fc[F_H] = _snap(h_nom, h_try * tol_scale)
+                figures[F_H] = _snap(h_nom, h_try * tol_scale)
         else:
-            fc[F_H] = min(h_nom, 2.0 * h_try)
-        if located and kind == EVENT_STICK and OUT[b, slot, C_SLACK] > 0.0:
+            figures[F_H] = min(h_nom, 2.0 * h_try)
+        if located and kind == EVENT_STICK and contacts[b, slot, C_SLACK] > 0.0:
             _consistent_stick(
-                P, corners, normals, phi, rigid_modal, omega, zeta, cfg, ctl, T, Y, LAM, OUT,
-                RES, MODAL, ACC, w, wdot, nodes, prev, work, PK, PA, PG0, PG1, h_taken, b, slot,
+                params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings,
+                counters, times, states, belt_wrench, contacts, resultants, modal_forces,
+                accelerations, deflection, deflection_rate, nodes, friction_prev, work,
+                propagator_keys, propagators, propagator_g0, propagator_g1, h_taken, b, slot,
                 on_belt,
             )  # fmt: skip
         # accept
         for k in range(3):
-            fc[F_PREV_V + k] = Y[a, 3 + k]
-            fc[F_PREV_A + k] = ACC[a, k]
+            figures[F_PREV_V + k] = states[a, 3 + k]
+            figures[F_PREV_A + k] = accelerations[a, k]
         for j in range(m):
-            MODAL[S_PREV, j] = MODAL[a, j]
-        fc[F_H_PREV] = h_taken
-        if located or abs(T[a] + h_taken - breaks[nb]) <= 1e-12:
-            fc[F_H_PREV] = 0.0
-            if cfg[G_GEN_ALPHA] != 0.0:
+            modal_forces[S_PREV, j] = modal_forces[a, j]
+        figures[F_H_PREV] = h_taken
+        if located or abs(times[a] + h_taken - breakpoints[nb]) <= 1e-12:
+            figures[F_H_PREV] = 0.0
+            if settings[G_GEN_ALPHA] != 0.0:
                 # restart from consistent accelerations after an event or a drive breakpoint
-                jump = _jump_at(P, T[b])
-                _accelerations(P, rigid_modal, omega, zeta, Y, LAM, RES, MODAL, ACC, b, jump)
-        ctl[I_CUR] = b
-        ctl[I_TRIAL] = a
+                jump = _jump_at(params, times[b])
+                _accelerations(
+                    params, rigid_modal, omega, zeta, states, belt_wrench, resultants,
+                    modal_forces, accelerations, b, jump,
+                )  # fmt: skip
+        counters[I_CUR] = b
+        counters[I_TRIAL] = a
         a = b
-        ctl[I_STEPS] += 1
+        counters[I_STEPS] += 1
         stop, on_belt = observe(
-            P, normals, cfg, ctl, fc, T, Y, LAM, OUT, RES, IMP, STG, REC, a, on_belt
-        )
-        ctl[I_STOP] = 1 if stop else 0
-        ctl[I_ON_BELT] = 1 if on_belt else 0
-        diag = diverged(P, cfg, fc, T[a], Y[a], RES[a])
+            params, normals, settings, counters, figures, times, states, belt_wrench, contacts,
+            resultants, impacts, stages, record, a, on_belt,
+        )  # fmt: skip
+        counters[I_STOP] = 1 if stop else 0
+        counters[I_ON_BELT] = 1 if on_belt else 0
+        diag = diverged(params, settings, figures, times[a], states[a], resultants[a])
         if diag != DIAG_NONE:
-            ctl[I_DIAG] = diag
-            ctl[I_DONE] = 1
+            counters[I_DIAG] = diag
+            counters[I_DONE] = 1
             return SOLVE_DONE

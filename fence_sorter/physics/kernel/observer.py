@@ -176,67 +176,70 @@ def parabola_peak(t0, n0, t1, n1, t2, n2):
 
 
 @njit(cache=True, _nrt=False)
-def _audit(fc, t, r):
+def _audit(figures, t, r):
     """Update the energy audit (``result.EnergyAudit``) with the balance r at t."""
     if not math.isfinite(r):
-        fc[F_MAX_RES] = r
-        fc[F_MIN_RES] = r
+        figures[F_MAX_RES] = r
+        figures[F_MIN_RES] = r
         return
-    if not math.isfinite(fc[F_MAX_RES]):
+    if not math.isfinite(figures[F_MAX_RES]):
         return
-    if r > fc[F_MAX_RES]:
-        fc[F_MAX_RES] = r
-        fc[F_T_MAX] = t
-    if r < fc[F_MIN_RES]:
-        fc[F_MIN_RES] = r
-        fc[F_T_MIN] = t
-    if r < fc[F_RUN_MIN]:
-        fc[F_RUN_MIN] = r
-        fc[F_T_RUN_MIN] = t
-    if r - fc[F_RUN_MIN] > fc[F_MAX_RISE]:
-        fc[F_MAX_RISE] = r - fc[F_RUN_MIN]
-        fc[F_T_RISE0] = fc[F_T_RUN_MIN]
-        fc[F_T_RISE1] = t
+    if r > figures[F_MAX_RES]:
+        figures[F_MAX_RES] = r
+        figures[F_T_MAX] = t
+    if r < figures[F_MIN_RES]:
+        figures[F_MIN_RES] = r
+        figures[F_T_MIN] = t
+    if r < figures[F_RUN_MIN]:
+        figures[F_RUN_MIN] = r
+        figures[F_T_RUN_MIN] = t
+    if r - figures[F_RUN_MIN] > figures[F_MAX_RISE]:
+        figures[F_MAX_RISE] = r - figures[F_RUN_MIN]
+        figures[F_T_RISE0] = figures[F_T_RUN_MIN]
+        figures[F_T_RISE1] = t
 
 
 @njit(cache=True, _nrt=False)
-def observe(P, normals, cfg, ctl, fc, T, Y, LAM, OUT, RES, IMP, STG, REC, i, on_belt):
+def observe(
+    params, normals, settings, counters, figures, times, states, belt_wrench, contacts, resultants,
+    impacts, stages, record, i, on_belt,
+):  # fmt: skip
     """The reductions of a run at the accepted point in state row i: sorting (C_s crossing
     y0 = s, exit speed interpolated), impacts (a fence contact after none, N_stiff at its w_n),
     peak N (with the parabola through the last three points when the contact set held), tip
     deflection, depth, y_max, stages, the energy audit and the recorded series; returns
     (stop, on_belt). The SciPy baselines call it from Python on their own points."""
-    t = T[i]
-    y = Y[i]
-    res = RES[i]
-    out = OUT[i]
-    mass = P[P_MASS]
+    t = times[i]
+    y = states[i]
+    res = resultants[i]
+    out = contacts[i]
+    mass = params[P_MASS]
     vx, vy, om = y[3], y[4], y[5]
-    energy = 0.5 * mass * (vx * vx + vy * vy) + 0.5 * P[P_INERTIA] * om * om
+    energy = 0.5 * mass * (vx * vx + vy * vy) + 0.5 * params[P_INERTIA] * om * om
     energy += res[R_ENERGY_CONTACT]
-    power = res[R_POWER_FENCE] + P[P_EXT_X] * vx + P[P_EXT_Y] * vy + P[P_EXT_M] * om
+    power = res[R_POWER_FENCE] + params[P_EXT_X] * vx + params[P_EXT_Y] * vy + params[P_EXT_M] * om
     if on_belt:
-        power += LAM[i, 0] * P[P_BELT]
-    width = cfg[G_WIDTH]
-    if ctl[I_FIRST] != 0:
-        ctl[I_FIRST] = 0
-        fc[F_E0] = energy
-        fc[F_FLOW] = abs(energy)
-        fc[F_Y_MAX] = y[1]
+        power += belt_wrench[i, 0] * params[P_BELT]
+    width = settings[G_WIDTH]
+    if counters[I_FIRST] != 0:
+        counters[I_FIRST] = 0
+        figures[F_E0] = energy
+        figures[F_FLOW] = abs(energy)
+        figures[F_Y_MAX] = y[1]
     else:
-        h = t - fc[F_PREV_T]
-        fc[F_WORK] += 0.5 * h * (power + fc[F_PREV_POWER])
-        fc[F_FLOW] += 0.5 * h * (abs(power) + abs(fc[F_PREV_POWER]))
-        _audit(fc, t, energy - fc[F_E0] - fc[F_WORK])
-        py1 = fc[F_PREV_Y + 1]
-        if y[1] >= width > py1 and ctl[I_SORTED] == 0:
+        h = t - figures[F_PREV_T]
+        figures[F_WORK] += 0.5 * h * (power + figures[F_PREV_POWER])
+        figures[F_FLOW] += 0.5 * h * (abs(power) + abs(figures[F_PREV_POWER]))
+        _audit(figures, t, energy - figures[F_E0] - figures[F_WORK])
+        py1 = figures[F_PREV_Y + 1]
+        if y[1] >= width > py1 and counters[I_SORTED] == 0:
             frac = (width - py1) / (y[1] - py1)
-            fc[F_EXIT_SPEED] = fc[F_PREV_Y + 4] + frac * (vy - fc[F_PREV_Y + 4])
-            ctl[I_SORTED] = 1
+            figures[F_EXIT_SPEED] = figures[F_PREV_Y + 4] + frac * (vy - figures[F_PREV_Y + 4])
+            counters[I_SORTED] = 1
     mask = int(res[R_ACTIVE_MASK])
     fence_on = (mask & 0xFF) != 0
-    if fence_on and ctl[I_HAD_FENCE] == 0:
-        ctl[I_TOUCHED] = 1
+    if fence_on and counters[I_HAD_FENCE] == 0:
+        counters[I_TOUCHED] = 1
         w_n = -math.inf
         for k in range(SLOT_BORDER):
             if out[k, C_ACTIVE] != 0.0:
@@ -245,84 +248,84 @@ def observe(P, normals, cfg, ctl, fc, T, Y, LAM, OUT, RES, IMP, STG, REC, i, on_
                     w_n = math.nan
                 elif v > w_n:
                     w_n = v
-        if math.isnan(fc[F_IMPACT_SPEED]):
-            fc[F_IMPACT_SPEED] = w_n
-        peak = n_stiff(mass, w_n, cfg[G_BP], cfg[G_KP])
-        n_imp = ctl[I_N_IMPACTS]
-        IMP[n_imp, 0] = t
-        IMP[n_imp, 1] = w_n
-        IMP[n_imp, 2] = peak
-        ctl[I_N_IMPACTS] = n_imp + 1
-    ctl[I_HAD_FENCE] = 1 if fence_on else 0
+        if math.isnan(figures[F_IMPACT_SPEED]):
+            figures[F_IMPACT_SPEED] = w_n
+        peak = n_stiff(mass, w_n, settings[G_BP], settings[G_KP])
+        n_imp = counters[I_N_IMPACTS]
+        impacts[n_imp, 0] = t
+        impacts[n_imp, 1] = w_n
+        impacts[n_imp, 2] = peak
+        counters[I_N_IMPACTS] = n_imp + 1
+    counters[I_HAD_FENCE] = 1 if fence_on else 0
     n = res[R_FENCE_N]
-    if n > fc[F_PEAK_N]:
-        fc[F_PEAK_N] = n
-    n1, n2 = fc[F_LAST_N1], fc[F_LAST_N2]
-    smooth = ctl[I_LAST_MASK0] == ctl[I_LAST_MASK1] and ctl[I_LAST_MASK1] == mask
-    ctl[I_LAST_MASK0] = ctl[I_LAST_MASK1]
-    ctl[I_LAST_MASK1] = mask
+    if n > figures[F_PEAK_N]:
+        figures[F_PEAK_N] = n
+    n1, n2 = figures[F_LAST_N1], figures[F_LAST_N2]
+    smooth = counters[I_LAST_MASK0] == counters[I_LAST_MASK1] and counters[I_LAST_MASK1] == mask
+    counters[I_LAST_MASK0] = counters[I_LAST_MASK1]
+    counters[I_LAST_MASK1] = mask
     if smooth and n2 > n1 and n2 >= n and n1 > 0.0:
-        peak = parabola_peak(fc[F_LAST_T1], n1, fc[F_LAST_T2], n2, t, n)
-        if peak > fc[F_PEAK_N]:
-            fc[F_PEAK_N] = peak
-    fc[F_LAST_N1], fc[F_LAST_N2] = n2, n
-    fc[F_LAST_T1], fc[F_LAST_T2] = fc[F_LAST_T2], t
+        peak = parabola_peak(figures[F_LAST_T1], n1, figures[F_LAST_T2], n2, t, n)
+        if peak > figures[F_PEAK_N]:
+            figures[F_PEAK_N] = peak
+    figures[F_LAST_N1], figures[F_LAST_N2] = n2, n
+    figures[F_LAST_T1], figures[F_LAST_T2] = figures[F_LAST_T2], t
     tip = abs(res[R_TIP_W])
-    if tip > fc[F_PEAK_TIP]:
-        fc[F_PEAK_TIP] = tip
-    if res[R_MAX_D] > fc[F_MAX_DEPTH]:
-        fc[F_MAX_DEPTH] = res[R_MAX_D]
-    if y[1] > fc[F_Y_MAX]:
-        fc[F_Y_MAX] = y[1]
-    sorted_ = ctl[I_SORTED] != 0
-    if mask != ctl[I_MASK] or (sorted_ and ctl[I_STAGE] != STAGE_CODE_SORTED):
-        ctl[I_MASK] = mask
+    if tip > figures[F_PEAK_TIP]:
+        figures[F_PEAK_TIP] = tip
+    if res[R_MAX_D] > figures[F_MAX_DEPTH]:
+        figures[F_MAX_DEPTH] = res[R_MAX_D]
+    if y[1] > figures[F_Y_MAX]:
+        figures[F_Y_MAX] = y[1]
+    sorted_ = counters[I_SORTED] != 0
+    if mask != counters[I_MASK] or (sorted_ and counters[I_STAGE] != STAGE_CODE_SORTED):
+        counters[I_MASK] = mask
         if sorted_:
             stage = STAGE_CODE_SORTED
         else:
-            stage = classify_code(out, normals, y[2], ctl[I_TOUCHED] != 0, cfg[G_FLUSH])
-        if stage != ctl[I_STAGE]:
-            ctl[I_STAGE] = stage
-            n_stg = ctl[I_N_STAGES]
-            STG[n_stg, 0] = t
-            STG[n_stg, 1] = stage
-            ctl[I_N_STAGES] = n_stg + 1
-    if cfg[G_RECORD] != 0.0:
-        n_rec = ctl[I_N_REC]
-        REC[REC_T, n_rec] = t
-        REC[REC_T_FENCE, n_rec] = t
-        REC[REC_T_FORCES, n_rec] = t
-        REC[REC_T_STAGE, n_rec] = t
+            stage = classify_code(out, normals, y[2], counters[I_TOUCHED] != 0, settings[G_FLUSH])
+        if stage != counters[I_STAGE]:
+            counters[I_STAGE] = stage
+            n_stg = counters[I_N_STAGES]
+            stages[n_stg, 0] = t
+            stages[n_stg, 1] = stage
+            counters[I_N_STAGES] = n_stg + 1
+    if settings[G_RECORD] != 0.0:
+        n_rec = counters[I_N_REC]
+        record[REC_T, n_rec] = t
+        record[REC_T_FENCE, n_rec] = t
+        record[REC_T_FORCES, n_rec] = t
+        record[REC_T_STAGE, n_rec] = t
         for k in range(6):
-            REC[REC_Y + k, n_rec] = y[k]
-        REC[REC_ALPHA, n_rec] = res[R_ALPHA]
-        REC[REC_TIP_W, n_rec] = res[R_TIP_W]
-        REC[REC_FENCE_N, n_rec] = res[R_FENCE_N]
-        REC[REC_MAX_D, n_rec] = res[R_MAX_D]
-        REC[REC_STAGE, n_rec] = ctl[I_STAGE]
-        ctl[I_N_REC] = n_rec + 1
-    fc[F_PREV_T] = t
+            record[REC_Y + k, n_rec] = y[k]
+        record[REC_ALPHA, n_rec] = res[R_ALPHA]
+        record[REC_TIP_W, n_rec] = res[R_TIP_W]
+        record[REC_FENCE_N, n_rec] = res[R_FENCE_N]
+        record[REC_MAX_D, n_rec] = res[R_MAX_D]
+        record[REC_STAGE, n_rec] = counters[I_STAGE]
+        counters[I_N_REC] = n_rec + 1
+    figures[F_PREV_T] = t
     for k in range(6):
-        fc[F_PREV_Y + k] = y[k]
-    fc[F_PREV_POWER] = power
-    return sorted_ and cfg[G_STOP_SORTED] != 0.0, on_belt and not sorted_
+        figures[F_PREV_Y + k] = y[k]
+    figures[F_PREV_POWER] = power
+    return sorted_ and settings[G_STOP_SORTED] != 0.0, on_belt and not sorted_
 
 
 @njit(cache=True, _nrt=False)
-def diverged(P, cfg, fc, t, y, res):
+def diverged(params, settings, figures, t, y, res):
     """Divergence checks at an accepted point: a DIAG_* code (non-finite state, deep
-    penetration, runaway speed; time and value left in fc)."""
+    penetration, runaway speed; time and value left in figures)."""
     total = 0.0
     for k in range(y.shape[0]):
         total += y[k]
-    fc[F_DIAG_T] = t
+    figures[F_DIAG_T] = t
     if not math.isfinite(total):
         return DIAG_NONFINITE
-    if res[R_MAX_D] > cfg[G_DEEP]:
-        fc[F_DIAG_V] = res[R_MAX_D]
+    if res[R_MAX_D] > settings[G_DEEP]:
+        figures[F_DIAG_V] = res[R_MAX_D]
         return DIAG_DEEP
     speed = math.hypot(y[3], y[4])
-    if speed > cfg[G_SPEED_LIMIT]:
-        fc[F_DIAG_V] = speed
+    if speed > settings[G_SPEED_LIMIT]:
+        figures[F_DIAG_V] = speed
         return DIAG_SPEED
     return DIAG_NONE
