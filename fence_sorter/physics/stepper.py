@@ -52,7 +52,6 @@ import numpy as np
 from fence_sorter.codes import Stage
 
 from . import kernel as K
-from .contacts import FLUSH_ANGLE
 from .model import SortingModel
 from .result import EnergyAudit, SimulationResult, make_result
 
@@ -272,7 +271,7 @@ class Stepper:
                 contact.phidot_min,
                 _UP,
                 _DOWN,
-                FLUSH_ANGLE,
+                K.FLUSH_ANGLE,
                 float(sv.method == "generalized_alpha"),
                 *generalized_alpha_coefficients(sv.rho_inf),
             ],

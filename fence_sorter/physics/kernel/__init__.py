@@ -304,6 +304,7 @@ from .loop import (  # noqa: E402 (after the cache directory is set)
 )
 from .loop import solve as _solve_jit  # noqa: E402 (after the cache directory is set)
 from .observer import (  # noqa: E402 (after the cache directory is set)
+    FLUSH_ANGLE,
     STAGE_CODE_E1,
     STAGE_CODE_E2,
     STAGE_CODE_E3,
@@ -478,6 +479,7 @@ __all__ = [
     "G_DEEP",
     "G_DOWN",
     "G_DT",
+    "FLUSH_ANGLE",
     "G_FLUSH",
     "G_GEN_ALPHA",
     "G_ALPHA_M",

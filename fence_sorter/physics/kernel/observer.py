@@ -3,7 +3,17 @@
 y_max, stages, the energy audit, the recorded series) and its divergence checks
 (:func:`diverged`). A module of its own, apart from the step control, because they serve every
 source of points: the compiled loop calls them per accepted step, the SciPy baselines from
-Python on their own points (``Stepper.observe``), so every scheme's result is reduced alike."""
+Python on their own points (``Stepper.observe``), so every scheme's result is reduced alike.
+
+Stages E1-E4 (paper section 2, appendix; ``fence_sorter.codes.Stage``) are classified from the
+active contact set by :func:`classify_code`, not integrated as separate equations. The contact
+slots (``forces.evaluate``, one row each): corners 0-3 against the fence surface (E1's oblique
+strike (13), (23)-(33)); the fence tip inside the load after a penetrating corner slid past it,
+slots 4-7 (E2's contact point kept on the fence until it passes R_z, (21)); corners against the
+fence-side border wall y0 = 0, slots 8-11 (E3, (50)-(56)). A face along the fence (E2) is a face
+whose two corners (or a corner and the fence tip) both touch the fence, or a single contact
+with the face within ``FLUSH_ANGLE`` of the fence tangent: that contact pair holds it flush, the
+moment the paper's E2 (46) imposes by slaving phi to the fence."""
 
 from __future__ import annotations
 
@@ -103,6 +113,10 @@ STAGE_CODE_E2 = 2
 STAGE_CODE_E3 = 3
 STAGE_CODE_E4 = 4
 STAGE_CODE_SORTED = 5
+
+
+# a single contact whose face lies this close to the fence tangent holds it flush: E2 [rad]
+FLUSH_ANGLE = math.radians(2.0)
 
 
 @njit(cache=True, _nrt=False)
