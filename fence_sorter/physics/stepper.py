@@ -242,12 +242,12 @@ class Stepper:
         t1 = sc.drive.t1
         breaks = [b for b in ((t1, t_cycle) if t1 < t_cycle else (t_cycle,)) if 0.0 < b < t_end]
         breaks.append(t_end)
-        self.breaks = np.array(breaks, dtype=float)
+        self.breakpoints = np.array(breaks, dtype=float)
         body = model.body
         contact = sc.contact
         v_ref = max(model.belt, 0.1)
         # one list in the order of the G_* indices (checked at import), one array
-        self.cfg = np.array(
+        self.settings = np.array(
             [
                 h_nom,
                 t_end,
@@ -284,26 +284,42 @@ class Stepper:
         if arrays is None:
             arrays = _workspace(n, m, model.n_el)
         (
-            self.ctl, self.fc, self.T, self.Y, self.LAM, self.OUT, self.RES, self.MODAL,
-            self.ACC, self.w, self.wdot, self.nodes, self.prev, self.work, self.IMP, self.STG,
-        ) = arrays  # fmt: skip
+            self.counters,
+            self.figures,
+            self.times,
+            self.states,
+            self.belt_wrench,
+            self.contact_rows,
+            self.resultant_rows,
+            self.modal_forces,
+            self.accelerations,
+            self.deflection,
+            self.deflection_rate,
+            self.nodes,
+            self.friction_prev,
+            self.work,
+            self.impact_rows,
+            self.stage_rows,
+        ) = arrays
         # kernel.solve zeroes the other state rows and the scratch arrays on its first call
-        ctl = self.ctl
-        ctl[:] = _CTL0
-        self.fc[:] = _FC0
-        self.T[0] = 0.0
-        y0 = self.Y[0]
+        counters = self.counters
+        counters[:] = _CTL0
+        self.figures[:] = _FC0
+        self.times[0] = 0.0
+        y0 = self.states[0]
         y0.fill(0.0)
         y0[:3] = model.initial
         v = sc.initial_velocity
         y0[3:6] = v if v is not None else (model.belt, 0.0, 0.0)
-        self.PK, self.PA, self.PG0, self.PG1, n_props = _propagator_cache(model)
+        self.propagator_keys, self.propagators, self.propagator_g0, self.propagator_g1, n_props = (
+            _propagator_cache(model)
+        )
         self._n_props = n_props
-        ctl[K.I_N_PROPS] = n_props[0]
+        counters[K.I_N_PROPS] = n_props[0]
         # a column per accepted point when anything is recorded (one otherwise: none is written);
         # not reused: the result's series are views of it
         cols = int(1.5 * t_end / h_nom) + 64 if sc.record else 1
-        self.REC = np.zeros((K.N_REC_COLS, min(cols, 1 << 16)))
+        self.record = np.zeros((K.N_REC_COLS, min(cols, 1 << 16)))
         # the modal basis of a flexible fence is read-only (cached per fence): writable copies
         # keep one signature of kernel.solve for stiff and flexible models (one compiled
         # specialisation to load from Numba's cache per process, ~0.3 s, instead of two)
@@ -320,12 +336,12 @@ class Stepper:
 
     @property
     def t(self) -> float:
-        return float(self.T[self.ctl[K.I_CUR]])
+        return float(self.times[self.counters[K.I_CUR]])
 
     @property
     def y(self) -> np.ndarray:
         """The state vector at :attr:`t` (a view: copy it to keep it)."""
-        return self.Y[self.ctl[K.I_CUR]]
+        return self.states[self.counters[K.I_CUR]]
 
     @property
     def running(self) -> bool:
@@ -336,8 +352,8 @@ class Stepper:
         failed (as ``OdeSolver.step``). Raises once the solve has ended."""
         if self.status != "running":
             raise RuntimeError(f"step() on a {self.status} solve")
-        steps = self.ctl[K.I_STEPS]
-        while self.status == "running" and self.ctl[K.I_STEPS] == steps:
+        steps = self.counters[K.I_STEPS]
+        while self.status == "running" and self.counters[K.I_STEPS] == steps:
             if self._over_time():
                 break
             self._call(1, math.inf)
@@ -357,7 +373,7 @@ class Stepper:
     def start(self) -> None:
         """Evaluate the forces and reductions at the initial point (the first :meth:`step` or
         :meth:`advance` does it otherwise), for a caller reading the point before stepping."""
-        if not self.ctl[K.I_STARTED]:
+        if not self.counters[K.I_STARTED]:
             self._call(0, math.inf)
 
     # -- the loop's figures at the last accepted point ----------------------------------------
@@ -365,32 +381,32 @@ class Stepper:
     @property
     def resultants(self) -> np.ndarray:
         """The resultants R_* at :attr:`t`."""
-        return self.RES[self.ctl[K.I_CUR]]
+        return self.resultant_rows[self.counters[K.I_CUR]]
 
     @property
     def contacts(self) -> np.ndarray:
         """The contact slots C_* at :attr:`t`."""
-        return self.OUT[self.ctl[K.I_CUR]]
+        return self.contact_rows[self.counters[K.I_CUR]]
 
     @property
     def stage(self) -> Stage:
         """The motion stage at :attr:`t`."""
-        return Stage(int(self.ctl[K.I_STAGE]))
+        return Stage(int(self.counters[K.I_STAGE]))
 
     @property
     def sorted(self) -> bool:
         """C_s has crossed the sorting line y0 = s."""
-        return bool(self.ctl[K.I_SORTED])
+        return bool(self.counters[K.I_SORTED])
 
     @property
     def impacts(self) -> list[tuple[float, float, float]]:
         """(onset time [s], w_n [m/s], N_stiff [N]) of every impact so far."""
-        return [(t, w, p) for t, w, p in self.IMP[: self.ctl[K.I_N_IMPACTS]].tolist()]
+        return [(t, w, p) for t, w, p in self.impact_rows[: self.counters[K.I_N_IMPACTS]].tolist()]
 
     # -- the driver --------------------------------------------------------------------------
 
     def _at_end(self) -> bool:
-        return bool(self.ctl[K.I_STOP]) or not self.t < self.t_end - 1e-12
+        return bool(self.counters[K.I_STOP]) or not self.t < self.t_end - 1e-12
 
     def _over_time(self) -> bool:
         """Fail the solve once the time spent stepping exceeds ``solver.max_wall_time``."""
@@ -408,12 +424,32 @@ class Stepper:
     def _loop_arrays(self) -> tuple:
         if self._args is None:
             md = self.model
-            model = K.LoopModel(md.P, md.corners, md.normals, *self.modes, self.cfg, self.breaks)
+            model = K.LoopModel(
+                md.P, md.corners, md.normals, *self.modes, self.settings, self.breakpoints
+            )
             state = K.LoopState(
-                self.ctl, self.fc, self.T, self.Y, self.LAM, self.OUT, self.RES, self.MODAL,
-                self.ACC, self.w, self.wdot, self.nodes, self.prev, self.work, self.PK, self.PA,
-                self.PG0, self.PG1, self.IMP, self.STG, self.REC,
-            )  # fmt: skip
+                self.counters,
+                self.figures,
+                self.times,
+                self.states,
+                self.belt_wrench,
+                self.contact_rows,
+                self.resultant_rows,
+                self.modal_forces,
+                self.accelerations,
+                self.deflection,
+                self.deflection_rate,
+                self.nodes,
+                self.friction_prev,
+                self.work,
+                self.propagator_keys,
+                self.propagators,
+                self.propagator_g0,
+                self.propagator_g1,
+                self.impact_rows,
+                self.stage_rows,
+                self.record,
+            )
             self._args = (model, state)
         return self._args
 
@@ -424,15 +460,15 @@ class Stepper:
         t0 = self.clock()
         status = K.solve(model, state, attempts, float(t_target))
         self.busy += self.clock() - t0
-        self._n_props[0] = self.ctl[K.I_N_PROPS]
+        self._n_props[0] = self.counters[K.I_N_PROPS]
         if status == K.SOLVE_GROW:
             self._grow()
         elif status == K.SOLVE_DONE:
-            code = int(self.ctl[K.I_DIAG])
+            code = int(self.counters[K.I_DIAG])
             if code == K.DIAG_NONE:
                 self.status = "finished"
             else:
-                self._fail(_FAILURES[code], self.fc[K.F_DIAG_T], self._diag_value(code))
+                self._fail(_FAILURES[code], self.figures[K.F_DIAG_T], self._diag_value(code))
         return status
 
     def _diag_value(self, code: int) -> float:
@@ -440,21 +476,21 @@ class Stepper:
             return math.nan
         if code == K.DIAG_MIN_DT:
             return self.model.sc.solver.min_dt
-        return float(self.fc[K.F_DIAG_V])
+        return float(self.figures[K.F_DIAG_V])
 
     def _grow(self) -> None:
-        for name in ("IMP", "STG"):
+        for name in ("impact_rows", "stage_rows"):
             arr = getattr(self, name)
-            used = self.ctl[K.I_N_IMPACTS if name == "IMP" else K.I_N_STAGES]
+            used = self.counters[K.I_N_IMPACTS if name == "impact_rows" else K.I_N_STAGES]
             if used >= arr.shape[0]:
                 bigger = np.zeros((2 * arr.shape[0], arr.shape[1]))
                 bigger[:used] = arr[:used]
                 setattr(self, name, bigger)
-        used = self.ctl[K.I_N_REC]
-        if used >= self.REC.shape[1]:
-            bigger = np.zeros((self.REC.shape[0], 2 * self.REC.shape[1]))
-            bigger[:, :used] = self.REC[:, :used]
-            self.REC = bigger
+        used = self.counters[K.I_N_REC]
+        if used >= self.record.shape[1]:
+            bigger = np.zeros((self.record.shape[0], 2 * self.record.shape[1]))
+            bigger[:, :used] = self.record[:, :used]
+            self.record = bigger
         self._args = None
 
     def release(self) -> None:
@@ -466,11 +502,24 @@ class Stepper:
         if len(pool) < 4:
             pool.append(
                 (
-                    self.ctl, self.fc, self.T, self.Y, self.LAM, self.OUT, self.RES, self.MODAL,
-                    self.ACC, self.w, self.wdot, self.nodes, self.prev, self.work, self.IMP,
-                    self.STG,
+                    self.counters,
+                    self.figures,
+                    self.times,
+                    self.states,
+                    self.belt_wrench,
+                    self.contact_rows,
+                    self.resultant_rows,
+                    self.modal_forces,
+                    self.accelerations,
+                    self.deflection,
+                    self.deflection_rate,
+                    self.nodes,
+                    self.friction_prev,
+                    self.work,
+                    self.impact_rows,
+                    self.stage_rows,
                 )
-            )  # fmt: skip
+            )
         self._key = None
 
     # -- a point integrated elsewhere --------------------------------------------------------
@@ -479,33 +528,53 @@ class Stepper:
         """Reduce a point integrated elsewhere (a SciPy baseline's accepted point: state, belt
         wrench, contact slots, resultants) with the loop's own reductions (``kernel.observe``);
         ``(stop, on_belt)`` as the loop has them after it. Then :meth:`diverged` checks it."""
-        ctl = self.ctl
+        counters = self.counters
         if (
-            ctl[K.I_N_IMPACTS] >= self.IMP.shape[0]
-            or ctl[K.I_N_STAGES] >= self.STG.shape[0]
-            or ctl[K.I_N_REC] >= self.REC.shape[1]
+            counters[K.I_N_IMPACTS] >= self.impact_rows.shape[0]
+            or counters[K.I_N_STAGES] >= self.stage_rows.shape[0]
+            or counters[K.I_N_REC] >= self.record.shape[1]
         ):
             self._grow()  # a point adds at most one row to each
-        i = int(self.ctl[K.I_CUR])
-        self.T[i] = t
-        self.Y[i] = y
-        self.LAM[i] = lam
-        self.OUT[i] = out
-        self.RES[i] = res
+        i = int(self.counters[K.I_CUR])
+        self.times[i] = t
+        self.states[i] = y
+        self.belt_wrench[i] = lam
+        self.contact_rows[i] = out
+        self.resultant_rows[i] = res
         stop, on_belt = K.observe(
-            self.model.P, self.model.normals, self.cfg, self.ctl, self.fc, self.T, self.Y,
-            self.LAM, self.OUT, self.RES, self.IMP, self.STG, self.REC, i, on_belt,
-        )  # fmt: skip
+            self.model.P,
+            self.model.normals,
+            self.settings,
+            self.counters,
+            self.figures,
+            self.times,
+            self.states,
+            self.belt_wrench,
+            self.contact_rows,
+            self.resultant_rows,
+            self.impact_rows,
+            self.stage_rows,
+            self.record,
+            i,
+            on_belt,
+        )
         return bool(stop), bool(on_belt)
 
     def diverged(self) -> Diagnosis | None:
         """The loop's divergence checks (NaN, deep penetration, runaway speed) on the last
         observed point; fails the solve on one."""
-        i = int(self.ctl[K.I_CUR])
-        code = K.diverged(self.model.P, self.cfg, self.fc, self.T[i], self.Y[i], self.RES[i])
+        i = int(self.counters[K.I_CUR])
+        code = K.diverged(
+            self.model.P,
+            self.settings,
+            self.figures,
+            self.times[i],
+            self.states[i],
+            self.resultant_rows[i],
+        )
         if code != K.DIAG_NONE:
-            self.ctl[K.I_DIAG] = code
-            self._fail(_FAILURES[code], self.fc[K.F_DIAG_T], self._diag_value(code))
+            self.counters[K.I_DIAG] = code
+            self._fail(_FAILURES[code], self.figures[K.F_DIAG_T], self._diag_value(code))
         return self.diagnosis
 
     # -- the result --------------------------------------------------------------------------
@@ -516,34 +585,48 @@ class Stepper:
         """The :class:`SimulationResult` of the solve so far from the loop's reductions
         (``result.make_result``). ``steps``, ``diagnosis``, ``wall``: a caller integrating
         elsewhere (:meth:`observe`) gives its own."""
-        ctl, fc = self.ctl.tolist(), self.fc.tolist()  # Python numbers, read once each
-        stages = [(STAGE_NAMES[int(c)], t) for t, c in self.STG[: ctl[K.I_N_STAGES]].tolist()]
+        # Python numbers, read once each
+        counters, figures = self.counters.tolist(), self.figures.tolist()
+        stages = [
+            (STAGE_NAMES[int(c)], t) for t, c in self.stage_rows[: counters[K.I_N_STAGES]].tolist()
+        ]
         audit = EnergyAudit(
-            max_residual=fc[K.F_MAX_RES],
-            min_residual=fc[K.F_MIN_RES],
-            flow=fc[K.F_FLOW],
-            e0=fc[K.F_E0],
-            t_max=fc[K.F_T_MAX],
-            t_min=fc[K.F_T_MIN],
-            max_rise=fc[K.F_MAX_RISE],
-            t_rise=(fc[K.F_T_RISE0], fc[K.F_T_RISE1]),
-            run_min=fc[K.F_RUN_MIN],
-            t_run_min=fc[K.F_T_RUN_MIN],
+            max_residual=figures[K.F_MAX_RES],
+            min_residual=figures[K.F_MIN_RES],
+            flow=figures[K.F_FLOW],
+            e0=figures[K.F_E0],
+            t_max=figures[K.F_T_MAX],
+            t_min=figures[K.F_T_MIN],
+            max_rise=figures[K.F_MAX_RISE],
+            t_rise=(figures[K.F_T_RISE0], figures[K.F_T_RISE1]),
+            run_min=figures[K.F_RUN_MIN],
+            t_run_min=figures[K.F_T_RUN_MIN],
         )
         md = self.model
         if diagnosis is None and self.diagnosis is not None:
             diagnosis = self.diagnosis.text
         return make_result(
-            md, float(self.T[ctl[K.I_CUR]]), diagnosis,
-            ctl[K.I_STEPS] if steps is None else steps, ctl[K.I_REJECTED],
-            self.clock() - self.wall0 if wall is None else wall, ctl[K.I_FORCED],
-            ctl[K.I_EVENTS], sorted_=bool(ctl[K.I_SORTED]), touched=bool(ctl[K.I_TOUCHED]),
-            exit_speed=fc[K.F_EXIT_SPEED], impact_speed=fc[K.F_IMPACT_SPEED],
-            impacts=[(t, w, p) for t, w, p in self.IMP[: ctl[K.I_N_IMPACTS]].tolist()],
-            peak_n=fc[K.F_PEAK_N], peak_tip=fc[K.F_PEAK_TIP], max_depth=fc[K.F_MAX_DEPTH],
-            y_max=fc[K.F_Y_MAX], stages=stages, audit=audit,
+            md,
+            float(self.times[counters[K.I_CUR]]),
+            diagnosis,
+            counters[K.I_STEPS] if steps is None else steps,
+            counters[K.I_REJECTED],
+            self.clock() - self.wall0 if wall is None else wall,
+            counters[K.I_FORCED],
+            counters[K.I_EVENTS],
+            sorted_=bool(counters[K.I_SORTED]),
+            touched=bool(counters[K.I_TOUCHED]),
+            exit_speed=figures[K.F_EXIT_SPEED],
+            impact_speed=figures[K.F_IMPACT_SPEED],
+            impacts=self.impacts,
+            peak_n=figures[K.F_PEAK_N],
+            peak_tip=figures[K.F_PEAK_TIP],
+            max_depth=figures[K.F_MAX_DEPTH],
+            y_max=figures[K.F_Y_MAX],
+            stages=stages,
+            audit=audit,
             series=self.series(md.sc.record, stages),
-        )  # fmt: skip
+        )
 
     def series(self, want, stages=None) -> dict[str, np.ndarray]:
         """The recorded series (each its own array: a row of the loop's REC, which records the
@@ -551,7 +634,9 @@ class Stepper:
         names are the names in it)."""
         if not want:
             return {}
-        cols = self.REC[:, : self.ctl[K.I_N_REC]]  # one row per recorded quantity, contiguous
+        cols = self.record[
+            :, : self.counters[K.I_N_REC]
+        ]  # one row per recorded quantity, contiguous
         out: dict[str, np.ndarray] = {}
         if "trajectory" in want:
             out["t"] = cols[K.REC_T]

@@ -100,14 +100,26 @@ def test_generalized_alpha_damps_the_top_fence_mode_by_rho_inf(rho_inf):
     assert model.omega[-1] * h > 100.0 and model.omega[0] * h < 0.3
     s = Stepper(model)
     assert s.advance(2.0 * sc.drive.t1 + 0.05)  # the drive is at rest from 2 t1
-    i = int(s.ctl[K.I_CUR])
-    assert s.RES[i, K.R_FENCE_N] == 0.0 and s.MODAL[i].max() == 0.0  # no load on the modes
-    s.Y[i, 6:] = 0.0
-    s.Y[i, 6] = 1e-3  # mode 1
-    s.Y[i, 6 + m - 1] = 1e-6  # top mode
+    i = int(s.counters[K.I_CUR])
+    assert (
+        s.resultant_rows[i, K.R_FENCE_N] == 0.0 and s.modal_forces[i].max() == 0.0
+    )  # no load on the modes
+    s.states[i, 6:] = 0.0
+    s.states[i, 6] = 1e-3  # mode 1
+    s.states[i, 6 + m - 1] = 1e-6  # top mode
     rigid_modal, omega, zeta = s.modes[1], s.modes[2], s.modes[3]
     K.loop._accelerations(
-        model.P, rigid_modal, omega, zeta, s.Y, s.LAM, s.RES, s.MODAL, s.ACC, i, 0.0
+        model.P,
+        rigid_modal,
+        omega,
+        zeta,
+        s.states,
+        s.belt_wrench,
+        s.resultant_rows,
+        s.modal_forces,
+        s.accelerations,
+        i,
+        0.0,
     )
     t0 = s.t
     amp1, top = [], []
@@ -158,7 +170,7 @@ def test_stepping_in_chunks_is_the_same_solve():
         times.append(single.t)
     for other in (chunked, single):
         assert other.status == "finished"
-        assert other.ctl[K.I_STEPS] == whole.ctl[K.I_STEPS] == len(times) - 1
+        assert other.counters[K.I_STEPS] == whole.counters[K.I_STEPS] == len(times) - 1
         assert other.t == whole.t
         np.testing.assert_array_equal(other.y, whole.y)
 
@@ -274,7 +286,7 @@ def test_wall_time_limit_stops_a_solve_that_steps_too_long():
     d = stepper.diagnosis
     assert stepper.status == "failed" and d.kind is Failure.WALL_TIME_LIMIT
     assert d.value == 0.3 and d.t == stepper.t and 0.0 < d.t < 0.6
-    assert stepper.busy > 0.3 and 1 <= stepper.ctl[K.I_STEPS] <= 7  # ~0.05 s per step
+    assert stepper.busy > 0.3 and 1 <= stepper.counters[K.I_STEPS] <= 7  # ~0.05 s per step
     assert str(d) == d.text == f"wall-time limit 0.3 s reached at t = {d.t:.4f} s"
     r = stepper.result()
     assert not r.success and r.diagnosis == d.text and r.sim_time == d.t

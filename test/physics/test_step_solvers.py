@@ -22,7 +22,7 @@ def _state_at(t: float):
     md = SortingModel(STIFF)
     cs = Stepper(md)
     cs.advance(t)
-    return md, cs, int(cs.ctl[K.I_CUR])
+    return md, cs, int(cs.counters[K.I_CUR])
 
 
 def _step(md, cs, a, h, max_iter, force, tol=1e-14):
@@ -32,12 +32,37 @@ def _step(md, cs, a, h, max_iter, force, tol=1e-14):
     out, res = np.zeros((K.N_SLOTS, K.N_COLS)), np.zeros(K.N_RES)
     props = (np.zeros((0, 2, 3)), np.zeros((0, 2)), np.zeros((0, 2)))
     status = K.trapezoidal_step.py_func(
-        md.P, md.corners, md.normals, cs.modes[0], cs.modes[1], props, h, cs.T[a], cs.Y[a],
-        cs.RES[a], cs.LAM[a], cs.MODAL[a], cs.OUT[a], np.zeros(0), 0.0, 0.0,
-        bool(cs.ctl[K.I_ON_BELT]), tol,
-        max_iter, force, y1, lam1, out, res, np.zeros(0), cs.w, cs.wdot, cs.nodes, cs.prev,
+        md.P,
+        md.corners,
+        md.normals,
+        cs.modes[0],
+        cs.modes[1],
+        props,
+        h,
+        cs.times[a],
+        cs.states[a],
+        cs.resultant_rows[a],
+        cs.belt_wrench[a],
+        cs.modal_forces[a],
+        cs.contact_rows[a],
+        np.zeros(0),
+        0.0,
+        0.0,
+        bool(cs.counters[K.I_ON_BELT]),
+        tol,
+        max_iter,
+        force,
+        y1,
+        lam1,
+        out,
+        res,
+        np.zeros(0),
+        cs.deflection,
+        cs.deflection_rate,
+        cs.nodes,
+        cs.friction_prev,
         cs.work,
-    )  # fmt: skip
+    )
     return status, y1, int(res[K.R_ITERATIONS])
 
 
@@ -59,7 +84,7 @@ def test_newton_contact_iteration_converges_quadratically_to_the_plain_fixed_poi
     tolerance of 1e-14 m), Newton quadratically (e_2 <= 1e4 / m e_1^2, down to round-off),
     the fixed point linearly."""
     md, cs, a = _state_at(t)
-    assert cs.RES[a, K.R_FENCE_N] > 10.0  # pushing
+    assert cs.resultant_rows[a, K.R_FENCE_N] > 10.0  # pushing
     h = STIFF.solver.dt_max
     errors = {}
     ends = {}
@@ -173,23 +198,64 @@ def _free_step(gap):
     """positioned_stiff at t = 0 with the load moved ``gap`` off the fence, riding at the belt's
     speed: one compiled step of dt_max; its (y1, out, res) and an evaluation at its end."""
     md, cs, a = _state_at(0.0)
-    cs.Y[a, 1] += gap  # the long face along the fence (D = 0 at t = 0), moved off it
+    cs.states[a, 1] += gap  # the long face along the fence (D = 0 at t = 0), moved off it
     h = STIFF.solver.dt_max
     y1, lam1 = np.zeros(md.n_state), np.zeros(3)
     out, res = np.zeros((K.N_SLOTS, K.N_COLS)), np.zeros(K.N_RES)
     props = (np.zeros((0, 2, 3)), np.zeros((0, 2)), np.zeros((0, 2)))
     status = K.trapezoidal_step(
-        md.P, md.corners, md.normals, cs.modes[0], cs.modes[1], props, h, cs.T[a], cs.Y[a],
-        cs.RES[a], cs.LAM[a], cs.MODAL[a], cs.OUT[a], np.zeros(0), 0.0, 0.0, True,
-        STIFF.solver.tolerance, 50,
-        False, y1, lam1, out, res, np.zeros(0), cs.w, cs.wdot, cs.nodes, cs.prev, cs.work,
-    )  # fmt: skip
+        md.P,
+        md.corners,
+        md.normals,
+        cs.modes[0],
+        cs.modes[1],
+        props,
+        h,
+        cs.times[a],
+        cs.states[a],
+        cs.resultant_rows[a],
+        cs.belt_wrench[a],
+        cs.modal_forces[a],
+        cs.contact_rows[a],
+        np.zeros(0),
+        0.0,
+        0.0,
+        True,
+        STIFF.solver.tolerance,
+        50,
+        False,
+        y1,
+        lam1,
+        out,
+        res,
+        np.zeros(0),
+        cs.deflection,
+        cs.deflection_rate,
+        cs.nodes,
+        cs.friction_prev,
+        cs.work,
+    )
     assert status == K.STEP_OK and res[K.R_ITERATIONS] == 1
     out2, res2 = np.zeros((K.N_SLOTS, K.N_COLS)), np.zeros(K.N_RES)
     K.evaluate(
-        md.P, md.corners, md.normals, cs.modes[0], cs.modes[1], cs.T[a] + h, 0.0, y1, cs.LAM[a],
-        0.5 * h, np.full(K.N_SLOTS, math.nan), out2, res2, np.zeros(0), cs.w, cs.wdot, cs.nodes,
-    )  # fmt: skip
+        md.P,
+        md.corners,
+        md.normals,
+        cs.modes[0],
+        cs.modes[1],
+        cs.times[a] + h,
+        0.0,
+        y1,
+        cs.belt_wrench[a],
+        0.5 * h,
+        np.full(K.N_SLOTS, math.nan),
+        out2,
+        res2,
+        np.zeros(0),
+        cs.deflection,
+        cs.deflection_rate,
+        cs.nodes,
+    )
     return out, res, out2, res2
 
 
