@@ -195,6 +195,27 @@ _FC0[K.F_Y_MAX] = -math.inf
 _WORKSPACES: dict[tuple, list[tuple]] = {}
 
 
+# the stepper's attributes for the arrays of ``_workspace``, in its order
+_WORKSPACE_FIELDS = (
+    "counters",
+    "figures",
+    "times",
+    "states",
+    "belt_wrench",
+    "contact_rows",
+    "resultant_rows",
+    "modal_forces",
+    "accelerations",
+    "deflection",
+    "deflection_rate",
+    "nodes",
+    "friction_prev",
+    "work",
+    "impact_rows",
+    "stage_rows",
+)
+
+
 def _workspace(n: int, m: int, n_el: int) -> tuple:
     """The arrays of one solve, in the order ``Stepper`` unpacks them."""
     s = K.N_STATES
@@ -283,24 +304,8 @@ class Stepper:
         arrays = pool.pop() if pool else None  # (list.pop: atomic under the GIL)
         if arrays is None:
             arrays = _workspace(n, m, model.n_el)
-        (
-            self.counters,
-            self.figures,
-            self.times,
-            self.states,
-            self.belt_wrench,
-            self.contact_rows,
-            self.resultant_rows,
-            self.modal_forces,
-            self.accelerations,
-            self.deflection,
-            self.deflection_rate,
-            self.nodes,
-            self.friction_prev,
-            self.work,
-            self.impact_rows,
-            self.stage_rows,
-        ) = arrays
+        for name, array in zip(_WORKSPACE_FIELDS, arrays, strict=True):
+            setattr(self, name, array)
         # kernel.solve zeroes the other state rows and the scratch arrays on its first call
         counters = self.counters
         counters[:] = _CTL0
@@ -500,26 +505,7 @@ class Stepper:
             return
         pool = _WORKSPACES.setdefault(self._key, [])
         if len(pool) < 4:
-            pool.append(
-                (
-                    self.counters,
-                    self.figures,
-                    self.times,
-                    self.states,
-                    self.belt_wrench,
-                    self.contact_rows,
-                    self.resultant_rows,
-                    self.modal_forces,
-                    self.accelerations,
-                    self.deflection,
-                    self.deflection_rate,
-                    self.nodes,
-                    self.friction_prev,
-                    self.work,
-                    self.impact_rows,
-                    self.stage_rows,
-                )
-            )
+            pool.append(tuple(getattr(self, name) for name in _WORKSPACE_FIELDS))
         self._key = None
 
     # -- a point integrated elsewhere --------------------------------------------------------
