@@ -233,19 +233,28 @@ def test_sigkill_keeps_every_closed_segment(ros_node, env, tmp_path):
     bag = tmp_path / "bag"
     meta = bag / "metadata.yaml"
 
-    def closed_clocks() -> int:
-        """/clock messages in the closed segments, as metadata.yaml lists them."""
+    def closed() -> tuple[int, int]:
+        """(files, /clock messages in the closed segments) as metadata.yaml lists them: the
+        closed segments and the open one."""
         try:
             info = yaml.safe_load(meta.read_text())["rosbag2_bagfile_information"]
             topics = info["topics_with_message_count"]
+            files = len(info["relative_file_paths"])
         except (OSError, TypeError, KeyError):
-            return 0
-        return sum(x["message_count"] for x in topics if x["topic_metadata"]["name"] == "/clock")
+            return 0, 0
+        clocks = (x["message_count"] for x in topics if x["topic_metadata"]["name"] == "/clock")
+        return files, sum(clocks)
+
+    def two_closed_segments(k: int) -> bool:
+        if k % 50:
+            return False
+        files, clocks = closed()
+        return files >= 3 and clocks >= 500
 
     with start_recorder(bag, env, segment=0.3) as proc:
         pubs = publishers(ros_node)
         wait_matched(ros_node, pubs, proc)
-        sent = publish(pubs, 20 * CLOCKS, stop=lambda k: k % 50 == 0 and closed_clocks() >= 500)
+        sent = publish(pubs, 20 * CLOCKS, stop=two_closed_segments)
         os.killpg(proc.pid, signal.SIGKILL)
         proc.wait(timeout=10)
         assert proc.returncode == -signal.SIGKILL
