@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fence_sorter.physics.params import ParameterError, SolverParams
 from fence_sorter.verification.accuracy import ATOL_PER_RTOL, SCENES
 
 REFERENCE_DIR = Path(__file__).resolve().parents[2] / "docs" / "accuracy" / "reference"
@@ -113,8 +114,16 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     for scene in args.scenes:
         if scene not in SCENES:
-            print(f"--scenes: unknown scene {scene!r}; one of {', '.join(SCENES)}")
-            return 2
+            ap.error(f"--scenes: unknown scene {scene!r}; one of {', '.join(SCENES)}")
+    if not args.scenes or not args.rtols:
+        ap.error("--scenes and --rtols need at least one value each")
+    for rtol in args.rtols:
+        try:  # solver.rtol's own range check
+            SolverParams(rtol=rtol, atol=rtol * ATOL_PER_RTOL).validate()
+        except ParameterError as exc:
+            ap.error(f"--rtols: {exc}")
+    if args.repeats < 1:
+        ap.error(f"--repeats must be >= 1, got {args.repeats}")
     points = []
     for scene in args.scenes:
         ref = reference_peak(scene)

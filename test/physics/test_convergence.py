@@ -38,3 +38,22 @@ def test_peak_force_error_falls_100x_from_rtol_1e4_to_1e7_on_a_stiff_fence(scene
     assert monotone, f"{scene}: errors {errors} not monotone within 2x"
     steps = [p.steps for p in points]
     assert all(a < b for a, b in zip(steps, steps[1:], strict=False)), steps
+
+
+@pytest.mark.parametrize(
+    ("args", "names"),
+    [
+        (["--rtols", "5"], "solver.rtol must be in [1e-13, 0.1]"),
+        (["--rtols"], "--rtols need at least one value"),
+        (["--repeats", "0"], "--repeats must be >= 1"),
+        (["--scenes", "nope"], "unknown scene 'nope'"),
+    ],
+)
+def test_bad_options_exit_2_with_one_line_naming_them(args, names, capsys) -> None:
+    from fence_sorter.verification.convergence import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(args)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert names in err
