@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from fence_sorter.physics.dense import hermite
 from fence_sorter.physics.params import ParameterError
 from fence_sorter.resources import find_data
 
@@ -385,19 +386,6 @@ def _instants(t0: float, t1: float, rate: float) -> np.ndarray:
     """The sample instants k / rate with floor(t0 rate) < k <= floor(t1 rate): consecutive
     intervals (t0, t1] of a state stream yield each instant once."""
     return np.arange(math.floor(t0 * rate) + 1, math.floor(t1 * rate) + 1) / rate
-
-
-def hermite(t: np.ndarray, t0: float, t1: float, y0: float, y1: float, v0: float, v1: float):
-    """Cubic Hermite interpolation of a quantity with values y and rates v at t0 and t1."""
-    h = t1 - t0
-    s = (np.asarray(t) - t0) / h
-    s2, s3 = s * s, s * s * s
-    return (
-        (2 * s3 - 3 * s2 + 1) * y0
-        + (s3 - 2 * s2 + s) * h * v0
-        + (-2 * s3 + 3 * s2) * y1
-        + (s3 - s2) * h * v1
-    )
 
 
 @dataclass(frozen=True)

@@ -8,8 +8,10 @@ is one physics :class:`~fence_sorter.physics.simulate.Scenario` (the parcel, Dri
 t1, R_s) with R_s the front position at the start, the line's conveyor/fence/contact/solver)
 stepped by its :class:`~fence_sorter.physics.stepper.Stepper` in step with the line clock,
 so the event is integrated as sim time passes, never precomputed. The solve runs on after the
-parcel is sorted until the fence cycle ends (the fence shape comes from it); a parcel that is not
-sorted stays in its solve to the solver's end (2 t1 + settle_time) and then rides on.
+parcel is sorted to the solver's end (2 t1 + settle_time): the fence shape comes from it through
+the cycle and the ring-down after it, until the next stroke starts (its solve starts with the
+fence at rest). A parcel that is not sorted stays in its solve to the solver's end and then
+rides on.
 
 Every parcel gets exactly one :class:`Outcome`. Not modelled: parcel-parcel contact and the
 fence acting on any parcel other than its stroke's; a parcel inside the fence's swept sector
@@ -19,6 +21,7 @@ during another parcel's stroke is reported as :class:`OverlapWarning`.
 from __future__ import annotations
 
 import bisect
+import functools
 import math
 import time
 from dataclasses import dataclass, replace
@@ -35,8 +38,14 @@ from fence_sorter.inputs import (
     validate_parcel,
 )
 from fence_sorter.physics import kernel as K
+from fence_sorter.physics.dense import hermite
 from fence_sorter.physics.drive import drive_state
-from fence_sorter.physics.fence import FenceParams, build_fence, node_positions
+from fence_sorter.physics.fence import (
+    FenceParams,
+    build_fence,
+    natural_frequencies,
+    node_positions,
+)
 from fence_sorter.physics.params import (
     OUR_METHODS,
     ContactParams,
@@ -67,6 +76,9 @@ from .types import (
 
 #: nodes drawn along a stiff fence (it has no FEM mesh)
 STIFF_NODES = 11
+#: the largest step of a flexible fence's solve on the line, omega_1 h [rad] (below 0.2 the
+#: trapezoid's period error of the first mode, (omega_1 h)^2 / 12, stays within 1/300)
+RING_STEP = 0.2
 #: a parcel corner this far inside the swept sector counts as overlapping [m]
 OVERLAP_TOL = 1e-3
 
@@ -232,7 +244,10 @@ class _Tap:
             del self.points[:i]
 
     def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """State vector and extras linearly interpolated at local time ``t`` (clamped)."""
+        """State vector and extras at local time ``t`` (clamped): every position of the state
+        (C_s, yaw, the modal coordinates) by cubic Hermite interpolation with its rate (a
+        fence ringing at tens of Hz between adaptive steps of up to dt_max is followed to
+        O(h^4)), the rates and the extras linearly."""
         ts, pts = self.ts, self.points
         i = bisect.bisect_right(ts, t)
         if i >= len(ts):
@@ -246,7 +261,19 @@ class _Tap:
         w = (t - t0) / (t1 - t0)
         e = e0 + w * (e1 - e0)
         e[HELD:] = e0[HELD:]  # stage and N_stiff: the point at or before t
-        return y0 + w * (y1 - y0), e
+        y = y0 + w * (y1 - y0)
+        pos, rate = _position_rate_index(len(y0))
+        y[pos] = hermite(t, t0, t1, y0[pos], y1[pos], y0[rate], y1[rate])
+        return y, e
+
+
+@functools.lru_cache(maxsize=8)
+def _position_rate_index(n_state: int) -> tuple[np.ndarray, np.ndarray]:
+    """Indices of the positions of a state [x, y, phi, vx, vy, phidot, eta, etadot] and of
+    their rates."""
+    n = (n_state - 6) // 2
+    pos = np.r_[0:3, 6 : 6 + n]
+    return pos, pos + np.r_[[3] * 3, [n] * n].astype(int)
 
 
 class _Stroke:
@@ -397,6 +424,12 @@ class SortingLine:
         # solver's wall-clock limit (the pacer reports a slow one), so lift it to its maximum
         # (see docs/simulator.md)
         solver = replace(config.solver, stop_when_sorted=False, max_wall_time=3600.0)
+        self.fem = build_fence(config.fence) if config.fence is not None else None
+        if self.fem is not None:
+            # the fence's state is published (the sensors' truth): steps resolve its first
+            # mode, a trapezoid's period error (omega_1 h)^2 / 12 within 1/300
+            omega_1 = 2.0 * math.pi * float(natural_frequencies(self.fem, 1)[0])
+            solver = replace(solver, dt_max=min(solver.dt_max, RING_STEP / omega_1))
         self.config = replace(config, solver=solver)
         self.t = float(t0)
         self.v = config.conveyor.belt_speed
@@ -405,7 +438,6 @@ class SortingLine:
         self.strokes: list[_Stroke] = []
         self._build_cost = 0.0  # wall time of the costliest recent stroke build [s] (prefetch)
         self.events: list[LineEvent] = []
-        self.fem = build_fence(config.fence) if config.fence is not None else None
         self._rest_s = (
             np.asarray(self.fem.node_s, dtype=float)
             if self.fem is not None
@@ -636,7 +668,13 @@ class SortingLine:
             p.rear_offset = min(c[0] for c in world_corners(p.body, 0.0, 0.0, p.yaw))
             p.stroke = None
             p.passed = True
-        if p.outcome is not None and t - s.t_start >= s.t_cycle - 1e-12:
+        # past its cycle a stroke whose parcel has its outcome only rings the fence down: it
+        # ends with its solve or when the next stroke starts (that solve starts at rest)
+        if (
+            p.outcome is not None
+            and t - s.t_start >= s.t_cycle - 1e-12
+            and (not s.alive or self.strokes[-1] is not s)
+        ):
             if s.alive:
                 s.close()
             self.strokes.remove(s)
@@ -763,12 +801,13 @@ class SortingLine:
         if s is not None:
             pid = s.parcel.spec.parcel_id
             t_local = t - s.t_start
+            # the drive is prescribed: its angle exactly, not interpolated between steps
+            d = drive_state(s.sc.drive, t_local)
             if s.alive and s.tap.cur is not None and s.model.flexible:
-                y, extra = at[id(s)] = s.tap.at(t_local)
+                y, _ = at[id(s)] = s.tap.at(t_local)
                 w_free = (s.model.phi @ y[6 : 6 + s.model.n_modes]).tolist()
-                fence = (float(extra[0]), float(extra[1]), float(extra[2]), w_free, pid, True)
+                fence = (d.alpha, d.rate, d.accel, w_free, pid, True)
             else:
-                d = drive_state(s.sc.drive, t_local)
                 fence = (d.alpha, d.rate, d.accel, None, pid, s.alive)
         parcels = []
         for p in self.parcels.values():
@@ -803,9 +842,11 @@ class SortingLine:
         return LineSnapshot(cap.t, self._render_fence(cap.fence), parcels)
 
     def _fence_stroke(self) -> _Stroke | None:
+        """The stroke the fence's state comes from: the last one started, during its cycle
+        and, while its solve runs on (to 2 t1 + settle_time), through the ring-down after it."""
         owner = None
         for s in self.strokes:
-            if 0.0 <= self.t - s.t_start <= s.t_cycle:
+            if 0.0 <= self.t - s.t_start and (self.t - s.t_start <= s.t_cycle or s.alive):
                 owner = s
         return owner
 
