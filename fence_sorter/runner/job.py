@@ -16,7 +16,13 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from fence_sorter.nodes.parameters import ParamOverrideError, ParamValue, parse_override, ros_value
+from fence_sorter.nodes.parameters import (
+    NODE_PARAMETERS,
+    ParamOverrideError,
+    ParamValue,
+    parse_override,
+    ros_value,
+)
 from fence_sorter.physics.params import ParameterError
 from fence_sorter.resources import data_path
 from fence_sorter.runner.monitor import Records
@@ -53,6 +59,10 @@ MAX_CONTROLLER_RESTARTS = 3
 #: sampling faster interpolates between states (docs/calibration.md); the sensors node and the
 #: recorder keep up with it on a loaded 2-CPU machine at rtf 1, not with 1 kHz
 MAX_STATE_RATE = 250.0
+#: the upper end of the simulator's publish_rate parameter [Hz of wall time when paced]
+MAX_PUBLISH_RATE = next(
+    s.max_value for s in NODE_PARAMETERS["simulator"] if s.name == "publish_rate"
+)
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 #: the node logs of a run without --log-dir
@@ -169,6 +179,15 @@ def prepare(opts: RunOptions) -> Plan:
         rates = [spec["encoder"]["rate"], spec["camera"]["rate"]]
         rates += [spec["strain"]["rate"]] if spec["strain"] and base.fence is not None else []
         state_rate = min(max(rates), MAX_STATE_RATE)
+        # paced, so the sensors node takes every state: unpaced the simulator publishes
+        # faster than it can, and past MAX_PUBLISH_RATE / state_rate the state is too sparse
+        rtf_max = MAX_PUBLISH_RATE / state_rate
+        if not 0.0 < opts.rtf <= rtf_max:
+            raise BadInput(
+                f"--rtf must be in (0, {rtf_max:g}] with --sensors {opts.sensors} (the state at "
+                f"{state_rate:g} Hz of sim time, at most {MAX_PUBLISH_RATE:g} Hz of wall time), "
+                f"got {opts.rtf:g}"
+            )
     sim_duration = START_DELAY + stream[-1].arrival_time + (LINE_END_X - SCAN_LINE_X) / v + 5.0
     try:
         domain = choose_domain(opts.domain)
@@ -193,7 +212,7 @@ def prepare(opts: RunOptions) -> Plan:
 def state_publish_rate(state_rate: float, rtf: float) -> float:
     """The simulator's publish_rate for ``state_rate`` Hz of sim time: wall Hz when paced (sim
     Hz x rtf), sim Hz when unpaced; within the parameter's [1, 1000]."""
-    return min(max(state_rate * rtf if rtf > 0.0 else state_rate, 1.0), 1000.0)
+    return min(max(state_rate * rtf if rtf > 0.0 else state_rate, 1.0), MAX_PUBLISH_RATE)
 
 
 def _sensors_truth(opts: RunOptions, scene_path: Path, base, stream) -> tuple[Path, dict]:

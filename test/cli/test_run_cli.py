@@ -17,6 +17,12 @@ from fence_sorter.testing import run_cli, wait_until
         (["--parcels", "0"], "--parcels must be in [1, inf), got 0"),
         (["--rtf", "-1"], "--rtf must be in [0, 100] (0: unpaced), got -1.0"),
         (["--scene", "nope"], "scene nope: no such file or shipped scene"),
+        (
+            ["--sensors", "camera60", "--rtf", "0"],
+            "--rtf must be in (0, 4] with --sensors camera60 (the state at 250 Hz of sim time, "
+            "at most 1000 Hz of wall time), got 0",
+        ),
+        (["--sensors", "camera25", "--rtf", "6"], "--rtf must be in (0, 5] with --sensors"),
         (["--stream", "nope"], "stream nope: file not found"),
         (["--rrd", "x.txt"], "--rrd must be a .rrd file in an existing directory, got x.txt"),
         (["--rrd", "/nonexistent/x.rrd"], "--rrd must be a .rrd file in an existing directory"),
