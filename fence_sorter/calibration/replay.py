@@ -30,6 +30,9 @@ ALIASES = {key: name for name, (key, _, _) in PARAMETERS.items()}
 
 #: seconds of track after the stroke ends (2 t1) that a replay covers
 SETTLE = 0.2
+#: a replay's implicit-step iterations: enough that a step converges instead of being
+#: rejected and halved, a discrete choice that would make the track jump as parameters move
+REPLAY_ITERATIONS = 40
 
 
 class ReplayError(RuntimeError):
@@ -88,13 +91,15 @@ class ParcelEvent:
 def event_scenario(base: Scenario, ev: ParcelEvent) -> Scenario:
     """The scene's physics with this parcel, this stroke, a fixed end and the series a track
     needs; a fixed-step trapezoidal solve, so a track is a smooth function of the parameters
-    (adaptive step sequences would change with them and spoil finite differences)."""
+    (adaptive step sequences would change with them and spoil finite differences), with
+    REPLAY_ITERATIONS so that no step is rejected for want of iterations."""
     # the first replay of a process may compile the kernel inside the solve's wall-time
     # budget (minutes on a loaded machine); divergence is caught by the solver's other checks
     solver = replace(
         base.solver,
         max_wall_time=max(base.solver.max_wall_time, 900.0),
         method="trapezoidal",
+        max_iterations=max(base.solver.max_iterations, REPLAY_ITERATIONS),
         stop_when_sorted=False,
         t_end=ev.t_end,
     )

@@ -570,7 +570,12 @@ def solve(model, state, max_attempts, t_target):
                 # the event (at an onset the approach's time_to_contact) times tol_scale
                 figures[F_H] = _snap(h_nom, h_try * tol_scale)
         else:
-            figures[F_H] = min(h_nom, 2.0 * h_try)
+            # a fixed step regrows from a rejection's halving, not from a step the drive's
+            # breakpoint cut short: after the breakpoint the grid goes on at h_nom from it, so
+            # the solution is continuous in the parameters that move the grid's phase (event
+            # times) as the cut step shrinks to zero, without a run of doubling steps that
+            # appears or vanishes with it
+            figures[F_H] = min(h_nom, 2.0 * figures[F_H])
         if located and kind == EVENT_STICK and contacts[b, slot, C_SLACK] > 0.0:
             _consistent_stick(
                 params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings,
