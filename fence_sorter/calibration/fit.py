@@ -15,7 +15,9 @@ Steps (docs/calibration.md):
 3. **Judge.** The covariance of the estimate over the parameters and the camera frame is the
    M-estimator's sandwich with each channel's noise level re-estimated from its residuals
    (:func:`_covariance`), the Jacobian by central differences over +- 1 sd
-   (:meth:`_Problem.secant_jac`); 95 % intervals exp(z +- 1.96 sd) and the correlation matrix. A
+   (:meth:`_Problem.secant_jac`), the strokes' encoder errors carried in as known nuisance
+   parameters (:func:`stroke_covariance`, :meth:`_Problem.stroke_derivatives`); 95 %
+   intervals exp(z +- 1.96 sd) and the correlation matrix. A
    parameter whose interval spans more than a factor exp(2 ``max_log_halfwidth``) (or that
    ends on a bound) is flagged as not identifiable by this data, fixed at the scene's value,
    and the others are refitted without it.
@@ -30,7 +32,7 @@ import os
 import resource
 import time
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -40,7 +42,7 @@ from fence_sorter.physics.simulate import Scenario
 
 from .bag import MeasuredBag
 from .replay import PARAMETERS, ParcelEvent, ReplayError, replay, scene_value
-from .sensors import camera_to_sorter, geometric_centre, sorter_to_camera
+from .sensors import camera_to_sorter, drive_angle, geometric_centre, sorter_to_camera
 
 Z95 = 1.959964
 #: seconds before a stroke where the root moment is read as the gauge's noise
@@ -157,6 +159,30 @@ def noise_levels(base: Scenario, eds: list[EventData], offset) -> tuple[float, f
     )
 
 
+#: a stroke's parameters as fitted from the drive encoder (:func:`~.bag.fit_stroke`)
+STROKE_FIELDS = ("t_start", "alpha_k", "t1")
+
+
+def stroke_covariance(enc_t: np.ndarray, enc_angle: np.ndarray, ev: ParcelEvent,
+                      noise: float) -> np.ndarray:  # fmt: skip
+    """Covariance of ``ev``'s (t_start, alpha_k, t1) as fitted from the encoder samples
+    (``noise``: their RMS about the fitted strokes [rad]): noise^2 (J^T J)^-1, J the drive
+    law's (:func:`~.sensors.drive_angle`) derivatives at the samples (central differences;
+    samples outside the stroke have none). Zero without samples in the stroke (the stroke as
+    commanded, taken as known)."""
+    t = enc_t[(enc_t >= ev.t_start) & (enc_t <= ev.t_start + 2.0 * ev.t1)]
+    if t.size < 2 * len(STROKE_FIELDS):
+        return np.zeros((3, 3))
+    cols = []
+    for name in STROKE_FIELDS:
+        h = 1e-7 * (1.0 if name == "t_start" else abs(getattr(ev, name)))
+        plus = replace(ev, **{name: getattr(ev, name) + h})
+        minus = replace(ev, **{name: getattr(ev, name) - h})
+        cols.append((drive_angle([plus], t) - drive_angle([minus], t)) / (2.0 * h))
+    j = np.column_stack(cols)
+    return noise**2 * np.linalg.pinv(j.T @ j)
+
+
 def predict(base: Scenario, ed: EventData, values: dict[str, float]):
     """The twin's replay sampled where this parcel was measured: x, y, yaw, moment."""
     tr = replay(base, ed.ev, values)
@@ -187,15 +213,38 @@ def _predict_all(base: Scenario, eds: list[EventData], idx, values_list):
     return out
 
 
-def _run_chunk(idx: list[int], values_list: list[dict[str, float]]):
-    """:func:`_predict_all` of the parcels this worker process holds (:func:`_init_worker`)."""
-    return _predict_all(_WORKER["base"], _WORKER["eds"], idx, values_list)
+def _predict_strokes(base: Scenario, eds: list[EventData], idx, values, widths):
+    """Per parcel of ``idx``, its predictions with each stroke parameter (STROKE_FIELDS) moved
+    by + and - its width (``widths`` by parcel id; six: start +-, alpha_k +-, t1 +-), or the
+    message of the first replay that failed. A later start samples the same replay earlier."""
+    out = []
+    for i in idx:
+        ed = eds[i]
+        dt0, dak, dt1 = widths[ed.ev.parcel_id]
+        try:
+            tr = replay(base, ed.ev, values)
+            row = []
+            for d in (dt0, -dt0):
+                row.append((*tr.pose_at(ed.cam_tau - d), tr.moment_at(ed.str_tau - d)))
+            for name, w in (("alpha_k", dak), ("t1", dt1)):
+                for d in (w, -w):
+                    ev = replace(ed.ev, **{name: getattr(ed.ev, name) + d})
+                    row.append(predict(base, replace(ed, ev=ev), values))
+        except ReplayError as exc:
+            return str(exc)
+        out.append(row)
+    return out
 
 
-def _run_detached(base: Scenario, eds: list[EventData], values_list):
-    """:func:`_predict_all` of every parcel of ``eds``, for a worker that holds none (a Dask
-    cluster's)."""
-    return _predict_all(base, eds, range(len(eds)), values_list)
+def _run_chunk(task, idx: list[int], *args):
+    """``task`` (:func:`_predict_all`, :func:`_predict_strokes`) on the parcels this worker
+    process holds (:func:`_init_worker`)."""
+    return task(_WORKER["base"], _WORKER["eds"], idx, *args)
+
+
+def _run_detached(task, base: Scenario, eds: list[EventData], *args):
+    """``task`` on every parcel of ``eds``, for a worker that holds none (a Dask cluster's)."""
+    return task(base, eds, range(len(eds)), *args)
 
 
 #: how parcels' replays are run in parallel: ``processes`` (a pool of forked processes),
@@ -262,38 +311,56 @@ class Evaluator:
         self._stack.close()
         self.pool = None
 
-    def _parts(self, values_list) -> list:
+    def _parts(self, task, *args) -> list:
+        """``task``'s result per chunk of parcels (``args`` after the chunk's indices)."""
         if "://" in self.scheduler:
             futures = [
-                self.pool.submit(_run_detached, self.base, [self.eds[i] for i in c], values_list)
+                self.pool.submit(_run_detached, task, self.base, [self.eds[i] for i in c], *args)
                 for c in self.chunks
             ]
             return [f.result() for f in futures]
         if self.scheduler == "dask":
             import dask
 
-            tasks = [dask.delayed(_run_chunk, pure=False)(c, values_list) for c in self.chunks]
+            tasks = [dask.delayed(_run_chunk, pure=False)(task, c, *args) for c in self.chunks]
             if self.pool is None:
                 return list(dask.compute(*tasks, scheduler="synchronous"))
             return list(dask.compute(*tasks, scheduler="processes", pool=self.pool))
         if self.pool is None:
-            return [_run_chunk(c, values_list) for c in self.chunks]
-        futures = [self.pool.submit(_run_chunk, c, values_list) for c in self.chunks]
+            return [_run_chunk(task, c, *args) for c in self.chunks]
+        futures = [self.pool.submit(_run_chunk, task, c, *args) for c in self.chunks]
         return [f.result() for f in futures]
 
-    def __call__(self, values_list: list[dict[str, float]]):
-        """Per parameter set, the list (per event) of predictions."""
-        parts = self._parts(values_list)
-        out = [[None] * len(self.eds) for _ in values_list]
+    def _gather(self, parts, rows: int) -> list:
+        """Per row of the chunks' results, the list over every parcel; FitError on a failure."""
+        out = [[None] * len(self.eds) for _ in range(rows)]
         for chunk, part in zip(self.chunks, parts, strict=True):
             if isinstance(part, str):
                 raise FitError(part)
             for j, row in enumerate(part):
                 for i, pred in zip(chunk, row, strict=True):
                     out[j][i] = pred
-        self.replays += len(values_list) * len(self.eds)
+        return out
+
+    def _count(self, replays: int) -> None:
+        self.replays += replays
         if self.on_replays is not None:
-            self.on_replays(len(values_list) * len(self.eds))
+            self.on_replays(replays)
+
+    def __call__(self, values_list: list[dict[str, float]]):
+        """Per parameter set, the list (per event) of predictions."""
+        out = self._gather(self._parts(_predict_all, values_list), len(values_list))
+        self._count(len(values_list) * len(self.eds))
+        return out
+
+    def strokes(self, values: dict[str, float], widths) -> list:
+        """Per parcel, its six predictions of :func:`_predict_strokes` (``widths``: per parcel,
+        the steps of its start, alpha_k and t1)."""
+        by_id = {ed.ev.parcel_id: tuple(w) for ed, w in zip(self.eds, widths, strict=True)}
+        parts = self._parts(_predict_strokes, values, by_id)
+        (out,) = self._gather([p if isinstance(p, str) else [p] for p in parts], 1)
+        self._count(5 * len(self.eds))
+        return out
         return out
 
 
@@ -494,9 +561,9 @@ class _Problem:
     def secant_jac(self, z, widths) -> np.ndarray:
         """The Jacobian by central differences over +- ``widths`` (log parameter; one-sided
         where a bound is nearer), the camera columns as in :meth:`jac`: the slope over the
-        interval's own scale. The replays' response to a contact parameter is piecewise
-        smooth, with small steps that a 1e-4 difference can straddle, which makes that
-        column, and the interval, far off; a difference across +- 1 sd averages over them."""
+        interval's own scale, where the linearisation the interval rests on has to hold (a
+        1e-4 difference gives the slope at the estimate alone, and straddles any step left
+        in the replays' response)."""
         z = np.asarray(z, dtype=float)
         lo, hi = self.bounds()
         plus, minus = [], []
@@ -513,6 +580,27 @@ class _Problem:
             fm = weighted(self.eds, preds[self.k + j], off, self.sigma)
             jac[:, j] = (fp - fm) / (plus[j][j] - minus[j][j])
         return jac
+
+    def stroke_derivatives(self, z, covariances):
+        """Per parcel, (D, C): the residuals' derivatives by its stroke's STROKE_FIELDS
+        (central differences over +- 1 sd, one parallel batch) and their covariance
+        ``covariances[i]``; for :func:`_covariance`'s ``nuisance``."""
+        widths = [np.sqrt(np.maximum(np.diag(c), 0.0)) for c in covariances]
+        moved = self.evaluate.strokes(self.values(z), widths)
+        base, off = list(self.preds(z)), tuple(z[self.k :])
+        for i, (w, c) in enumerate(zip(widths, covariances, strict=True)):
+            cols = []
+            for j, wj in enumerate(w):
+                if wj <= 0.0:
+                    cols.append(np.zeros(self.fun(z).size))
+                    continue
+                f = []
+                for p in moved[i][2 * j : 2 * j + 2]:
+                    preds = base.copy()
+                    preds[i] = p
+                    f.append(weighted(self.eds, preds, off, self.sigma))
+                cols.append((f[0] - f[1]) / (2.0 * wj))
+            yield np.column_stack(cols), c
 
     def bounds(self):
         lo = [math.log(PARAMETERS[n][1]) for n in self.names] + [-np.inf] * 3
@@ -566,7 +654,9 @@ def _rms(r: np.ndarray) -> float:
     return float(np.sqrt(np.mean(r**2))) if r.size else math.nan
 
 
-def _covariance(jac: np.ndarray, r: np.ndarray, sizes: tuple[int, ...], f_scale: float):
+def _covariance(
+    jac: np.ndarray, r: np.ndarray, sizes: tuple[int, ...], f_scale: float, nuisance=()
+):
     """Covariance of the robust (``soft_l1``, scale ``f_scale``) estimate, each channel's
     noise level re-estimated from its residuals.
 
@@ -581,7 +671,13 @@ def _covariance(jac: np.ndarray, r: np.ndarray, sizes: tuple[int, ...], f_scale:
     channel with the most samples would set. Returns the covariance (a parameter in a null
     direction of J gets an infinite variance), the singular values of sqrt(a) J and each
     channel's variance factor sum r^2 / dof (its noise level is the assumed one times the
-    root of it)."""
+    root of it).
+
+    ``nuisance``: pairs (D, C) of parameters fitted elsewhere and taken as known here (a
+    stroke's start, alpha_k and t1 from the encoder), D the residuals' derivatives by them, C
+    their covariance. An error e in them moves the estimate by G e with G = -A^-1 J^T diag(a)
+    D (the estimating equation J^T psi(r + J dz + D e) = 0 to first order), which adds
+    G C G^T to the covariance."""
     u2 = (r / f_scale) ** 2
     psi, dpsi = r / np.sqrt(1.0 + u2), (1.0 + u2) ** -1.5
     a_rows, b_rows = np.ones(r.size), np.ones(r.size)
@@ -602,6 +698,10 @@ def _covariance(jac: np.ndarray, r: np.ndarray, sizes: tuple[int, ...], f_scale:
         b_rows[lo:hi] = float(psi[lo:hi] @ psi[lo:hi]) / dof
         factors.append(float(r[lo:hi] @ r[lo:hi]) / dof)
     cov = a_inv @ ((jac.T * b_rows) @ jac) @ a_inv
+    jt_a = jac.T * a_rows
+    for d, c in nuisance:
+        g = a_inv @ (jt_a @ d)
+        cov += g @ c @ g.T
     for k in np.flatnonzero(~keep):
         for j in np.flatnonzero(np.abs(vt[k]) > 1e-3):
             cov[j, j] = np.inf
@@ -632,6 +732,9 @@ def calibrate(
             f"calibration needs at least {min_parcels}"
         )
     sigma = noise_levels(base, eds, offset0)
+    stroke_cov = [
+        stroke_covariance(mb.m.enc_t, mb.m.enc_angle, ed.ev, mb.encoder_rms) for ed in eds
+    ]
     n_cam = sum(ed.cam_tau.size for ed in eds)
     sizes = (2 * n_cam, n_cam, sum(ed.str_tau.size for ed in eds))
     prior = {n: float(scene_value(base, n)) for n in names}
@@ -650,7 +753,9 @@ def calibrate(
             # the interval from the slope over +- 1 sd of each parameter
             sd = np.nan_to_num(np.sqrt(np.diag(cov))[: len(active)], nan=0.1, posinf=0.1)
             jac = prob.secant_jac(sol.x, np.clip(sd, FD_STEP, 0.1))
-            cov, sv, factors = _covariance(jac, r, sizes, F_SCALE)
+            cov, sv, factors = _covariance(
+                jac, r, sizes, F_SCALE, prob.stroke_derivatives(sol.x, stroke_cov)
+            )
             sd = np.sqrt(np.diag(cov))
             lo, hi = prob.bounds()
             bad = {}
@@ -679,8 +784,9 @@ def calibrate(
         raw = channels(eds, preds, offset)
         levels = tuple(sg * math.sqrt(f) for sg, f in zip(sigma, factors, strict=True))
         boot = _bootstrap(
-            evaluate, eds, preds, active, fixed, levels, sol.x, bootstrap, seed, max_nfev
-        )
+            evaluate, eds, preds, active, fixed, levels, sol.x, bootstrap, seed, max_nfev,
+            stroke_cov,
+        )  # fmt: skip
     finally:
         evaluate.close()
     estimates = []
@@ -737,9 +843,13 @@ def calibrate(
     )
 
 
-def _bootstrap(evaluate, eds, preds, active, fixed, sigma, z_hat, count, seed, max_nfev):
+def _bootstrap(
+    evaluate, eds, preds, active, fixed, sigma, z_hat, count, seed, max_nfev, stroke_cov
+):
     """Parametric bootstrap: ``count`` refits to the twin's prediction at the estimate plus
-    fresh noise of the estimated levels at the measured sample times; percentile intervals."""
+    fresh noise of the estimated levels at the measured sample times, each refit replaying
+    strokes off by a fresh draw of their encoder errors (``stroke_cov``, per parcel: the
+    covariance of start, alpha_k, t1); percentile intervals."""
     if not count or not active:
         return {}
     rng = np.random.default_rng(seed)
@@ -747,21 +857,29 @@ def _bootstrap(evaluate, eds, preds, active, fixed, sigma, z_hat, count, seed, m
     draws = []
     for _ in range(count):
         fake = []
-        for ed, (x, y, a, mz) in zip(eds, preds, strict=True):
+        for ed, (x, y, a, mz), c in zip(eds, preds, stroke_cov, strict=True):
             cx, cy, ca = sorter_to_camera(offset, x, y, a)
+            d0, dak, dt1 = rng.multivariate_normal(np.zeros(3), c)
+            ev = replace(ed.ev, t_start=ed.ev.t_start + d0, alpha_k=ed.ev.alpha_k + dak,
+                         t1=ed.ev.t1 + dt1)  # fmt: skip
             fake.append(
                 EventData(
-                    ed.ev,
-                    ed.cam_tau,
+                    ev,
+                    ed.cam_tau - d0,
                     cx + rng.normal(0, sigma[0], x.size),
                     cy + rng.normal(0, sigma[0], y.size),
                     ca + rng.normal(0, sigma[1], a.size),
-                    ed.str_tau,
+                    ed.str_tau - d0,
                     mz + rng.normal(0, sigma[2], mz.size),
                 )
             )
-        prob = _Problem(evaluate, fake, active, fixed, sigma)
-        draws.append(_solve(prob, z_hat, max_nfev).x)
+        # the refit's replays need the moved strokes: a pool of processes that holds them
+        with contextlib.closing(
+            Evaluator(evaluate.base, fake, evaluate.workers, evaluate.scheduler)
+        ) as moved:
+            prob = _Problem(moved, fake, active, fixed, sigma)
+            draws.append(_solve(prob, z_hat, max_nfev).x)
+            evaluate.replays += moved.replays
     draws = np.array(draws)
     out = {}
     for j, n in enumerate(active):
