@@ -136,7 +136,18 @@ def render(report: dict, command: str, commit: str) -> str:
                          f"| {cov['median_rel_halfwidth'][n] * 100:.2g} % |")  # fmt: skip
         lines += ["", "z = log(estimate / truth) / sd, sd the standard deviation of "
                   "log(value) the interval is built from: RMS 1 for intervals of the right "
-                  "width.", ""]  # fmt: skip
+                  "width. Per seed (**bold**: the truth outside the interval, |z| > 1.96; "
+                  f"the first {k} rows are the first {k} seeds):", "",
+                  "| seed | " + " | ".join(TRUTH) + " |",
+                  "| --- |" + " --- |" * len(TRUTH)]  # fmt: skip
+        for r in cov["rows"]:
+            cells = []
+            for n in TRUTH:
+                z = r[n]["z"]
+                cell = "-" if z is None else f"{z:+.2f}"
+                cells.append(cell if r[n]["inside"] else f"**{cell}**")
+            lines.append(f"| {r['seed']} | " + " | ".join(cells) + " |")
+        lines.append("")
     flag = report.get("flag")
     if flag:
         lines += ["**Identifiability** (`arbitrary_stiff`, `border` stream, 4 parcels, "

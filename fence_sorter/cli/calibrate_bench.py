@@ -37,6 +37,11 @@ def register(subparsers) -> None:
         "--doc", metavar="FILE", help="fill the generated section of FILE (docs/calibration.md)"
     )
     parser.add_argument("--json", metavar="FILE", help="write the figures as JSON")
+    parser.add_argument(
+        "--from-json",
+        metavar="FILE",
+        help="render the figures of an earlier --json FILE (with its command and commit)",
+    )
     parser.set_defaults(func=run)  # fmt: skip
 
 
@@ -57,6 +62,30 @@ def run(args: argparse.Namespace) -> int:
         check_scheduler(args.scheduler)
     except CalibrationInputError as exc:
         return error(str(exc))
+    if args.from_json:
+        try:
+            report = json.loads(Path(args.from_json).read_text(encoding="utf-8"))
+            command, commit = report["command"], report["commit"]
+        except (OSError, ValueError, KeyError) as exc:
+            return error(f"--from-json {args.from_json}: not a calibrate-bench JSON ({exc})")
+    else:
+        report = measure(bench, args)
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
+                                text=True, check=False).stdout.strip() or "unknown"  # fmt: skip
+        command = "nice -n 10 fence-sorter calibrate-bench " + " ".join(sys.argv[2:])
+        report.update(command=command.strip(), commit=commit)
+    section = bench.render(report, command.strip(), commit)
+    if args.json and not args.from_json:
+        Path(args.json).write_text(json.dumps(report, indent=1, default=str), encoding="utf-8")
+    if args.doc:
+        bench.write_doc(Path(args.doc), section)
+    print(section)
+    return 0
+
+
+def measure(bench, args: argparse.Namespace) -> dict:
+    """The figures of ``bench`` (the calibration's benchmark module): coverage over the
+    seeds, the flagged case, the timing."""
     report: dict = {}
     run_kw = {"workers": args.workers, "scheduler": args.scheduler}
     if args.seeds:
@@ -66,13 +95,4 @@ def run(args: argparse.Namespace) -> int:
     report["flag"] = bench.flag_case(**run_kw)
     if args.timing_parcels:
         report["timing"] = bench.timing(args.timing_parcels, **run_kw)
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
-                            text=True, check=False).stdout.strip() or "unknown"  # fmt: skip
-    command = "nice -n 10 fence-sorter calibrate-bench " + " ".join(sys.argv[2:])
-    section = bench.render(report, command.strip(), commit)
-    if args.json:
-        Path(args.json).write_text(json.dumps(report, indent=1, default=str), encoding="utf-8")
-    if args.doc:
-        bench.write_doc(Path(args.doc), section)
-    print(section)
-    return 0
+    return report

@@ -1,10 +1,13 @@
 """`fence-sorter calibrate-bench` refuses bad options before any work: exit 2, one line
-naming the option and its allowed range."""
+naming the option and its allowed range; --from-json renders an earlier run's figures."""
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
+from fence_sorter.calibration.bench import BEGIN, END, TRUTH
 from fence_sorter.cli import main as cli_main
 
 
@@ -23,3 +26,40 @@ def test_bad_option_exits_2_naming_it(capsys, option, value, allowed) -> None:
     assert code == 2
     assert len(err) == 1
     assert option in err[0] and allowed in err[0] and value in err[0]
+
+
+def _row(seed: int, z: float) -> dict:
+    est = {"value": 1.0, "ci95": [0.9, 1.1], "inside": abs(z) <= 1.96, "z": z,
+           "verdict": "identified"}  # fmt: skip
+    return {"seed": seed, **{n: est for n in TRUTH}}
+
+
+def test_from_json_renders_the_measured_figures_with_their_command(tmp_path, capsys) -> None:
+    """--from-json renders an earlier run's figures (command, commit, per-seed z with the
+    misses in bold) into the doc's generated section, and nothing else of the doc."""
+    n = len(TRUTH)
+    report = {
+        "command": "nice -n 10 fence-sorter calibrate-bench --seeds 2",
+        "commit": "abc1234",
+        "coverage": {"seeds": 2, "parcels": 8, "share_inside": dict.fromkeys(TRUTH, 0.5),
+                     "share_inside_first": dict.fromkeys(TRUTH, 0.5),
+                     "rms_z": dict.fromkeys(TRUTH, 1.8), "median_rel_halfwidth":
+                     dict.fromkeys(TRUTH, 0.001), "rows": [_row(100, 0.5), _row(101, -2.5)]},
+        "flag": {},
+    }  # fmt: skip
+    src = tmp_path / "bench.json"
+    src.write_text(json.dumps(report), encoding="utf-8")
+    doc = tmp_path / "doc.md"
+    doc.write_text(f"before\n\n{BEGIN}\nstale figures\n{END}\n\nafter\n", encoding="utf-8")
+    assert cli_main.main(["calibrate-bench", "--from-json", str(src), "--doc", str(doc)]) == 0
+    text = doc.read_text(encoding="utf-8")
+    assert text.startswith("before\n") and text.endswith("\nafter\n")
+    assert "stale figures" not in text
+    assert "`nice -n 10 fence-sorter calibrate-bench --seeds 2` at abc1234" in text
+    assert "| 100 | " + " | ".join(["+0.50"] * n) + " |" in text
+    assert "| 101 | " + " | ".join(["**-2.50**"] * n) + " |" in text
+    assert "50 % (1 of 2)" in text
+    capsys.readouterr()
+    assert cli_main.main(["calibrate-bench", "--from-json", str(doc)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--from-json" in err[0]
