@@ -37,6 +37,7 @@ def checkout_root() -> Path | None:
 def share_dir() -> Path | None:
     """``share/fence_sorter`` of the ament prefix that installed the package, or None."""
     try:
+        # lazy: loads the ament index (ROS only)
         from ament_index_python.packages import get_package_share_directory
 
         return Path(get_package_share_directory(PACKAGE))

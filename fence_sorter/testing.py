@@ -17,6 +17,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TypeVar
 
+from fence_sorter.runner.processes import node_env
+
 T = TypeVar("T")
 
 #: Fast DDS accepts domain ids 0..232; stay away from 0 (the default) and 1..99.
@@ -69,8 +71,6 @@ def ros_env(
 ) -> dict[str, str]:
     """Return os.environ plus the isolation settings for a child process (the same as
     ``fence-sorter run`` gives its nodes: :func:`fence_sorter.runner.processes.node_env`)."""
-    from fence_sorter.runner.processes import node_env
-
     return node_env(domain_id, log_dir, extra)
 
 

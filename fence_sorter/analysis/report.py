@@ -71,7 +71,7 @@ def analyze_bag(bag: Path | str, out_dir: Path | str | None = None, plots: bool 
             writer.writerow({k: _csv(row[k]) for k in TABLE_COLUMNS})
     report.files["parcels.csv"] = str(csv_path)
     if plots:
-        from fence_sorter.analysis.plots import (
+        from fence_sorter.analysis.plots import (  # lazy: loads Matplotlib, rosbags
             plot_damage_risk,
             plot_impact,
             plot_overview,

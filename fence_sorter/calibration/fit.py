@@ -284,6 +284,7 @@ class Evaluator:
         self.pool = None
         self._stack = contextlib.ExitStack()
         if "://" in scheduler:
+            # lazy: loads the kernel (Numba), SciPy
             from fence_sorter.optimize.executor import evaluation_pool
 
             self.pool = self._stack.enter_context(evaluation_pool(scheduler, workers))
@@ -320,7 +321,7 @@ class Evaluator:
             ]
             return [f.result() for f in futures]
         if self.scheduler == "dask":
-            import dask
+            import dask  # lazy: Dask (0.2-1.6 s), only to evaluate in parallel
 
             tasks = [dask.delayed(_run_chunk, pure=False)(task, c, *args) for c in self.chunks]
             if self.pool is None:
@@ -469,7 +470,7 @@ class CalibrationResult:
 
 def check_fit_names(base: Scenario, names: list[str], scene: str) -> list[str]:
     """Canonical fit names; CalibrationInputError names an unknown or absent parameter."""
-    from .replay import canonical
+    from .replay import canonical  # lazy: loads the kernel (Numba), SciPy
 
     out = []
     for raw in names:

@@ -58,10 +58,10 @@ def format_result(res: CalibrationResult) -> str:
 
 def plot_residuals(eds: list[EventData], res: CalibrationResult, path: Path) -> Path:
     """Residuals (twin minus measured) of the calibrated twin against time from stroke start."""
-    import matplotlib
+    import matplotlib  # lazy: Matplotlib (0.7-1.3 s), only to plot
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # lazy: Matplotlib (0.7-1.3 s), only to plot
 
     pos, yaw, mom = res.residuals
     tau = np.concatenate([ed.cam_tau for ed in eds])

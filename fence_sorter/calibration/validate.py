@@ -122,10 +122,10 @@ def summary(checks: list[ParcelCheck]) -> dict:
 
 def plot_checks(checks: list[ParcelCheck], path) -> None:
     """Predicted against measured for exit speed, y_max and peak acceleration."""
-    import matplotlib
+    import matplotlib  # lazy: Matplotlib (0.7-1.3 s), only to plot
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # lazy: Matplotlib (0.7-1.3 s), only to plot
 
     keys = (
         ("exit_speed", "exit speed [m/s]"),

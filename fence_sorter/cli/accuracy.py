@@ -17,6 +17,8 @@ import shlex
 import sys
 from pathlib import Path
 
+from fence_sorter.scene import available_scenes
+
 EXIT_OK = 0
 EXIT_BAD_ARGS = 2
 EXIT_FAILED = 3
@@ -28,17 +30,14 @@ def error(message: str, code: int = EXIT_BAD_ARGS) -> int:
     return code
 
 
-def register(subparsers) -> None:
+def register(parser: argparse.ArgumentParser) -> None:
+    # lazy: loads the kernel (Numba), SciPy
     from fence_sorter.verification.accuracy import METHODS, SCENES
 
-    parser = subparsers.add_parser(
-        "accuracy",
-        help="work-precision diagrams: error against wall time for every method",
-        description=(
-            "Solve benchmark scenes with every method over a range of step sizes or "
-            "tolerances, compare with a converged reference and write error-against-wall-time "
-            "plots and a markdown report."
-        ),
+    parser.description = (
+        "Solve benchmark scenes with every method over a range of step sizes or "
+        "tolerances, compare with a converged reference and write error-against-wall-time "
+        "plots and a markdown report."
     )
     parser.add_argument(
         "--scenes",
@@ -95,8 +94,7 @@ def command_line(args: argparse.Namespace, repeats: int) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fence_sorter.scene import available_scenes
-    from fence_sorter.verification import accuracy
+    from fence_sorter.verification import accuracy  # lazy: loads the kernel (Numba), SciPy
 
     if args.plots_only:
         results = Path(args.out) / "results.json"

@@ -15,11 +15,9 @@ import sys
 from pathlib import Path
 
 
-def register(subparsers) -> None:
-    parser = subparsers.add_parser(
-        "analyze",
-        help="analyse a recorded bag: per-parcel table, capacity, plots, check vs live outcomes",
-        description="Analyse a bag recorded by the recorder node (fence-sorter run --bag DIR).",
+def register(parser: argparse.ArgumentParser) -> None:
+    parser.description = (
+        "Analyse a bag recorded by the recorder node (fence-sorter run --bag DIR)."
     )
     parser.add_argument("bag", help="bag directory (or one .mcap/.db3 file)")
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
@@ -33,6 +31,7 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # lazy: loads rosbags
     from fence_sorter.analysis.report import analyze_bag, format_report, missing_parcels
     from fence_sorter.recording.bagread import BagReadError
 

@@ -13,12 +13,8 @@ import json
 import sys
 
 
-def register(subparsers) -> None:
-    parser = subparsers.add_parser(
-        "bag",
-        help="bag tools standing in for `ros2 bag` (info)",
-        description="Stand-ins for `ros2 bag` subcommands, without rosbag2.",
-    )
+def register(parser: argparse.ArgumentParser) -> None:
+    parser.description = "Stand-ins for `ros2 bag` subcommands, without rosbag2."
     parser.set_defaults(func=lambda args: _usage(parser))
     commands = parser.add_subparsers(dest="bag_command", metavar="COMMAND")
     info = commands.add_parser(
@@ -37,7 +33,7 @@ def _usage(parser: argparse.ArgumentParser) -> int:
 
 
 def run_info(args: argparse.Namespace) -> int:
-    from fence_sorter.recording.baginfo import bag_info, format_info
+    from fence_sorter.recording.baginfo import bag_info, format_info  # lazy: loads rosbags
     from fence_sorter.recording.bagread import BagReadError
 
     try:

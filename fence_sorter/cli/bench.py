@@ -21,23 +21,22 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from fence_sorter.verification import bench as B
+from fence_sorter.verification.bench_suite import BEGIN, END
+
 EXIT_OK = 0
 EXIT_BAD_ARGS = 2
 DEFAULT_OUT = "docs/benchmarks.md"
 
 
-def register(subparsers) -> None:
-    parser = subparsers.add_parser(
-        "bench",
-        help="speed and memory of the default configuration against SciPy baselines",
-        description=(
-            "Benchmark the default configuration per scene: wall time, steps, real-time "
-            "factor and peak-force error against a converged reference, side by side with the "
-            "fastest SciPy solve_ivp method at the same error; stiff-fence event times; peak "
-            "memory; the model each scene builds against the full model; the compiled kernel "
-            "against the same code with NUMBA_DISABLE_JIT=1. Prints the report and writes it "
-            "as markdown."
-        ),
+def register(parser: argparse.ArgumentParser) -> None:
+    parser.description = (
+        "Benchmark the default configuration per scene: wall time, steps, real-time "
+        "factor and peak-force error against a converged reference, side by side with the "
+        "fastest SciPy solve_ivp method at the same error; stiff-fence event times; peak "
+        "memory; the model each scene builds against the full model; the compiled kernel "
+        "against the same code with NUMBA_DISABLE_JIT=1. Prints the report and writes it "
+        "as markdown."
     )
     add_arguments(parser)
     parser.set_defaults(func=run)
@@ -98,8 +97,6 @@ def _error(message: str) -> int:
 def _suite_section(out: Path) -> str:
     """The node-suite section ``fence-sorter bench-suite`` keeps in the same file (between its
     markers): carried over, since this command regenerates everything else."""
-    from fence_sorter.verification.bench_suite import BEGIN, END
-
     old = out.read_text(encoding="utf-8") if out.is_file() else ""
     if BEGIN not in old or END not in old or old.index(BEGIN) > old.index(END):
         return ""
@@ -116,8 +113,6 @@ def write_markdown(out: Path, text: str) -> None:
 
 def render_again(source: Path, out: Path) -> int:
     """``--from-json``: the markdown of an earlier run's JSON, nothing measured."""
-    from fence_sorter.verification import bench as B
-
     try:
         data = json.loads(source.read_text(encoding="utf-8"))
         text = B.render_markdown(B.report_from_dict(data))
@@ -129,8 +124,6 @@ def render_again(source: Path, out: Path) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fence_sorter.verification import bench as B
-
     if args.from_json:
         return render_again(Path(args.from_json), Path(args.out))
     allowed = B.SCENES

@@ -15,17 +15,19 @@ import shlex
 import sys
 from pathlib import Path
 
+from fence_sorter.cli.run import add_param_option
+from fence_sorter.runner.job import BadInput
+from fence_sorter.verification.bench_suite import render, run_bench, write_section
+from fence_sorter.verification.machine import git_revision, machine_info
+
 DEFAULT_OUT = "docs/benchmarks.md"
 
 
-def register(subparsers) -> None:
-    from fence_sorter.cli.run import add_param_option
+def register(parser: argparse.ArgumentParser) -> None:
 
-    parser = subparsers.add_parser(
-        "bench-suite",
-        help="node suite benchmark: pacing, lost messages, controller latency, unpaced RTF",
-        description="Paced run (rtf 1.0, 60 s, 2400 pcs/h) and unpaced run of the node suite; "
-        "writes the figures between <!-- suite:begin --> and <!-- suite:end --> in --out.",
+    parser.description = (
+        "Paced run (rtf 1.0, 60 s, 2400 pcs/h) and unpaced run of the node suite; "
+        "writes the figures between <!-- suite:begin --> and <!-- suite:end --> in --out."
     )
     parser.add_argument("--out", default=DEFAULT_OUT, help="markdown file (section replaced)")
     parser.add_argument("--duration", type=float, default=60.0, help="paced stream length [s]")
@@ -45,9 +47,6 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fence_sorter.verification.bench_suite import render, run_bench, write_section
-    from fence_sorter.verification.machine import git_revision, machine_info
-
     if not args.duration > 0 or args.unpaced_parcels < 1:
         print(
             "fence-sorter: error: --duration must be in (0, inf) s and --unpaced-parcels in "
@@ -59,7 +58,6 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_write and not out.parent.is_dir():
         print(f"fence-sorter: error: --out {out}: no such directory", file=sys.stderr)
         return 2
-    from fence_sorter.runner.job import BadInput
 
     try:
         fig = run_bench(

@@ -12,10 +12,15 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 
+from tqdm import tqdm
+
 from fence_sorter.cli.simulate import add_set_argument, error
+from fence_sorter.physics.params import ParameterError
+from fence_sorter.scene import load_scene
 
 
 def add_bag_scene_arguments(parser: argparse.ArgumentParser, scene_help: str) -> None:
@@ -28,12 +33,8 @@ def add_bag_scene_arguments(parser: argparse.ArgumentParser, scene_help: str) ->
     parser.add_argument("--out", metavar="DIR", help="write the result files here")
 
 
-def register(subparsers) -> None:
-    parser = subparsers.add_parser(
-        "calibrate",
-        help="fit friction, contact and fence damping parameters to a measured bag",
-        description="Fit the twin's physics parameters to the measured topics of a bag.",
-    )
+def register(parser: argparse.ArgumentParser) -> None:
+    parser.description = "Fit the twin's physics parameters to the measured topics of a bag."
     add_bag_scene_arguments(
         parser, "prior scene (file or name; default: the scene an emulated bag names)"
     )
@@ -90,10 +91,9 @@ def add_scheduler_argument(parser: argparse.ArgumentParser) -> None:
 
 def load_bag_and_scene(args):
     """(MeasuredBag, LoadedScene, None) or (None, None, exit code)."""
+    # lazy: loads the kernel (Numba), SciPy, rosbags
     from fence_sorter.calibration.bag import MeasuredBagError, read_measured_bag
-    from fence_sorter.physics.params import ParameterError
     from fence_sorter.recording.bagread import BagReadError
-    from fence_sorter.scene import load_scene
 
     try:
         mb = read_measured_bag(Path(args.bag))
@@ -110,11 +110,7 @@ def load_bag_and_scene(args):
 
 
 def run(args: argparse.Namespace) -> int:
-    import math
-
-    from tqdm import tqdm
-
-    from fence_sorter.calibration.fit import (
+    from fence_sorter.calibration.fit import (  # lazy: loads the kernel (Numba), SciPy, rosbags
         CalibrationInputError,
         FitError,
         calibrate,

@@ -17,12 +17,8 @@ from fence_sorter.cli.calibrate import add_scheduler_argument
 from fence_sorter.cli.simulate import error
 
 
-def register(subparsers) -> None:
-    parser = subparsers.add_parser(
-        "calibrate-bench",
-        help="calibration benchmark: interval coverage, identifiability, wall time",
-        description="Measure the calibration on emulated bags with known truth.",
-    )
+def register(parser: argparse.ArgumentParser) -> None:
+    parser.description = "Measure the calibration on emulated bags with known truth."
     parser.add_argument("--seeds", type=int, default=20, help="coverage seeds (default 20)")
     parser.add_argument("--parcels", type=int, default=8, help="parcels per seed (default 8)")
     parser.add_argument(
@@ -46,7 +42,7 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fence_sorter.calibration import bench
+    from fence_sorter.calibration import bench  # lazy: loads the kernel (Numba), SciPy, rosbags
 
     for option, value, low in (
         ("--seeds", args.seeds, 0),
@@ -56,6 +52,7 @@ def run(args: argparse.Namespace) -> int:
     ):
         if value < low:
             return error(f"{option} must be in [{low}, inf), got {value}")
+    # lazy: loads the kernel (Numba), SciPy, rosbags
     from fence_sorter.calibration.fit import CalibrationInputError, check_scheduler
 
     try:

@@ -13,6 +13,7 @@ import os
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass
+from importlib import metadata
 from pathlib import Path
 
 PACKAGE = "fence_sorter"
@@ -63,7 +64,7 @@ def check_rclpy() -> str:
     if problem:
         raise CheckFailed(f"not imported: {problem}")
     try:
-        import rclpy
+        import rclpy  # lazy: rclpy (0.25 s), only where ROS runs
         from rclpy.impl.implementation_singleton import rclpy_implementation  # noqa: F401
     except Exception as exc:  # ImportError, or OSError from a missing shared library
         raise CheckFailed(f"cannot import rclpy ({type(exc).__name__}: {exc}); {FIX}") from None
@@ -76,6 +77,7 @@ def check_rmw() -> str:
     if problem:
         raise CheckFailed(problem)
     try:
+        # lazy: rclpy (0.25 s), only where ROS runs
         from rclpy.utilities import get_rmw_implementation_identifier
 
         identifier = get_rmw_implementation_identifier()
@@ -95,7 +97,7 @@ def check_rmw() -> str:
 
 def _msg_names() -> list[str]:
     try:
-        from fence_sorter.recording.msgtypes import message_names
+        from fence_sorter.recording.msgtypes import message_names  # lazy: loads rosbags
 
         return message_names()
     except Exception as exc:
@@ -112,6 +114,7 @@ def check_messages() -> str:
             f"cannot import {MSG_PACKAGE}.msg ({type(exc).__name__}: {exc}); the interface "
             f"package is not built or not on the path; {FIX}"
         ) from None
+    # lazy: loads rosbags
     from fence_sorter.recording.msgtypes import field_names, make_typestore, msgtype_name
 
     typestore = make_typestore()
@@ -140,8 +143,6 @@ def check_messages() -> str:
 
 def _node_executables() -> list[str]:
     """Return the console scripts of the installed fence_sorter that start nodes."""
-    from importlib import metadata
-
     try:
         entry_points = metadata.distribution(PACKAGE).entry_points
     except metadata.PackageNotFoundError:
@@ -159,6 +160,7 @@ def check_ament_index() -> str:
     if not os.environ.get("AMENT_PREFIX_PATH"):
         raise CheckFailed("AMENT_PREFIX_PATH is not set; `source scripts/env.sh` (or " + FIX + ")")
     try:
+        # lazy: loads the ament index (ROS only)
         from ament_index_python.packages import PackageNotFoundError, get_package_prefix
     except Exception as exc:
         raise CheckFailed(f"cannot import ament_index_python ({exc}); {FIX}") from None
@@ -191,6 +193,7 @@ def check_ament_index() -> str:
 def check_typestore() -> str:
     """The rosbags type store registers every message of msg_defs/."""
     try:
+        # lazy: loads rosbags
         from fence_sorter.recording.msgtypes import find_msg_dir, make_typestore, msg_files
     except Exception as exc:
         raise CheckFailed(f"cannot import rosbags ({exc}); {FIX}") from None
@@ -243,9 +246,6 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add the ``check`` subcommand."""
-    parser = subparsers.add_parser(
-        "check", help="verify rclpy, fence_sorter_msgs, Fast DDS, ament index and rosbags"
-    )
+def register(parser: argparse.ArgumentParser) -> None:
+    """Configure the ``check`` subcommand."""
     parser.set_defaults(func=run)

@@ -29,8 +29,9 @@ def _domain_id(requested: int | None) -> int:
 def run(args: argparse.Namespace) -> int:
     """Run the round trip; print one line per message type; return 0 if all came back."""
     try:
-        import rclpy
+        import rclpy  # lazy: rclpy (0.25 s), only where ROS runs
 
+        # lazy: loads rclpy, ROS messages, rosbags
         from fence_sorter.nodes.roundtrip import print_result, run_publisher
     except Exception as exc:
         print(f"FAIL cannot import rclpy / fence_sorter_msgs ({exc}); {FIX}")
@@ -76,12 +77,8 @@ def run(args: argparse.Namespace) -> int:
     return 1
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add the ``demo-roundtrip`` subcommand."""
-    parser = subparsers.add_parser(
-        "demo-roundtrip",
-        help="send every fence_sorter_msgs message to an echo node and check it comes back",
-    )
+def register(parser: argparse.ArgumentParser) -> None:
+    """Configure the ``demo-roundtrip`` subcommand."""
     parser.add_argument("--timeout", type=float, default=30.0, help="give up after [s]")
     parser.add_argument(
         "--domain-id", type=int, default=None, help="ROS_DOMAIN_ID (default: env or random)"

@@ -12,15 +12,15 @@ import argparse
 import sys
 from pathlib import Path
 
+from fence_sorter.calibration.sensors import SensorConfigError, load_sensors
 from fence_sorter.cli.simulate import add_scene_arguments, error, load
+from fence_sorter.physics.params import ParameterError
 
 
-def register(subparsers) -> None:
-    parser = subparsers.add_parser(
-        "emulate",
-        help="write a measured bag (encoder, camera, strain) of the twin with known truth",
-        description="Run a stream's parcels through the twin and record what emulated "
-        "sensors would measure, into a bag for fence-sorter calibrate.",
+def register(parser: argparse.ArgumentParser) -> None:
+    parser.description = (
+        "Run a stream's parcels through the twin and record what emulated "
+        "sensors would measure, into a bag for fence-sorter calibrate."
     )
     add_scene_arguments(parser)
     parser.add_argument(
@@ -42,10 +42,9 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # lazy: loads the kernel (Numba), SciPy, rosbags
     from fence_sorter.calibration.emulate import emulate_bag
     from fence_sorter.calibration.replay import ReplayError
-    from fence_sorter.calibration.sensors import SensorConfigError, load_sensors
-    from fence_sorter.physics.params import ParameterError
     from fence_sorter.recording.writer import BagWriteError
 
     if not 1 <= args.parcels <= 10000:

@@ -8,18 +8,19 @@ files, scenes, streams and parameters (:mod:`fence_sorter.verification.faults`).
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
+
+from fence_sorter.verification.faults import campaign
 
 CASES = ("wire", "cli", "floods", "interrupts")
 
 
-def register(subparsers) -> None:
-    parser = subparsers.add_parser(
-        "faults",
-        help="fault-injection campaign of the node suite (writes docs/reliability.md)",
-        description="Inject the faults of the reliability campaign (repeated Ctrl-C, floods, "
+def register(parser: argparse.ArgumentParser) -> None:
+    parser.description = (
+        "Inject the faults of the reliability campaign (repeated Ctrl-C, floods, "
         "hostile messages, bad input), count what the suite refused, dropped and sorted, and "
-        "write the report.",
+        "write the report."
     )
     parser.add_argument(
         "--out",
@@ -38,15 +39,12 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import sys
-
     if args.trials < 1:
         print(
             f"fence-sorter: error: --trials must be in [1, inf), got {args.trials}",
             file=sys.stderr,
         )
         return 2
-    from fence_sorter.verification.faults import campaign
 
     met = campaign(
         Path(args.out),

@@ -1,9 +1,13 @@
 """``fence-sorter``: the user command line.
 
 Each subcommand lives in its own module ``fence_sorter/cli/<module>.py`` that exposes
-``register(subparsers)``; ``register`` adds the subcommand's parser and sets ``func`` (called
-with the parsed arguments, returns the exit code). To add a subcommand, write its module and
-append the module name to :data:`SUBCOMMAND_MODULES`.
+``register(parser)``; ``register`` adds the subcommand's arguments to its parser and sets
+``func`` (called with the parsed arguments, returns the exit code). To add a subcommand, write
+its module and add the command and its one-line help to :data:`SUBCOMMANDS`. Only the module
+of the command being run is imported, so ``fence-sorter --help`` and every start-up pay for
+one subcommand's imports, not for all of them; a subcommand module imports its heavy
+dependencies (the kernel, rclpy, SciPy, ...) inside the function that needs them, so that its
+``--help`` stays light too.
 """
 
 from __future__ import annotations
@@ -17,38 +21,44 @@ from collections.abc import Callable, Sequence
 
 from fence_sorter import __version__
 
-#: Modules under fence_sorter.cli that provide subcommands, in the order of ``--help``.
-SUBCOMMAND_MODULES: tuple[str, ...] = (
-    "check",
-    "demo_roundtrip",
-    "simulate",
-    "modes",
-    "accuracy",
-    "stability",
-    "bench",
-    "run",
-    "replay",
-    "analyze",
-    "bag",
-    "topic",
-    "rrd",
-    "bench_suite",
-    "optimize",
-    "faults",
-    "emulate",
-    "calibrate",
-    "validate",
-    "calibrate_bench",
-)
+#: Subcommand -> its one-line help, in the order of ``--help``. The subcommand ``a-b`` lives in
+#: the module ``fence_sorter.cli.a_b``.
+SUBCOMMANDS: dict[str, str] = {
+    "check": "verify rclpy, fence_sorter_msgs, Fast DDS, ament index and rosbags",
+    "demo-roundtrip": "send each fence_sorter_msgs message to an echo node, check it comes back",
+    "simulate": "run one sorting event from a scene file",
+    "modes": "natural frequencies and tip deflection of a scene's flexible fence",
+    "accuracy": "work-precision diagrams: error against wall time for every method",
+    "stability": "stability campaign over stiff and extreme cases (invariants and verdicts)",
+    "bench": "speed and memory of the default configuration against SciPy baselines",
+    "run": "run the node suite on a parcel stream and print a summary",
+    "replay": "republish a recorded bag over DDS with its original timing (scaled)",
+    "analyze": "analyse a recorded bag: per-parcel table, capacity, plots, check vs live outcomes",
+    "bag": "bag tools standing in for `ros2 bag` (info)",
+    "topic": "topic tools standing in for `ros2 topic` (list, echo, hz) over rclpy",
+    "rrd": "convert a recorded bag into a Rerun recording (.rrd)",
+    "bench-suite": "node suite benchmark: pacing, lost messages, controller latency, unpaced RTF",
+    "optimize": "maximise the sorting capacity W_t over X = [R_s, v, t1, R_z] (sections 3-4)",
+    "faults": "fault-injection campaign of the node suite (writes docs/reliability.md)",
+    "emulate": "write a measured bag (encoder, camera, strain) of the twin with known truth",
+    "calibrate": "fit friction, contact and fence damping parameters to a measured bag",
+    "validate": "predict held-out parcels of a measured bag with a (calibrated) scene",
+    "calibrate-bench": "calibration benchmark: interval coverage, identifiability, wall time",
+}
 
 
-def _unavailable(module: str, error: BaseException) -> Callable[[argparse.Namespace], int]:
-    """Return a func that reports why the subcommand from ``module`` cannot be loaded."""
+def module_name(command: str) -> str:
+    """The module under fence_sorter.cli that defines ``command``."""
+    return f"fence_sorter.cli.{command.replace('-', '_')}"
+
+
+def _unavailable(command: str, error: BaseException) -> Callable[[argparse.Namespace], int]:
+    """Return a func that reports why the module of ``command`` cannot be loaded."""
 
     def func(args: argparse.Namespace) -> int:
         del args
         print(
-            f"fence-sorter: subcommand module fence_sorter.cli.{module} cannot be loaded: "
+            f"fence-sorter: subcommand module {module_name(command)} cannot be loaded: "
             f"{type(error).__name__}: {error}",
             file=sys.stderr,
         )
@@ -57,24 +67,33 @@ def _unavailable(module: str, error: BaseException) -> Callable[[argparse.Namesp
     return func
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """Return the top-level parser with every subcommand registered."""
+def build_parser(argv: Sequence[str] = ()) -> argparse.ArgumentParser:
+    """Return the top-level parser. Every subcommand is listed with its help; only the one
+    named in ``argv`` (if any) is configured, so only its module is imported."""
     parser = argparse.ArgumentParser(
         prog="fence-sorter",
         description="Digital twin of a rotary active fence parcel sorter.",
     )
     parser.add_argument("--version", action="version", version=f"fence-sorter {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for module_name in SUBCOMMAND_MODULES:
-        try:
-            module = importlib.import_module(f"fence_sorter.cli.{module_name}")
-            module.register(subparsers)
-        except Exception as exc:  # a broken subcommand must not take the others down
-            stub = subparsers.add_parser(
-                module_name.replace("_", "-"), help=f"(unavailable: {type(exc).__name__})"
-            )
-            stub.set_defaults(func=_unavailable(module_name, exc))
+    chosen = next((a for a in argv if not a.startswith("-")), None)
+    for command, help_text in SUBCOMMANDS.items():
+        sub = subparsers.add_parser(command, help=help_text)
+        if command == chosen:
+            configure(command, sub)
     return parser
+
+
+def configure(command: str, parser: argparse.ArgumentParser) -> None:
+    """Import the module of ``command`` and let it add its arguments and ``func`` to ``parser``;
+    a module that cannot be loaded becomes a subcommand that says why (exit 1), so it cannot
+    take the others down."""
+    try:
+        # lazy: the one dispatch of the command line: only the chosen subcommand's module
+        module = importlib.import_module(module_name(command))
+        module.register(parser)
+    except Exception as exc:
+        parser.set_defaults(func=_unavailable(command, exc))
 
 
 def _interrupt_once(signum: int, frame: object) -> None:
@@ -96,7 +115,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         signal.signal(signal.SIGINT, _interrupt_once)
         signal.signal(signal.SIGTERM, _interrupt_once)
     try:
-        parser = build_parser()
+        argv = sys.argv[1:] if argv is None else list(argv)
+        parser = build_parser(argv)
         args = parser.parse_args(argv)
         func = getattr(args, "func", None)
         if func is None:

@@ -14,12 +14,8 @@ import json
 from fence_sorter.cli.simulate import EXIT_OK, add_scene_arguments, error, load
 
 
-def register(subparsers) -> None:
-    parser = subparsers.add_parser(
-        "modes",
-        help="natural frequencies and tip deflection of a scene's flexible fence",
-        description="Natural frequencies and static tip deflection of the flexible fence.",
-    )
+def register(parser: argparse.ArgumentParser) -> None:
+    parser.description = "Natural frequencies and static tip deflection of the flexible fence."
     add_scene_arguments(parser)
     parser.add_argument(
         "--tip-load",
@@ -51,6 +47,7 @@ def run(args: argparse.Namespace) -> int:
         return error(
             f"scene {loaded.source_path.name}: modes needs a flexible fence (fence.type: flexible)"
         )
+    # lazy: loads SciPy
     from fence_sorter.physics.fence import build_fence, natural_frequencies, static_tip_deflection
 
     model = build_fence(fence)

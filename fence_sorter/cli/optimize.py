@@ -12,6 +12,10 @@ import json
 import math
 import sys
 
+from fence_sorter.jsonsafe import json_safe
+from fence_sorter.optimize.problem import OptimizeSpec
+from fence_sorter.physics.params import ParameterError
+
 EXIT_OK = 0
 EXIT_BAD_INPUT = 2
 
@@ -63,19 +67,13 @@ def _steps(text: str) -> dict[str, float]:
     return out
 
 
-def register(subparsers) -> None:
-    from fence_sorter.optimize.problem import OptimizeSpec
-
+def register(p: argparse.ArgumentParser) -> None:
     d = OptimizeSpec(case="positioned", alpha_k=0.7)
-    p = subparsers.add_parser(
-        "optimize",
-        help="maximise the sorting capacity W_t over X = [R_s, v, t1, R_z] (sections 3-4)",
-        description=(
-            "Maximise the sorting capacity W_t (1) over X = [R_s, v, t1, R_z] within the ranges "
-            "(3)-(6) subject to the selected constraints (7)-(12), evaluated on the twin "
-            "(docs/optimize.md). Prints the optimum X, W_t [pcs/h], Delta_c, the active "
-            "constraints and every margin; 'feasible: false' with the constraint no point met."
-        ),
+    p.description = (
+        "Maximise the sorting capacity W_t (1) over X = [R_s, v, t1, R_z] within the ranges "
+        "(3)-(6) subject to the selected constraints (7)-(12), evaluated on the twin "
+        "(docs/optimize.md). Prints the optimum X, W_t [pcs/h], Delta_c, the active "
+        "constraints and every margin; 'feasible: false' with the constraint no point met."
     )
     p.add_argument("--case", choices=("arbitrary", "positioned"), help="section 4.1 or 4.2")
     p.add_argument("--alpha-k", type=float, metavar="DEG", help="fence deflection alpha_k [deg]")
@@ -195,9 +193,6 @@ def error(message: str) -> int:
 
 def spec_from_args(args: argparse.Namespace):
     """The validated OptimizeSpec of the command line (ParameterError names the option)."""
-    from fence_sorter.optimize.problem import OptimizeSpec
-    from fence_sorter.physics.params import ParameterError
-
     if args.case is None:
         raise ParameterError("--case is required: one of arbitrary, positioned")
     if args.alpha_k is None:
@@ -288,14 +283,13 @@ def summary(d: dict) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fence_sorter.physics.params import ParameterError
-
     if args.sweep is not None:
         if args.max_points is not None and args.max_points < 1:
             return error(f"--max-points must be in [1, inf), got {args.max_points}")
-        from fence_sorter.optimize import sweep
+        from fence_sorter.optimize import sweep  # lazy: loads the kernel (Numba), SciPy
 
         return int(sweep.main(args) or 0)
+    # lazy: loads the kernel (Numba), SciPy
     from fence_sorter.optimize.executor import evaluation_pool
     from fence_sorter.optimize.solve import grid_search, optimize
 
@@ -318,8 +312,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _print_grid(g: dict, spec, args) -> int:
-    from fence_sorter.jsonsafe import json_safe
-
     best = g["best"]
     d = {
         "feasible": best is not None,

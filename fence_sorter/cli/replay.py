@@ -12,13 +12,11 @@ import sys
 from pathlib import Path
 
 
-def register(subparsers) -> None:
-    parser = subparsers.add_parser(
-        "replay",
-        help="republish a recorded bag over DDS with its original timing (scaled)",
-        description="Republish every message of a bag (or the chosen topics) on the current "
+def register(parser: argparse.ArgumentParser) -> None:
+    parser.description = (
+        "Republish every message of a bag (or the chosen topics) on the current "
         "ROS_DOMAIN_ID with the recorded timing divided by --rate; /clock comes from the bag, so "
-        "nodes with use_sim_time:=true follow it.",
+        "nodes with use_sim_time:=true follow it."
     )
     parser.add_argument("bag", help="bag directory (or one .mcap/.db3 file)")
     parser.add_argument("--rate", type=float, default=1.0, help="speed factor (default 1)")
@@ -34,7 +32,7 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fence_sorter.recording.bagread import BagReadError, read_bag
+    from fence_sorter.recording.bagread import BagReadError, read_bag  # lazy: loads rosbags
 
     if not (args.rate > 0 and args.rate < float("inf")):
         print(f"fence-sorter replay: error: --rate must be in (0, inf), got {args.rate}",
@@ -56,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
                 file=sys.stderr,
             )
             return 2
-    from fence_sorter.nodes.replay import replay
+    from fence_sorter.nodes.replay import replay  # lazy: loads rosbags
 
     try:
         result = replay(contents, args.rate, args.topics, wait_for_subscribers=args.wait)

@@ -10,14 +10,14 @@ import argparse
 import sys
 from pathlib import Path
 
+from fence_sorter.visualisation.rerun_log import log_bag, open_recording, scene_from_bag
 
-def register(subparsers) -> None:
-    parser = subparsers.add_parser(
-        "rrd",
-        help="convert a recorded bag into a Rerun recording (.rrd)",
-        description="Log a bag recorded by the recorder node into an .rrd (conveyor, chute, "
+
+def register(parser: argparse.ArgumentParser) -> None:
+    parser.description = (
+        "Log a bag recorded by the recorder node into an .rrd (conveyor, chute, "
         "fence with its deflection, parcels, contact forces, time series on sim_time) with a "
-        "default blueprint; open it with `rerun FILE`.",
+        "default blueprint; open it with `rerun FILE`."
     )
     parser.add_argument("bag", help="bag directory (or one .mcap/.db3 file)")
     parser.add_argument("--out", metavar="FILE", help="output .rrd (default: <bag>.rrd)")
@@ -28,8 +28,7 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fence_sorter.recording.bagread import BagReadError, read_bag
-    from fence_sorter.visualisation.rerun_log import log_bag, open_recording, scene_from_bag
+    from fence_sorter.recording.bagread import BagReadError, read_bag  # lazy: loads rosbags
 
     bag = Path(args.bag)
     out = Path(args.out) if args.out else bag.resolve().with_suffix(".rrd")

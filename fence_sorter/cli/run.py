@@ -16,14 +16,14 @@ import json
 import sys
 
 from fence_sorter.jsonsafe import json_safe
+from fence_sorter.runner.job import BadInput, RunOptions, StopRequest, run_job
+from fence_sorter.runner.summary import format_summary
 
 
-def register(subparsers) -> None:
-    parser = subparsers.add_parser(
-        "run",
-        help="run the node suite on a parcel stream and print a summary",
-        description="Start simulator, scanner and controller (and the recorder with --bag) as "
-        "separate processes on an isolated ROS domain, run the stream, stop cleanly, summarise.",
+def register(parser: argparse.ArgumentParser) -> None:
+    parser.description = (
+        "Start simulator, scanner and controller (and the recorder with --bag) as "
+        "separate processes on an isolated ROS domain, run the stream, stop cleanly, summarise."
     )
     parser.add_argument("--scene", default="impact_flexible", help="scene file or name")
     amount = parser.add_mutually_exclusive_group()
@@ -81,8 +81,6 @@ def add_param_option(parser: argparse.ArgumentParser, help: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fence_sorter.runner.job import BadInput, RunOptions, StopRequest
-
     opts = RunOptions(
         scene=args.scene,
         parcels=args.parcels,
@@ -114,9 +112,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_and_report(args: argparse.Namespace, opts, say, stop) -> int:
-    from fence_sorter.runner.job import run_job
-    from fence_sorter.runner.summary import format_summary
-
     result = run_job(opts, say=say, stop=stop)
     if args.json:
         print(

@@ -12,6 +12,9 @@ import json
 import math
 import sys
 
+from fence_sorter.physics.params import ParameterError
+from fence_sorter.scene import load_scene
+
 EXIT_OK = 0
 EXIT_BAD_SCENE = 2
 EXIT_SOLVE_FAILED = 3
@@ -45,9 +48,6 @@ def error(message: str) -> int:
 
 def load(args: argparse.Namespace):
     """Load the scene named on the command line; (LoadedScene, None) or (None, exit code)."""
-    from fence_sorter.physics.params import ParameterError
-    from fence_sorter.scene import load_scene
-
     try:
         loaded = load_scene(args.scene, args.overrides)
     except (ParameterError, OSError) as exc:
@@ -57,12 +57,8 @@ def load(args: argparse.Namespace):
     return loaded, None
 
 
-def register(subparsers) -> None:
-    parser = subparsers.add_parser(
-        "simulate",
-        help="run one sorting event from a scene file",
-        description="Run one sorting event from a scene file and print its outcome.",
-    )
+def register(parser: argparse.ArgumentParser) -> None:
+    parser.description = "Run one sorting event from a scene file and print its outcome."
     add_scene_arguments(parser)
     parser.add_argument("--json", action="store_true", help="print the outcome as one JSON object")
     parser.set_defaults(func=run)
@@ -110,6 +106,7 @@ def run(args: argparse.Namespace) -> int:
     loaded, code = load(args)
     if loaded is None:
         return code
+    # lazy: loads the kernel (Numba), SciPy
     from fence_sorter.physics.simulate import SortingModel, simulate
 
     try:

@@ -23,15 +23,11 @@ EXIT_BAD_ARGS = 2
 REPO = Path(__file__).resolve().parents[2]
 
 
-def register(subparsers) -> None:
-    parser = subparsers.add_parser(
-        "stability",
-        help="stability campaign over stiff and extreme cases (invariants and verdicts)",
-        description=(
-            "Solve every stability case, check its invariants (finite results, energy never "
-            "rising without a power source, bounded penetration, convergence when the step is "
-            "halved, a named diagnosis when a case cannot be solved) and write the report."
-        ),
+def register(parser: argparse.ArgumentParser) -> None:
+    parser.description = (
+        "Solve every stability case, check its invariants (finite results, energy never "
+        "rising without a power source, bounded penetration, convergence when the step is "
+        "halved, a named diagnosis when a case cannot be solved) and write the report."
     )
     parser.add_argument(
         "--out",
@@ -64,7 +60,7 @@ def _line(cr) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fence_sorter.verification import stability as S
+    from fence_sorter.verification import stability as S  # lazy: loads the kernel (Numba), SciPy
 
     if args.list:
         for c in S.CASES:

@@ -23,18 +23,17 @@ import os
 import sys
 import time
 
+import yaml
+
+from fence_sorter.jsonsafe import json_safe
 from fence_sorter.stamps import time_to_sec
 
 #: seconds without a change of the graph after which `list` takes it as discovered
 SETTLE = 0.5
 
 
-def register(subparsers) -> None:
-    parser = subparsers.add_parser(
-        "topic",
-        help="topic tools standing in for `ros2 topic` (list, echo, hz) over rclpy",
-        description=__doc__.splitlines()[0],
-    )
+def register(parser: argparse.ArgumentParser) -> None:
+    parser.description = __doc__.splitlines()[0]
     parser.set_defaults(func=lambda args: _usage(parser))
     commands = parser.add_subparsers(dest="topic_command", metavar="COMMAND")
     common = argparse.ArgumentParser(add_help=False)
@@ -95,7 +94,7 @@ class _Session:
     """An rclpy context and node on the chosen domain."""
 
     def __init__(self, domain: int | None, name: str) -> None:
-        import rclpy
+        import rclpy  # lazy: rclpy (0.25 s), only where ROS runs
         from rclpy.signals import SignalHandlerOptions
 
         os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
@@ -106,6 +105,7 @@ class _Session:
         self.node = rclpy.create_node(
             f"fence_sorter_topic_{name}_{os.getpid()}", context=self.context
         )
+        # lazy: rclpy (0.25 s), only where ROS runs
         from rclpy.executors import SingleThreadedExecutor
 
         self.executor = SingleThreadedExecutor(context=self.context)
@@ -135,8 +135,10 @@ class _Session:
 
     def subscribe(self, topic: str, msgtype: str, callback):
         """A subscription with QoS the topic's publishers can serve."""
+        # lazy: loads rclpy
         from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+        # lazy: loads rclpy, ROS messages, rosbags
         from fence_sorter.nodes.recorder import message_class
 
         try:
@@ -221,10 +223,7 @@ def plain(value):
 
 
 def run_echo(args: argparse.Namespace) -> int:
-    import yaml
-
-    from fence_sorter.jsonsafe import json_safe
-    from fence_sorter.nodes.convert import msg_to_dict
+    from fence_sorter.nodes.convert import msg_to_dict  # lazy: loads ROS messages
 
     if args.count < 0:
         print(f"fence-sorter topic echo: --count must be >= 0, got {args.count}", file=sys.stderr)

@@ -19,12 +19,8 @@ from fence_sorter.cli.calibrate import add_bag_scene_arguments, load_bag_and_sce
 from fence_sorter.cli.simulate import error
 
 
-def register(subparsers) -> None:
-    parser = subparsers.add_parser(
-        "validate",
-        help="predict held-out parcels of a measured bag with a (calibrated) scene",
-        description="Compare the twin's predictions with the measured parcels of a bag.",
-    )
+def register(parser: argparse.ArgumentParser) -> None:
+    parser.description = "Compare the twin's predictions with the measured parcels of a bag."
     add_bag_scene_arguments(parser, "scene to validate (file or name), e.g. a calibrated one")
     parser.add_argument(
         "--last",
@@ -38,6 +34,7 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # lazy: loads the kernel (Numba), SciPy, rosbags
     from fence_sorter.calibration.fit import CalibrationInputError, FitError
     from fence_sorter.calibration.validate import plot_checks, validate
 

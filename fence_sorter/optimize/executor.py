@@ -44,7 +44,7 @@ def evaluation_pool(
             f"got {scheduler!r}"
         )
     try:  # optional: only a --scheduler run needs dask, and it takes seconds to import
-        from dask.distributed import Client
+        from dask.distributed import Client  # lazy: Dask (0.2-1.6 s), only to evaluate in parallel
     except ImportError as exc:  # pragma: no cover - dask is a listed requirement
         raise ParameterError(f"scheduler needs dask[distributed] installed: {exc}") from None
     try:

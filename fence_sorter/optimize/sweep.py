@@ -29,6 +29,8 @@ from concurrent.futures import Executor, Future, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from tqdm import tqdm
+
 from fence_sorter.capacity.decision_table import build_table, write_table
 from fence_sorter.optimize import solve
 from fence_sorter.optimize.decision import decision_points
@@ -577,23 +579,7 @@ def get_sweep(name: str) -> SweepDef:
 def _progress(total: int, initial: int, desc: str, enabled: bool):
     if not enabled:
         return None
-    try:  # optional: a progress bar where tqdm is installed
-        from tqdm import tqdm
-    except ImportError:  # plain lines instead of a bar
-        return _LineProgress(total, initial, desc)
     return tqdm(total=total, initial=initial, desc=desc, unit="optimum", file=sys.stderr)
-
-
-class _LineProgress:
-    def __init__(self, total: int, initial: int, desc: str):
-        self.n, self.total, self.desc = initial, total, desc
-
-    def update(self, k: int = 1) -> None:
-        self.n += k
-        print(f"{self.desc}: {self.n}/{self.total}", file=sys.stderr, flush=True)
-
-    def close(self) -> None:
-        pass
 
 
 def _order(sweep: SweepDef, rows: Iterable[dict]) -> list[dict]:
@@ -818,10 +804,10 @@ def plot_sweep(sweep: SweepDef, rows: Sequence[dict], path: str | Path) -> Path:
     value (a real value such as R_s = 0 is never taken for it). One legend, outside the
     panels; the title wrapped to the figure's width."""
     # matplotlib takes ~0.5 s to import and only the plots need it (workers never plot)
-    import matplotlib
+    import matplotlib  # lazy: Matplotlib (0.7-1.3 s), only to plot
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # lazy: Matplotlib (0.7-1.3 s), only to plot
     from matplotlib.patches import Rectangle
     from matplotlib.transforms import blended_transform_factory
 

@@ -31,7 +31,7 @@ def simulate(sc: Scenario, model: SortingModel | None = None) -> SimulationResul
     if sc.solver.method.startswith("scipy:"):
         # scipy.integrate and scipy.optimize take ~0.7 s to import (python -X importtime);
         # only the baselines need them
-        from .baselines import run_solve_ivp
+        from .baselines import run_solve_ivp  # lazy: loads the kernel (Numba), SciPy
 
         return run_solve_ivp(model)
     return run(model)

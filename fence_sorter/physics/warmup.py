@@ -17,6 +17,8 @@ from dataclasses import replace
 
 from fence_sorter.scene import load_scene
 
+from . import kernel
+from .kernel import aot
 from .simulate import simulate
 
 PARTS = (
@@ -41,9 +43,6 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--no-aot", action="store_true", help="the JIT's cache only")
     args = ap.parse_args(argv)
-    from . import kernel
-    from .kernel import aot
-
     start = time.perf_counter()
     entry = kernel.solve
     entry.entries = []  # the JIT solves: its cache, and the signatures the extension exports

@@ -16,6 +16,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 import yaml
+from rosbags.rosbag2 import Reader
 
 from fence_sorter.recording.bagread import (
     STORAGE_SUFFIXES,
@@ -92,7 +93,7 @@ class BagInfo:
 
 
 def _mcap_segment(path: Path, types: dict[str, str]) -> SegmentInfo:
-    from mcap.reader import make_reader
+    from mcap.reader import make_reader  # lazy: mcap (40 ms), only to read a bag's chunks
 
     seg = SegmentInfo(str(path), path.stat().st_size)
     if seg.size == 0:
@@ -130,8 +131,6 @@ def _mcap_segment(path: Path, types: dict[str, str]) -> SegmentInfo:
 
 
 def _sqlite_segment(path: Path, types: dict[str, str]) -> SegmentInfo:
-    from rosbags.rosbag2 import Reader
-
     seg = SegmentInfo(str(path), path.stat().st_size)
     try:
         with Reader(path) as reader:

@@ -168,6 +168,7 @@ def _read_with_rosbags(path: Path) -> tuple[dict[str, str], dict[str, str], list
 
 def _recover_mcap(path: Path) -> tuple[dict[str, str], dict[str, str], list, str]:
     """Records of an MCAP file read as a stream up to the first damaged record."""
+    # lazy: mcap (40 ms), only to read a bag's chunks
     from mcap.records import Channel, Message, Schema
     from mcap.stream_reader import StreamReader
 

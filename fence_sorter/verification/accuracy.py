@@ -57,6 +57,7 @@ from scipy.interpolate import CubicHermiteSpline
 from fence_sorter.jsonsafe import json_safe
 from fence_sorter.physics.params import OUR_METHODS, SCIPY_METHODS
 from fence_sorter.physics.simulate import Scenario, SimulationResult, SortingModel, simulate
+from fence_sorter.scene import load_scene
 from fence_sorter.verification import machine
 from fence_sorter.verification.report import table
 
@@ -494,8 +495,6 @@ class Campaign:
 
 
 def _load(scene: str) -> Scenario:
-    from fence_sorter.scene import load_scene
-
     return load_scene(scene).scenario
 
 
@@ -679,10 +678,10 @@ def plot_measure(
     """One work-precision diagram: error in ``measure`` against wall time, one curve per
     method, the default as a star, the reference's own error and the ODE form's gap as lines;
     the legend beside the axes (never over the data)."""
-    import matplotlib
+    import matplotlib  # lazy: Matplotlib (0.7-1.3 s), only to plot
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # lazy: Matplotlib (0.7-1.3 s), only to plot
 
     methods = list(dict.fromkeys(p.method for p in points if not p.is_default))
     fig, ax = plt.subplots(figsize=(9.0, 5.0))

@@ -61,6 +61,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 
+from fence_sorter.physics.params import FenceParams
+from fence_sorter.physics.scenario import RECORDABLE
+from fence_sorter.scene import load_scene
 from fence_sorter.verification.machine import REPO, git_revision, load_average, machine_info
 from fence_sorter.verification.report import table
 
@@ -153,7 +156,7 @@ class Outcome:
 def build_model(sc, force_border: bool = False):
     """``SortingModel(sc)``; ``force_border`` switches border contact on even when the load
     cannot reach the border (the model otherwise leaves it out)."""
-    from fence_sorter.physics import kernel as K
+    from fence_sorter.physics import kernel as K  # lazy: loads the kernel (Numba)
     from fence_sorter.physics.simulate import SortingModel
 
     md = SortingModel(sc)
@@ -179,7 +182,7 @@ def timed_run(sc, force_border: bool = False) -> tuple[Outcome, float, float]:
     the timed call, and none runs just before it to leave the caches cold (call :func:`collect`
     before a block of calls instead). Every timed run of the benchmark, ours and SciPy's, goes
     through here."""
-    from fence_sorter.physics.simulate import simulate
+    from fence_sorter.physics.simulate import simulate  # lazy: loads the kernel (Numba), SciPy
     from fence_sorter.physics.stepper import collector_off
 
     with collector_off():
@@ -564,9 +567,6 @@ class PartsResult:
 
 def parts_variants(sc) -> list[tuple[str, str, bool, object, bool]]:
     """(label, role, same physics, scenario, force border) of the model-parts comparison."""
-    from fence_sorter.physics.fence import FenceParams
-    from fence_sorter.physics.simulate import RECORDABLE
-
     md = build_model(sc)
     out = [("as built (the scene)", "built", True, sc, False)]
     if sc.record:
@@ -644,6 +644,8 @@ def hwm_kib():
         pass
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 t0 = time.perf_counter()
+from fence_sorter.physics.params import FenceParams
+from fence_sorter.physics.scenario import RECORDABLE
 from fence_sorter.scene import load_scene
 from fence_sorter.physics.simulate import simulate
 import numba
@@ -782,8 +784,6 @@ class BeltProbe:
 
 
 def belt_probe(name: str, cap: float) -> BeltProbe:
-    from fence_sorter.scene import load_scene
-
     sc = load_scene(name, ["conveyor.mu_belt=0"]).scenario
     method, rtol = SCIPY_REFERENCE
     a, _, _ = timed_run(reference_solver(sc, REFERENCE_DT))
@@ -840,8 +840,6 @@ def bench_scene(
     cap: float,
     log: Log = _quiet,
 ) -> SceneBench:
-    from fence_sorter.scene import load_scene
-
     sc = load_scene(name).scenario
     sv = sc.solver
 

@@ -19,6 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from fence_sorter.physics.params import ParameterError, SolverParams
+from fence_sorter.physics.simulate import simulate
+from fence_sorter.physics.stepper import collector_off
+from fence_sorter.scene import load_scene
 from fence_sorter.verification.accuracy import ATOL_PER_RTOL, SCENES
 
 REFERENCE_DIR = Path(__file__).resolve().parents[2] / "docs" / "accuracy" / "reference"
@@ -47,10 +50,6 @@ def reference_peak(scene: str, directory: Path = REFERENCE_DIR) -> float:
 
 def solve_at(scene: str, rtol: float, repeats: int = 1, ref_peak: float | None = None):
     """The scene's default solved at ``rtol``: its :class:`ConvergencePoint`."""
-    from fence_sorter.physics.simulate import simulate
-    from fence_sorter.physics.stepper import collector_off
-    from fence_sorter.scene import load_scene
-
     sc = load_scene(scene).scenario
     sv = replace(sc.solver, rtol=rtol, atol=rtol * ATOL_PER_RTOL)
     sv.validate()

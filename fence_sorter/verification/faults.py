@@ -21,6 +21,7 @@ Cases:
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import os
@@ -33,10 +34,21 @@ import sys
 import tempfile
 import threading
 import time
+from collections import Counter
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from fence_sorter.cli.main import main as cli_main
 from fence_sorter.resources import data_path
+from fence_sorter.runner.monitor import Monitor
+from fence_sorter.runner.processes import (
+    ProcessGroup,
+    leftovers,
+    node_command,
+    node_env,
+    run_domain_id,
+)
+from fence_sorter.verification.machine import machine_info
 
 REPO = Path(__file__).resolve().parents[2]
 #: the run id of the wire case's nodes
@@ -124,8 +136,6 @@ class InterruptTrial:
 
 def _names(pids: list[int]) -> str:
     """The leftovers' executables, e.g. "simulator, python (2)"."""
-    from collections import Counter
-
     names = Counter()
     for pid in pids:
         try:
@@ -200,8 +210,6 @@ def flood_main(argv: list[str]) -> int:
     """``python -m fence_sorter.verification.faults flood TOPIC --domain N [--rate R]
     [--seconds S]``: publish another run's messages at R per second for S s; print the count
     sent as JSON."""
-    import argparse
-
     ap = argparse.ArgumentParser(prog="faults flood")
     ap.add_argument("topic", choices=("/parcels", "/fence_commands"))
     ap.add_argument("--domain", type=int, required=True)
@@ -211,10 +219,10 @@ def flood_main(argv: list[str]) -> int:
     ap.add_argument("--ids", type=int, default=20, help="ids cycle over first-id + [0, ids)")
     a = ap.parse_args(argv)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    import rclpy
+    import rclpy  # lazy: rclpy (0.25 s), only where ROS runs
     from rclpy.signals import SignalHandlerOptions
 
-    from fence_sorter.nodes.qos import INPUT_QOS
+    from fence_sorter.nodes.qos import INPUT_QOS  # lazy: loads rclpy
     from fence_sorter_msgs.msg import FenceCommand, Parcel
 
     ctx = rclpy.Context()
@@ -248,7 +256,7 @@ def flood_main(argv: list[str]) -> int:
             error = f"{type(exc).__name__}: {exc}"
     wall = time.monotonic() - t0
     # every subscriber has it before the participant goes (its writer's history goes with it)
-    from rclpy.duration import Duration
+    from rclpy.duration import Duration  # lazy: rclpy (0.25 s), only where ROS runs
 
     acked = pub.wait_for_all_acked(Duration(seconds=30))
     print(
@@ -270,7 +278,7 @@ def flood_main(argv: list[str]) -> int:
 
 def parcel_msg(pid: int, run_id: int = 0, scan_time: float = 0.0, **fields):
     """A plausible Parcel (0.3 x 0.2 m, 3 kg, to divert) with ``fields`` changed."""
-    from fence_sorter.nodes.convert import sec_to_time
+    from fence_sorter.nodes.convert import sec_to_time  # lazy: loads ROS messages
     from fence_sorter_msgs.msg import Parcel
 
     msg = Parcel()
@@ -290,7 +298,7 @@ def parcel_msg(pid: int, run_id: int = 0, scan_time: float = 0.0, **fields):
 
 def command_msg(pid: int, run_id: int, **fields):
     """A FenceCommand (R_s 0.4 m, t1 0.35 s, alpha_k 40 deg, feasible) with ``fields``."""
-    from fence_sorter_msgs.msg import FenceCommand
+    from fence_sorter_msgs.msg import FenceCommand  # lazy: ROS messages, only where ROS runs
 
     msg = FenceCommand()
     msg.header.frame_id = "sorter"
@@ -463,10 +471,8 @@ class WireResult:
 
 def run_wire(workdir: Path, domain: int, progress=print) -> tuple[list[WireResult], dict]:
     """Start a controller and a simulator of run WIRE_RUN and send each wire case."""
-    from fence_sorter.nodes.convert import sec_to_time
+    from fence_sorter.nodes.convert import sec_to_time  # lazy: loads ROS messages
     from fence_sorter.nodes.qos import INPUT_QOS
-    from fence_sorter.runner.monitor import Monitor
-    from fence_sorter.runner.processes import ProcessGroup, leftovers, node_command, node_env
     from fence_sorter_msgs.msg import FenceCommand, Parcel
 
     env = node_env(domain, workdir / "wire-ros")
@@ -973,9 +979,6 @@ def campaign(
 ) -> dict[str, bool]:
     """Run the cases named in ``which``, replace their sections of the report ``out`` (the
     others are kept from its JSON) and return whether each section met its target."""
-    from fence_sorter.runner.processes import run_domain_id
-    from fence_sorter.verification.machine import machine_info
-
     rng = random.Random(seed)
     workdir = Path(tempfile.mkdtemp(prefix="fence_sorter_faults_"))
     try:
@@ -1044,7 +1047,6 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ["flood"]:
         return flood_main(argv[1:])
-    from fence_sorter.cli.main import main as cli_main
 
     return cli_main(["faults", *argv])
 

@@ -7,6 +7,8 @@ import platform
 import subprocess
 from pathlib import Path
 
+import numpy as np
+
 REPO = Path(__file__).resolve().parents[2]
 
 
@@ -23,8 +25,7 @@ def _first_field(path: str, prefix: str) -> str | None:
 
 def machine_info() -> dict[str, str]:
     """CPU model, cores, memory, OS, Python and library versions, whether the JIT is on."""
-    import numba
-    import numpy as np
+    import numba  # lazy: Numba (0.4 s), only for its version
     import scipy
 
     cpu = _first_field("/proc/cpuinfo", "model name") or platform.processor() or platform.machine()

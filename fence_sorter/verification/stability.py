@@ -47,7 +47,9 @@ from pathlib import Path
 import numpy as np
 
 from fence_sorter.codes import Stage
+from fence_sorter.physics.params import ParameterError
 from fence_sorter.physics.simulate import EnergyAudit, SortingModel, simulate
+from fence_sorter.scene import load_scene
 from fence_sorter.verification.machine import git_revision, machine_info
 from fence_sorter.verification.report import table
 
@@ -835,9 +837,6 @@ def _second_solve(name: str, sc2, r, what: str) -> tuple[object | None, list[Inv
 
 def run_case(case: Case, convergence: bool = True) -> CaseResult:
     """Load, solve (nominal, halved step, fine reference if any), check the invariants, judge."""
-    from fence_sorter.physics.params import ParameterError
-    from fence_sorter.scene import load_scene
-
     wall0 = time.perf_counter()
     invs: list[Invariant] = []
     try:
@@ -1004,8 +1003,6 @@ def run_case(case: Case, convergence: bool = True) -> CaseResult:
 
 def warm_up(cases: Sequence[Case]) -> float:
     """Compile the kernel for the methods the cases use (a short solve each); return seconds."""
-    from fence_sorter.scene import load_scene
-
     wall0 = time.perf_counter()
     methods = {str(c.overrides.get("solver.method", "adaptive")) for c in cases}
     for method in sorted(methods):
@@ -1080,10 +1077,10 @@ def plot_summary(results: Sequence[CaseResult], path) -> None:
     A bar is green when its invariant holds and red when not; the case's verdict follows its
     name. Diagnosed cases have no values (nothing past a diagnosis is data).
     """
-    import matplotlib
+    import matplotlib  # lazy: Matplotlib (0.7-1.3 s), only to plot
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # lazy: Matplotlib (0.7-1.3 s), only to plot
 
     n = len(results)
     floor, top = 1e-6, 100.0

@@ -14,17 +14,18 @@ import tempfile
 import time
 from pathlib import Path
 
+from fence_sorter.visualisation.rerun_log import (
+    RerunLogger,
+    bag_frames,
+    open_recording,
+    scene_from_bag,
+)
+
 REPO = Path(__file__).resolve().parents[2]
 
 
 def bench(bag: Path, repeat: int, runs: int, scene_every: list[int]) -> list[str]:
-    from fence_sorter.recording.bagread import read_bag
-    from fence_sorter.visualisation.rerun_log import (
-        RerunLogger,
-        bag_frames,
-        open_recording,
-        scene_from_bag,
-    )
+    from fence_sorter.recording.bagread import read_bag  # lazy: loads rosbags
 
     contents = read_bag(bag)
     frames = list(bag_frames(contents)) * repeat

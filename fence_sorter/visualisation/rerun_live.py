@@ -30,7 +30,14 @@ from pathlib import Path
 
 import numpy as np
 
-from fence_sorter.visualisation.rerun_log import FenceFrame, ParcelFrame, SceneGeometry
+from fence_sorter.visualisation.rerun_log import (
+    TIMELINE,
+    FenceFrame,
+    ParcelFrame,
+    RerunLogger,
+    SceneGeometry,
+    open_recording,
+)
 
 KIND_FRAME, KIND_EVENT, KIND_SORT_EVENT = 1, 2, 3
 _HEAD = struct.Struct("<IB")  # payload length, kind
@@ -218,7 +225,6 @@ def child_main(argv: list[str] | None = None) -> int:
         os.nice(NICE)  # the real-time loop's process goes first when the CPUs are busy
     except OSError:
         pass
-    from fence_sorter.visualisation.rerun_log import TIMELINE, RerunLogger, open_recording
 
     scene = SceneGeometry(
         args.belt_width,

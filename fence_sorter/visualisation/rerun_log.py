@@ -93,7 +93,7 @@ class ParcelFrame:
 
 def _rr():
     os.environ.setdefault("RERUN_ANALYTICS_ENABLED", "false")  # no outside network here
-    import rerun as rr
+    import rerun as rr  # lazy: Rerun (0.5 s), only to log
 
     return rr
 
@@ -116,7 +116,7 @@ def blueprint(scene: SceneGeometry | None = None):
     on the left with the 3D scene in a tab behind it; on the right the time series (forces,
     tip deflection, alpha_w, speeds) with the damage-risk plots in a tab behind them. Every
     plot's time axis is linked to the others (one instant at one x position)."""
-    import rerun.blueprint as rrb
+    import rerun.blueprint as rrb  # lazy: Rerun (0.5 s), only to log
 
     bounds = None
     if scene is not None:
@@ -595,7 +595,7 @@ def frames_from_snapshot(snap) -> tuple[FenceFrame, list[ParcelFrame]]:
 # -- frames from a recorded bag ------------------------------------------------------------------
 def scene_from_bag(contents) -> SceneGeometry:
     """Belt, chute (from /markers) and scan line (from /parcels) as the bag shows them."""
-    from fence_sorter.analysis.run import DEFAULT_BELT_WIDTH
+    from fence_sorter.analysis.run import DEFAULT_BELT_WIDTH  # lazy: loads rosbags
 
     width, belt_x, chute = DEFAULT_BELT_WIDTH, (-3.0, 3.0), None
     for m in contents.by_topic(topics.MARKERS):
@@ -656,7 +656,7 @@ def bag_frames(contents) -> Iterable[tuple[float, FenceFrame | None, list[Parcel
 
 def log_bag(contents, rec) -> RerunLogger:
     """Log a recorded run (read with :func:`fence_sorter.recording.bagread.read_bag`)."""
-    from fence_sorter.analysis.events import SortEventData, risk_of
+    from fence_sorter.analysis.events import SortEventData, risk_of  # lazy: loads rosbags
     from fence_sorter.analysis.run import OUTCOME_FIELDS
 
     logger = RerunLogger(rec, scene_from_bag(contents), series_every=1000, scene_every=1000)

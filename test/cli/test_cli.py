@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -38,26 +39,46 @@ def test_version_is_single_sourced() -> None:
     assert f"<version>{__version__}</version>" in package_xml.read_text()
 
 
-def test_every_registered_module_adds_its_subcommand() -> None:
+def test_every_subcommand_module_configures_its_parser() -> None:
     import importlib
 
-    assert "check" in cli_main.SUBCOMMAND_MODULES
-    assert "demo_roundtrip" in cli_main.SUBCOMMAND_MODULES
-    for module_name in cli_main.SUBCOMMAND_MODULES:
-        module = importlib.import_module(f"fence_sorter.cli.{module_name}")
-        subparsers = argparse.ArgumentParser().add_subparsers()
-        module.register(subparsers)
-        assert subparsers.choices, f"{module_name}.register added no subcommand"
-        for name, parser in subparsers.choices.items():
-            assert callable(parser._defaults.get("func")), f"{module_name}: {name} has no func"
+    assert "check" in cli_main.SUBCOMMANDS and "demo-roundtrip" in cli_main.SUBCOMMANDS
+    for command in cli_main.SUBCOMMANDS:
+        module = importlib.import_module(cli_main.module_name(command))
+        parser = argparse.ArgumentParser(prog=command)
+        module.register(parser)
+        assert callable(parser._defaults.get("func")), f"{command} has no func"
     parser = cli_main.build_parser()
     assert "check" in parser.format_help() and "demo-roundtrip" in parser.format_help()
+
+
+def test_only_the_chosen_subcommand_module_is_imported() -> None:
+    """``fence-sorter simulate --help`` imports cli.simulate, no other subcommand module and
+    none of the heavy dependencies (the kernel, SciPy, rclpy)."""
+    code = (
+        "import sys\n"
+        "from fence_sorter.cli import main\n"
+        "try:\n"
+        "    main.main(['simulate', '--help'])\n"
+        "except SystemExit:\n"
+        "    pass\n"
+        "heavy = ('numba', 'scipy', 'rclpy', 'fence_sorter.physics.kernel')\n"
+        "loaded = [m for m in sys.modules if m.startswith('fence_sorter.cli.')]\n"
+        "loaded += [m for m in heavy if m in sys.modules]\n"
+        "print(' '.join(sorted(loaded)), file=sys.stderr)\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=TIMEOUT
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "--set KEY=VALUE" in proc.stdout
+    assert proc.stderr.split() == ["fence_sorter.cli.main", "fence_sorter.cli.simulate"]
 
 
 def test_broken_subcommand_module_does_not_break_the_others(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    monkeypatch.setattr(cli_main, "SUBCOMMAND_MODULES", ("check", "no_such_module"))
+    monkeypatch.setitem(cli_main.SUBCOMMANDS, "no-such-module", "a module that is not there")
     assert cli_main.main(["no-such-module"]) == 1
     assert "fence_sorter.cli.no_such_module cannot be loaded" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exc:

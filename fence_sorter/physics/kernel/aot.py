@@ -33,10 +33,13 @@ import os
 import platform
 import shutil
 import tempfile
+import warnings
 from pathlib import Path
 
+import llvmlite.binding as ll
 import numba
 import numpy as np
+from numba.np.numpy_support import as_dtype
 
 MODULE = "solve_aot"  # the extension's module name (its PyInit_ symbol)
 BUILD_FILE = "build.json"
@@ -45,8 +48,6 @@ log = logging.getLogger("fence_sorter.physics.kernel")
 
 def host_cpu() -> str:
     """The CPU model the extension is compiled for (LLVM's name, as Numba's JIT uses)."""
-    import llvmlite.binding as ll  # loaded with numba already
-
     return ll.get_host_cpu_name()
 
 
@@ -67,8 +68,6 @@ def aot_directory(cache: Path) -> Path:
 
 def _spec(numba_type) -> tuple:
     """Per field of a (named) tuple argument: (dtype, ndim) of its C-contiguous array."""
-    from numba.np.numpy_support import as_dtype
-
     fields = []
     for t in numba_type:
         if not (isinstance(t, numba.types.Array) and t.layout == "C" and t.mutable):
@@ -91,14 +90,12 @@ def _describe(sig) -> dict:
 def build(directory: Path, digest: str, jit, verbose: bool = False) -> Path:
     """Compile the extension into ``directory`` (replaced whole, atomically), one entry per
     signature the dispatcher ``jit`` (``loop.solve``) has compiled; returns the directory."""
-    import warnings
-
     signatures = list(jit.signatures)
     if not signatures:
         raise RuntimeError("loop.solve has no compiled signature to export: solve first")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", numba.NumbaPendingDeprecationWarning)
-        from numba.pycc import CC
+        from numba.pycc import CC  # lazy: Numba's ahead-of-time compiler, only to compile
 
         cc = CC(MODULE)
         cc.target_cpu = host_cpu()
