@@ -37,6 +37,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.optimize import least_squares
 
+from fence_sorter.physics.params import SolverParams
 from fence_sorter.physics.parcel import initial_pose, parcel_body
 from fence_sorter.physics.simulate import Scenario
 
@@ -47,6 +48,9 @@ from .sensors import camera_to_sorter, drive_angle, geometric_centre, sorter_to_
 Z95 = 1.959964
 #: seconds before a stroke where the root moment is read as the gauge's noise
 PRE_WINDOW = 0.5
+#: after a stroke's cycle, how long the fence rings down before a root moment reads it at rest
+#: [s] (the line's solver.settle_time: a run's fence follows its stroke's solve that long)
+RING_DOWN = SolverParams().settle_time
 #: initial noise levels of the first pass: position [m], yaw [rad], root moment [N m]
 NOMINAL_SIGMA = (2e-3, 1e-2, 1.0)
 SIGMA_FLOOR = (1e-8, 1e-8, 1e-8)
@@ -117,15 +121,29 @@ def align_camera(base: Scenario, mb: MeasuredBag) -> tuple[tuple[float, float, f
     return (float(d[0]), float(d[1]), theta), rms
 
 
-def event_data(mb: MeasuredBag) -> list[EventData]:
-    """Each parcel's samples (camera frame), times from its stroke start, to its replay's end."""
+def event_data(mb: MeasuredBag, ring_down: float = RING_DOWN) -> list[EventData]:
+    """Each parcel's samples (camera frame), times from its stroke start, to its replay's end.
+
+    The root moment's window is what its replay explains with the fence at rest before the
+    stroke: from PRE_WINDOW before the stroke, but not within ``ring_down`` after the previous
+    stroke's cycle (the fence still rings; a run's line follows it for solver.settle_time), and
+    up to the next stroke's start (whose solve starts with the fence at rest).
+    """
     m = mb.m
     out = []
+    events = sorted(mb.events, key=lambda e: e.t_start)
     for ev in mb.events:
+        k = events.index(ev)
         sel = m.cam_id == ev.parcel_id
         tau = m.cam_t[sel] - ev.t_start
         keep = tau < ev.t_end - 1e-6
-        ssel = (m.str_t >= ev.t_start - PRE_WINDOW) & (m.str_t < ev.t_start + ev.t_end - 1e-6)
+        lo, hi = ev.t_start - PRE_WINDOW, ev.t_start + ev.t_end - 1e-6
+        if k > 0:
+            prev = events[k - 1]
+            lo = max(lo, prev.t_start + 2.0 * prev.t1 + ring_down)
+        if k + 1 < len(events):
+            hi = min(hi, events[k + 1].t_start - 1e-6)
+        ssel = (m.str_t >= lo) & (m.str_t < hi)
         out.append(
             EventData(
                 ev,
@@ -726,7 +744,7 @@ def calibrate(
     """Fit ``names`` of ``base`` to the bag; see the module docstring."""
     wall0, cpu0 = time.perf_counter(), cpu_seconds()
     offset0, cam_rms = align_camera(base, mb)
-    eds = [ed for ed in event_data(mb) if (ed.cam_tau > 0.0).sum() >= 3]
+    eds = [ed for ed in event_data(mb, base.solver.settle_time) if (ed.cam_tau > 0.0).sum() >= 3]
     if len(eds) < min_parcels:
         raise CalibrationInputError(
             f"{mb.path}: {len(eds)} parcels with a stroke and camera poses during it; a "

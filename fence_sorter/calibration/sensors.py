@@ -424,12 +424,14 @@ class SensorStream:
     source (the fence; one parcel) the truth is interpolated: the drive angle and a parcel's
     centre of gravity and yaw by cubic Hermite interpolation with their rates, the root moment
     (no rate in the state) by the cubic through the four states around the sample, one state
-    interval later. Across a gap longer than ``max_gap`` no sample is taken and the missed instants
-    are counted (``*_dropped_state_gap``). Camera frames are held until the state clock
-    reaches capture + latency (:meth:`release`); beyond ``max_pending`` held frames a new
-    frame is dropped and counted (``camera_dropped_overload``). Three generators (encoder,
-    camera, strain) spawned from ``seed``. ``moment_factor``: root moment per tip deflection
-    [N m / m] (None: a stiff fence, no gauge).
+    interval later. Across a gap longer than ``max_gap`` (a run sets it to 1.5 state periods: a
+    lost state is never bridged) no sample is taken and the missed instants are counted
+    (``*_dropped_state_gap``), the gauge's also where its cubic's stencil spans such a gap.
+    Camera frames are held until the state clock reaches capture + latency (:meth:`release`);
+    beyond ``max_pending`` held frames a new frame is dropped and counted
+    (``camera_dropped_overload``). Three generators (encoder, camera, strain) spawned from
+    ``seed``. ``moment_factor``: root moment per tip deflection [N m / m] (None: a stiff
+    fence, no gauge).
     """
 
     def __init__(
@@ -497,22 +499,24 @@ class SensorStream:
 
     def _gauge(self, hist: list[tuple[float, ...]]):
         """The gauge's samples in the interval before the newest state: the root moment by the
-        cubic through the four states around it (two each side; linear where a neighbour is
-        more than ``max_gap`` away), so a ringing fence is followed between states."""
+        cubic through the four states around it (two each side), so a ringing fence is
+        followed between states. Where a state of that stencil is missing (a neighbour more
+        than ``max_gap`` away) the samples are dropped and counted: a cubic or a line across
+        a lost state misses an impact by several noise levels."""
         a, b = hist[-3], hist[-2]
         tt = self._span(a[0], b[0], self.strain.rate, "strain_dropped_state_gap")
         if tt is None or not tt.size:
             return np.zeros(0), np.zeros(0)
         pts = hist[-4:] if len(hist) == 4 else hist[-3:]
-        if all(q[0] - p[0] <= self.max_gap for p, q in zip(pts, pts[1:], strict=False)):
-            ts, ms = [p[0] for p in pts], [p[3] for p in pts]
-            true = sum(
-                ms[i] * np.prod([(tt - ts[j]) / (ts[i] - ts[j]) for j in range(len(ts)) if j != i],
-                                axis=0)
-                for i in range(len(ts))
-            )  # fmt: skip
-        else:
-            true = np.interp(tt, (a[0], b[0]), (a[3], b[3]))
+        if any(q[0] - p[0] > self.max_gap for p, q in zip(pts, pts[1:], strict=False)):
+            self.counts["strain_dropped_state_gap"] += tt.size
+            return np.zeros(0), np.zeros(0)
+        ts, ms = [p[0] for p in pts], [p[3] for p in pts]
+        true = sum(
+            ms[i] * np.prod([(tt - ts[j]) / (ts[i] - ts[j]) for j in range(len(ts)) if j != i],
+                            axis=0)
+            for i in range(len(ts))
+        )  # fmt: skip
         self.counts["strain_published"] += tt.size
         return tt, strain_readings(self.strain, self.rng_strain, true)
 

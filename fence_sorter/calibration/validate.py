@@ -73,7 +73,7 @@ class ParcelCheck:
 def validate(base: Scenario, mb: MeasuredBag, workers: int | None = None):
     """Per-parcel checks and the error summary of ``base`` on every parcel of ``mb``."""
     offset, _ = align_camera(base, mb)
-    eds = [ed for ed in event_data(mb) if ed.cam_tau.size >= 3]
+    eds = [ed for ed in event_data(mb, base.solver.settle_time) if ed.cam_tau.size >= 3]
     evaluate = Evaluator(base, eds, workers)
     try:
         preds = evaluate([{}])[0]

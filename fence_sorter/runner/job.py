@@ -175,19 +175,8 @@ def prepare(opts: RunOptions) -> Plan:
     if opts.sensors is not None:
         sensors_path, truth = _sensors_truth(opts, scene_path, base, stream)
         truth["seed"] = node_params.get("sensors", {}).get("seed", truth["seed"])
-        spec = truth["sensors_spec"]
-        rates = [spec["encoder"]["rate"], spec["camera"]["rate"]]
-        rates += [spec["strain"]["rate"]] if spec["strain"] and base.fence is not None else []
-        state_rate = min(max(rates), MAX_STATE_RATE)
-        # paced, so the sensors node takes every state: unpaced the simulator publishes
-        # faster than it can, and past MAX_PUBLISH_RATE / state_rate the state is too sparse
-        rtf_max = MAX_PUBLISH_RATE / state_rate
-        if not 0.0 < opts.rtf <= rtf_max:
-            raise BadInput(
-                f"--rtf must be in (0, {rtf_max:g}] with --sensors {opts.sensors} (the state at "
-                f"{state_rate:g} Hz of sim time, at most {MAX_PUBLISH_RATE:g} Hz of wall time), "
-                f"got {opts.rtf:g}"
-            )
+        cfg = load_sensors_arg(sensors_path)
+        state_rate = sensors_state_rate(cfg, base, opts.rtf, opts.sensors)
     sim_duration = START_DELAY + stream[-1].arrival_time + (LINE_END_X - SCAN_LINE_X) / v + 5.0
     try:
         domain = choose_domain(opts.domain)
@@ -209,6 +198,47 @@ def prepare(opts: RunOptions) -> Plan:
     )
 
 
+def load_sensors_arg(sensors: str | Path):
+    """The sensors file of ``--sensors`` (a path or a name under config/sensors/); BadInput
+    names it and the key."""
+    from fence_sorter.calibration.sensors import load_sensors
+
+    try:
+        return load_sensors(sensors)
+    except ParameterError as exc:
+        raise BadInput(f"--sensors: {exc}") from None
+
+
+def sensors_state_rate(cfg, base, rtf: float, label: str | None = None) -> float:
+    """The simulator state's rate [Hz of sim time] the sensors ``cfg`` need on scene ``base``
+    (the highest sensor rate, at most MAX_STATE_RATE); BadInput unless ``rtf`` paces the run
+    within (0, MAX_PUBLISH_RATE / that rate]: unpaced the simulator publishes faster than the
+    sensors node takes its state, and beyond it the state is sparser than they need."""
+    rates = [cfg.encoder.rate, cfg.camera.rate]
+    rates += [cfg.strain.rate] if cfg.strain is not None and base.fence is not None else []
+    state_rate = min(max(rates), MAX_STATE_RATE)
+    rtf_max = MAX_PUBLISH_RATE / state_rate
+    if not 0.0 < rtf <= rtf_max:
+        raise BadInput(
+            f"--rtf must be in (0, {rtf_max:g}] with --sensors {label or cfg.name} (the state at "
+            f"{state_rate:g} Hz of sim time, at most {MAX_PUBLISH_RATE:g} Hz of wall time), "
+            f"got {rtf:g}"
+        )
+    return state_rate
+
+
+def sensors_node_parameters(scene: str, sensors: str, seed: int, state_rate: float) -> dict:
+    """The sensors node's parameters in a run (``fence-sorter run`` and the launch file)."""
+    return {
+        "scene": scene,
+        "sensors": sensors,
+        "seed": seed,
+        # no lost state is bridged: across one, interpolating the truth misses an impact by
+        # several noise levels (the samples there are dropped and counted)
+        "max_state_gap": 1.5 / state_rate,
+    }
+
+
 def state_publish_rate(state_rate: float, rtf: float) -> float:
     """The simulator's publish_rate for ``state_rate`` Hz of sim time: wall Hz when paced (sim
     Hz x rtf), sim Hz when unpaced; within the parameter's [1, 1000]."""
@@ -223,13 +253,13 @@ def _sensors_truth(opts: RunOptions, scene_path: Path, base, stream) -> tuple[Pa
     from dataclasses import asdict
 
     from fence_sorter.calibration.emulate import truth_record
-    from fence_sorter.calibration.sensors import load_sensors, resolve_sensors
+    from fence_sorter.calibration.sensors import resolve_sensors
 
     try:
         path = resolve_sensors(opts.sensors).resolve()
-        sensors = load_sensors(path)
     except ParameterError as exc:
         raise BadInput(f"--sensors: {exc}") from None
+    sensors = load_sensors_arg(path)
     truth = truth_record(
         scene_path.stem,
         base,
@@ -418,11 +448,13 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None], stop: StopReq
                         plan,
                         opts,
                         [
-                            scene,
-                            f"sensors:={plan.sensors_path}",
-                            f"seed:={sensors_seed(opts)}",
-                            # two consecutive states may be lost
-                            f"max_state_gap:={3.0 / plan.state_rate}",
+                            f"{k}:={v}"
+                            for k, v in sensors_node_parameters(
+                                str(plan.scene_path),
+                                str(plan.sensors_path),
+                                sensors_seed(opts),
+                                plan.state_rate,
+                            ).items()
                         ],
                     ),
                 ),

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from fence_sorter.calibration.bag import read_measured_bag
+from fence_sorter.calibration.fit import event_data, predict
 from fence_sorter.calibration.replay import root_moment_factor
 from fence_sorter.calibration.sensors import (
     camera_to_sorter,
@@ -220,6 +221,25 @@ def test_camera_noise_frame_offset_dropouts_and_latency(run):
     # first state past it (states 4 ms apart)
     assert cam.latency <= float(diag["camera_delay_min_s"]) <= cam.latency + 0.004 + 1e-6
     assert float(diag["camera_delay_max_s"]) >= float(diag["camera_delay_min_s"])
+
+
+def test_the_gauge_is_the_replays_of_the_runs_parcels_plus_its_noise(run):
+    """The run's root moment (the line's solve, its 250 Hz state, the sensors node) against the
+    calibration's replays of the same parcels and strokes (fixed-step trapezoid) over each
+    parcel's window, ring-down included: what is left is the gauge's noise, no bias, and the
+    two models' difference adds at most sigma / 2 in quadrature."""
+    base = load_scene(SCENE).scenario
+    sigma = run["cfg"].strain.noise
+    mb = read_measured_bag(run["bag"])
+    res, peaks = [], []
+    for ed in event_data(mb, base.solver.settle_time):
+        *_, moment = predict(base, ed, {})
+        res.append(ed.str_m - moment)
+        peaks.append(np.abs(moment).max())
+    r = np.concatenate(res)
+    assert len(peaks) == 4 and min(peaks) > 10.0 * sigma  # every stroke loads the fence
+    assert sigma * 0.9 < np.sqrt(np.mean(r**2)) < sigma * math.hypot(1.0, 0.5)
+    assert abs(np.mean(r)) < 5.0 * sigma / math.sqrt(r.size)
 
 
 def test_the_bag_carries_the_truth_and_calibrate_fits_it(run):
