@@ -18,7 +18,7 @@ from .drive import peak_rate
 from .fence import build_fence, modal_basis
 from .params import ConveyorParams, FenceParams, ParcelParams
 from .parcel import ParcelBody, initial_pose, parcel_body
-from .scenario import RECORDABLE, Scenario
+from .scenario import RECORDABLE, Scenario, per_scenario
 
 __all__ = ["RECORDABLE", "Scenario", "SortingModel"]
 
@@ -28,64 +28,34 @@ class SortingModel:
     the modes ``fence_modes`` keeps, no border contact for a load that cannot reach the border,
     no time series nobody asked for."""
 
+    sc: Scenario
+    body: ParcelBody
+    corners: np.ndarray  # the load's corners relative to C_s [m]
+    normals: np.ndarray  # its face normals
+    initial: tuple[float, float, float]  # initial pose (C_s, yaw)
+    mass: float
+    inertia: float
+    belt: float  # belt speed [m/s]
+    flexible: bool
+    fem: object | None  # the fence's FEM (flexible)
+    omega: np.ndarray  # kept modes' angular frequencies [rad/s] (empty: stiff fence)
+    zeta: np.ndarray
+    phi: np.ndarray
+    rigid_modal: np.ndarray
+    n_el: int
+    n_modes: int
+    n_state: int
+    use_border: bool
+    P: np.ndarray  # packed parameters (kernel.pack)
+    speed_limit: float  # runaway-speed diagnosis [m/s]
+    deep: float  # deep-penetration diagnosis [m]
+    parts: tuple[str, ...]
+
     def __init__(self, sc: Scenario):
-        self.sc = sc
-        self.body: ParcelBody
-        self.body, self.corners, self.normals, self.initial, reach = _load_geometry(
-            sc.parcel, sc.conveyor, sc.drive.r_s
-        )
-        self.mass = self.body.mass
-        self.inertia = self.body.inertia
-        self.belt = sc.conveyor.belt_speed
-        self.flexible = sc.fence is not None
-        if self.flexible:
-            fem, self.omega, self.zeta, self.phi, self.rigid_modal = _fence_modes(
-                sc.fence, sc.fence_modes
-            )
-            self.fem = fem
-            self.n_el = int(sc.fence.elements)
-            dl = fem.dl
-        else:
-            self.fem = None
-            self.omega = self.zeta = self.rigid_modal = _NO_MODES
-            self.phi = _NO_PHI
-            self.n_el = 0
-            dl = 0.0
-        self.n_modes = len(self.omega)
-        self.n_state = 6 + 2 * self.n_modes
-        y0 = self.initial[1]
-        steep = sc.drive.alpha_k > math.atan2(1.0, max(sc.contact.mu_fence, 1e-12))
-        self.use_border = y0 - reach < 1e-3 or steep
-        self.P = K.pack(
-            alpha_k=sc.drive.alpha_k,
-            t1=sc.drive.t1,
-            mass=self.mass,
-            inertia=self.inertia,
-            f_max=self.body.f_max,
-            t_max=self.body.t_max,
-            b_p=sc.contact.b_p,
-            k_p=sc.contact.k_p,
-            mu2=sc.contact.mu_fence,
-            v_min=sc.contact.v_min,
-            phidot_min=sc.contact.phidot_min,
-            length=sc.length,
-            dl=dl,
-            n_el=self.n_el,
-            use_border=self.use_border,
-            use_tip=True,
-            flexible=self.flexible,
-            belt=self.belt,
-            external=sc.external_wrench,
-        )
-        tip_speed = peak_rate(sc.drive) * sc.length
-        self.speed_limit = 20.0 * (self.belt + tip_speed) + 10.0
-        self.deep = sc.contact.deep_penetration * min(self.body.length_a, self.body.width_b)
-        parts = ["load", "belt_friction", "fence_contact", "stiff_reference"]
-        parts.append("fem_fence" if self.flexible else "rigid_fence")
-        if self.use_border:
-            parts.append("border_contact")
-        parts.extend(f"record:{r}" for r in sc.record)
-        self.parts = tuple(parts)
+        # every attribute is a function of the (frozen) scenario: packed once per scenario
+        # (``_packed``); the arrays are shared by the models of the scenario, so nothing may
+        # write to them (a caller changing a part assigns its own copy of ``P``)
+        self.__dict__.update(_packed(sc))
 
     def initial_state(self) -> np.ndarray:
         """[x, y, phi, vx, vy, phidot, eta, etadot] at t = 0 (fence at rest)."""
@@ -101,6 +71,73 @@ class SortingModel:
 
 _NO_MODES = np.zeros(0)  # a stiff fence's (empty) modal arrays, shared
 _NO_PHI = np.zeros((2, 0))
+
+
+@per_scenario
+def _packed(sc: Scenario) -> dict:
+    """The attributes of a :class:`SortingModel` of ``sc``: the parts the scenario needs packed
+    for the kernel (no FEM for a stiff fence, no border contact for a load that cannot reach it,
+    only the modes ``fence_modes`` keeps, no time series nobody asked for). Computed once per
+    scenario (repeated events of one scene: the optimiser, the line, the benchmarks); the arrays
+    are shared, so nothing may write to them."""
+    d: dict = {"sc": sc}
+    body, d["corners"], d["normals"], d["initial"], reach = _load_geometry(
+        sc.parcel, sc.conveyor, sc.drive.r_s
+    )
+    d["body"] = body
+    d["mass"] = mass = body.mass
+    d["inertia"] = body.inertia
+    d["belt"] = belt = sc.conveyor.belt_speed
+    d["flexible"] = flexible = sc.fence is not None
+    if flexible:
+        fem, d["omega"], d["zeta"], d["phi"], d["rigid_modal"] = _fence_modes(
+            sc.fence, sc.fence_modes
+        )
+        d["fem"] = fem
+        d["n_el"] = n_el = int(sc.fence.elements)
+        dl = fem.dl
+    else:
+        d["fem"] = None
+        d["omega"] = d["zeta"] = d["rigid_modal"] = _NO_MODES
+        d["phi"] = _NO_PHI
+        d["n_el"] = n_el = 0
+        dl = 0.0
+    d["n_modes"] = n_modes = len(d["omega"])
+    d["n_state"] = 6 + 2 * n_modes
+    y0 = d["initial"][1]
+    steep = sc.drive.alpha_k > math.atan2(1.0, max(sc.contact.mu_fence, 1e-12))
+    d["use_border"] = use_border = y0 - reach < 1e-3 or steep
+    d["P"] = K.pack(
+        alpha_k=sc.drive.alpha_k,
+        t1=sc.drive.t1,
+        mass=mass,
+        inertia=body.inertia,
+        f_max=body.f_max,
+        t_max=body.t_max,
+        b_p=sc.contact.b_p,
+        k_p=sc.contact.k_p,
+        mu2=sc.contact.mu_fence,
+        v_min=sc.contact.v_min,
+        phidot_min=sc.contact.phidot_min,
+        length=sc.length,
+        dl=dl,
+        n_el=n_el,
+        use_border=use_border,
+        use_tip=True,
+        flexible=flexible,
+        belt=belt,
+        external=sc.external_wrench,
+    )
+    tip_speed = peak_rate(sc.drive) * sc.length
+    d["speed_limit"] = 20.0 * (belt + tip_speed) + 10.0
+    d["deep"] = sc.contact.deep_penetration * min(body.length_a, body.width_b)
+    parts = ["load", "belt_friction", "fence_contact", "stiff_reference"]
+    parts.append("fem_fence" if flexible else "rigid_fence")
+    if use_border:
+        parts.append("border_contact")
+    parts.extend(f"record:{r}" for r in sc.record)
+    d["parts"] = tuple(parts)
+    return d
 
 
 @functools.lru_cache(maxsize=64)

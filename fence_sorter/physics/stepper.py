@@ -32,8 +32,11 @@ the next accepted point (the soft-real-time line), :meth:`Stepper.advance` to a 
 which compiled code cannot read, and grows the output buffers); :meth:`Stepper.result` is the
 :class:`~.result.SimulationResult` from the loop's own reductions (peaks, impacts with N_stiff,
 stages, energy audit, recorded series). :meth:`Stepper.observe` feeds a point integrated
-elsewhere (the SciPy baselines) to the same reductions. A one-shot solve (:func:`run`) reuses
-the arrays of the previous solve of the same shape.
+elsewhere (the SciPy baselines) to the same reductions. As MuJoCo splits a static model from
+its dynamic data, the loop's model (``kernel.LoopModel``: parameters, geometry, modes, settings)
+is built once per scenario and shared by its solves, and a one-shot solve (:func:`run`) hands
+its loop state (``kernel.LoopState``) to the next solve of the same shape: repeated events of a
+scene (the optimiser, the line, the benchmarks) pay neither again.
 """
 
 from __future__ import annotations
@@ -54,6 +57,7 @@ from fence_sorter.codes import Stage
 from . import kernel as K
 from .model import SortingModel
 from .result import EnergyAudit, SimulationResult, make_result
+from .scenario import Scenario, per_scenario
 
 # the solve loop's stage codes are the Stage values; the result's stage names their labels
 assert (K.STAGE_CODE_ON_BELT, K.STAGE_CODE_E1, K.STAGE_CODE_E2, K.STAGE_CODE_E3) == (
@@ -189,14 +193,15 @@ _FC0 = np.zeros(K.N_FC)
 _FC0[[K.F_EXIT_SPEED, K.F_IMPACT_SPEED, K.F_FLOW, K.F_E0]] = math.nan
 _FC0[K.F_Y_MAX] = -math.inf
 
-# per (n_state, modes, elements): the arrays of finished solves, reused by the next one (an
-# event of the optimiser, the line or the benchmark builds ~20 small arrays otherwise: ~6 us
-# of NumPy calls, ~15 us on a cold cache, per ~0.3 ms stiff event)
+# per (n_state, modes, elements): the loop states (``kernel.LoopState``) of finished solves,
+# reused by the next one: an event of the optimiser, the line or the benchmark builds ~20
+# small arrays otherwise (~6 us of NumPy calls, ~15 us on a cold cache, per ~0.2 ms stiff
+# event), and ``kernel.solve.entry`` checks the types of a state it has seen only once (~7 us)
 _WORKSPACES: dict[tuple, list[tuple]] = {}
+_POOLED_RECORD = 1 << 12  # a state whose record grew past this many columns is not kept
 
-
-# the stepper's attributes for the arrays of ``_workspace``, in its order
-_WORKSPACE_FIELDS = (
+# the stepper's attribute for each field of ``kernel.LoopState``, in its order
+_STATE_ATTRIBUTES = (
     "counters",
     "figures",
     "times",
@@ -211,15 +216,22 @@ _WORKSPACE_FIELDS = (
     "nodes",
     "friction_prev",
     "work",
+    "propagator_keys",
+    "propagators",
+    "propagator_g0",
+    "propagator_g1",
     "impact_rows",
     "stage_rows",
+    "record",
 )
+assert len(_STATE_ATTRIBUTES) == len(K.LoopState._fields), "Stepper's state attributes"
 
 
-def _workspace(n: int, m: int, n_el: int) -> tuple:
-    """The arrays of one solve, in the order ``Stepper`` unpacks them."""
+def _loop_state(n: int, m: int, n_el: int, propagators: tuple, cols: int) -> tuple:
+    """A ``kernel.LoopState`` for a model of n states, m modes and n_el elements, with the
+    modal propagator cache ``propagators`` and a record of ``cols`` columns."""
     s = K.N_STATES
-    return (
+    return K.LoopState(
         np.zeros(K.N_CTL, dtype=np.int64),
         np.zeros(K.N_FC),
         np.zeros(s),
@@ -234,9 +246,75 @@ def _workspace(n: int, m: int, n_el: int) -> tuple:
         np.zeros((n_el + 1, 2)),
         np.zeros(K.N_SLOTS),
         np.zeros(K.trapezoidal_work_shape(m)),
+        *propagators[:4],
         np.zeros((8, 3)),
         np.zeros((16, 2)),
+        # a column per accepted point when anything is recorded (one otherwise: none is
+        # written). Not zeroed: the loop writes every row of a column, and only the columns
+        # written are read
+        np.empty((K.N_REC_COLS, cols)),
     )
+
+
+@per_scenario
+def _loop_static(sc: Scenario) -> tuple:
+    """What the solve loop reads of a scenario and never writes, built once per scenario and
+    shared by its solves: the ``kernel.LoopModel`` (packed parameters, the load's geometry, the
+    modal basis, the settings ``G_*``, the breakpoints: the drive's acceleration jumps and the
+    end time), the end time, the record's first column count and the initial state. A flexible
+    fence's basis is read-only (cached per fence): writable copies keep one signature of
+    kernel.solve for stiff and flexible models (one compiled specialisation to load from
+    Numba's cache per process, ~0.3 s, instead of two)."""
+    model = SortingModel(sc)
+    sv = sc.solver
+    adaptive = sv.method == "adaptive"
+    h_nom = sv.dt_max if adaptive else sv.dt
+    t_cycle = 2.0 * sc.drive.t1
+    t_end = sv.t_end if sv.t_end > 0 else t_cycle + sv.settle_time
+    t1 = sc.drive.t1
+    breaks = [b for b in ((t1, t_cycle) if t1 < t_cycle else (t_cycle,)) if 0.0 < b < t_end]
+    breaks.append(t_end)
+    body = model.body
+    contact = sc.contact
+    v_ref = max(model.belt, 0.1)
+    # one list in the order of the G_* indices (checked at import), one array
+    settings = np.array(
+        [
+            h_nom,
+            t_end,
+            sv.dt,
+            sv.min_dt,
+            sv.tolerance,
+            sv.max_iterations,
+            sv.atol,
+            sv.rtol,
+            v_ref,
+            v_ref / min(body.length_a, body.width_b),
+            sc.conveyor.width,
+            float(adaptive),
+            float(sv.stop_when_sorted),
+            float(bool(sc.record)),
+            contact.b_p,
+            contact.k_p,
+            model.deep,
+            model.speed_limit,
+            contact.v_min,
+            contact.phidot_min,
+            _UP,
+            _DOWN,
+            K.FLUSH_ANGLE,
+            float(sv.method == "generalized_alpha"),
+            *generalized_alpha_coefficients(sv.rho_inf),
+        ],
+        dtype=float,
+    )
+    cols = int(1.5 * t_end / h_nom) + 64 if sc.record else 1
+    modes = (model.phi, model.rigid_modal, model.omega, model.zeta)
+    if model.flexible:
+        modes = tuple(a if a.flags.writeable else a.copy() for a in modes)
+    breakpoints = np.array(breaks, dtype=float)
+    loop_model = K.LoopModel(model.P, model.corners, model.normals, *modes, settings, breakpoints)
+    return loop_model, t_end, min(cols, 1 << 16), model.initial_state()
 
 
 class Stepper:
@@ -254,85 +332,38 @@ class Stepper:
         self.model = model
         self.clock = clock
         self.wall0 = clock()
-        sc = model.sc
-        sv = sc.solver
-        adaptive = sv.method == "adaptive"
-        h_nom = sv.dt_max if adaptive else sv.dt
-        t_cycle = 2.0 * sc.drive.t1
-        self.t_end = t_end = sv.t_end if sv.t_end > 0 else t_cycle + sv.settle_time
-        t1 = sc.drive.t1
-        breaks = [b for b in ((t1, t_cycle) if t1 < t_cycle else (t_cycle,)) if 0.0 < b < t_end]
-        breaks.append(t_end)
-        self.breakpoints = np.array(breaks, dtype=float)
-        body = model.body
-        contact = sc.contact
-        v_ref = max(model.belt, 0.1)
-        # one list in the order of the G_* indices (checked at import), one array
-        self.settings = np.array(
-            [
-                h_nom,
-                t_end,
-                sv.dt,
-                sv.min_dt,
-                sv.tolerance,
-                sv.max_iterations,
-                sv.atol,
-                sv.rtol,
-                v_ref,
-                v_ref / min(body.length_a, body.width_b),
-                sc.conveyor.width,
-                float(adaptive),
-                float(sv.stop_when_sorted),
-                float(bool(sc.record)),
-                contact.b_p,
-                contact.k_p,
-                model.deep,
-                model.speed_limit,
-                contact.v_min,
-                contact.phidot_min,
-                _UP,
-                _DOWN,
-                K.FLUSH_ANGLE,
-                float(sv.method == "generalized_alpha"),
-                *generalized_alpha_coefficients(sv.rho_inf),
-            ],
-            dtype=float,
-        )
+        static, self.t_end, cols, y0 = _loop_static(model.sc)
+        if model.P is not static.params:  # a model whose parameters a caller changed
+            static = static._replace(params=model.P)
+        self.loop_model = static
+        self.settings, self.breakpoints = static.settings, static.breakpoints
         n, m = model.n_state, model.n_modes
         self._key = (n, m, model.n_el)
+        propagators = _propagator_cache(model)
+        self._n_props = n_props = propagators[4]
         pool = _WORKSPACES.get(self._key)
-        arrays = pool.pop() if pool else None  # (list.pop: atomic under the GIL)
-        if arrays is None:
-            arrays = _workspace(n, m, model.n_el)
-        for name, array in zip(_WORKSPACE_FIELDS, arrays, strict=True):
+        state = pool.pop() if pool else None  # (list.pop: atomic under the GIL)
+        if state is None:
+            state = _loop_state(n, m, model.n_el, propagators, cols)
+        else:
+            if state.propagators is not propagators[1]:  # another modal basis
+                keys, maps, g0, g1 = propagators[:4]
+                state = state._replace(
+                    propagator_keys=keys, propagators=maps, propagator_g0=g0, propagator_g1=g1
+                )
+            if state.record.shape[1] < cols:
+                state = state._replace(record=np.empty((K.N_REC_COLS, cols)))
+        for name, array in zip(_STATE_ATTRIBUTES, state, strict=True):
             setattr(self, name, array)
+        self._args: tuple | None = (static, state)
+        self._solve = None  # the entry for ``_args`` (``kernel.solve.entry``), on first use
         # kernel.solve zeroes the other state rows and the scratch arrays on its first call
         counters = self.counters
         counters[:] = _CTL0
         self.figures[:] = _FC0
         self.times[0] = 0.0
-        y0 = self.states[0]
-        y0.fill(0.0)
-        y0[:3] = model.initial
-        v = sc.initial_velocity
-        y0[3:6] = v if v is not None else (model.belt, 0.0, 0.0)
-        self.propagator_keys, self.propagators, self.propagator_g0, self.propagator_g1, n_props = (
-            _propagator_cache(model)
-        )
-        self._n_props = n_props
+        self.states[0] = y0
         counters[K.I_N_PROPS] = n_props[0]
-        # a column per accepted point when anything is recorded (one otherwise: none is written);
-        # not reused: the result's series are views of it
-        cols = int(1.5 * t_end / h_nom) + 64 if sc.record else 1
-        self.record = np.zeros((K.N_REC_COLS, min(cols, 1 << 16)))
-        # the modal basis of a flexible fence is read-only (cached per fence): writable copies
-        # keep one signature of kernel.solve for stiff and flexible models (one compiled
-        # specialisation to load from Numba's cache per process, ~0.3 s, instead of two)
-        modes = (model.phi, model.rigid_modal, model.omega, model.zeta)
-        if model.flexible:
-            modes = tuple(a if a.flags.writeable else a.copy() for a in modes)
-        self.modes = modes
-        self._args: tuple | None = None
         self.busy = 0.0
         self.status = "running"
         self.diagnosis: Diagnosis | None = None
@@ -427,43 +458,22 @@ class Stepper:
         self.status = "failed"
 
     def _loop_arrays(self) -> tuple:
+        """(``kernel.LoopModel``, ``kernel.LoopState``) of this solve (the state anew after
+        :meth:`_grow`)."""
         if self._args is None:
-            md = self.model
-            model = K.LoopModel(
-                md.P, md.corners, md.normals, *self.modes, self.settings, self.breakpoints
-            )
-            state = K.LoopState(
-                self.counters,
-                self.figures,
-                self.times,
-                self.states,
-                self.belt_wrench,
-                self.contact_rows,
-                self.resultant_rows,
-                self.modal_forces,
-                self.accelerations,
-                self.deflection,
-                self.deflection_rate,
-                self.nodes,
-                self.friction_prev,
-                self.work,
-                self.propagator_keys,
-                self.propagators,
-                self.propagator_g0,
-                self.propagator_g1,
-                self.impact_rows,
-                self.stage_rows,
-                self.record,
-            )
-            self._args = (model, state)
+            state = K.LoopState(*(getattr(self, name) for name in _STATE_ATTRIBUTES))
+            self._args = (self.loop_model, state)
+            self._solve = None
         return self._args
 
     def _call(self, attempts: int, t_target: float) -> int:
         """One call of ``kernel.solve`` (at most ``attempts`` step attempts); grows a full
         buffer, ends the solve when the loop ends it."""
         model, state = self._loop_arrays()
+        if self._solve is None:
+            self._solve = K.solve.entry(model, state)
         t0 = self.clock()
-        status = K.solve(model, state, attempts, float(t_target))
+        status = self._solve(model, state, attempts, float(t_target))
         self.busy += self.clock() - t0
         self._n_props[0] = self.counters[K.I_N_PROPS]
         if status == K.SOLVE_GROW:
@@ -504,8 +514,8 @@ class Stepper:
         if self._key is None:
             return
         pool = _WORKSPACES.setdefault(self._key, [])
-        if len(pool) < 4:
-            pool.append(tuple(getattr(self, name) for name in _WORKSPACE_FIELDS))
+        if len(pool) < 4 and self.record.shape[1] <= _POOLED_RECORD:
+            pool.append(self._loop_arrays()[1])
         self._key = None
 
     # -- a point integrated elsewhere --------------------------------------------------------
@@ -620,25 +630,25 @@ class Stepper:
         names are the names in it)."""
         if not want:
             return {}
-        cols = self.record[
-            :, : self.counters[K.I_N_REC]
-        ]  # one row per recorded quantity, contiguous
+        # one array per recorded quantity (rows of one copy: the record is reused by the next
+        # solve once this one is released)
+        rows = list(self.record[:, : self.counters[K.I_N_REC]].copy())
         out: dict[str, np.ndarray] = {}
         if "trajectory" in want:
-            out["t"] = cols[K.REC_T]
+            out["t"] = rows[K.REC_T]
             for k, key in enumerate(("x", "y", "phi", "vx", "vy", "phidot")):
-                out[key] = cols[K.REC_Y + k]
+                out[key] = rows[K.REC_Y + k]
         if "fence" in want:
-            out["t_fence"] = cols[K.REC_T_FENCE]
-            out["alpha_w"] = cols[K.REC_ALPHA]
-            out["tip_deflection"] = cols[K.REC_TIP_W]
+            out["t_fence"] = rows[K.REC_T_FENCE]
+            out["alpha_w"] = rows[K.REC_ALPHA]
+            out["tip_deflection"] = rows[K.REC_TIP_W]
         if "forces" in want:
-            out["t_forces"] = cols[K.REC_T_FORCES]
-            out["normal_force"] = cols[K.REC_FENCE_N]
-            out["deformation"] = cols[K.REC_MAX_D]
+            out["t_forces"] = rows[K.REC_T_FORCES]
+            out["normal_force"] = rows[K.REC_FENCE_N]
+            out["deformation"] = rows[K.REC_MAX_D]
         if "stages" in want:
-            out["t_stage"] = cols[K.REC_T_STAGE]
-            codes = cols[K.REC_STAGE].astype(np.intp)
+            out["t_stage"] = rows[K.REC_T_STAGE]
+            codes = rows[K.REC_STAGE].astype(np.intp)
             # the names' string width: the longest present (every stage the run entered was
             # recorded at the point it was entered)
             if not len(codes):
@@ -647,7 +657,7 @@ class Stepper:
                 width = max(len(name) for name, _ in stages)
             else:
                 width = int(_STAGE_LENGTHS[codes].max())
-            out["stage"] = _STAGE_BY_WIDTH[width][codes]
+            out["stage"] = _STAGE_BY_WIDTH[width].take(codes)
         return out
 
 

@@ -162,6 +162,7 @@ def build_model(sc, force_border: bool = False):
     md = SortingModel(sc)
     if force_border and not md.use_border:
         md.use_border = True
+        md.P = md.P.copy()  # the scenario's packing is shared by its models
         md.P[K.P_USE_BORDER] = 1.0
         parts = list(md.parts)
         at = parts.index("fem_fence" if md.flexible else "rigid_fence") + 1

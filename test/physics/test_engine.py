@@ -1,7 +1,7 @@
 """The solve loop (``kernel.solve``) driven by ``stepper.Stepper``: what it records and
 reduces (every series, a point per accepted step, the stages as ``codes.Stage``), the typed
-diagnosis of each divergence, the wall-time limit, and that stepping in chunks or reusing the
-arrays of an earlier solve changes nothing."""
+diagnosis of each divergence, the wall-time limit, and that stepping in chunks, reusing the
+arrays of an earlier solve or what was packed of the scenario for it changes nothing."""
 
 from __future__ import annotations
 
@@ -13,6 +13,9 @@ import pytest
 
 from fence_sorter.codes import Stage
 from fence_sorter.physics import kernel as K
+from fence_sorter.physics import model as M
+from fence_sorter.physics import stepper as ST
+from fence_sorter.physics.scenario import PER_SCENARIO_SIZE, per_scenario
 from fence_sorter.physics.simulate import SortingModel, simulate
 from fence_sorter.physics.stepper import STAGE_NAMES, Diagnosis, Failure, Stepper
 from fence_sorter.scene import SceneError, load_scene
@@ -172,6 +175,68 @@ def test_a_reused_workspace_gives_the_same_solve() -> None:
     for k, v in kept.items():
         np.testing.assert_array_equal(first.series[k], v, err_msg=k)
         np.testing.assert_array_equal(again.series[k], v, err_msg=k)
+
+
+def _fresh(sc) -> object:
+    """``simulate(sc)`` with nothing cached per scenario (packed model, loop settings)."""
+    M._packed.cache_clear()
+    ST._loop_static.cache_clear()
+    return simulate(sc)
+
+
+def _assert_same(a, b) -> None:
+    assert dc.replace(a, series={}, wall_time=0.0) == dc.replace(b, series={}, wall_time=0.0)
+    assert list(a.series) == list(b.series)
+    for key, va in a.series.items():
+        np.testing.assert_array_equal(va, b.series[key], err_msg=key)
+
+
+@pytest.mark.parametrize("scene", ["positioned_stiff", "impact_flexible"])
+def test_a_scene_packed_once_solves_as_a_fresh_packing(scene: str) -> None:
+    """What a model and the loop read of a scenario is packed once per Scenario object and
+    reused by its later solves: each of them is bitwise the solve of a fresh packing; a changed
+    scene (a new Scenario) is packed anew and solves as fresh; a model whose parameters a caller
+    changed (its own copy of ``P``) solves with them and changes no other model of the scene."""
+    sc = load_scene(scene).scenario
+    fresh = _fresh(sc)
+    for _ in range(2):
+        _assert_same(simulate(sc), fresh)
+    changed = load_scene(scene, ["drive.alpha_k_deg=45", "contact.k_p=3e9"]).scenario
+    again = simulate(changed)
+    assert again.sorted and again.peak_contact_force != fresh.peak_contact_force
+    _assert_same(again, _fresh(changed))
+    _assert_same(simulate(sc), fresh)
+    changed_p = SortingModel(sc)  # a caller changes a parameter: in its own copy of P
+    changed_p.P = changed_p.P.copy()
+    changed_p.P[K.P_MU2] = 0.0
+    assert simulate(sc, changed_p).peak_contact_force != fresh.peak_contact_force
+    assert SortingModel(sc).P[K.P_MU2] == sc.contact.mu_fence
+    _assert_same(simulate(sc), fresh)
+
+
+def test_the_per_scenario_cache_keeps_each_scenario_it_answers_for() -> None:
+    """Keyed on identity: scenarios built and dropped one after another (whose ids Python may
+    reuse) each get their own answer, an equal but distinct Scenario its own entry, and the
+    cache holds at most PER_SCENARIO_SIZE entries."""
+    built = []
+
+    @per_scenario
+    def alpha(sc):
+        built.append(sc.drive.alpha_k)  # not the scenario: it may be dropped
+        return sc.drive.alpha_k
+
+    base = load_scene("positioned_stiff").scenario
+    for k in range(3 * PER_SCENARIO_SIZE):
+        sc = dc.replace(base, drive=dc.replace(base.drive, alpha_k=0.1 + 1e-3 * k))
+        assert alpha(sc) == sc.drive.alpha_k
+        assert alpha(sc) == sc.drive.alpha_k
+        assert len(alpha.cache) <= PER_SCENARIO_SIZE
+        del sc
+    assert len(built) == 3 * PER_SCENARIO_SIZE  # one build each, none answered for another
+    twin = dc.replace(base)
+    assert twin == base and twin is not base
+    alpha(base), alpha(twin)
+    assert len(built) == 3 * PER_SCENARIO_SIZE + 2
 
 
 def test_a_scene_setting_an_engine_is_refused() -> None:

@@ -43,6 +43,7 @@ from numba.np.numpy_support import as_dtype
 
 MODULE = "solve_aot"  # the extension's module name (its PyInit_ symbol)
 BUILD_FILE = "build.json"
+SEEN = 8  # argument pairs whose entry ``Solve.entry`` remembers
 log = logging.getLogger("fence_sorter.physics.kernel")
 
 
@@ -180,6 +181,7 @@ class Solve:
         self.digest = digest
         self.entries: list | None = None if not numba.config.DISABLE_JIT else []
         self._said_types = False
+        self._seen: dict[tuple[int, int], tuple] = {}  # ``entry``'s checked pairs
 
     def resolve(self) -> list:
         """Load the extension (once); logs once why the JIT solves when it cannot."""
@@ -196,13 +198,39 @@ class Solve:
                 )
         return self.entries
 
-    def __call__(self, model, state, max_attempts, t_target):
+    def entry(self, model, state):
+        """The function that solves these ``model`` and ``state`` tuples (called with an int
+        ``max_attempts`` and a float ``t_target``): the ahead-of-time entry of their types, else
+        the JIT dispatcher. Their ~30 arrays are checked once per pair of tuples (~7 us): the
+        last SEEN pairs are remembered (held, so their ids are not reused while remembered),
+        for a caller that solves with the same tuples again (``stepper.Stepper`` reuses its
+        loop model per scenario and its loop states)."""
         entries = self.entries if self.entries is not None else self.resolve()
-        if type(max_attempts) is int and type(t_target) is float:
-            for model_spec, state_spec, fn in entries:
-                if _fits(model, model_spec) and _fits(state, state_spec):
-                    return fn(model, state, max_attempts, t_target)
-        if entries and not self._said_types:
+        key = (id(model), id(state))
+        hit = self._seen.get(key)
+        if hit is not None and hit[0] is model and hit[1] is state and hit[2] is entries:
+            return hit[3]
+        for model_spec, state_spec, aot_fn in entries:
+            if _fits(model, model_spec) and _fits(state, state_spec):
+                fn = aot_fn
+                break
+        else:
+            fn = self._jit_entry()
+        if len(self._seen) >= SEEN:
+            self._seen.clear()
+        self._seen[key] = (model, state, entries, fn)
+        return fn
+
+    def _jit_entry(self):
+        """The JIT dispatcher, for arguments without an ahead-of-time entry (said once)."""
+        if self.resolve() and not self._said_types:
             self._said_types = True
             log.info("solve's arguments have no ahead-of-time entry: the JIT solves them")
-        return self.jit(model, state, max_attempts, t_target)
+        return self.jit
+
+    def __call__(self, model, state, max_attempts, t_target):
+        if type(max_attempts) is int and type(t_target) is float:
+            fn = self.entry(model, state)
+        else:
+            fn = self._jit_entry()
+        return fn(model, state, max_attempts, t_target)
