@@ -47,15 +47,14 @@ def _nodes(context) -> list:
     }
     scene, stream, bag, rtf = arg["scene"], arg["stream"], arg["bag"], float(arg["rtf"])
     sim_time = {"use_sim_time": True}
-    simulator = {"scene": scene, "real_time_factor": rtf}
-    recorder = {"output_dir": bag, **sim_time}
+    publish, topics = {}, {}
     gate = ["simulator", "controller"] + (["recorder"] if bag else [])
     nodes = []
     if arg["sensors"]:
         cfg = load_sensors_arg(arg["sensors"])
         state_rate = sensors_state_rate(cfg, load_scene(scene).scenario, rtf, arg["sensors"])
-        simulator["publish_rate"] = state_publish_rate(state_rate, rtf)
-        recorder["topics"] = [*TOPICS, *MEASURED]
+        publish = {"publish_rate": state_publish_rate(state_rate, rtf)}
+        topics = {"topics": [*TOPICS, *MEASURED]}
         gate.append("sensors")
         seed = sensors_seed(RunOptions(seed=int(arg["seed"]) if int(arg["seed"]) >= 0 else None))
         nodes.append(
@@ -63,7 +62,7 @@ def _nodes(context) -> list:
                 package=PACKAGE,
                 executable="sensors",
                 name="sensors",
-                parameters=[sensors_node_parameters(scene, arg["sensors"], seed, state_rate)],
+                parameters=[{**sensors_node_parameters(scene, arg["sensors"], seed, state_rate)}],
                 output="screen",
             )
         )
@@ -72,7 +71,10 @@ def _nodes(context) -> list:
             package=PACKAGE,
             executable="simulator",
             name="simulator",
-            parameters=[str(config / "simulator.yaml"), simulator],
+            parameters=[
+                str(config / "simulator.yaml"),
+                {"scene": scene, "real_time_factor": rtf, **publish},
+            ],
             output="screen",
         ),
         Node(
@@ -109,7 +111,10 @@ def _nodes(context) -> list:
                 package=PACKAGE,
                 executable="recorder",
                 name="recorder",
-                parameters=[str(config / "recorder.yaml"), recorder],
+                parameters=[
+                    str(config / "recorder.yaml"),
+                    {"output_dir": bag, **sim_time, **topics},
+                ],
                 output="screen",
             )
         )
