@@ -21,8 +21,11 @@ fence geometry (``SortingLine.render``). ``due`` is the cycle's wake time on
 (cycles, misses, lateness and work histograms, sim time) are not sent: the loop writes them
 into shared memory (:class:`Gauges`) every cycle.
 
-Run as ``python -m fence_sorter.line.worker IN_FD OUT_FD GAUGES_FD PARENT_PID``; the first
-frame on IN_FD is ``(LineConfig, scenario or None, LoopSettings)``.
+Run as ``python -m fence_sorter.line.worker IN_FD OUT_FD GAUGES_FD PARENT_PID``, or forked
+from the node's process before it starts rclpy (``LineProcess(fork=True)``: the copy has the
+line's modules imported already, which a fresh interpreter takes about a second of CPU to
+do); either way it is named :data:`PROCESS_NAME` and the first frame on IN_FD is
+``(LineConfig, scenario or None, LoopSettings)``.
 """
 
 from __future__ import annotations
@@ -72,6 +75,11 @@ FLUSH_MAX_HOLD = 0.01
 PIPE_SIZE = 1 << 20
 _HEADER = struct.Struct("<I")
 _F_SETPIPE_SZ = 1031
+_PR_SET_PDEATHSIG, _PR_SET_NAME = 1, 15
+#: the loop's process's name (/proc/PID/comm), started either way
+PROCESS_NAME = "fs-line-worker"
+#: held while the node forks the loop's process, until the copy ignores them
+_STOP_SIGNALS = frozenset({signal.SIGINT, signal.SIGTERM})
 
 
 class LoopStartError(RuntimeError):
@@ -597,13 +605,21 @@ def main(argv: list[str]) -> int:
             file=sys.stderr,
         )
         return 2
+    return serve(in_fd, out_fd, gauges_fd, parent)
+
+
+def serve(in_fd: int, out_fd: int, gauges_fd: int, parent: int) -> int:
+    """The loop's process on its pipes, however started (:func:`main` or a fork)."""
     # die with the node; Ctrl-C and SIGTERM reach the whole process group, but only the node
     # ends this process (stop frame, or its end of the pipe closing), after the last frames
-    ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    libc = ctypes.CDLL(None, use_errno=True)
+    libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+    libc.prctl(_PR_SET_NAME, PROCESS_NAME.encode())
     if os.getppid() != parent:
         return 0
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)  # held by a fork until now
     try:
         fcntl.fcntl(out_fd, _F_SETPIPE_SZ, PIPE_SIZE)
     except OSError:
@@ -641,14 +657,73 @@ def main(argv: list[str]) -> int:
 
 
 # -- the node's side ------------------------------------------------------------------------------
+def _fork(args: tuple[int, int, int, int], close: tuple[int, ...]) -> _Forked:
+    """Fork the loop's process: the copy closes the node's ends of the pipes (``close``) and
+    serves ``args`` (:func:`serve`); SIGINT and SIGTERM are held across the fork, so the copy
+    ignores them before one can reach it."""
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    pid = os.fork()
+    if pid == 0:
+        code = 1
+        try:
+            for fd in close:
+                os.close(fd)
+            code = serve(*args)
+        finally:
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(code)
+    signal.pthread_sigmask(signal.SIG_SETMASK, held)
+    return _Forked(pid)
+
+
+class _Forked:
+    """A forked loop process, seen through the part of subprocess.Popen that LineProcess and
+    the node use (pid, returncode, poll, wait, kill)."""
+
+    def __init__(self, pid: int) -> None:
+        self.pid = pid
+        self.returncode: int | None = None
+        self._pidfd = os.pidfd_open(pid)
+
+    def _reap(self, options: int) -> int | None:
+        if self.returncode is None:
+            done, status = os.waitpid(self.pid, options)
+            if done:
+                self.returncode = os.waitstatus_to_exitcode(status)
+                os.close(self._pidfd)
+        return self.returncode
+
+    def poll(self) -> int | None:
+        return self._reap(os.WNOHANG)
+
+    def wait(self, timeout: float | None = None) -> int:
+        if self.poll() is None and not select.select([self._pidfd], [], [], timeout)[0]:
+            raise subprocess.TimeoutExpired(PROCESS_NAME, timeout)
+        return self._reap(0)
+
+    def kill(self) -> None:
+        if self.poll() is None:
+            os.kill(self.pid, signal.SIGKILL)
+
+
 class LineProcess:
     """The loop's process seen from the node: start it, send it inputs (thread-safe), iterate
     over what it sends, stop it."""
 
     def __init__(
-        self, config: LineConfig, scenario, settings: LoopSettings, scan_limit: float = math.inf
+        self,
+        config: LineConfig | None = None,
+        scenario=None,
+        settings: LoopSettings | None = None,
+        scan_limit: float = math.inf,
+        fork: bool = False,
     ) -> None:
-        """``scan_limit``: the initial Gauges.SCAN_LIMIT (an unpaced loop does not pass it)."""
+        """Start the loop's process and, given a ``config``, :meth:`configure` it. ``fork``:
+        a copy of this process, which must have no other thread yet (the simulator's main
+        before rclpy starts its own); else a fresh interpreter."""
         to_child_r, self._to_child = os.pipe()
         self._from_child, from_child_w = os.pipe()
         try:
@@ -658,19 +733,31 @@ class LineProcess:
         self._lock = threading.Lock()
         #: the loop's running figures (cycles, misses, lateness and work histograms, ...)
         self.gauges = Gauges()
-        self.gauges.header[Gauges.SCAN_LIMIT] = scan_limit
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "fence_sorter.line.worker", str(to_child_r),
-             str(from_child_w), str(self.gauges.fd), str(os.getpid())],
-            pass_fds=(to_child_r, from_child_w, self.gauges.fd),
-            stdin=subprocess.DEVNULL,
-        )  # fmt: skip
+        fds = (to_child_r, from_child_w, self.gauges.fd, os.getpid())
+        if fork:
+            self.proc = _fork(fds, close=(self._to_child, self._from_child))
+        else:
+            self.proc = subprocess.Popen(
+                [sys.executable, "-m", "fence_sorter.line.worker", *map(str, fds)],
+                pass_fds=fds[:3],
+                stdin=subprocess.DEVNULL,
+            )
         os.close(to_child_r)
         os.close(from_child_w)
         os.close(self.gauges.fd)  # the mapping stays
         self._frames = FrameBuffer()
         self._pending: deque = deque()
         self._eof = False
+        if config is not None:
+            self.configure(config, scenario, settings, scan_limit)
+
+    def configure(
+        self, config: LineConfig, scenario, settings: LoopSettings, scan_limit: float = math.inf
+    ) -> None:
+        """Send the set-up: the line, the scenario to warm the kernel up with (None: no
+        warm-up), the loop's settings; ``scan_limit``: the initial Gauges.SCAN_LIMIT (an
+        unpaced loop does not pass it)."""
+        self.gauges.header[Gauges.SCAN_LIMIT] = scan_limit
         self.send((config, scenario, settings))
 
     def send(self, item: object) -> bool:

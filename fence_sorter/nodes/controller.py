@@ -30,6 +30,9 @@ from fence_sorter.nodes.parameters import CONTROLLER_PARAMETERS
 from fence_sorter.nodes.qos import INPUT_QOS, topic_qos
 from fence_sorter.physics.params import ParameterError, ParcelParams
 from fence_sorter.recording import topics
+from fence_sorter.scene import load_scene
+from fence_sorter.stream import load_stream
+from fence_sorter_msgs.msg import FenceCommand, Parcel
 
 DEFAULT_SCENE = "impact_flexible"
 
@@ -151,9 +154,6 @@ class ControllerNode(FenceSorterNode):
             raise ParameterException(str(exc), "controller") from None
 
     def _setup(self) -> None:
-        from fence_sorter.scene import load_scene
-        from fence_sorter_msgs.msg import FenceCommand, Parcel
-
         self._command_class = FenceCommand
         p = {spec.name: self.get_parameter(spec.name).value for spec in self.PARAMETERS}
         scene = p["scene"] or DEFAULT_SCENE
@@ -199,8 +199,6 @@ class ControllerNode(FenceSorterNode):
 
     def _warm_up(self, p: dict) -> None:
         """Compile the kernel and fill the cache before subscribing (first plans are fast)."""
-        from fence_sorter.stream import load_stream
-
         wall0 = time.perf_counter()
         loads = [ParcelParams(length_a=0.4, width_b=0.3, mass=5.0)]
         if p["warmup_stream"] and p["warmup_parcels"] > 0:
@@ -233,6 +231,7 @@ class ControllerNode(FenceSorterNode):
             self.parcel_intake,
         )
         self.get_logger().info("listening on /parcels")
+        self.publish_heartbeat()  # the run starts its stream on this news: now, not in 1 s
 
     def on_parcel(self, msg) -> None:
         """Hand the parcel to :func:`handle_parcel`; publish what it returns."""

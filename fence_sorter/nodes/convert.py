@@ -259,7 +259,7 @@ def event_to_msg(e: EventTrace, frame_id: str = FRAME_ID) -> SortEvent:
     msg.impact_force_stiff = np.ascontiguousarray(e.impacts[:, 2])
     contact = ContactParams(b_p=e.b_p, k_p=e.k_p)
     # scipy.integrate (~0.5 s) on first use: every node imports this module, few call this
-    from fence_sorter.physics.contact import stiff_course
+    from fence_sorter.physics.contact import stiff_course  # lazy: scipy.integrate, ~0.3 s
 
     courses = [stiff_course(e.mass, w_n, contact, t0) for t0, w_n, _ in e.impacts]
     msg.stiff_t = np.concatenate([c[0] for c in courses]) if courses else np.zeros(0)

@@ -91,8 +91,12 @@ class ParamSpec:
     def descriptor(self):
         """The rcl_interfaces ParameterDescriptor that declares this parameter (imports
         rclpy: for the nodes only)."""
-        from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-        from rclpy.parameter import Parameter
+        from rcl_interfaces.msg import (  # lazy: ROS messages; the runner checks without ROS
+            FloatingPointRange,
+            IntegerRange,
+            ParameterDescriptor,
+        )
+        from rclpy.parameter import Parameter  # lazy: rclpy; the table is ROS-free for the runner
 
         param_type = Parameter.Type.from_parameter_value(self.default)
         desc = ParameterDescriptor(

@@ -48,9 +48,9 @@ from rosbags.interfaces import (
 from fence_sorter.nodes.base import FenceSorterNode, run_node
 from fence_sorter.nodes.parameters import RECORDER_PARAMETERS
 from fence_sorter.nodes.qos import topic_qos
-from fence_sorter.recording.logtime import SettleBuffer
+from fence_sorter.recording.logtime import SettleBuffer, StampOrder, starts_with_header
 from fence_sorter.recording.topics import ALL_TOPICS, RECORDER_DEPTH, TOPICS, QosSpec
-from fence_sorter.recording.writer import COMPRESSIONS
+from fence_sorter.recording.writer import COMPRESSIONS, BagWriteError, SegmentedBagWriter
 
 DEFAULT_TOPICS = list(TOPICS)
 #: set when a recorder of this process failed to write or close its bag (exit status 1)
@@ -140,9 +140,6 @@ class RecorderNode(FenceSorterNode):
 
     def __init__(self, **kwargs: object) -> None:
         super().__init__(**kwargs)
-        from fence_sorter.recording.logtime import StampOrder, starts_with_header
-        from fence_sorter.recording.writer import SegmentedBagWriter
-
         p = {spec.name: self.get_parameter(spec.name).value for spec in self.PARAMETERS}
         self.path = bag_path(str(p["output_dir"]))
         self.writer = SegmentedBagWriter(
@@ -323,8 +320,6 @@ def main(args: Sequence[str] | None = None) -> int:
     """Run the recorder until Ctrl-C or SIGTERM; the bag is closed on the way out. Exit 1 if
     writing or closing the bag failed, 2 with one line when the bag cannot be created or a topic
     is unknown."""
-    from fence_sorter.recording.writer import BagWriteError
-
     try:
         code = run_node(RecorderNode, args)
         return 1 if code == 0 and _WRITE_FAILED else code

@@ -16,6 +16,12 @@ from collections import Counter
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
+import rclpy
+from rclpy.duration import Duration
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+from fence_sorter.nodes.qos import RELIABLE_QOS, topic_qos
+from fence_sorter.nodes.recorder import message_class
 from fence_sorter.recording.bagread import BagContents
 from fence_sorter.recording.topics import REPLAY_DEPTH, TOPICS
 
@@ -37,8 +43,6 @@ def offered(qos):
     local gets every message from the first, even when its side of the match completes after
     the replay has started (a volatile reader drops what arrives before); volatile
     subscribers are matched and served as before."""
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-
     if qos.reliability != ReliabilityPolicy.RELIABLE:
         return qos
     return QoSProfile(
@@ -61,12 +65,6 @@ def replay(
     ``wait_for_subscribers`` > 0: wait up to that long [s] for at least one subscriber on a
     replayed topic before starting (so a node started just before does not miss the start).
     """
-    import rclpy
-    from rclpy.duration import Duration
-
-    from fence_sorter.nodes.qos import RELIABLE_QOS, topic_qos
-    from fence_sorter.nodes.recorder import message_class
-
     if not rate > 0:
         raise ValueError(f"--rate must be > 0, got {rate}")
     wanted = set(topics) if topics else None

@@ -35,7 +35,9 @@ from fence_sorter.nodes.parameters import SCANNER_PARAMETERS
 from fence_sorter.nodes.qos import topic_qos
 from fence_sorter.physics.params import ParameterError
 from fence_sorter.recording import topics
+from fence_sorter.scene import load_scene
 from fence_sorter.stream import ParcelSpec, load_stream
+from fence_sorter_msgs.msg import Parcel
 
 DEFAULT_SCENE = "impact_flexible"
 DEFAULT_STREAM = "default"
@@ -112,9 +114,6 @@ class ScannerNode(FenceSorterNode):
             raise ParameterException(str(exc), "scanner") from None
 
     def _setup(self) -> None:
-        from fence_sorter.scene import load_scene
-        from fence_sorter_msgs.msg import Parcel
-
         p = {spec.name: self.get_parameter(spec.name).value for spec in self.PARAMETERS}
         base = load_scene(p["scene"] or DEFAULT_SCENE).scenario
         self.belt_speed = base.conveyor.belt_speed
@@ -270,13 +269,12 @@ class ScannerNode(FenceSorterNode):
             self._progress.publish(fill_clock(self._progress_msg, now))
             self._progress_sent = now
 
-    def publish_heartbeat(self) -> None:
+    def publish_heartbeat(self) -> bool:
         """Not before the first /clock: the scanner starts into a running simulation, and a
         heartbeat stamped 0 in mid-run is logged before every message stamped later
         (StampOrder), into a bag chunk written long before (rerun reports the chunks out of
         order)."""
-        if self.get_clock().now().nanoseconds > 0:
-            super().publish_heartbeat()
+        return self.get_clock().now().nanoseconds > 0 and super().publish_heartbeat()
 
     def heartbeat_status(self) -> DiagnosticStatus:
         status = super().heartbeat_status()

@@ -39,6 +39,7 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from sensor_msgs.msg import JointState
 
 from fence_sorter.calibration.bag import camera_msg, encoder_msg, moment_msg
+from fence_sorter.calibration.replay import root_moment_factor
 from fence_sorter.calibration.sensors import SensorConfigError, SensorStream, load_sensors
 from fence_sorter.inputs import InputError, validate_parcel
 from fence_sorter.nodes.base import FenceSorterNode, run_node
@@ -65,8 +66,6 @@ class SensorsNode(FenceSorterNode):
     PARAMETERS = SENSORS_PARAMETERS
 
     def __init__(self, **kwargs: object) -> None:
-        from fence_sorter.calibration.replay import root_moment_factor
-
         super().__init__(**kwargs)
         p = {spec.name: self.get_parameter(spec.name).value for spec in self.PARAMETERS}
         self.config = load_sensors(str(p["sensors"]))  # SensorConfigError: exit 2 in main()

@@ -32,11 +32,11 @@ from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.logging import LoggingSeverity
 from rclpy.parameter import Parameter
+from rclpy.signals import SignalHandlerOptions
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
-from fence_sorter.analysis.events import SortEventData, risk_of
 from fence_sorter.capacity.constraints import ConstraintProfile
 from fence_sorter.line import (
     EventTrace,
@@ -57,10 +57,11 @@ from fence_sorter.nodes.intake import TopicIntake
 from fence_sorter.nodes.parameters import SIMULATOR_PARAMETERS
 from fence_sorter.nodes.qos import INPUT_QOS, topic_qos
 from fence_sorter.nodes.tf_publisher import TfPublisher
-from fence_sorter.physics import contact  # noqa: F401 (convert.event_to_msg's N_stiff courses)
 from fence_sorter.recording import topics
 from fence_sorter.scene import load_scene
 from fence_sorter.stamps import time_to_sec
+from fence_sorter.visualisation.rerun_live import RerunProcess
+from fence_sorter.visualisation.rerun_log import SceneGeometry
 from fence_sorter_msgs.msg import (
     FenceCommand,
     FenceState,
@@ -85,7 +86,9 @@ class SimulatorNode(FenceSorterNode):
     STATUS_LEVEL = DiagnosticStatus.OK
     PARAMETERS = SIMULATOR_PARAMETERS
 
-    def __init__(self, **kwargs: object) -> None:
+    def __init__(self, loop: LineProcess | None = None, **kwargs: object) -> None:
+        """``loop``: the loop's process, started and waiting for its set-up, which it gets
+        here (else :meth:`start` starts one)."""
         super().__init__(**kwargs)
         p = {spec.name: self.get_parameter(spec.name).value for spec in self.PARAMETERS}
         self.frame_id = str(p["frame_id"])
@@ -127,9 +130,12 @@ class SimulatorNode(FenceSorterNode):
         )
         self.keep_cpus_awake = bool(p["keep_cpus_awake"])
         self._spinners: list = []
-        self.loop: LineProcess | None = None
         self.scan_lead = float(p["scan_lead"])
         self._scan_limit = -math.inf  # the scanner's progress + scan_lead (sim s)
+        self._t0 = line.t
+        self.loop: LineProcess | None = None
+        if loop is not None:  # it builds and warms its line while this node sets up
+            self._configure_loop(loop)
 
         run_id = int(p["run_id"])
         self.parcel_intake = TopicIntake("parcels", run_id)
@@ -177,7 +183,6 @@ class SimulatorNode(FenceSorterNode):
         self.counts: Counter[str] = Counter()
         self.outcome_counts: Counter[str] = Counter()
         self._gauges_left: Gauges | None = None  # the stopped loop's, for a last heartbeat
-        self._t0 = line.t
         self.loop_error: str | None = None
         self._rtf_window = (time.perf_counter(), line.t)
         self._stopping = False
@@ -232,6 +237,10 @@ class SimulatorNode(FenceSorterNode):
         # loop seconds late in sim time
         self._saved_switch = sys.getswitchinterval()
         sys.setswitchinterval(SWITCH_INTERVAL)
+        if self.loop is None:
+            self._configure_loop(LineProcess())
+        self.loop.wait_ready(ready_timeout)
+        # the spinners once the loop is up: interpreters whose start-up is not idle
         if self.keep_cpus_awake and self.rtf > 0.0:
             cpus = set(os.sched_getaffinity(0))  # and the loop's, if pinned outside them
             cpus |= {self.settings.loop_cpu} if self.settings.loop_cpu >= 0 else set()
@@ -239,22 +248,27 @@ class SimulatorNode(FenceSorterNode):
             self.get_logger().info(
                 f"keep_cpus_awake: {len(self._spinners)} SCHED_IDLE spinner processes"
             )
-        # unpaced, with scan_lead: held at the start until the scanner's first report
-        held = self.scan_lead > 0.0 and self.rtf == 0.0
-        self.loop = LineProcess(
-            self.line_config,
-            self._warm_scenario,
-            self.settings,
-            scan_limit=self._t0 if held else math.inf,
-        )
-        self.loop.wait_ready(ready_timeout)
         self._set_priority()
         self._reader.start()
-        if held:
+        threading.Thread(
+            target=_import_event_modules, name="simulator-imports", daemon=True
+        ).start()
+        if self._held():
             self.get_logger().info(
                 f"unpaced: sim time keeps within scan_lead {self.scan_lead:g} s of the "
                 "scanner's /scan_progress (scan_lead:=0 turns it off)"
             )
+
+    def _held(self) -> bool:
+        """Unpaced, with scan_lead: the loop is held at the start until the scanner's first
+        report."""
+        return self.scan_lead > 0.0 and self.rtf == 0.0
+
+    def _configure_loop(self, loop: LineProcess) -> None:
+        """Send the loop's process its set-up; it is this node's loop from now on."""
+        self.loop = loop
+        limit = self._t0 if self._held() else math.inf
+        loop.configure(self.line_config, self._warm_scenario, self.settings, scan_limit=limit)
 
     def _on_scan_progress(self, msg: Clock) -> None:
         """The scanner has scanned up to this sim time: an unpaced loop may run scan_lead past
@@ -393,6 +407,8 @@ class SimulatorNode(FenceSorterNode):
                 self.pub_outcomes.publish(convert.outcome_to_msg(e, self.frame_id, self.limits))
                 if self.rerun is not None and math.isfinite(e.peak_normal_force):
                     # its EventTrace follows in the same list: the damage colours of the view
+                    from fence_sorter.analysis.events import risk_of  # lazy: see _start_rerun
+
                     self._risks[e.parcel_id] = risk_of(
                         {
                             "impact_normal_speed": e.impact_normal_speed,
@@ -430,6 +446,8 @@ class SimulatorNode(FenceSorterNode):
                 with self._lock:
                     self.counts["sort_events"] += 1
                 if self.rerun is not None:  # the same curves as a bag's (fence-sorter rrd)
+                    from fence_sorter.analysis.events import SortEventData  # lazy: _start_rerun
+
                     risk = self._risks.pop(e.parcel_id, None)
                     self.rerun.sort_event(SortEventData.from_msg(msg), risk)
             elif isinstance(e, StrokeStarted):
@@ -552,13 +570,20 @@ def _start_rerun(p: dict, belt_width: float, belt_x: tuple[float, float], rtf: f
     path, url = str(p["rrd_path"]), str(p["rrd_url"])
     if not path and not url:
         return None
-    from fence_sorter.visualisation.rerun_live import RerunProcess
-    from fence_sorter.visualisation.rerun_log import SceneGeometry
+    # what a Rerun view needs, here rather than at an event in the publisher thread
+    from fence_sorter.analysis import events  # noqa: F401  # lazy: fence_sorter.analysis pulls rosbags
 
     # chute as convert.MarkerBuilder draws it
     chute = (0.75, belt_width + 0.3, 1.5, 0.6)
     scene = SceneGeometry(belt_width, belt_x, chute, float(p["rrd_scan_line_x"]))
     return RerunProcess(scene, path or None, url or None, lossless=rtf == 0.0)
+
+
+def _import_event_modules() -> None:
+    """convert.event_to_msg's N_stiff courses (:mod:`fence_sorter.physics.contact`),
+    imported in a thread of their own once the node is up: off its start, and not at the
+    first event in the publisher thread (which waits on the import lock if it comes first)."""
+    from fence_sorter.physics import contact  # noqa: F401  # lazy: scipy.integrate, ~0.3 s
 
 
 class OrderlyStop:
@@ -594,8 +619,9 @@ class OrderlyStop:
 def main(args: Sequence[str] | None = None) -> int:
     """Run the simulator until Ctrl-C or SIGTERM (:class:`OrderlyStop`); exit 2 with one line
     on a bad scene or parameter, 1 if the pacing loop failed."""
-    from rclpy.signals import SignalHandlerOptions
-
+    # the loop's process first, while this process has no other thread: a copy of it with the
+    # line's modules imported, which builds and warms its line while this one starts rclpy
+    loop = LineProcess(fork=True)
     stopper = OrderlyStop()
     stopper.install()
     rclpy.init(
@@ -607,7 +633,7 @@ def main(args: Sequence[str] | None = None) -> int:
     try:
         if stopper.signals:  # a signal before the context existed
             return 0
-        node = SimulatorNode()
+        node = SimulatorNode(loop)
         stopper.node = node
         node.start()
         if stopper.signals:  # a signal during start-up: the stop thread may have missed it
@@ -635,6 +661,7 @@ def main(args: Sequence[str] | None = None) -> int:
             if node.loop_error:
                 code = 1
             node.destroy_node()
+        loop.close()  # not yet the node's: its pipe closes, it ends
         rclpy.try_shutdown()
     return code
 

@@ -18,6 +18,13 @@ import os
 import threading
 import time
 
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+
+from fence_sorter.inputs import ParcelSpec, StrokeCommand
+from fence_sorter.nodes import convert
+from fence_sorter.nodes.simulator import SimulatorNode
+
 SPACING = 1.5  # s between parcels at 1 m/s: 2400 parcels/h
 KEYS = (
     "cycles",
@@ -48,13 +55,6 @@ def main(argv: list[str] | None = None) -> int:
     # a domain of its own (the test runs use 100-199), localhost only
     os.environ.setdefault("ROS_DOMAIN_ID", str(229))
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
-
-    from fence_sorter.line import ParcelSpec, StrokeCommand
-    from fence_sorter.nodes import convert
-    from fence_sorter.nodes.simulator import SimulatorNode
 
     # its parcels are "scanned" at x0 = -2 m
     params = [f"real_time_factor:={a.rtf}", "heartbeat_period:=60.0", "scan_line_x:=-2.0", *a.p]

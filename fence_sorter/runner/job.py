@@ -4,6 +4,7 @@ an isolated ROS domain, watch the run until every parcel has its outcome, stop c
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import secrets
@@ -13,9 +14,12 @@ import tempfile
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+import yaml
+
+from fence_sorter.calibration.sensors import load_sensors, resolve_sensors
 from fence_sorter.nodes.parameters import (
     NODE_PARAMETERS,
     ParamOverrideError,
@@ -24,8 +28,9 @@ from fence_sorter.nodes.parameters import (
     ros_value,
 )
 from fence_sorter.physics.params import ParameterError
+from fence_sorter.recording.topics import MEASURED, TOPICS
 from fence_sorter.resources import data_path
-from fence_sorter.runner.monitor import Records
+from fence_sorter.runner.monitor import MONITOR_NAME, Monitor, Records
 from fence_sorter.runner.processes import (
     DomainError,
     ProcessGroup,
@@ -37,6 +42,8 @@ from fence_sorter.runner.processes import (
     wait_until,
 )
 from fence_sorter.runner.summary import summarise, verdict
+from fence_sorter.scene import load_scene, resolve_scene
+from fence_sorter.stream import load_stream, resolve_stream
 
 DEFAULT_SCENE = "impact_flexible"
 DEFAULT_STREAM = "default"
@@ -126,9 +133,6 @@ class Plan:
 
 def prepare(opts: RunOptions) -> Plan:
     """Check every input before anything starts; BadInput names the option and the range."""
-    from fence_sorter.scene import load_scene, resolve_scene
-    from fence_sorter.stream import load_stream, resolve_stream
-
     if opts.parcels is not None and opts.parcels < 1:
         raise BadInput(f"--parcels must be in [1, inf), got {opts.parcels}")
     if opts.duration is not None and not opts.duration > 0:
@@ -201,8 +205,6 @@ def prepare(opts: RunOptions) -> Plan:
 def load_sensors_arg(sensors: str | Path):
     """The sensors file of ``--sensors`` (a path or a name under config/sensors/); BadInput
     names it and the key."""
-    from fence_sorter.calibration.sensors import load_sensors
-
     try:
         return load_sensors(sensors)
     except ParameterError as exc:
@@ -249,11 +251,7 @@ def _sensors_truth(opts: RunOptions, scene_path: Path, base, stream) -> tuple[Pa
     """The sensors file of the run and the truth its bag carries: the scene's fit parameters
     (a friction the stream sets per parcel is no single truth and is left out), the sensors,
     the noise seed and the stream."""
-    import math
-    from dataclasses import asdict
-
-    from fence_sorter.calibration.emulate import truth_record
-    from fence_sorter.calibration.sensors import resolve_sensors
+    from fence_sorter.calibration.emulate import truth_record  # lazy: the physics, numba
 
     try:
         path = resolve_sensors(opts.sensors).resolve()
@@ -308,8 +306,6 @@ def loop_cpu(plan: Plan, rtf: float, cpus: set[int]) -> tuple[int, bool]:
     if "loop_cpu" in plan.node_params.get("simulator", {}):
         return int(plan.node_params["simulator"]["loop_cpu"]), False
     try:
-        import yaml
-
         doc = yaml.safe_load(data_path("config", "simulator.yaml").read_text()) or {}
         configured = int(doc["simulator"]["ros__parameters"].get("loop_cpu", -1))
     except (OSError, KeyError, TypeError, ValueError):
@@ -407,10 +403,6 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None], stop: StopReq
     wall0 = time.monotonic()
     try:
         stop.check()
-        from fence_sorter.runner.monitor import Monitor
-
-        monitor = Monitor(domain, run_id=plan.run_id)
-        stop.check()
         say(
             f"fence-sorter run: {count} parcels from {plan.stream_path.name}, scene "
             f"{plan.scene_path.stem}, rtf {opts.rtf:g}, ROS domain {domain}, logs {log_dir}"
@@ -428,7 +420,7 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None], stop: StopReq
             ),
         )
         # the stream starts once these nodes subscribe to their topics (by name in the graph)
-        gate = ["simulator", "controller", monitor.node.get_name()]
+        gate = ["simulator", "controller", MONITOR_NAME]
         gate += ["recorder"] if opts.bag else []
         gate += ["sensors"] if plan.sensors_path else []
         if opts.bag:
@@ -505,6 +497,12 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None], stop: StopReq
         group.start(
             "scanner", node_command("scanner", _ros_args("scanner", plan, opts, scanner_args))
         )
+        # this process's node once the node processes are on their way: its rclpy import
+        # and set-up (~0.1-0.5 s) overlap with their imports, which take longer, so it is
+        # still the first /diagnostics listener each node finds (their first heartbeat goes
+        # to the first one)
+        monitor = Monitor(domain, MONITOR_NAME, run_id=plan.run_id)
+        stop.check()
         up = {}  # node -> seconds from the start to the arrival of its first heartbeat
         for node, timeout in (
             ("controller", 120.0),
@@ -647,12 +645,9 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None], stop: StopReq
 def _recorder_args(plan: Plan, opts: RunOptions, log_dir: Path) -> list[str]:
     """The recorder's parameters: the bag; with sensors the measured topics too and the truth
     in the bag's metadata (custom_data, :data:`fence_sorter.calibration.bag.TRUTH_KEY`)."""
-    import json
-
     args = [f"output_dir:={Path(opts.bag).resolve()}", "use_sim_time:=true"]
     if plan.truth is not None and "topics" not in plan.node_params.get("recorder", {}):
-        from fence_sorter.calibration.bag import TRUTH_KEY
-        from fence_sorter.recording.topics import MEASURED, TOPICS
+        from fence_sorter.calibration.bag import TRUTH_KEY  # lazy: rosbags and the physics
 
         truth_file = log_dir / "calibration_truth.json"
         truth_file.write_text(json.dumps({TRUTH_KEY: json.dumps(plan.truth)}), encoding="utf-8")

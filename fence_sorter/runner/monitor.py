@@ -11,7 +11,11 @@ import time
 from dataclasses import dataclass, field
 
 from fence_sorter.codes import OutcomeCode, code_name
+from fence_sorter.recording import topics
 from fence_sorter.stamps import time_to_sec
+
+#: the monitor's node name (the scanner's start gate waits for its subscriptions)
+MONITOR_NAME = "fence_sorter_run"
 
 
 @dataclass
@@ -34,17 +38,17 @@ class Records:
 class Monitor:
     """An rclpy context and node of its own (no signal handlers: the job handles Ctrl-C)."""
 
-    def __init__(self, domain_id: int, name: str = "fence_sorter_run", run_id: int = 0):
-        import rclpy
-        from diagnostic_msgs.msg import DiagnosticArray
-        from rclpy.qos import QoSProfile, ReliabilityPolicy
-        from rclpy.signals import SignalHandlerOptions
-        from rosgraph_msgs.msg import Clock
+    def __init__(self, domain_id: int, name: str = MONITOR_NAME, run_id: int = 0):
+        # Records and the runner's checks of its input do without ROS
+        import rclpy  # lazy: rclpy, ~0.1-0.4 s, once the run starts
+        from diagnostic_msgs.msg import DiagnosticArray  # lazy: ROS message
+        from rclpy.qos import QoSProfile, ReliabilityPolicy  # lazy: rclpy
+        from rclpy.signals import SignalHandlerOptions  # lazy: rclpy
+        from rosgraph_msgs.msg import Clock  # lazy: ROS message
 
-        from fence_sorter.nodes.base import make_executor
-        from fence_sorter.nodes.qos import INPUT_QOS, topic_qos
-        from fence_sorter.recording import topics
-        from fence_sorter_msgs.msg import FenceCommand, Parcel, SortOutcome
+        from fence_sorter.nodes.base import make_executor  # lazy: rclpy
+        from fence_sorter.nodes.qos import INPUT_QOS, topic_qos  # lazy: rclpy
+        from fence_sorter_msgs.msg import FenceCommand, Parcel, SortOutcome  # lazy: ROS messages
 
         os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
         self.rclpy = rclpy

@@ -10,9 +10,12 @@ runner ends without saying it is done (SIGKILL of the runner included).
 from __future__ import annotations
 
 import ctypes
+import errno
+import fcntl
 import os
 import re
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -61,9 +64,6 @@ def domain_ports(domain: int, participants: int = PROBED_PARTICIPANTS) -> list[i
 def domain_in_use(domain: int) -> list[int]:
     """Ports of ``domain`` that a process on this host holds (Fast DDS binds them exclusively;
     a wildcard bind conflicts with a bind on any address)."""
-    import errno
-    import socket
-
     taken = []
     for port in domain_ports(domain):
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
@@ -444,8 +444,6 @@ def clean_shm(directory: Path = SHM_DIR) -> list[str]:
     owner lives, as ``fastdds shm clean`` tests it); files younger than SHM_GRACE stay.
     Where the processes cannot be read, only a free lock file tells, and it takes its port
     or segment and the port's semaphore with it. Returns the names removed."""
-    import fcntl
-
     try:
         names = sorted(n for n in os.listdir(directory) if _SHM_FILE.match(n))
     except OSError:

@@ -60,6 +60,19 @@ def _running(tag: str, module: str) -> bool:
     return any(module in c for c in _cmdlines(tag))
 
 
+def _loop_running(tag: str) -> bool:
+    """The pacing loop's process (forked from the simulator's: named, not in its cmdline)."""
+    from fence_sorter.line.worker import PROCESS_NAME  # lazy: numba, through the line
+
+    for pid in tagged(TAG, tag):
+        try:
+            if Path(f"/proc/{pid}/comm").read_text().strip() == PROCESS_NAME:
+                return True
+        except OSError:
+            pass
+    return False
+
+
 def _finish(proc: subprocess.Popen, tag: str) -> tuple[str, str]:
     try:
         out, err = proc.communicate(timeout=60)
@@ -128,10 +141,13 @@ def test_killed_runner_takes_every_process_with_it(tmp_path: Path) -> None:
     signal, the pacing worker and the Rerun child with their groups (the reaper)."""
     proc, tag = _start_run(tmp_path, "--parcels", "40", "--rrd", str(tmp_path / "r.rrd"))
     try:
+        rerun = "fence_sorter.visualisation.rerun_live"
         assert wait_until(
-            lambda: _running(tag, "fence_sorter.line.worker") or proc.poll() is not None, 180.0
+            lambda: (_loop_running(tag) and _running(tag, rerun)) or proc.poll() is not None,
+            180.0,
         )
-        assert _running(tag, "fence_sorter.visualisation.rerun_live"), _cmdlines(tag)
+        assert _running(tag, rerun), _cmdlines(tag)
+        assert _loop_running(tag)
         assert proc.poll() is None
         proc.send_signal(signal.SIGKILL)
     finally:

@@ -308,11 +308,12 @@ def test_unpaced_sim_time_follows_the_scanners_progress(domain_id: int) -> None:
 def _loop_process(pid: int) -> int:
     """The pacing loop's process among the simulator's children."""
 
+    from fence_sorter.line.worker import PROCESS_NAME  # lazy: numba, through the line
+
     def find() -> int | None:
         for task in Path(f"/proc/{pid}/task").iterdir():
             for child in (task / "children").read_text().split():
-                cmdline = Path(f"/proc/{child}/cmdline").read_bytes()
-                if b"fence_sorter.line.worker" in cmdline:
+                if Path(f"/proc/{child}/comm").read_text().strip() == PROCESS_NAME:
                     return int(child)
         return None
 
