@@ -57,7 +57,7 @@ from fence_sorter.codes import Stage
 from . import kernel as K
 from .model import SortingModel
 from .result import EnergyAudit, SimulationResult, make_result
-from .scenario import Scenario, per_scenario
+from .scenario import RECORDABLE, Scenario, per_scenario
 
 # the solve loop's stage codes are the Stage values; the result's stage names their labels
 assert (K.STAGE_CODE_ON_BELT, K.STAGE_CODE_E1, K.STAGE_CODE_E2, K.STAGE_CODE_E3) == (
@@ -315,6 +315,35 @@ def _loop_static(sc: Scenario) -> tuple:
     breakpoints = np.array(breaks, dtype=float)
     loop_model = K.LoopModel(model.P, model.corners, model.normals, *modes, settings, breakpoints)
     return loop_model, t_end, min(cols, 1 << 16), model.initial_state()
+
+
+# each recordable group's series: (name, row of the loop's record REC_*)
+_SERIES_ROWS = {
+    "trajectory": (
+        ("t", K.REC_T),
+        *((key, K.REC_Y + k) for k, key in enumerate(("x", "y", "phi", "vx", "vy", "phidot"))),
+    ),
+    "fence": (
+        ("t_fence", K.REC_T_FENCE),
+        ("alpha_w", K.REC_ALPHA),
+        ("tip_deflection", K.REC_TIP_W),
+    ),
+    "forces": (
+        ("t_forces", K.REC_T_FORCES),
+        ("normal_force", K.REC_FENCE_N),
+        ("deformation", K.REC_MAX_D),
+    ),
+    "stages": (("t_stage", K.REC_T_STAGE), ("stage", K.REC_STAGE)),
+}
+assert tuple(_SERIES_ROWS) == RECORDABLE, "a series layout per recordable group"
+
+
+@lru_cache(maxsize=16)
+def _series_layout(want: tuple[str, ...]) -> tuple[tuple[str, ...], np.ndarray]:
+    """The names of the series of the recorded groups ``want`` (in RECORDABLE's order) and
+    their rows in the loop's record."""
+    pairs = [pair for group in RECORDABLE if group in want for pair in _SERIES_ROWS[group]]
+    return tuple(name for name, _ in pairs), np.array([row for _, row in pairs], dtype=np.intp)
 
 
 class Stepper:
@@ -630,25 +659,12 @@ class Stepper:
         names are the names in it)."""
         if not want:
             return {}
-        # one array per recorded quantity (rows of one copy: the record is reused by the next
-        # solve once this one is released)
-        rows = list(self.record[:, : self.counters[K.I_N_REC]].copy())
-        out: dict[str, np.ndarray] = {}
-        if "trajectory" in want:
-            out["t"] = rows[K.REC_T]
-            for k, key in enumerate(("x", "y", "phi", "vx", "vy", "phidot")):
-                out[key] = rows[K.REC_Y + k]
-        if "fence" in want:
-            out["t_fence"] = rows[K.REC_T_FENCE]
-            out["alpha_w"] = rows[K.REC_ALPHA]
-            out["tip_deflection"] = rows[K.REC_TIP_W]
-        if "forces" in want:
-            out["t_forces"] = rows[K.REC_T_FORCES]
-            out["normal_force"] = rows[K.REC_FENCE_N]
-            out["deformation"] = rows[K.REC_MAX_D]
-        if "stages" in want:
-            out["t_stage"] = rows[K.REC_T_STAGE]
-            codes = rows[K.REC_STAGE].astype(np.intp)
+        names, rows = _series_layout(tuple(want))
+        # one copy of the rows wanted (the record is reused by the next solve once this one is
+        # released), a series per row
+        out = dict(zip(names, self.record[rows, : self.counters[K.I_N_REC]], strict=True))
+        if "stage" in out:
+            codes = out["stage"].astype(np.intp)
             # the names' string width: the longest present (every stage the run entered was
             # recorded at the point it was entered)
             if not len(codes):

@@ -55,8 +55,10 @@ for _ in range(args["calls"]):
     r = simulate(sc)
     walls.append(time.perf_counter() - t0)
 gc.enable()
+from fence_sorter.physics import kernel
 print(json.dumps({"module": fence_sorter.__file__, "walls": walls,
-                  "peak_force": float(r.peak_contact_force)}))
+                  "peak_force": float(r.peak_contact_force),
+                  "aot": bool(getattr(kernel.solve, "entries", None))}))
 """
 
 
@@ -72,10 +74,30 @@ def commit_of(rev: str, root: Path = REPO) -> str:
     return out.stdout.strip()
 
 
-def run_child(tree: Path, scene: str, calls: int, warm_up: int) -> dict:
-    """One fresh process of ``tree``: its timed calls of ``scene`` (JSON)."""
+def tree_env(tree: Path) -> dict[str, str]:
+    """The environment of a process of ``tree``: its own PYTHONPATH and kernel cache."""
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
     env["PYTHONPATH"] = str(tree)
+    return env
+
+
+def prepare(tree: Path) -> bool:
+    """Compile ``tree``'s kernel as scripts/bootstrap.sh does for a clone (``python -m
+    fence_sorter.physics.warmup``: the JIT's cache and the ahead-of-time solve), so that both
+    trees solve through the same kind of entry; False when the tree has no such module."""
+    p = subprocess.run(
+        [sys.executable, "-m", "fence_sorter.physics.warmup"],
+        cwd=tree,
+        env=tree_env(tree),
+        capture_output=True,
+        text=True,
+    )
+    return p.returncode == 0
+
+
+def run_child(tree: Path, scene: str, calls: int, warm_up: int) -> dict:
+    """One fresh process of ``tree``: its timed calls of ``scene`` (JSON)."""
+    env = tree_env(tree)
     arg = json.dumps({"scene": scene, "calls": calls, "warm_up": warm_up})
     p = subprocess.run(
         [sys.executable, "-c", CHILD, arg], cwd=tree, env=env, capture_output=True, text=True
@@ -103,6 +125,7 @@ def measure(
     for scene in scenes:
         walls: dict[str, list[float]] = {n: [] for n in names}
         peaks: dict[str, float] = {}
+        aot: dict[str, bool] = {}
         round_ratios = []
         for k in range(rounds):
             this_round = {}
@@ -110,6 +133,7 @@ def measure(
                 data = run_child(trees[name], scene, calls, warm_up)
                 walls[name] += data["walls"]
                 peaks[name] = data["peak_force"]
+                aot[name] = data.get("aot", False)
                 this_round[name] = statistics.median(data["walls"])
             round_ratios.append(this_round[names[0]] / this_round[names[1]])
         medians = {n: statistics.median(walls[n]) for n in names}
@@ -118,6 +142,7 @@ def measure(
             "calls": {n: len(walls[n]) for n in names},
             "median_ms": {n: medians[n] * 1e3 for n in names},
             "peak_force": peaks,
+            "aot": aot,
             "ratio": medians[names[0]] / medians[names[1]],
             "round_ratios": round_ratios,
         }
@@ -143,6 +168,18 @@ def render(data: dict) -> str:
         "measured: [verification.md](verification.md#solve-speed-against-a-base-commit).",
         "",
     ]
+    if "prepared" in data:
+        entry = {
+            n: "the ahead-of-time solve"
+            if all(r.get("aot", {}).get(n) for r in data["scenes"])
+            else "the JIT"
+            for n in ("head", "base")
+        }
+        lines += [
+            f"Each tree's kernel compiled first (`python -m fence_sorter.physics.warmup`): "
+            f"`{head}` solved through {entry['head']}, `{base}` through {entry['base']}.",
+            "",
+        ]
     lines += table(
         (
             "scene",
@@ -207,6 +244,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             check=True,
             capture_output=True,
         )
+        prepared = {name: prepare(tree) for name, tree in (("head", REPO), ("base", base_tree))}
         try:
             rows = measure(
                 {"head": REPO, "base": base_tree}, scenes, args.rounds, args.calls,
@@ -228,6 +266,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "rounds": args.rounds,
         "calls": args.calls,
         "warm_up": WARM_UP,
+        "prepared": prepared,
         "load_before": load_before,
         "load_after": load_average(),
         "machine": machine_info(),
