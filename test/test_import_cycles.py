@@ -50,11 +50,6 @@ HEAVY = frozenset(
 )
 LAZY_MARK = "# lazy:"
 
-#: Function-level imports of the node and runner modules that do not follow the rule yet, by
-#: file: the check passes over them and fails on any other. An entry that no longer occurs
-#: fails too, so the list only shrinks; the check is strict once it is empty.
-NOT_YET_CONVERTED: dict[str, set[str]] = {}
-
 
 def module_names(root: Path = PACKAGE) -> dict[str, Path]:
     """Dotted module name -> source file, for every module of the package."""
@@ -260,14 +255,4 @@ def test_the_scene_reader_and_the_command_line_are_light():
 
 
 def test_imports_inside_functions_are_heavy_and_say_why():
-    found: dict[str, set[str]] = {}
-    bad = []
-    for line in unjustified_lazy_imports():
-        where, module = line.split()[:2]
-        path = where.rpartition(":")[0]
-        if module in NOT_YET_CONVERTED.get(path, ()):
-            found.setdefault(path, set()).add(module)
-        else:
-            bad.append(line)
-    assert bad == []
-    assert found == NOT_YET_CONVERTED, "NOT_YET_CONVERTED names imports that follow the rule now"
+    assert unjustified_lazy_imports() == []
