@@ -660,6 +660,47 @@ def _solve(problem: _Problem, z0, max_nfev: int):
     return sol
 
 
+#: a fit whose position residuals scatter by more than this factor (in variance) of the
+#: noise level seen before the strokes sits in a wrong basin of the cost
+WRONG_BASIN = 2.0
+#: where :func:`_escape` looks for a better basin: moves of one parameter [log]
+BASIN_STEPS = (-0.2, -0.1, -0.05, -0.02, 0.02, 0.05, 0.1, 0.2)
+
+
+def _escape(problem: _Problem, sol, n_position: int, max_nfev: int, rounds: int = 2):
+    """``sol``, or a better local optimum if it sits in a wrong basin. The cost is not convex
+    far from the truth: a parcel that sticks to the fence or slides along it, is sorted or
+    not, switches with a friction coefficient, and Gauss-Newton from the scene's values can
+    end between two such switches (position residuals several times the pre-stroke noise).
+    Then each parameter is moved alone by BASIN_STEPS (one parallel batch) and the fit is
+    restarted from the lowest point if it is lower; at most ``rounds`` times."""
+    nfev = sol.nfev
+    for _ in range(rounds):
+        r = problem.fun(sol.x)
+        if not r[:n_position].size or np.mean(r[:n_position] ** 2) <= WRONG_BASIN:
+            break
+        lo, hi = problem.bounds()
+        points = []
+        for j in range(problem.k):
+            for step in BASIN_STEPS:
+                z = sol.x.copy()
+                z[j] = min(max(z[j] + step, lo[j] + 1e-9), hi[j] - 1e-9)
+                points.append(z)
+        off = tuple(sol.x[problem.k :])
+        costs = [float(np.sum(weighted(problem.eds, p, off, problem.sigma) ** 2))
+                 for p in problem.evaluate([problem.values(z) for z in points])]  # fmt: skip
+        best = int(np.argmin(costs)) if costs else 0
+        if not costs or costs[best] >= float(r @ r):
+            break
+        new = _solve(problem, points[best], max_nfev)
+        nfev += new.nfev
+        if new.cost >= sol.cost:
+            break
+        sol = new
+    sol.nfev = nfev
+    return sol
+
+
 def cpu_seconds() -> tuple[float, float]:
     """CPU time [s] of this process and of its ended child processes (a closed Evaluator's
     workers; a Dask cluster's workers are not counted): the load-independent cost of a
@@ -765,7 +806,7 @@ def calibrate(
     try:
         while True:
             prob = _Problem(evaluate, eds, active, fixed, sigma)
-            sol = _solve(prob, z, max_nfev)
+            sol = _escape(prob, _solve(prob, z, max_nfev), sizes[0], max_nfev)
             nfev += sol.nfev
             r = prob.fun(sol.x)
             cov, sv, factors = _covariance(prob.jac(sol.x), r, sizes, F_SCALE)
