@@ -76,8 +76,8 @@ from .types import (
 
 #: nodes drawn along a stiff fence (it has no FEM mesh)
 STIFF_NODES = 11
-#: the largest step of a flexible fence's solve on the line, omega_1 h [rad] (below 0.2 the
-#: trapezoid's period error of the first mode, (omega_1 h)^2 / 12, stays within 1/300)
+#: the largest step of a flexible fence's solve on the line, omega_2 h [rad] (below 0.2 the
+#: trapezoid's period error of the first two modes, (omega h)^2 / 12, stays within 1/300)
 RING_STEP = 0.2
 #: a parcel corner this far inside the swept sector counts as overlapping [m]
 OVERLAP_TOL = 1e-3
@@ -426,10 +426,12 @@ class SortingLine:
         solver = replace(config.solver, stop_when_sorted=False, max_wall_time=3600.0)
         self.fem = build_fence(config.fence) if config.fence is not None else None
         if self.fem is not None:
-            # the fence's state is published (the sensors' truth): steps resolve its first
-            # mode, a trapezoid's period error (omega_1 h)^2 / 12 within 1/300
-            omega_1 = 2.0 * math.pi * float(natural_frequencies(self.fem, 1)[0])
-            solver = replace(solver, dt_max=min(solver.dt_max, RING_STEP / omega_1))
+            # the fence's state is published (the sensors' truth): steps resolve its first two
+            # modes (the first if only one is kept), a trapezoid's period error
+            # (omega h)^2 / 12 within 1/300
+            kept = 2 if config.fence_modes is None or config.fence_modes >= 2 else 1
+            omega = 2.0 * math.pi * float(natural_frequencies(self.fem, kept)[-1])
+            solver = replace(solver, dt_max=min(solver.dt_max, RING_STEP / omega))
         self.config = replace(config, solver=solver)
         self.t = float(t0)
         self.v = config.conveyor.belt_speed
