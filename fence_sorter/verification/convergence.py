@@ -28,6 +28,7 @@ REFERENCE_DIR = Path(__file__).resolve().parents[2] / "docs" / "accuracy" / "ref
 RTOLS = (1e-4, 1e-5, 1e-6, 1e-7)
 GAIN = 100.0  # the error at the tightest rtol at least this much below the loosest's
 MONOTONE = 2.0  # ... and no error more than this above the one of the looser rtol before it
+COST_GROWTH = 4.0  # the steps grow with each decade of rtol, by less than this factor
 
 
 @dataclass
@@ -82,6 +83,11 @@ def converges(errors: list[float], resolution: float = 0.0) -> tuple[bool, bool]
         max(b, floor) <= MONOTONE * max(a, floor) for a, b in zip(errors, errors[1:], strict=False)
     )
     return gain, monotone
+
+
+def smooth_cost(steps: list[int]) -> bool:
+    """The steps over tightening rtols (a decade apart) grow, each by less than COST_GROWTH."""
+    return all(a < b < COST_GROWTH * a for a, b in zip(steps, steps[1:], strict=False))
 
 
 def table(points: list[ConvergencePoint], rtols=RTOLS) -> list[str]:

@@ -16,6 +16,8 @@ from .layout import (
     C_NRAW,
     C_S,
     C_SLACK,
+    G_ADAPTIVE,
+    G_RTOL,
     N_SLOTS,
     P_BEFF,
     P_KP,
@@ -117,11 +119,24 @@ def tolerance_scale(rtol):
     ~tol^(2/3): from rtol 1e-4 to 1e-7 that is 100x only in the limit, and the peak force of an
     impact, set by the steps near it, gains less. Holding the local error at
     rtol (rtol / 1e-4)^(1/2) makes the global error fall about as rtol while the default is
-    unchanged. On a stiff fence it needs the stick/slip switches located (``first_event``'s
-    ``friction``): without, a switch inside a step chatters from rtol 1e-5 (arbitrary_stiff)."""
+    unchanged. On a stiff fence it needs the fence friction's stick resolved
+    (:func:`resolves_stick`)."""
     if rtol >= RTOL_DEFAULT:
         return 1.0
     return math.sqrt(rtol / RTOL_DEFAULT)
+
+
+@njit(cache=True, _nrt=False)
+def resolves_stick(settings, m):
+    """Whether the adaptive scheme resolves the fence friction's stick on a stiff fence: below
+    the default rtol. Then its stick/slip switches are events (``first_event``'s
+    ``friction``), the contact iteration converges the load's velocities to
+    ``solver.tolerance`` [m/s] (its |dq| + h |dv| test alone leaves a velocity error up to
+    tol / h and a force error ~ m tol / h^2 at the short steps around a switch), and a contact
+    sticking at both ends of a step ends it at the stick force extrapolated from the step
+    means (``steps._unring_stick``). See docs/numerics.md, "Convergence of the adaptive
+    scheme with rtol"."""
+    return settings[G_ADAPTIVE] != 0.0 and m == 0 and settings[G_RTOL] < RTOL_DEFAULT
 
 
 @njit(cache=True, _nrt=False)

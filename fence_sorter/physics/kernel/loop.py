@@ -11,20 +11,18 @@ from numba import njit
 from .control import (
     EVENT_ONSET,
     EVENT_SLIDE_OFF,
-    EVENT_STICK,
     event_value,
     first_event,
     flexible_contact_step,
     milne_error,
     modal_propagators,
     oscillation_step,
+    resolves_stick,
     time_to_contact,
     tolerance_scale,
 )
 from .forces import evaluate, karnopp_belt, stick_wrench
 from .layout import (
-    C_FT,
-    C_SLACK,
     DIAG_MIN_DT,
     DIAG_NONE,
     F_DIAG_T,
@@ -86,7 +84,6 @@ from .steps import (
     STEP_FORCED,
     STEP_REJECTED,
     generalized_alpha_step,
-    shift_friction,
     trapezoidal_step,
 )
 
@@ -180,9 +177,9 @@ def _trap(
         params, corners, normals, mode_shapes, rigid_modal,
         (propagators[k], propagator_g0[k], propagator_g1[k]), h, times[a], states[a],
         resultants[a], belt_wrench[a], modal_forces[a], contacts[a], modal_forces[S_PREV], h_prev,
-        jump, on_belt, settings[G_TOL], int(settings[G_MAX_ITER]), force, states[b],
-        belt_wrench[b], contacts[b], resultants[b], modal_forces[b], deflection, deflection_rate,
-        nodes, friction_prev, work,
+        jump, on_belt, settings[G_TOL], resolves_stick(settings, omega.shape[0]),
+        int(settings[G_MAX_ITER]), force, states[b], belt_wrench[b], contacts[b], resultants[b],
+        modal_forces[b], deflection, deflection_rate, nodes, friction_prev, work,
     )  # fmt: skip
     if status != STEP_REJECTED:
         accelerations[b, 0] = (resultants[b, 0] + belt_wrench[b, 0]) / params[P_MASS]
@@ -231,49 +228,6 @@ def _accelerations(
             - omega[j] ** 2 * y[6 + j]
             - 2.0 * zeta[j] * omega[j] * y[6 + m + j]
         )
-
-
-STICK_PROBE = 1e-3  # the probe step of a located stick start, relative to the step that met it
-
-
-@njit(cache=True, _nrt=False)
-def _consistent_stick(
-    params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings, counters, times,
-    states, belt_wrench, contacts, resultants, modal_forces, accelerations, deflection,
-    deflection_rate, nodes, friction_prev, work, propagator_keys, propagators, propagator_g0,
-    propagator_g1, h, b, slot, on_belt,
-):  # fmt: skip
-    """Replace the friction of ``slot`` at a located stick start (row b) by the stick force.
-
-    The trapezoidal rule's stick force is a constraint force it rings on (F1 = 2 F_mean - F0):
-    a step that starts at the slip limit mu N ends at 2 F_stick - mu N, the next from there at
-    mu N again, and a located slip -> stick switch would alternate with stick -> slip at every
-    step. The stick force at b is the mean force of a short probe step from b that sticks
-    (its F_mean -> F_stick as the probe shrinks), so the step after the switch starts from a
-    force consistent with sticking and the error history restarts there."""
-    st = _trap(
-        params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings, counters, times,
-        states, belt_wrench, contacts, resultants, modal_forces, accelerations, deflection,
-        deflection_rate, nodes, friction_prev, work, propagator_keys, propagators, propagator_g0,
-        propagator_g1, STICK_PROBE * h, 0.0, b, S_LOC, _jump_at(params, times[b]), on_belt, False,
-    )  # fmt: skip
-    if st == STEP_REJECTED or not contacts[S_LOC, slot, C_SLACK] > 0.0:
-        return
-    d = 0.5 * (contacts[S_LOC, slot, C_FT] - contacts[b, slot, C_FT])
-    shift_friction(
-        params,
-        mode_shapes,
-        contacts[b],
-        resultants[b],
-        modal_forces[b],
-        states[b, 0],
-        states[b, 1],
-        slot,
-        d,
-    )
-    accelerations[b, 0] = (resultants[b, 0] + belt_wrench[b, 0]) / params[P_MASS]
-    accelerations[b, 1] = (resultants[b, 1] + belt_wrench[b, 1]) / params[P_MASS]
-    accelerations[b, 2] = (resultants[b, 2] + belt_wrench[b, 2]) / params[P_INERTIA]
 
 
 @njit(cache=True, _nrt=False)
@@ -403,9 +357,9 @@ def solve(model, state, max_attempts, t_target):
     m = omega.shape[0]
     # tolerance proportionality (and on a flexible fence the contact's step and the event
     # restart: the modes' error, which Milne's estimate on the load does not see); below the
-    # default rtol a stiff fence's stick/slip switches are located (control.first_event)
+    # default rtol a stiff fence's stick is resolved (control.resolves_stick)
     tol_scale = tolerance_scale(settings[G_RTOL])
-    friction_events = adaptive and m == 0 and tol_scale < 1.0
+    friction_events = resolves_stick(settings, m)
     if counters[I_STARTED] == 0:
         # forces at t = 0, belt wrench by Karnopp, consistent accelerations
         counters[I_STARTED] = 1
@@ -576,14 +530,6 @@ def solve(model, state, max_attempts, t_target):
             # times) as the cut step shrinks to zero, without a run of doubling steps that
             # appears or vanishes with it
             figures[F_H] = min(h_nom, 2.0 * figures[F_H])
-        if located and kind == EVENT_STICK and contacts[b, slot, C_SLACK] > 0.0:
-            _consistent_stick(
-                params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings,
-                counters, times, states, belt_wrench, contacts, resultants, modal_forces,
-                accelerations, deflection, deflection_rate, nodes, friction_prev, work,
-                propagator_keys, propagators, propagator_g0, propagator_g1, h_taken, b, slot,
-                on_belt,
-            )  # fmt: skip
         # accept
         for k in range(3):
             figures[F_PREV_V + k] = states[a, 3 + k]

@@ -21,6 +21,7 @@ from .layout import (
     C_ACTIVE,
     C_D,
     C_DDOT,
+    C_FMEAN,
     C_FT,
     C_GAP,
     C_N,
@@ -234,6 +235,7 @@ def trapezoidal_step(
     jump,
     on_belt,
     tol,
+    resolve_stick,
     max_iter,
     force,
     y1,
@@ -266,8 +268,10 @@ def trapezoidal_step(
 
     Stick forces are constraint forces, and the trapezoidal rule rings on them (F1 = 2 F - F0,
     alternating step to step); like the belt's stick wrench, a fence or border contact that
-    sticks at both ends of the step stores the mean (F0 + F1) / 2 as its end force (``out0``:
-    the contacts at the step start), which removes the ringing mode.
+    sticks at both ends of the step stores a force free of the ring as its end force
+    (``_unring_stick``; ``out0``: the contacts at the step start). ``resolve_stick``
+    (``control.resolves_stick``): the iteration converges the load's velocities to ``tol``
+    [m/s] as well, and that end force is extrapolated to second order.
     """
     a_mat, g0, g1 = props
     m = modal0.shape[0]
@@ -390,6 +394,8 @@ def trapezoidal_step(
         err = abs(q0 - y1[0]) + h * abs(vi0 - y1[3])
         err = max(err, abs(q1 - y1[1]) + h * abs(vi1 - y1[4]))
         err = max(err, abs(q2 - y1[2]) + h * abs(vi2 - y1[5]))
+        if resolve_stick:  # the velocities to tol [m/s] as well
+            err = max(err, abs(vi0 - y1[3]), abs(vi1 - y1[4]), abs(vi2 - y1[5]))
         g_new[0], g_new[1], g_new[2], g_new[3], g_new[4], g_new[5] = q0, q1, q2, vi0, vi1, vi2
         for j in range(m):
             z0 = base0[j] + base0[m + j] * modal1[j]
@@ -476,7 +482,7 @@ def trapezoidal_step(
             P, corners, normals, phi, rigid_modal, alpha1, rate1, accel1, ca1, sa1, y1, c1, s1,
             lam0, hh, prev, out, res, modal1, w, wdot, nodes,
         )  # fmt: skip
-    _unring_stick(P, phi, out0, out, res, modal1, y1[0], y1[1])
+    _unring_stick(P, phi, out0, out, res, modal1, y1[0], y1[1], h, h_prev, resolve_stick)
     if stuck:
         lam1[0], lam1[1], lam1[2] = stick_wrench(P, res[R_FX], res[R_FY], res[R_MZ])
     res[R_ITERATIONS] = iterations
@@ -484,8 +490,11 @@ def trapezoidal_step(
 
 
 @njit(cache=True, _nrt=False)
-def _unring_stick(P, phi, out0, out, res, modal, x, y):
-    """Replace the end friction of contacts that stick at both step ends by the step mean."""
+def _unring_stick(P, phi, out0, out, res, modal, x, y, h, h_prev, extrapolate):
+    """Replace the end friction of contacts that stick at both step ends by the stick force
+    estimated from the step means (impulse / h, free of the ring): the mean itself, or with
+    ``extrapolate`` and a previous step of h_prev > 0 that stuck at both ends too, the line
+    through the two means at the step end (second order; the mean lags by h / 2)."""
     mu2 = P[P_MU2]
     for k in range(N_SLOTS):
         if out[k, C_ACTIVE] == 0.0 or out0[k, C_ACTIVE] == 0.0:
@@ -495,7 +504,13 @@ def _unring_stick(P, phi, out0, out, res, modal, x, y):
             continue
         if abs(ft0) >= mu2 * out0[k, C_N] * (1.0 - 1e-9):
             continue
-        shift_friction(P, phi, out, res, modal, x, y, k, 0.5 * (ft0 + ft1) - ft1)
+        mean = 0.5 * (ft0 + ft1)
+        out[k, C_FMEAN] = mean
+        stick = mean
+        mean0 = out0[k, C_FMEAN]
+        if extrapolate and h_prev > 0.0 and mean0 != 0.0:
+            stick = mean + (mean - mean0) * h / (h + h_prev)
+        shift_friction(P, phi, out, res, modal, x, y, k, stick - ft1)
 
 
 @njit(cache=True, _nrt=False)
