@@ -11,7 +11,8 @@ Steps (docs/calibration.md):
    level (from the samples before the strokes). Parameters are fitted in log space
    (``scipy.optimize.least_squares``, trust region reflective; Gauss-Newton, then the
    ``soft_l1`` loss), the Jacobian by forward differences: one replay per parcel and
-   parameter, every parcel's replays run in parallel (:class:`Evaluator`).
+   parameter, every parcel's replays run in parallel (:class:`Evaluator`). A fit that ends
+   in a wrong basin of the cost restarts from a better point (:func:`_escape`).
 3. **Judge.** The covariance of the estimate over the parameters and the camera frame is the
    M-estimator's sandwich with each channel's noise level re-estimated from its residuals
    (:func:`_covariance`), the Jacobian by central differences over +- 1 sd

@@ -186,9 +186,9 @@ def cost_along_contact_damping(parcels, steps, width):
 def test_cost_along_the_contact_damping_has_no_jumps():
     """The cost along b_p, 61 values over +- 3 sd of its interval (0.1 sd apart) on three
     parcels whose replays jumped: its second difference stays within 0.01 of its mean (a
-    parabola's is constant, about 0.008 here). A step whose iterations ran out (rejected and
-    halved) or a run of doubling steps after a drive breakpoint that the grid's phase cut
-    short made jumps of 0.1-0.25."""
+    parabola's is constant, about 0.008 here). A step whose iterations run out (rejected and
+    halved; with 12 iterations) or a run of doubling steps after a drive breakpoint that the
+    grid's phase cut short makes jumps of 0.1-0.25."""
     d2 = np.diff(cost_along_contact_damping([1, 2, 4], 61, 3 * 1.9e-3), 2)
     assert np.abs(d2 - d2.mean()).max() < 0.01, d2
 
