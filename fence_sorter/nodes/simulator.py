@@ -58,6 +58,7 @@ from fence_sorter.nodes.parameters import SIMULATOR_PARAMETERS
 from fence_sorter.nodes.qos import INPUT_QOS, topic_qos
 from fence_sorter.nodes.tf_publisher import TfPublisher
 from fence_sorter.recording import topics
+from fence_sorter.runner.processes import keep_on
 from fence_sorter.scene import load_scene
 from fence_sorter.stamps import time_to_sec
 from fence_sorter.visualisation.rerun_live import RerunProcess
@@ -308,11 +309,9 @@ class SimulatorNode(FenceSorterNode):
         cpu = self.settings.loop_cpu
         others = os.sched_getaffinity(0) - {cpu}
         if cpu >= 0 and others:
-            for tid in os.listdir("/proc/self/task"):
-                try:
-                    os.sched_setaffinity(int(tid), others)
-                except OSError:
-                    pass
+            keep_on(os.getpid(), others)
+            if self.rerun is not None:  # started before, with this process's CPUs
+                keep_on(self.rerun.proc.pid, others)
             self.get_logger().info(f"node threads: kept off CPU {cpu} (the loop's)")
         prio = self.settings.rt_priority - 1
         if prio < 1 or self.rtf <= 0.0:

@@ -393,8 +393,6 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None], stop: StopReq
     others = allowed - {pinned}
     cpus = others if pinned >= 0 and opts.rtf > 0.0 and others else None
     group = ProcessGroup(env, log_dir, cpus)
-    if cpus is not None:  # this thread, and the monitor's threads created from it
-        os.sched_setaffinity(0, cpus)
     monitor = None
     code, message = EXIT_OK, "done"
     stalled = False  # the nodes ran on, but outcomes stayed missing (stall or timeout)
@@ -501,6 +499,8 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None], stop: StopReq
         # and set-up (~0.1-0.5 s) overlap with their imports, which take longer, so it is
         # still the first /diagnostics listener each node finds (their first heartbeat goes
         # to the first one)
+        if cpus is not None:  # this thread, after the nodes' start (they inherit it), and
+            os.sched_setaffinity(0, cpus)  # the monitor's threads created from it
         monitor = Monitor(domain, MONITOR_NAME, run_id=plan.run_id)
         stop.check()
         up = {}  # node -> seconds from the start to the arrival of its first heartbeat
@@ -519,6 +519,8 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None], stop: StopReq
         scanner_started = time.monotonic()  # the stream may start from here
         beats = ", ".join(f"{node} {t:.1f} s" for node, t in up.items())
         say(f"nodes up in {time.monotonic() - wall0:.1f} s (heartbeats: {beats}); running")
+        # their start-up used both CPUs; the run keeps them off the loop's
+        group.confine()
         timeout = opts.timeout or 120.0 + 3.0 * plan.sim_duration / max(opts.rtf, 1.0)
         deadline = time.monotonic() + timeout
         expected = set(plan.expected_ids)

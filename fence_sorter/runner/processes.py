@@ -163,13 +163,31 @@ class NodeProcess:
             return ""
 
 
+def keep_on(pid: int, cpus: set[int] | None) -> None:
+    """Every thread of process ``pid`` on ``cpus`` (None: left as it is); a process or thread
+    that has just ended is passed over."""
+    if cpus is None:
+        return
+    try:
+        tids = os.listdir(f"/proc/{pid}/task")
+    except OSError:
+        return
+    for tid in tids:
+        try:
+            os.sched_setaffinity(int(tid), cpus)
+        except OSError:
+            pass
+
+
 class ProcessGroup:
     """The node processes of one run; :meth:`stop` ends them all, in order, with escalation."""
 
     def __init__(self, env: Mapping[str, str], log_dir: Path, cpus: set[int] | None = None):
-        """``cpus``: the CPUs every node process may run on (None: as this process)."""
+        """``cpus``: the CPUs every node process may run on once :meth:`confine` is called
+        (None: as this process)."""
         self.env = dict(env)
         self.cpus = cpus
+        self.confined = False  # the start-up may use every CPU (the loop runs after it)
         self.log_dir = Path(log_dir)
         self.log_dir.mkdir(parents=True, exist_ok=True)
         self.nodes: dict[str, NodeProcess] = {}
@@ -202,12 +220,17 @@ class ProcessGroup:
             self.reaper.watch(proc.pid)
         finally:
             signal.pthread_sigmask(signal.SIG_SETMASK, held)
-        if self.cpus is not None:  # before the interpreter starts any thread (inherited)
-            try:
-                os.sched_setaffinity(proc.pid, self.cpus)
-            except OSError:
-                pass
+        if self.confined:  # before the interpreter starts any thread (inherited)
+            keep_on(proc.pid, self.cpus)
         return node
+
+    def confine(self) -> None:
+        """Keep every node process (each of its threads; not its children, which place
+        themselves) on :attr:`cpus` from now on, and every node started later."""
+        self.confined = True
+        for node in self.nodes.values():
+            if node.proc.poll() is None:
+                keep_on(node.proc.pid, self.cpus)
 
     def restart(self, name: str) -> NodeProcess:
         """End whatever is left of node ``name``'s group and start it again (same command,
