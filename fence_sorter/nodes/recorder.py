@@ -289,6 +289,11 @@ class RecorderNode(FenceSorterNode):
         # topics with a publisher in the graph that this recorder's subscription has not yet
         # matched: what it publishes now is not recorded (the scanner's start gate waits)
         values["publishers_unmatched"] = " ".join(self.publishers_unmatched())
+        # what it has matched, topic=count: the recorder's own graph may not yet show a
+        # publisher that the scanner's does (the gate compares the counts with its graph)
+        values["publishers_matched"] = " ".join(
+            f"{t.name}={t.subscription.get_publisher_count()}" for t in self.topics
+        )
         for t in self.topics:
             values[f"received{t.name.replace('/', '.')}"] = str(t.received)
             values[f"written{t.name.replace('/', '.')}"] = str(t.written)

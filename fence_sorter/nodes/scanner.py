@@ -8,9 +8,11 @@ The stream starts once every node named in ``start_gate`` is in the ROS graph wi
 subscription on each topic it needs (``NODE_SUBSCRIPTIONS`` of
 :mod:`fence_sorter.recording.topics`; by node name, so extra listeners on /parcels do not
 count) and, when the recorder is named, once a recorder heartbeat sent after that reports
-every publisher in the graph matched (``publishers_unmatched`` empty): the graph shows a
-subscription before DDS has matched it, and the volatile state topics (/clock, /load_states)
-published in between would be missing from the bag. /parcels is transient local with a
+every publisher in the graph matched (``publishers_unmatched`` empty, and its
+``publishers_matched`` counts no fewer publishers per topic than this node's graph shows: the
+recorder's own graph may not show them all yet): the graph shows a subscription before DDS has
+matched it, and the volatile state topics (/clock, /load_states) published in between would be
+missing from the bag. /parcels is transient local with a
 history covering the stream, so a subscriber whose matching completes after the gate opened
 still gets every parcel.
 """
@@ -135,7 +137,7 @@ class ScannerNode(FenceSorterNode):
         self.gate = gate_requirements(str(p["start_gate"]))
         self.gate_missing: list[str] = [f"{n}:{t}" for n, t in self.gate]
         self._gate_checked = -math.inf
-        # (wall time received, publishers_unmatched) of the recorder's latest heartbeat
+        # (wall time received, topics it has not matched) of the recorder's latest heartbeat
         self._match_report: tuple[float, str] | None = None
         self._graph_open_at: float | None = None
         if any(n == MATCH_REPORTER for n, _ in self.gate):
@@ -221,7 +223,13 @@ class ScannerNode(FenceSorterNode):
             if status.name == f"fence_sorter/{MATCH_REPORTER}":
                 values = {kv.key: kv.value for kv in status.values}
                 if "publishers_unmatched" in values:
-                    self._match_report = (time.monotonic(), values["publishers_unmatched"])
+                    unmatched = values["publishers_unmatched"].split()
+                    # its graph may lag this one's: a publisher seen here, not matched there
+                    for item in values.get("publishers_matched", "").split():
+                        topic, _, count = item.rpartition("=")
+                        if self.count_publishers(topic) > int(count) and topic not in unmatched:
+                            unmatched.append(topic)
+                    self._match_report = (time.monotonic(), " ".join(unmatched))
 
     def _gate_open(self) -> bool:
         """Every (node, topic) of the start gate is in the graph, and the recorder, if named,
