@@ -220,18 +220,22 @@ class ControllerNode(FenceSorterNode):
         )
 
     def _listen_when_matched(self) -> None:
-        if self._pub.get_subscription_count() < self._min_subscribers:
-            return
-        self._listen_timer.cancel()
-        self._sub = self.create_intake_subscription(
-            self._parcel_class,
-            topics.PARCELS,
-            self.on_parcel,
-            INPUT_QOS,
-            self.parcel_intake,
-        )
-        self.get_logger().info("listening on /parcels")
-        self.publish_heartbeat()  # the run starts its stream on this news: now, not in 1 s
+        if self._sub is None:
+            if self._pub.get_subscription_count() < self._min_subscribers:
+                return
+            self._sub = self.create_intake_subscription(
+                self._parcel_class,
+                topics.PARCELS,
+                self.on_parcel,
+                INPUT_QOS,
+                self.parcel_intake,
+            )
+            self.get_logger().info("listening on /parcels")
+        # the run starts its stream on this news: a heartbeat now, not in up to 1 s, once sim
+        # time runs (one stamped 0 after later ones is out of order in a bag)
+        if self.get_clock().now().nanoseconds > 0:
+            self._listen_timer.cancel()
+            self.publish_heartbeat()
 
     def on_parcel(self, msg) -> None:
         """Hand the parcel to :func:`handle_parcel`; publish what it returns."""
