@@ -240,7 +240,13 @@ class SimulatorNode(FenceSorterNode):
         sys.setswitchinterval(SWITCH_INTERVAL)
         if self.loop is None:
             self._configure_loop(LineProcess())
+        # convert.event_to_msg's N_stiff courses, imported while the loop's process warms up
+        # (not in the publisher thread: its first /clock messages would leave in a burst)
+        from fence_sorter.physics import contact  # noqa: F401  # lazy: scipy.integrate, ~0.3 s
+
         self.loop.wait_ready(ready_timeout)
+        # the loop runs from here: what it sends is published at once, not after the rest
+        self._reader.start()
         # the spinners once the loop is up: interpreters whose start-up is not idle
         if self.keep_cpus_awake and self.rtf > 0.0:
             cpus = set(os.sched_getaffinity(0))  # and the loop's, if pinned outside them
@@ -249,11 +255,7 @@ class SimulatorNode(FenceSorterNode):
             self.get_logger().info(
                 f"keep_cpus_awake: {len(self._spinners)} SCHED_IDLE spinner processes"
             )
-        self._set_priority()
-        self._reader.start()
-        threading.Thread(
-            target=_import_event_modules, name="simulator-imports", daemon=True
-        ).start()
+        self._set_priority()  # the publisher thread's too
         if self._held():
             self.get_logger().info(
                 f"unpaced: sim time keeps within scan_lead {self.scan_lead:g} s of the "
@@ -576,13 +578,6 @@ def _start_rerun(p: dict, belt_width: float, belt_x: tuple[float, float], rtf: f
     chute = (0.75, belt_width + 0.3, 1.5, 0.6)
     scene = SceneGeometry(belt_width, belt_x, chute, float(p["rrd_scan_line_x"]))
     return RerunProcess(scene, path or None, url or None, lossless=rtf == 0.0)
-
-
-def _import_event_modules() -> None:
-    """convert.event_to_msg's N_stiff courses (:mod:`fence_sorter.physics.contact`),
-    imported in a thread of their own once the node is up: off its start, and not at the
-    first event in the publisher thread (which waits on the import lock if it comes first)."""
-    from fence_sorter.physics import contact  # noqa: F401  # lazy: scipy.integrate, ~0.3 s
 
 
 class OrderlyStop:
