@@ -388,10 +388,13 @@ def test_rerun_full_check_accepts_every_segment_of_the_run(recorded_run):
         assert_rerun_accepts(segment)
     contents = read_bag(bag)
     clocks = [m for m in contents.messages if m.topic == "/clock"]
-    # bag time is sim time (not the system clock): a /clock message is logged at about the
-    # time it carries (the recorder's clock is the /clock it has processed, a few ticks behind)
-    lags = [m.t_ns - (m.msg.clock.sec * 10**9 + m.msg.clock.nanosec) for m in clocks]
-    assert len(lags) > 100 and max(abs(x) for x in lags) < 5 * 10**8
+    # bag time is sim time (not the system clock, ~1.7e18 ns away): a /clock message is logged
+    # at about the time it carries. The recorder's clock is the newest /clock rclpy's time source
+    # has taken, so it is a few ticks off while the recorder keeps up (the median), and ahead by
+    # the recorder's backlog when it is starved for CPU (the bound on the largest lag)
+    lags = sorted(abs(m.t_ns - (m.msg.clock.sec * 10**9 + m.msg.clock.nanosec)) for m in clocks)
+    assert len(lags) > 100
+    assert lags[len(lags) // 2] < 5 * 10**7 and lags[-1] < 3 * 10**9
     stamped = [m for m in contents.messages if m.topic == "/diagnostics"]
     assert {s.name for m in stamped for s in m.msg.status} >= {
         "fence_sorter/recorder", "fence_sorter/simulator", "fence_sorter/controller",
