@@ -96,27 +96,35 @@ def test_loop_cpu_comes_from_the_override_the_config_or_the_run(tmp_path: Path) 
 @pytest.mark.slow
 @pytest.mark.skipif(len(__import__("os").sched_getaffinity(0)) < 2, reason="needs 2 CPUs")
 def test_process_group_keeps_its_nodes_on_the_cpus_it_is_given(tmp_path: Path) -> None:
+    """Nodes start on every CPU (their imports use both); :meth:`ProcessGroup.confine` moves
+    every thread of each onto the group's CPUs, and a node started after it inherits them."""
     import os
     import sys
 
     from fence_sorter.runner.processes import ProcessGroup, leftovers
 
-    cpus = {min(os.sched_getaffinity(0))}
+    every = os.sched_getaffinity(0)
+    cpus = {min(every)}
     group = ProcessGroup(dict(os.environ), tmp_path, cpus)
     # a node with a second thread, both blocked until the group stops it
     code = (
         "import threading; threading.Thread(target=threading.Event().wait, daemon=True).start(); "
         "threading.Event().wait()"
     )
-    node = group.start("sleeper", [sys.executable, "-c", code])
+
+    def threads_of(node) -> list[str] | None:
+        tids = os.listdir(f"/proc/{node.proc.pid}/task")
+        return tids if len(tids) > 1 else None
+
     try:
-
-        def threads() -> list[str] | None:
-            tids = os.listdir(f"/proc/{node.proc.pid}/task")
-            return tids if len(tids) > 1 else None
-
-        tids = wait_until(threads, 5.0, "the node's second thread")  # it inherits the mask
+        early = group.start("early", [sys.executable, "-c", code])
+        tids = wait_until(lambda: threads_of(early), 5.0, "the early node's second thread")
+        assert all(os.sched_getaffinity(int(t)) == every for t in tids)
+        group.confine()
         assert all(os.sched_getaffinity(int(t)) == cpus for t in tids)
+        late = group.start("late", [sys.executable, "-c", code])
+        tids = wait_until(lambda: threads_of(late), 5.0, "the late node's second thread")
+        assert all(os.sched_getaffinity(int(t)) == cpus for t in tids)  # inherited
     finally:
         group.stop()
     assert not leftovers(group.pgids)
