@@ -33,6 +33,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from ..scene import available_scenes
 from .machine import REPO, git_revision, load_average, machine_info
 from .report import fmt, table
 
@@ -265,9 +266,14 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.rounds < 1:
         ap.error(f"--rounds must be >= 1, got {args.rounds}")
-    if args.runs < 0 or args.load < 0:
-        ap.error(f"--runs and --load must be >= 0, got {args.runs} and {args.load}")
+    for name in ("runs", "load"):
+        if getattr(args, name) < 0:
+            ap.error(f"--{name} must be >= 0, got {getattr(args, name)}")
     scenes = args.scene or ["positioned_stiff", "impact_flexible"]
+    known = available_scenes()
+    for scene in scenes:
+        if scene not in known:
+            ap.error(f"--scene: unknown scene {scene!r}; one of {', '.join(known)}")
     data = {
         "command": "python -m fence_sorter.verification.startup "
         + " ".join(argv if argv is not None else sys.argv[1:]),
