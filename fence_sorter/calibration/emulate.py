@@ -91,15 +91,32 @@ def emulate(
 ) -> tuple[list[ParcelEvent], Measurements]:
     """The events and their measured samples (see the module docstring)."""
     events = draw_events(base, stream, count, seed)
+    truth = truth_events(base, events, workers)
+    return events, measure_events(base, sensors, events, truth, seed + 1)
+
+
+def truth_events(base: Scenario, events: list[ParcelEvent], workers: int | None = None):
+    """Each event's true track on the twin, placed at its stroke start."""
     tracks = truth_tracks(base, events, workers)
-    truth = [
+    return [
         TruthEvent(e.parcel_id, e.t_start, e.alpha_k, e.t1, tr)
         for e, tr in zip(events, tracks, strict=True)
     ]
+
+
+def measure_events(
+    base: Scenario,
+    sensors: SensorConfig,
+    events: list[ParcelEvent],
+    truth: list[TruthEvent],
+    noise_seed: int,
+) -> Measurements:
+    """The sensors' samples of the true tracks, the noise seeded by ``noise_seed`` (no strain
+    gauge on a stiff fence)."""
     t_end = (events[-1].t_start + events[-1].t_end + 1.0) if events else 1.0
     if base.fence is None:
         sensors = replace(sensors, strain=None)
-    return events, measure(truth, sensors, seed + 1, PRE_TIME, t_end)
+    return measure(truth, sensors, noise_seed, PRE_TIME, t_end)
 
 
 def emulate_bag(

@@ -1,7 +1,8 @@
 """``fence-sorter calibrate-bench``: the calibration's figures into docs/calibration.md.
 
-Interval coverage over seeds (camera60, impact_flexible), the b_p flag from 25 Hz poses and
-the wall time of a 50-parcel, 5-parameter calibration (fence_sorter/calibration/bench.py).
+Interval coverage over seeds (camera60, impact_flexible), the coverage over fresh noise for
+given seeds' parcels, the b_p flag from 25 Hz poses and the wall time of a 50-parcel,
+5-parameter calibration (fence_sorter/calibration/bench.py).
 Heavy: run it niced. Exit codes: 0 done, 2 bad input.
 """
 
@@ -21,6 +22,15 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.description = "Measure the calibration on emulated bags with known truth."
     parser.add_argument("--seeds", type=int, default=20, help="coverage seeds (default 20)")
     parser.add_argument("--parcels", type=int, default=8, help="parcels per seed (default 8)")
+    parser.add_argument(
+        "--fresh-noise",
+        metavar="SEEDS",
+        default="",
+        help="comma-separated seeds whose parcels are calibrated with --draws fresh noise draws",
+    )
+    parser.add_argument(
+        "--draws", type=int, default=100, help="noise draws per --fresh-noise seed (default 100)"
+    )
     parser.add_argument(
         "--timing-parcels",
         type=int,
@@ -48,10 +58,18 @@ def run(args: argparse.Namespace) -> int:
         ("--seeds", args.seeds, 0),
         ("--parcels", args.parcels, 3),
         ("--timing-parcels", args.timing_parcels, 0),
+        ("--draws", args.draws, 1),
         ("--workers", 1 if args.workers is None else args.workers, 1),
     ):
         if value < low:
             return error(f"{option} must be in [{low}, inf), got {value}")
+    try:
+        args.fresh_noise_seeds = [int(v) for v in args.fresh_noise.split(",") if v.strip()]
+        if any(v < 0 for v in args.fresh_noise_seeds):
+            raise ValueError
+    except ValueError:
+        return error(f"--fresh-noise must be comma-separated integers in [0, inf), "
+                     f"got {args.fresh_noise!r}")  # fmt: skip
     # lazy: loads the kernel (Numba), SciPy, rosbags
     from fence_sorter.calibration.fit import CalibrationInputError, check_scheduler
 
@@ -89,6 +107,11 @@ def measure(bench, args: argparse.Namespace) -> dict:
         report["coverage"] = bench.coverage(
             args.seeds, args.parcels, log=lambda s: print(s, file=sys.stderr), **run_kw
         )
+    if args.fresh_noise_seeds:
+        report["fresh_noise"] = bench.fresh_noise(
+            args.fresh_noise_seeds, args.draws, args.parcels,
+            log=lambda s: print(s, file=sys.stderr), **run_kw
+        )  # fmt: skip
     report["flag"] = bench.flag_case(**run_kw)
     if args.timing_parcels:
         report["timing"] = bench.timing(args.timing_parcels, **run_kw)
