@@ -29,7 +29,7 @@ from fence_sorter.scene import load_scene
 
 from .bag import read_measured_bag, write_measured_bag
 from .emulate import draw_events, emulate_bag, measure_events, truth_events, truth_record
-from .fit import CalibrationResult, calibrate
+from .fit import CalibrationResult, FitError, calibrate
 from .replay import with_values
 from .sensors import load_sensors
 
@@ -58,9 +58,13 @@ def _run(scene: str, truth: dict, sensors: str, stream: str, count: int, seed: i
                          scheduler=scheduler)  # fmt: skip
 
 
-def _z_row(res: CalibrationResult) -> dict:
+def _z_row(res: CalibrationResult | FitError) -> dict:
     """Each parameter's estimate, interval, truth inside or not, and z = log(estimate /
-    truth) / sd (sd that of log(value) the interval is built from)."""
+    truth) / sd (sd that of log(value) the interval is built from). A failed fit (exit 3)
+    returns no interval: a miss for every parameter."""
+    if isinstance(res, FitError):
+        return {n: {"value": None, "ci95": None, "inside": False, "z": None,
+                    "verdict": f"fit failed: {res}"} for n in TRUTH}  # fmt: skip
     row = {}
     for e in res.estimates:
         inside = e.ci95 is not None and e.ci95[0] <= TRUTH[e.name] <= e.ci95[1]
@@ -76,14 +80,18 @@ def coverage(seeds: int, parcels: int, workers=None, scheduler="processes", log=
     names = list(TRUTH)
     rows = []
     for seed in range(100, 100 + seeds):
-        res = _run(SCENE, TRUTH, "camera60", "default", parcels, seed, names, workers,
-                   scheduler)  # fmt: skip
-        row = {"seed": seed, "wall_time_s": res.wall_time, "cpu_time_s": res.cpu_time,
-               **_z_row(res)}  # fmt: skip
+        t0 = time.perf_counter()
+        try:
+            res = _run(SCENE, TRUTH, "camera60", "default", parcels, seed, names, workers,
+                       scheduler)  # fmt: skip
+        except FitError as exc:
+            res = exc
+        wall = time.perf_counter() - t0
+        row = {"seed": seed, "wall_time_s": wall, **_z_row(res)}
         rows.append(row)
         log(f"seed {seed}: " + ", ".join(
             f"{n} {'in' if row[n]['inside'] else 'OUT'}" for n in names
-        ) + f" ({res.wall_time:.0f} s, {res.cpu_time:.0f} CPU s)")  # fmt: skip
+        ) + f" ({wall:.0f} s{', fit failed' if isinstance(res, FitError) else ''})")  # fmt: skip
     return {"seeds": seeds, "parcels": parcels, "rows": rows, **coverage_figures(rows)}
 
 
@@ -158,8 +166,11 @@ def fresh_noise(seeds: list[int], draws: int, parcels: int, workers=None,
             m = measure_events(truth_scene, sensors, events, true_tracks, noise_seed)
             with tempfile.TemporaryDirectory() as d:
                 bag = write_measured_bag(Path(d) / "bag", events, m, record)
-                res = calibrate(base, read_measured_bag(bag), names, workers=workers,
-                                scheduler=scheduler)  # fmt: skip
+                try:
+                    res = calibrate(base, read_measured_bag(bag), names, workers=workers,
+                                    scheduler=scheduler)  # fmt: skip
+                except FitError as exc:
+                    res = exc
             for n, e in _z_row(res).items():
                 zs[n].append(e["z"])
                 inside[n] += e["inside"]

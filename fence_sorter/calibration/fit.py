@@ -666,6 +666,15 @@ def _solve(problem: _Problem, z0, max_nfev: int):
 WRONG_BASIN = 2.0
 #: where :func:`_escape` looks for a better basin: moves of one parameter [log]
 BASIN_STEPS = (-0.2, -0.1, -0.05, -0.02, 0.02, 0.05, 0.1, 0.2)
+#: moves at least this large [log] leave the basin they start from; smaller ones fall back
+BASIN_JUMP = 0.05
+
+
+def _position_misfit(problem: _Problem, x: np.ndarray, n_position: int) -> float:
+    """The mean square of the position residuals in units of the pre-stroke noise (1 in the
+    truth's basin)."""
+    r = problem.fun(x)[:n_position]
+    return float(np.mean(r**2)) if r.size else 0.0
 
 
 def _escape(problem: _Problem, sol, n_position: int, max_nfev: int, rounds: int = 2):
@@ -674,30 +683,46 @@ def _escape(problem: _Problem, sol, n_position: int, max_nfev: int, rounds: int 
     not, switches with a friction coefficient, and Gauss-Newton from the scene's values can
     end between two such switches (position residuals several times the pre-stroke noise).
     Then each parameter is moved alone by BASIN_STEPS (one parallel batch) and the fit is
-    restarted from the lowest point if it is lower; at most ``rounds`` times."""
+    restarted from the lowest point if it is lower; at most ``rounds`` times. Where the
+    other parameters have compensated, no single move is lower although the truth's basin
+    lies one move away: then the fit restarts from the moves of at least BASIN_JUMP in
+    order of their cost until one ends in a basin whose residuals scatter as the noise."""
     nfev = sol.nfev
-    for _ in range(rounds):
+    for round_ in range(rounds + 1):
         r = problem.fun(sol.x)
         if not r[:n_position].size or np.mean(r[:n_position] ** 2) <= WRONG_BASIN:
             break
         lo, hi = problem.bounds()
-        points = []
+        points, steps = [], []
         for j in range(problem.k):
             for step in BASIN_STEPS:
                 z = sol.x.copy()
                 z[j] = min(max(z[j] + step, lo[j] + 1e-9), hi[j] - 1e-9)
                 points.append(z)
+                steps.append(step)
         off = tuple(sol.x[problem.k :])
         costs = [float(np.sum(weighted(problem.eds, p, off, problem.sigma) ** 2))
                  for p in problem.evaluate([problem.values(z) for z in points])]  # fmt: skip
-        best = int(np.argmin(costs)) if costs else 0
-        if not costs or costs[best] >= float(r @ r):
+        if not costs:
             break
-        new = _solve(problem, points[best], max_nfev)
-        nfev += new.nfev
-        if new.cost >= sol.cost:
-            break
-        sol = new
+        best = int(np.argmin(costs))
+        if round_ < rounds and costs[best] < float(r @ r):
+            new = _solve(problem, points[best], max_nfev)
+            nfev += new.nfev
+            if new.cost >= sol.cost:
+                break
+            sol = new
+            continue
+        # no lower move: restart from the far moves, the cheapest first
+        for i in sorted(range(len(points)), key=costs.__getitem__):
+            if abs(steps[i]) < BASIN_JUMP:
+                continue
+            new = _solve(problem, points[i], max_nfev)
+            nfev += new.nfev
+            if new.cost < sol.cost and _position_misfit(problem, new.x, n_position) <= WRONG_BASIN:
+                sol = new
+                break
+        break
     sol.nfev = nfev
     return sol
 
@@ -809,6 +834,14 @@ def calibrate(
             prob = _Problem(evaluate, eds, active, fixed, sigma)
             sol = _escape(prob, _solve(prob, z, max_nfev), sizes[0], max_nfev)
             nfev += sol.nfev
+            misfit = _position_misfit(prob, sol.x, sizes[0])
+            if misfit > WRONG_BASIN:
+                raise FitError(
+                    f"the fit of {', '.join(active)} ends with the camera poses scattering "
+                    f"{math.sqrt(misfit):.2g} times their noise before the strokes (limit "
+                    f"{math.sqrt(WRONG_BASIN):.2g}): a wrong basin of the cost, or a twin "
+                    "that does not fit this machine"
+                )
             r = prob.fun(sol.x)
             cov, sv, factors = _covariance(prob.jac(sol.x), r, sizes, F_SCALE)
             # the interval from the slope over +- 1 sd of each parameter

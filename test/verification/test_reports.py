@@ -198,3 +198,19 @@ def test_startup_readme_is_its_json_rendered() -> None:
     rendered = startup.render(data)
     assert len(tables(rendered)) >= 1
     assert (DOCS / "startup" / "README.md").read_text(encoding="utf-8") == rendered
+
+
+@pytest.mark.skipif(
+    not (DOCS / "calibration.json").is_file(), reason="docs/calibration.json not written"
+)
+def test_calibration_md_figures_are_its_json_rendered() -> None:
+    """docs/calibration.md's generated section (coverage, per-block counts, per-seed z, fresh
+    noise) has the tables ``calibrate-bench --from-json docs/calibration.json`` renders."""
+    from fence_sorter.calibration import bench as calibration_bench
+
+    data = json.loads((DOCS / "calibration.json").read_text(encoding="utf-8"))
+    doc = (DOCS / "calibration.md").read_text(encoding="utf-8")
+    section = doc[doc.index(calibration_bench.BEGIN) : doc.index(calibration_bench.END)]
+    rendered = tables(calibration_bench.render(data, data["command"], data["commit"]))
+    assert len(rendered) >= 2
+    assert tables(section) == rendered
