@@ -451,6 +451,9 @@ class CalibrationResult:
     wall_time: float
     cpu_time: float  # of this process and its worker processes [s]
     worker_cpu_time: float  # of the worker processes alone [s]
+    # RMS of the camera positions' residuals in units of their pre-stroke noise (1: the twin
+    # follows the parcels to the camera's noise)
+    pose_scatter: float = math.nan
     residuals: tuple[np.ndarray, np.ndarray, np.ndarray] = ()
     final_values: dict[str, float] = field(default_factory=dict)
     data: list[EventData] = field(default_factory=list)  # the parcels fitted
@@ -484,6 +487,7 @@ class CalibrationResult:
             "wall_time_s": self.wall_time,
             "cpu_time_s": self.cpu_time,
             "worker_cpu_time_s": self.worker_cpu_time,
+            "pose_scatter": self.pose_scatter,
         }
 
 
@@ -662,7 +666,8 @@ def _solve(problem: _Problem, z0, max_nfev: int):
 
 
 #: a fit whose position residuals scatter by more than this factor (in variance) of the
-#: noise level seen before the strokes sits in a wrong basin of the cost
+#: noise level seen before the strokes sits in a wrong basin of the cost (the default of
+#: ``calibrate``'s ``max_pose_scatter``, its square root)
 WRONG_BASIN = 2.0
 #: where :func:`_escape` looks for a better basin: moves of one parameter [log]
 BASIN_STEPS = (-0.2, -0.1, -0.05, -0.02, 0.02, 0.05, 0.1, 0.2)
@@ -677,12 +682,16 @@ def _position_misfit(problem: _Problem, x: np.ndarray, n_position: int) -> float
     return float(np.mean(r**2)) if r.size else 0.0
 
 
-def _escape(problem: _Problem, sol, n_position: int, max_nfev: int, rounds: int = 2):
+def _escape(
+    problem: _Problem, sol, n_position: int, max_nfev: int, limit: float = WRONG_BASIN,
+    rounds: int = 2,
+):  # fmt: skip
     """``sol``, or a better local optimum if it sits in a wrong basin. The cost is not convex
     far from the truth: a parcel that sticks to the fence or slides along it, is sorted or
     not, switches with a friction coefficient, and Gauss-Newton from the scene's values can
-    end between two such switches (position residuals several times the pre-stroke noise).
-    Then each parameter is moved alone by BASIN_STEPS (one parallel batch) and the fit is
+    end between two such switches (position residuals several times the pre-stroke noise;
+    ``limit`` is the largest mean square accepted, in units of that noise's variance). Then
+    each parameter is moved alone by BASIN_STEPS (one parallel batch) and the fit is
     restarted from the lowest point if it is lower; at most ``rounds`` times. Where the
     other parameters have compensated, no single move is lower although the truth's basin
     lies one move away: then the fit restarts from the moves of at least BASIN_JUMP in
@@ -690,7 +699,7 @@ def _escape(problem: _Problem, sol, n_position: int, max_nfev: int, rounds: int 
     nfev = sol.nfev
     for round_ in range(rounds + 1):
         r = problem.fun(sol.x)
-        if not r[:n_position].size or np.mean(r[:n_position] ** 2) <= WRONG_BASIN:
+        if not r[:n_position].size or np.mean(r[:n_position] ** 2) <= limit:
             break
         lo, hi = problem.bounds()
         points, steps = [], []
@@ -719,7 +728,7 @@ def _escape(problem: _Problem, sol, n_position: int, max_nfev: int, rounds: int 
                 continue
             new = _solve(problem, points[i], max_nfev)
             nfev += new.nfev
-            if new.cost < sol.cost and _position_misfit(problem, new.x, n_position) <= WRONG_BASIN:
+            if new.cost < sol.cost and _position_misfit(problem, new.x, n_position) <= limit:
                 sol = new
                 break
         break
@@ -807,8 +816,13 @@ def calibrate(
     seed: int = 0,
     progress=None,
     scheduler: str = "processes",
+    max_pose_scatter: float = math.sqrt(WRONG_BASIN),
 ) -> CalibrationResult:
-    """Fit ``names`` of ``base`` to the bag; see the module docstring."""
+    """Fit ``names`` of ``base`` to the bag; see the module docstring. ``max_pose_scatter``:
+    the largest RMS of the camera positions' residuals after the fit, in units of their noise
+    before the strokes, that is taken as the truth's basin; a fit above it restarts and, if no
+    restart gets below, fails (a twin with model error on a real machine may need more than
+    the default sqrt(2))."""
     wall0, cpu0 = time.perf_counter(), cpu_seconds()
     offset0, cam_rms = align_camera(base, mb)
     eds = [ed for ed in event_data(mb, base.solver.settle_time) if (ed.cam_tau > 0.0).sum() >= 3]
@@ -832,15 +846,16 @@ def calibrate(
     try:
         while True:
             prob = _Problem(evaluate, eds, active, fixed, sigma)
-            sol = _escape(prob, _solve(prob, z, max_nfev), sizes[0], max_nfev)
+            limit = max_pose_scatter**2
+            sol = _escape(prob, _solve(prob, z, max_nfev), sizes[0], max_nfev, limit)
             nfev += sol.nfev
             misfit = _position_misfit(prob, sol.x, sizes[0])
-            if misfit > WRONG_BASIN:
+            if misfit > limit:
                 raise FitError(
                     f"the fit of {', '.join(active)} ends with the camera poses scattering "
-                    f"{math.sqrt(misfit):.2g} times their noise before the strokes (limit "
-                    f"{math.sqrt(WRONG_BASIN):.2g}): a wrong basin of the cost, or a twin "
-                    "that does not fit this machine"
+                    f"{math.sqrt(misfit):.2g} times their noise before the strokes "
+                    f"(--max-pose-scatter {max_pose_scatter:.3g}): a wrong basin of the "
+                    "cost, or a twin that does not fit this machine"
                 )
             r = prob.fun(sol.x)
             cov, sv, factors = _covariance(prob.jac(sol.x), r, sizes, F_SCALE)
@@ -931,6 +946,7 @@ def calibrate(
         wall_time=time.perf_counter() - wall0,
         cpu_time=sum(cpu_seconds()) - sum(cpu0),
         worker_cpu_time=cpu_seconds()[1] - cpu0[1],
+        pose_scatter=math.sqrt(misfit),
         residuals=raw,
         final_values=final,
         data=eds,

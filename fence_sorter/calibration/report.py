@@ -34,7 +34,8 @@ def format_result(res: CalibrationResult) -> str:
         f"(pre-stroke RMS {res.camera_rms * 1e3:.2f} mm); encoder RMS about the strokes "
         f"{res.encoder_rms:.2e} rad",
         f"noise levels: position {res.sigma[0] * 1e3:.3g} mm, yaw "
-        f"{math.degrees(res.sigma[1]):.3g} deg, root moment {res.sigma[2]:.3g} N m",
+        f"{math.degrees(res.sigma[1]):.3g} deg, root moment {res.sigma[2]:.3g} N m; camera "
+        f"positions scatter {res.pose_scatter:.3g} times their pre-stroke noise",
         "",
         f"{'parameter':<22}{'prior':>12}{'estimate':>12}{'95 % interval':>28}  verdict",
     ]

@@ -65,6 +65,15 @@ def register(parser: argparse.ArgumentParser) -> None:
         metavar="F",
         help="flag a parameter whose 95 %% interval spans more than a factor F (default e)",
     )
+    parser.add_argument(
+        "--max-pose-scatter",
+        type=float,
+        default=math.sqrt(2.0),
+        metavar="F",
+        help="the largest RMS of the fitted camera positions' residuals, in units of their "
+        "noise before the strokes, taken as a fit (default sqrt(2)); above it the fit "
+        "restarts, then fails with exit 3",
+    )
     parser.add_argument("--seed", type=int, default=0, help="seed of the bootstrap's noise")
     parser.add_argument(
         "--max-evaluations",
@@ -125,6 +134,8 @@ def run(args: argparse.Namespace) -> int:
         return error(f"--max-evaluations must be in [1, inf), got {args.max_evaluations}")
     if not args.max_ci_factor > 1.0:
         return error(f"--max-ci-factor must be in (1, inf), got {args.max_ci_factor}")
+    if not args.max_pose_scatter >= 1.0:
+        return error(f"--max-pose-scatter must be in [1, inf), got {args.max_pose_scatter}")
     try:
         check_scheduler(args.scheduler)
     except CalibrationInputError as exc:
@@ -161,6 +172,7 @@ def run(args: argparse.Namespace) -> int:
             seed=args.seed,
             progress=bar.update,
             max_nfev=args.max_evaluations,
+            max_pose_scatter=args.max_pose_scatter,
         )
     except CalibrationInputError as exc:
         return error(str(exc))

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -214,6 +215,55 @@ def test_fit_that_does_not_converge_exits_3(tmp_path, capsys):
     )
     assert code == 3
     assert "did not converge in" in _err_line(capsys)
+
+
+def test_a_twin_that_does_not_fit_the_machine_fails_unless_its_scatter_is_accepted(
+    tmp_path, capsys
+):
+    """The machine's fence friction is 0.6 where the twin has 0.35 and the fit may not move
+    it: no basin brings the camera poses to their noise, so the fit fails (exit 3) naming
+    their scatter; with --max-pose-scatter above it the fit is reported with that scatter
+    (and a belt friction the model error has biased beyond its interval), and fitting the
+    fence friction too brings the scatter back to the camera's noise."""
+    _, truth = _truth_scene("positioned_stiff", mu_fence=0.6)
+    bag = emulate_bag(
+        tmp_path / "m",
+        truth,
+        load_sensors("camera60"),
+        scene_name="positioned_stiff",
+        stream="default",
+        count=3,
+        seed=2,
+    )
+    args = ["calibrate", str(bag), "--fit", "mu_belt,k_p", "--no-progress", "--json"]
+    assert main(args) == 3
+    line = _err_line(capsys)
+    m = re.search(r"scattering ([\d.]+) times their noise .*--max-pose-scatter 1\.41", line)
+    assert m, line
+    scatter = float(m.group(1))
+    assert scatter > 2.0
+    assert main([*args, "--max-pose-scatter", "1000"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["pose_scatter"] == pytest.approx(scatter, rel=0.05)
+    lo, hi = {e["name"]: e for e in out["estimates"]}["mu_belt"]["ci95"]
+    assert not lo < 0.55 < hi  # the model error biases the belt friction beyond its interval
+    assert main([*args[:3], "mu_belt,mu_fence,k_p", *args[4:]]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert 0.7 < out["pose_scatter"] < 1.3
+    est = {e["name"]: e for e in out["estimates"]}
+    lo, hi = est["mu_fence"]["ci95"]
+    assert lo < 0.6 < hi
+
+
+@pytest.mark.parametrize(
+    ("option", "value"),
+    [("--max-pose-scatter", "0.9"), ("--max-pose-scatter", "nan"), ("--max-ci-factor", "1"),
+     ("--max-evaluations", "0")],
+)  # fmt: skip
+def test_bad_fit_options_exit_2_naming_the_option(capsys, option, value):
+    code = main(["calibrate", "no_such_bag", "--fit", "k_p", option, value])
+    assert code == 2
+    assert option in _err_line(capsys)
 
 
 def test_validate_with_the_truth_scene_predicts_the_measured_figures(tmp_path, capsys):
