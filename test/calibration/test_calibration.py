@@ -199,17 +199,17 @@ def test_parameter_the_scene_lacks_exits_2(small_bag, capsys, fit, words):
     assert words in _err_line(capsys)
 
 
+def _three_stiff_parcels(path, truth):
+    """A camera60 bag of three parcels on ``truth``, a positioned_stiff scene."""
+    return emulate_bag(
+        path, truth, load_sensors("camera60"), scene_name="positioned_stiff", stream="default",
+        count=3, seed=2,
+    )  # fmt: skip
+
+
 def test_fit_that_does_not_converge_exits_3(tmp_path, capsys):
     _, truth = _truth_scene("positioned_stiff")
-    bag = emulate_bag(
-        tmp_path / "b",
-        truth,
-        load_sensors("camera60"),
-        scene_name="positioned_stiff",
-        stream="default",
-        count=3,
-        seed=2,
-    )
+    bag = _three_stiff_parcels(tmp_path / "b", truth)
     code = main(
         ["calibrate", str(bag), "--fit", "mu_belt,k_p", "--max-evaluations", "1", "--no-progress"]
     )
@@ -226,15 +226,7 @@ def test_a_twin_that_does_not_fit_the_machine_fails_unless_its_scatter_is_accept
     (and a belt friction the model error has biased beyond its interval), and fitting the
     fence friction too brings the scatter back to the camera's noise."""
     _, truth = _truth_scene("positioned_stiff", mu_fence=0.6)
-    bag = emulate_bag(
-        tmp_path / "m",
-        truth,
-        load_sensors("camera60"),
-        scene_name="positioned_stiff",
-        stream="default",
-        count=3,
-        seed=2,
-    )
+    bag = _three_stiff_parcels(tmp_path / "m", truth)
     args = ["calibrate", str(bag), "--fit", "mu_belt,k_p", "--no-progress", "--json"]
     assert main(args) == 3
     line = _err_line(capsys)
