@@ -736,6 +736,43 @@ def _escape(
     return sol
 
 
+#: how far a further start lies from the fit along a weakly determined direction [log]
+START_STEP = 0.3
+
+
+def _restart_along_weak_directions(
+    problem: _Problem, sol, n_position: int, max_nfev: int, limit: float, starts: int
+):
+    """``sol``, or the lower optimum a further start reaches. A wrong basin hides along the
+    directions the data determine least (on the stiff fence the contact stiffness and damping
+    together): the fit can stay near the prior there with its poses still at their noise. For
+    each of the ``starts`` - 1 weakest eigenvectors of J^T J (physics columns) the points
+    START_STEP either side are evaluated (one parallel batch) and the fit restarts from the
+    lower; it is kept if it ends lower with its poses within ``limit``."""
+    if starts <= 1 or problem.k == 0:
+        return sol
+    jac = problem.jac(sol.x)[:, : problem.k]
+    _, vectors = np.linalg.eigh(jac.T @ jac)
+    points = []
+    for i in range(min(starts - 1, problem.k)):
+        for sign in (-1.0, 1.0):
+            z = sol.x.copy()
+            z[: problem.k] += sign * START_STEP * vectors[:, i]
+            points.append(z)
+    off = tuple(sol.x[problem.k :])
+    costs = [float(np.sum(weighted(problem.eds, p, off, problem.sigma) ** 2))
+             for p in problem.evaluate([problem.values(z) for z in points])]  # fmt: skip
+    nfev = sol.nfev
+    for i in range(0, len(points), 2):
+        start = points[i] if costs[i] <= costs[i + 1] else points[i + 1]
+        new = _solve(problem, start, max_nfev)
+        nfev += new.nfev
+        if new.cost < sol.cost and _position_misfit(problem, new.x, n_position) <= limit:
+            sol = new
+    sol.nfev = nfev
+    return sol
+
+
 def cpu_seconds() -> tuple[float, float]:
     """CPU time [s] of this process and of its ended child processes (a closed Evaluator's
     workers; a Dask cluster's workers are not counted): the load-independent cost of a
@@ -817,12 +854,14 @@ def calibrate(
     progress=None,
     scheduler: str = "processes",
     max_pose_scatter: float = math.sqrt(WRONG_BASIN),
+    starts: int = 1,
 ) -> CalibrationResult:
     """Fit ``names`` of ``base`` to the bag; see the module docstring. ``max_pose_scatter``:
     the largest RMS of the camera positions' residuals after the fit, in units of their noise
     before the strokes, that is taken as the truth's basin; a fit above it restarts and, if no
     restart gets below, fails (a twin with model error on a real machine may need more than
-    the default sqrt(2))."""
+    the default sqrt(2)). ``starts`` > 1: further starts along the least determined
+    directions (:func:`_restart_along_weak_directions`)."""
     wall0, cpu0 = time.perf_counter(), cpu_seconds()
     offset0, cam_rms = align_camera(base, mb)
     eds = [ed for ed in event_data(mb, base.solver.settle_time) if (ed.cam_tau > 0.0).sum() >= 3]
@@ -848,6 +887,7 @@ def calibrate(
             prob = _Problem(evaluate, eds, active, fixed, sigma)
             limit = max_pose_scatter**2
             sol = _escape(prob, _solve(prob, z, max_nfev), sizes[0], max_nfev, limit)
+            sol = _restart_along_weak_directions(prob, sol, sizes[0], max_nfev, limit, starts)
             nfev += sol.nfev
             misfit = _position_misfit(prob, sol.x, sizes[0])
             if misfit > limit:

@@ -74,6 +74,15 @@ def register(parser: argparse.ArgumentParser) -> None:
         "noise before the strokes, taken as a fit (default sqrt(2)); above it the fit "
         "restarts, then fails with exit 3",
     )
+    parser.add_argument(
+        "--starts",
+        type=int,
+        default=1,
+        metavar="N",
+        help="fit again from N-1 further starts along the least determined directions and "
+        "keep the lowest (default 1; use 2 on a stiff fence, where the contact stiffness and "
+        "damping can stay near the prior)",
+    )
     parser.add_argument("--seed", type=int, default=0, help="seed of the bootstrap's noise")
     parser.add_argument(
         "--max-evaluations",
@@ -134,6 +143,8 @@ def run(args: argparse.Namespace) -> int:
         return error(f"--max-evaluations must be in [1, inf), got {args.max_evaluations}")
     if not args.max_ci_factor > 1.0:
         return error(f"--max-ci-factor must be in (1, inf), got {args.max_ci_factor}")
+    if args.starts < 1:
+        return error(f"--starts must be in [1, inf), got {args.starts}")
     if not args.max_pose_scatter >= 1.0:
         return error(f"--max-pose-scatter must be in [1, inf), got {args.max_pose_scatter}")
     try:
@@ -173,6 +184,7 @@ def run(args: argparse.Namespace) -> int:
             progress=bar.update,
             max_nfev=args.max_evaluations,
             max_pose_scatter=args.max_pose_scatter,
+            starts=args.starts,
         )
     except CalibrationInputError as exc:
         return error(str(exc))

@@ -250,7 +250,7 @@ def test_a_twin_that_does_not_fit_the_machine_fails_unless_its_scatter_is_accept
 @pytest.mark.parametrize(
     ("option", "value"),
     [("--max-pose-scatter", "0.9"), ("--max-pose-scatter", "nan"), ("--max-ci-factor", "1"),
-     ("--max-evaluations", "0")],
+     ("--max-evaluations", "0"), ("--starts", "0")],
 )  # fmt: skip
 def test_bad_fit_options_exit_2_naming_the_option(capsys, option, value):
     code = main(["calibrate", "no_such_bag", "--fit", "k_p", option, value])
