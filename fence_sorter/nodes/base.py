@@ -22,9 +22,10 @@ from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedE
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from fence_sorter import __version__
+from fence_sorter import __version__, provenance
 from fence_sorter.nodes.parameters import COMMON_PARAMETERS, ParamSpec
 from fence_sorter.nodes.qos import topic_qos
+from fence_sorter.nodes.sources import PinnedClock, authentic
 from fence_sorter.recording.topics import DIAGNOSTICS
 
 
@@ -67,6 +68,15 @@ class FenceSorterNode(Node):
         if reason:
             raise ParameterException(reason, "initial values")
         self.add_on_set_parameters_callback(self._on_set_parameters)
+        # the run's key (fence_sorter.provenance): tags on what this node sends, checks on what
+        # it takes in, and its sim time from /run_clock
+        try:
+            self.run_key = provenance.run_key()
+        except ValueError as exc:
+            raise ParameterException(str(exc), provenance.RUN_KEY_ENV) from None
+        self.pinned_clock: PinnedClock | None = None
+        if self.run_key is not None and self.get_parameter("use_sim_time").value:
+            self.pinned_clock = PinnedClock(self, self.run_key)
 
         self._diagnostics_pub = self.create_publisher(
             DiagnosticArray, DIAGNOSTICS, topic_qos(DIAGNOSTICS)
@@ -86,6 +96,10 @@ class FenceSorterNode(Node):
         return None
 
     def _on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
+        if self.pinned_clock is not None and any(p.name == "use_sim_time" for p in parameters):
+            return SetParametersResult(
+                successful=False, reason="use_sim_time is fixed in a run with a key (/run_clock)"
+            )
         reason = self.validate_parameters(parameters)
         if reason:
             return SetParametersResult(successful=False, reason=reason)
@@ -93,11 +107,14 @@ class FenceSorterNode(Node):
 
     def create_intake_subscription(self, msg_type, topic: str, callback, qos, intake):
         """A subscription whose callback sees only what ``intake`` (a
-        :class:`fence_sorter.nodes.intake.TopicIntake`) admits, with the middleware's
-        message-lost event counted in it where the RMW provides that event."""
+        :class:`fence_sorter.nodes.intake.TopicIntake`) admits (the run's id, the sender's tag
+        under the run's key, the rate), with the middleware's message-lost event counted in it
+        where the RMW provides that event."""
+
+        key = self.run_key
 
         def admitted(msg) -> None:
-            if intake.admit(msg.run_id):
+            if intake.admit(msg.run_id, lambda: authentic(msg, key)):
                 callback(msg)
 
         try:
@@ -123,6 +140,10 @@ class FenceSorterNode(Node):
                 KeyValue(key="version", value=__version__),
                 KeyValue(key="node", value=self.get_fully_qualified_name()),
                 KeyValue(key="take_errors", value=str(self.take_errors)),
+                *(
+                    KeyValue(key=k, value=v)
+                    for k, v in (self.pinned_clock.values() if self.pinned_clock else {}).items()
+                ),
             ],
         )
 

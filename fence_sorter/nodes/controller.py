@@ -25,9 +25,10 @@ from fence_sorter.capacity.planner import LoadRequest, Plan, Planner, PlannerCon
 from fence_sorter.inputs import InputError, ParcelSpec, validate_parcel
 from fence_sorter.nodes.base import FenceSorterNode, run_node
 from fence_sorter.nodes.convert import parcel_from_msg
-from fence_sorter.nodes.intake import TopicIntake
+from fence_sorter.nodes.intake import ParcelRegistry, TopicIntake
 from fence_sorter.nodes.parameters import CONTROLLER_PARAMETERS
 from fence_sorter.nodes.qos import INPUT_QOS, topic_qos
+from fence_sorter.nodes.sources import sign
 from fence_sorter.physics.params import ParameterError, ParcelParams
 from fence_sorter.recording import topics
 from fence_sorter.scene import load_scene
@@ -165,6 +166,7 @@ class ControllerNode(FenceSorterNode):
         self.scan_line_tolerance = float(p["scan_line_tolerance"])
         self.run_id = int(p["run_id"])
         self.parcel_intake = TopicIntake("parcels", self.run_id)
+        self.registry = ParcelRegistry()
         self.stats = ControllerStats()
         self.rtf = RateEstimate()
         # sampled on the steady clock, so the estimate follows the sim clock between parcels
@@ -255,6 +257,7 @@ class ControllerNode(FenceSorterNode):
         values["parcel_publishers"] = str(self._sub.get_publisher_count() if self._sub else 0)
         values["real_time_factor_seen"] = f"{self.rtf.value:.3f}"
         values.update(self.parcel_intake.values())
+        values.update(self.registry.values())
         status.values.extend(KeyValue(key=k, value=v) for k, v in values.items())
         return status
 
@@ -267,6 +270,14 @@ def handle_parcel(node: ControllerNode, msg):
     now = node.get_clock().now()
     t_now = now.nanoseconds * 1e-9
     spec = parcel_from_msg(msg)
+    seen = node.registry.register(spec)
+    if seen != "new":  # refused, counted by the registry (duplicate or conflict)
+        if seen == "conflict":
+            log.error(
+                f"parcel {spec.parcel_id}: a second authentic message with another spec; the "
+                "first one stays, the parcel is disputed"
+            )
+        return None
     try:
         validate_parcel(
             spec,
@@ -311,6 +322,7 @@ def handle_parcel(node: ControllerNode, msg):
     cmd.header.frame_id = node.frame_id
     fill_command(cmd, plan, node.config.alpha_k)
     cmd.run_id = node.run_id
+    sign(cmd, node.run_key)
     stats.commands += 1
     if plan.feasible:
         stats.lead.append(plan.start_time - now.nanoseconds * 1e-9)

@@ -35,6 +35,7 @@ from fence_sorter.nodes.base import FenceSorterNode, run_node
 from fence_sorter.nodes.convert import fill_clock
 from fence_sorter.nodes.parameters import SCANNER_PARAMETERS
 from fence_sorter.nodes.qos import topic_qos
+from fence_sorter.nodes.sources import sign
 from fence_sorter.physics.params import ParameterError
 from fence_sorter.recording import topics
 from fence_sorter.scene import load_scene
@@ -208,7 +209,7 @@ class ScannerNode(FenceSorterNode):
             msg = self._parcel_class()
             stamp = self.t0 + spec.arrival_time
             fill_parcel(msg, spec, stamp, self.scan_x, self.frame_id, self.run_id)
-            self._pub.publish(msg)
+            self._pub.publish(sign(msg, self.run_key))
             self.scan_lag_max = max(self.scan_lag_max, now - stamp)
             if now - stamp > SCAN_LAG_WARN:
                 self.get_logger().warning(

@@ -28,6 +28,8 @@ from collections.abc import Sequence
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from rclpy.clock import Clock as RosClock
+from rclpy.clock import ClockType
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.logging import LoggingSeverity
@@ -53,9 +55,10 @@ from fence_sorter.line.awake import start_spinners, stop_spinners
 from fence_sorter.line.worker import Gauges, LineProcess, LoopSettings, LoopStartError, LoopStats
 from fence_sorter.nodes import convert
 from fence_sorter.nodes.base import FenceSorterNode, spin_node
-from fence_sorter.nodes.intake import TopicIntake
+from fence_sorter.nodes.intake import ParcelRegistry, TopicIntake
 from fence_sorter.nodes.parameters import SIMULATOR_PARAMETERS
-from fence_sorter.nodes.qos import INPUT_QOS, topic_qos
+from fence_sorter.nodes.qos import CLOCK_QOS, INPUT_QOS, topic_qos
+from fence_sorter.nodes.sources import foreign_publishers, sign_clock
 from fence_sorter.nodes.tf_publisher import TfPublisher
 from fence_sorter.recording import topics
 from fence_sorter.runner.processes import keep_on
@@ -68,6 +71,7 @@ from fence_sorter_msgs.msg import (
     FenceState,
     LoadState,
     Parcel,
+    RunClock,
     SortEvent,
     SortOutcome,
 )
@@ -77,6 +81,14 @@ DEFAULT_SCENE = "impact_flexible"
 UNPACED_PUBLISH_LEAD = 0.1
 #: the node process's GIL switch interval while running [s] (see start())
 SWITCH_INTERVAL = 2e-4
+#: (topic, the node that owns it): any other publisher of these is named (wall period [s])
+WATCHED_SOURCES = (
+    (topics.CLOCK, "simulator"),
+    (topics.RUN_CLOCK, "simulator"),
+    (topics.PARCELS, "scanner"),
+    (topics.FENCE_COMMANDS, "controller"),
+)
+GRAPH_PERIOD = 0.2
 
 
 class SimulatorNode(FenceSorterNode):
@@ -141,6 +153,8 @@ class SimulatorNode(FenceSorterNode):
         run_id = int(p["run_id"])
         self.parcel_intake = TopicIntake("parcels", run_id)
         self.command_intake = TopicIntake("commands", run_id)
+        self.parcel_registry = ParcelRegistry()
+        self.run_id = run_id
         self._parcel_sub = self.create_intake_subscription(
             Parcel, topics.PARCELS, self._on_parcel, INPUT_QOS, self.parcel_intake
         )
@@ -159,6 +173,18 @@ class SimulatorNode(FenceSorterNode):
             return self.create_publisher(msg_type, name, topic_qos(name))
 
         self.pub_clock = publisher(Clock, topics.CLOCK)
+        # the run's clock under its key, for the nodes of the run (fence_sorter.provenance)
+        self.pub_run_clock = (
+            self.create_publisher(RunClock, topics.RUN_CLOCK, CLOCK_QOS)
+            if self.run_key is not None
+            else None
+        )
+        self._run_clock_msg = RunClock(run_id=run_id)
+        # publishers of the run's topics that are not the run's own nodes, from the graph
+        self.foreign: dict[str, set[str]] = {name: set() for name, _ in WATCHED_SOURCES}
+        self._graph_timer = self.create_timer(
+            GRAPH_PERIOD, self._watch_sources, clock=RosClock(clock_type=ClockType.STEADY_TIME)
+        )
         self.pub_fence = publisher(FenceState, topics.FENCE_STATE)
         self.pub_joint = publisher(JointState, topics.JOINT_STATES)
         self.pub_loads = publisher(LoadState, topics.LOAD_STATES)
@@ -217,7 +243,24 @@ class SimulatorNode(FenceSorterNode):
 
     # -- callbacks: hand off only --------------------------------------------------------------
     def _on_parcel(self, msg: Parcel) -> None:
-        self._send(("parcel", convert.parcel_from_msg(msg)))
+        spec = convert.parcel_from_msg(msg)
+        seen = self.parcel_registry.register(spec)
+        if seen == "new":
+            self._send(("parcel", spec))
+        elif seen == "conflict":
+            self.get_logger().error(
+                f"parcel {spec.parcel_id}: a second authentic message with another spec; "
+                "the first one stays, the parcel is disputed"
+            )
+
+    def _watch_sources(self) -> None:
+        """Name every publisher of a watched topic that is not its owner (a second /clock,
+        an insider on /parcels or /fence_commands), for the heartbeat."""
+        for topic, owner in WATCHED_SOURCES:
+            found = foreign_publishers(self, topic, owner)
+            if found and not self.foreign[topic].issuperset(found):
+                self.get_logger().error(f"{topic}: publishers other than {owner}: {found}")
+            self.foreign[topic].update(found)
 
     def _on_command(self, msg: FenceCommand) -> None:
         self._send(("command", convert.command_from_msg(msg)))
@@ -375,6 +418,10 @@ class SimulatorNode(FenceSorterNode):
         """/clock at ``t`` unless it went out already (an outcome at a snapshot's time)."""
         if t > self._clock_sent:
             self.pub_clock.publish(convert.fill_clock(self._clock_msg, t))
+            if self.pub_run_clock is not None:
+                msg = self._run_clock_msg
+                msg.clock = self._clock_msg.clock
+                self.pub_run_clock.publish(sign_clock(msg, self.run_key))
             self._clock_published = self._clock_sent = t
 
     def _publish_states(self, snap) -> None:
@@ -405,7 +452,9 @@ class SimulatorNode(FenceSorterNode):
                 # e.t first, so a sim-time subscriber (the recorder) receives the outcome at
                 # its stamp, not up to a publish period before it
                 self._publish_clock(e.t)
-                self.pub_outcomes.publish(convert.outcome_to_msg(e, self.frame_id, self.limits))
+                out = convert.outcome_to_msg(e, self.frame_id, self.limits)
+                out.disputed = e.parcel_id in self.parcel_registry.disputed
+                self.pub_outcomes.publish(out)
                 if self.rerun is not None and math.isfinite(e.peak_normal_force):
                     # its EventTrace follows in the same list: the damage colours of the view
                     from fence_sorter.analysis.events import risk_of  # lazy: see _start_rerun
@@ -533,6 +582,10 @@ class SimulatorNode(FenceSorterNode):
         }
         values.update(self.parcel_intake.values())
         values.update(self.command_intake.values())
+        values.update(self.parcel_registry.values())
+        values.update(
+            {f"foreign_publishers.{k}": "; ".join(sorted(v)) for k, v in self.foreign.items()}
+        )
         if self.rerun is not None:
             values["rerun_frames_sent"] = str(self.rerun.sent)
             values["rerun_frames_dropped"] = str(self.rerun.dropped)

@@ -11,6 +11,9 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 CLOCK = "/clock"
+#: the simulator's sim time under the run's key (fence_sorter_msgs/RunClock): the nodes of a
+#: run with a key take their time from it, not from /clock (fence_sorter/provenance.py)
+RUN_CLOCK = "/run_clock"
 PARCELS = "/parcels"
 #: the scanner's progress (rosgraph_msgs/Clock: every parcel due by this sim time is out)
 SCAN_PROGRESS = "/scan_progress"

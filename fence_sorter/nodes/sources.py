@@ -1,0 +1,107 @@
+"""The run's key in a node: tags on what it sends, checks on what it takes in, a pinned clock.
+
+:mod:`fence_sorter.provenance` says why (the run id is public, the key is not). Here the rclpy
+side: :func:`sign` and :func:`authentic` on fence_sorter_msgs messages with an ``auth`` field
+(the tag covers :func:`fence_sorter.provenance.message_payload`), :class:`PinnedClock`,
+which takes a node's sim time from /run_clock under the key instead of /clock, and
+:func:`foreign_publishers`, which names the other publishers of a topic from the graph.
+"""
+
+from __future__ import annotations
+
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+
+from fence_sorter import provenance
+from fence_sorter.recording.topics import RUN_CLOCK
+from fence_sorter_msgs.msg import RunClock
+
+
+def sign(msg, key: bytes | None):
+    """Put the tag of ``msg`` under ``key`` into ``msg.auth`` (nothing without a key)."""
+    if key is not None:
+        msg.auth = provenance.tag(key, provenance.message_payload(msg))
+    return msg
+
+
+def authentic(msg, key: bytes | None) -> bool:
+    """True when ``msg.auth`` is its tag under ``key``; every message is, without a key."""
+    if key is None:
+        return True
+    given = int(msg.auth)
+    return bool(given) and provenance.verify(key, provenance.message_payload(msg), given)
+
+
+def clock_authentic(msg, key: bytes) -> bool:
+    """True when a RunClock message's tag verifies under ``key``."""
+    payload = provenance.clock_payload(msg.clock.sec, msg.clock.nanosec, msg.run_id)
+    return provenance.verify(key, payload, int(msg.auth))
+
+
+def sign_clock(msg, key: bytes):
+    """Tag a RunClock message (its time and run id) under ``key``."""
+    msg.auth = provenance.tag(
+        key, provenance.clock_payload(msg.clock.sec, msg.clock.nanosec, msg.run_id)
+    )
+    return msg
+
+
+class PinnedClock:
+    """A node's sim time from /run_clock messages that verify under the run's key.
+
+    rclpy's TimeSource takes /clock from anyone on the domain; this replaces its subscription
+    (same QoS: best effort, depth 1) with one to /run_clock that hands only authentic, not
+    older messages on to the TimeSource. A second /clock publisher then moves no node's time;
+    it is named from the graph (:func:`foreign_publishers`) instead.
+    """
+
+    COUNTERS = ("accepted", "foreign_source", "stale")
+
+    def __init__(self, node, key: bytes) -> None:
+        self.key = key
+        self.accepted = self.foreign_source = self.stale = 0
+        self._last = -1
+        self._clock = Clock()
+        self._time_source = node._time_source  # rclpy's, attached to the node's clock
+        if self._time_source._clock_sub is not None:
+            node.destroy_subscription(self._time_source._clock_sub)
+        self._time_source._clock_sub = node.create_subscription(
+            RunClock,
+            RUN_CLOCK,
+            self.on_run_clock,
+            QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT),
+        )
+
+    def on_run_clock(self, msg) -> None:
+        if not clock_authentic(msg, self.key):
+            self.foreign_source += 1
+            return
+        t = int(msg.clock.sec) * 1_000_000_000 + int(msg.clock.nanosec)
+        if t < self._last:  # a replayed, older message of the run's clock
+            self.stale += 1
+            return
+        self._last = t
+        self.accepted += 1
+        self._clock.clock = msg.clock
+        self._time_source.clock_callback(self._clock)
+
+    def values(self) -> dict[str, str]:
+        return {f"run_clock.{k}": str(getattr(self, k)) for k in self.COUNTERS}
+
+
+def endpoint_name(info) -> str:
+    """``namespace/node`` of a graph endpoint, with the first bytes of its GID."""
+    ns = info.node_namespace.rstrip("/")
+    gid = bytes(info.endpoint_gid[:8]).hex()
+    return f"{ns}/{info.node_name} (gid {gid})"
+
+
+def foreign_publishers(node, topic: str, owner: str) -> list[str]:
+    """The publishers of ``topic`` in the graph that are not node ``owner`` of ``node``'s
+    namespace, by :func:`endpoint_name`."""
+    ns = node.get_namespace().rstrip("/")
+    return [
+        endpoint_name(e)
+        for e in node.get_publishers_info_by_topic(topic)
+        if not (e.node_name == owner and e.node_namespace.rstrip("/") == ns)
+    ]

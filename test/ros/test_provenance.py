@@ -1,0 +1,135 @@
+"""The run's key: tags on parcels, commands and the run clock (fence_sorter.provenance,
+nodes/sources.py), and the registry that tells a duplicate from a conflict (nodes/intake.py).
+
+A tag made in one process verifies in another (the payload is the message's values, not its
+CDR bytes, whose padding is uninitialised), any changed field or another key fails it, and an
+unsigned message fails under a key."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+
+import pytest
+
+from fence_sorter import provenance
+from fence_sorter.inputs import ParcelSpec
+from fence_sorter.nodes.intake import ParcelRegistry, TopicIntake
+
+pytestmark = pytest.mark.ros
+
+KEY = bytes(range(32))
+OTHER = bytes(range(1, 33))
+#: the parcel of these tests, built the same way here and in a child process
+PARCEL = (
+    "from fence_sorter.inputs import ParcelSpec\n"
+    "from fence_sorter.nodes.convert import parcel_to_msg\n"
+    "spec = ParcelSpec(7, 0.4, 0.3, 0.2, 5.0, lateral_gap=0.1, divert=True, scan_time=12.5)\n"
+    "msg = parcel_to_msg(spec, run_id=99)\n"
+)
+
+
+def parcel():
+    scope: dict = {}
+    exec(PARCEL, scope)
+    return scope["msg"]
+
+
+def test_a_tag_made_in_another_process_verifies_here() -> None:
+    from fence_sorter.nodes.sources import authentic
+
+    code = PARCEL + (
+        "from fence_sorter.nodes.sources import sign\n"
+        f"print(sign(msg, bytes.fromhex('{KEY.hex()}')).auth)\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout
+    msg = parcel()
+    msg.auth = int(out.split()[-1])
+    assert authentic(msg, KEY)
+    assert not authentic(msg, OTHER)
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [
+        ("mass", 5.000000000000001),  # one ulp: the payload is exact
+        ("divert", False),
+        ("parcel_id", 8),
+        ("run_id", 98),
+        ("mu_belt", 0.5),  # NaN (the scene's) -> a value
+        ("lateral_gap", -0.0),
+    ],
+)
+def test_any_changed_field_fails_the_tag(field: str, value) -> None:
+    from fence_sorter.nodes.sources import authentic, sign
+
+    msg = sign(parcel(), KEY)
+    assert authentic(msg, KEY)
+    setattr(msg, field, value)
+    assert not authentic(msg, KEY)
+
+
+def test_nested_fields_are_covered_and_unsigned_messages_fail() -> None:
+    from fence_sorter.nodes.sources import authentic, sign
+
+    msg = sign(parcel(), KEY)
+    msg.scan_time.nanosec += 1
+    assert not authentic(msg, KEY)
+    unsigned = parcel()
+    assert unsigned.auth == 0 and not authentic(unsigned, KEY)
+    assert authentic(unsigned, None)  # a node without a key checks run ids only
+
+
+def test_commands_and_the_run_clock_are_tagged() -> None:
+    from fence_sorter.nodes.sources import authentic, clock_authentic, sign, sign_clock
+    from fence_sorter_msgs.msg import FenceCommand, RunClock
+
+    cmd = FenceCommand(parcel_id=3, run_id=99, t1=0.3, predicted_peak_force=math.nan)
+    assert authentic(sign(cmd, KEY), KEY)
+    cmd.feasible = not cmd.feasible
+    assert not authentic(cmd, KEY)
+    tick = RunClock(run_id=99)
+    tick.clock.sec, tick.clock.nanosec = 12, 345
+    assert clock_authentic(sign_clock(tick, KEY), KEY)
+    tick.clock.sec = 67_000_000  # a forged jump
+    assert not clock_authentic(tick, KEY)
+
+
+def test_run_key_from_the_environment() -> None:
+    key = provenance.new_run_key()
+    assert provenance.run_key({provenance.RUN_KEY_ENV: key}) == bytes.fromhex(key)
+    assert provenance.run_key({}) is None
+    with pytest.raises(ValueError, match="FENCE_SORTER_RUN_KEY must be 64 hex digits"):
+        provenance.run_key({provenance.RUN_KEY_ENV: "abc"})
+
+
+def test_intake_refuses_a_forgery_before_the_rate_limit() -> None:
+    """A flood with the run's id but no valid tag spends none of the tokens: the real
+    sender's messages after it are all taken."""
+    intake = TopicIntake("parcels", run_id=99, rate=1.0, burst=2.0, clock=lambda: 0.0)
+    for _ in range(1000):
+        assert not intake.admit(99, lambda: False)
+    assert intake.admit(99, lambda: True) and intake.admit(99, lambda: True)
+    assert not intake.admit(99, lambda: True)  # the third real one meets the rate limit
+    assert (intake.foreign_source, intake.accepted, intake.rate_limited) == (1000, 2, 1)
+    assert not intake.admit(98, lambda: True) and intake.foreign == 1
+    assert intake.dropped == 1000 + 1 + 1
+
+
+def test_registry_tells_a_duplicate_from_a_conflict() -> None:
+    reg = ParcelRegistry()
+    spec = ParcelSpec(4, 0.4, 0.3, 0.2, 5.0, lateral_gap=0.1, divert=True)  # mu NaN
+    assert reg.register(spec) == "new"
+    assert reg.register(ParcelSpec(4, 0.4, 0.3, 0.2, 5.0, lateral_gap=0.1, divert=True)) == (
+        "duplicate"
+    )
+    forged = ParcelSpec(4, 0.6, 0.4, 0.2, 20.0, lateral_gap=0.1, divert=False)
+    assert reg.register(forged) == "conflict"
+    assert reg.values() == {
+        "parcels.duplicate": "1",
+        "parcels.conflict": "1",
+        "parcels.disputed_ids": "4",
+    }
