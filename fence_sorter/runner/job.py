@@ -20,6 +20,7 @@ from pathlib import Path
 import yaml
 
 from fence_sorter.calibration.sensors import load_sensors, resolve_sensors
+from fence_sorter.inputs import ParcelSpec
 from fence_sorter.nodes.parameters import (
     NODE_PARAMETERS,
     ParamOverrideError,
@@ -28,6 +29,7 @@ from fence_sorter.nodes.parameters import (
     ros_value,
 )
 from fence_sorter.physics.params import ParameterError
+from fence_sorter.provenance import RUN_KEY_ENV, new_run_key, run_key
 from fence_sorter.recording.topics import MEASURED, TOPICS
 from fence_sorter.resources import data_path
 from fence_sorter.runner.monitor import MONITOR_NAME, Monitor, Records
@@ -129,6 +131,11 @@ class Plan:
     state_rate: float = 0.0  # the state's rate the sensors need [Hz of sim time]; 0: default
     #: the run's identity on the wire (drawn per run; messages with another are foreign)
     run_id: int = field(default_factory=lambda: 1 + secrets.randbelow(2**63 - 1))
+    #: the run's key (hex; fence_sorter.provenance): its nodes' tags on what they send, handed
+    #: to them in their environment only
+    run_key: str = field(default_factory=new_run_key, repr=False)
+    #: the stream the run's scanner publishes, by parcel id (what the summary covers)
+    stream: dict[int, ParcelSpec] = field(default_factory=dict, repr=False)
 
 
 def prepare(opts: RunOptions) -> Plan:
@@ -199,6 +206,7 @@ def prepare(opts: RunOptions) -> Plan:
         sensors_path=sensors_path,
         truth=truth,
         state_rate=state_rate,
+        stream={s.parcel_id: s for s in stream},
     )
 
 
@@ -381,7 +389,7 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None], stop: StopReq
     domain = plan.domain
     log_dir = Path(opts.log_dir or tempfile.mkdtemp(prefix=LOG_DIR_PREFIX))
     log_dir.mkdir(parents=True, exist_ok=True)
-    env = node_env(domain, log_dir / "ros")
+    env = node_env(domain, log_dir / "ros", {RUN_KEY_ENV: plan.run_key})
     clean_shm()  # what killed runs (of any program) left in /dev/shm
     # this process's participant (the monitor) on the nodes' transports
     for var in ("FASTDDS_DEFAULT_PROFILES_FILE", "ROS_AUTOMATIC_DISCOVERY_RANGE"):
@@ -501,7 +509,13 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None], stop: StopReq
         # to the first one)
         if cpus is not None:  # this thread, after the nodes' start (they inherit it), and
             os.sched_setaffinity(0, cpus)  # the monitor's threads created from it
-        monitor = Monitor(domain, MONITOR_NAME, run_id=plan.run_id)
+        monitor = Monitor(
+            domain,
+            MONITOR_NAME,
+            run_id=plan.run_id,
+            run_key=run_key({RUN_KEY_ENV: plan.run_key}),
+            stream=plan.stream,
+        )
         stop.check()
         up = {}  # node -> seconds from the start to the arrival of its first heartbeat
         for node, timeout in (

@@ -2,7 +2,10 @@
 and /scan_progress, and keeps plain records for :mod:`fence_sorter.runner.summary`.
 
 With a ``run_id``, parcels and commands of another run (another ``run_id`` on the message) are
-counted apart as foreign and never enter the records the figures come from."""
+counted apart as foreign and never enter the records the figures come from. With the run's key
+(:mod:`fence_sorter.provenance`), so are messages with the run's id whose sender's tag does not
+verify (forged, by parcel id). With the run's stream, a parcel outside it is counted apart, and
+one whose spec differs from the stream's (or from an earlier message's) is disputed."""
 
 from __future__ import annotations
 
@@ -11,6 +14,8 @@ import time
 from dataclasses import dataclass, field
 
 from fence_sorter.codes import OutcomeCode, code_name
+from fence_sorter.inputs import ParcelSpec
+from fence_sorter.nodes.intake import spec_fingerprint
 from fence_sorter.recording import topics
 from fence_sorter.stamps import time_to_sec
 
@@ -27,6 +32,13 @@ class Records:
     parcel_messages: int = 0
     foreign_parcel_messages: int = 0
     foreign_command_messages: int = 0
+    #: messages with the run's id whose tag did not verify under the run's key, by parcel id
+    forged_parcels: dict[int, int] = field(default_factory=dict)
+    forged_commands: dict[int, int] = field(default_factory=dict)
+    #: authentic parcel messages of ids outside the run's stream
+    unexpected_parcel_messages: int = 0
+    #: parcel ids given two specs (two authentic messages, or a message and the stream)
+    disputed: set[int] = field(default_factory=set)
     commands: dict[int, dict] = field(default_factory=dict)
     command_messages: int = 0
     outcomes: dict[int, dict] = field(default_factory=dict)
@@ -38,7 +50,14 @@ class Records:
 class Monitor:
     """An rclpy context and node of its own (no signal handlers: the job handles Ctrl-C)."""
 
-    def __init__(self, domain_id: int, name: str = MONITOR_NAME, run_id: int = 0):
+    def __init__(
+        self,
+        domain_id: int,
+        name: str = MONITOR_NAME,
+        run_id: int = 0,
+        run_key: bytes | None = None,
+        stream: dict[int, ParcelSpec] | None = None,
+    ):
         # Records and the runner's checks of its input do without ROS
         import rclpy  # lazy: rclpy, ~0.1-0.4 s, once the run starts
         from diagnostic_msgs.msg import DiagnosticArray  # lazy: ROS message
@@ -46,6 +65,7 @@ class Monitor:
         from rclpy.signals import SignalHandlerOptions  # lazy: rclpy
         from rosgraph_msgs.msg import Clock  # lazy: ROS message
 
+        from fence_sorter.nodes import convert, sources  # lazy: rclpy
         from fence_sorter.nodes.base import make_executor  # lazy: rclpy
         from fence_sorter.nodes.qos import INPUT_QOS, topic_qos  # lazy: rclpy
         from fence_sorter_msgs.msg import FenceCommand, Parcel, SortOutcome  # lazy: ROS messages
@@ -61,6 +81,11 @@ class Monitor:
         self.node = rclpy.create_node(name, context=self.context)
         self.records = Records()
         self.run_id = int(run_id)
+        self.run_key = run_key
+        self.stream = stream
+        self._authentic = sources.authentic
+        self._parcel_from_msg = convert.parcel_from_msg
+        self._specs: dict[int, tuple[str, ...]] = {}
         n = self.node
         for msg_type, name, callback in (
             (Parcel, topics.PARCELS, self._on_parcel),
@@ -95,11 +120,36 @@ class Monitor:
     def _foreign(self, msg) -> bool:
         return bool(self.run_id) and int(msg.run_id) != self.run_id
 
+    def _forged(self, msg, counts: dict[int, int]) -> bool:
+        """A message with the run's id that its sender's tag does not vouch for (counted)."""
+        if self._authentic(msg, self.run_key):
+            return False
+        pid = int(msg.parcel_id)
+        counts[pid] = counts.get(pid, 0) + 1
+        return True
+
+    def _disputed(self, msg) -> bool:
+        """Whether this parcel message contradicts the stream or an earlier message."""
+        spec = self._parcel_from_msg(msg)
+        pid = spec.parcel_id
+        mine = spec_fingerprint(physical(spec))
+        if pid in self._specs:
+            return self._specs[pid] != mine
+        self._specs[pid] = mine
+        return self.stream is not None and spec_fingerprint(physical(self.stream[pid])) != mine
+
     def _on_parcel(self, msg) -> None:
         r = self.records
         if self._foreign(msg):
             r.foreign_parcel_messages += 1
             return
+        if self._forged(msg, r.forged_parcels):
+            return
+        if self.stream is not None and int(msg.parcel_id) not in self.stream:
+            r.unexpected_parcel_messages += 1
+            return
+        if self._disputed(msg):
+            r.disputed.add(int(msg.parcel_id))
         r.parcel_messages += 1
         r.parcels.setdefault(
             int(msg.parcel_id),
@@ -118,6 +168,8 @@ class Monitor:
         r = self.records
         if self._foreign(msg):
             r.foreign_command_messages += 1
+            return
+        if self._forged(msg, r.forged_commands):
             return
         r.command_messages += 1
         r.commands.setdefault(
@@ -152,6 +204,7 @@ class Monitor:
                 "peak_normal_accel": msg.peak_normal_accel,
                 "impact_normal_speed": msg.impact_normal_speed,
                 "exit_speed_y": msg.exit_speed_y,
+                "disputed": bool(getattr(msg, "disputed", False)),
             },
         )
         self._seen(time_to_sec(msg.header.stamp))
@@ -193,3 +246,21 @@ class Monitor:
             self.node.destroy_node()
         finally:
             self.rclpy.try_shutdown(context=self.context)
+
+
+def physical(spec: ParcelSpec) -> ParcelSpec:
+    """The spec without its times and scan position (what the stream fixes of a parcel)."""
+    return ParcelSpec(
+        parcel_id=spec.parcel_id,
+        length_a=spec.length_a,
+        width_b=spec.width_b,
+        height=spec.height,
+        mass=spec.mass,
+        cog_offset_x=spec.cog_offset_x,
+        cog_offset_y=spec.cog_offset_y,
+        lateral_gap=spec.lateral_gap,
+        yaw=spec.yaw,
+        mu_belt=spec.mu_belt,
+        mu_fence=spec.mu_fence,
+        divert=spec.divert,
+    )

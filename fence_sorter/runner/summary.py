@@ -9,8 +9,13 @@ from collections import Counter
 #: exit status: a divert parcel of the run's own stream got no outcome
 EXIT_INCOMPLETE = 3
 #: exit status: every divert parcel has its outcome, but foreign traffic (parcels or commands
-#: of another run) was seen on the run's domain: refused and counted, never in the figures
+#: of another run, messages with the run's id that its key does not vouch for, publishers of
+#: the run's topics that are not its nodes: a second /clock) was seen on the run's domain:
+#: refused and counted, never in the figures
 EXIT_FOREIGN = 4
+#: exit status: a parcel of the run was disputed: two authentic messages (or a message and the
+#: run's stream) gave its id different specs; the first one was sorted
+EXIT_DISPUTED = 6
 #: the diagnostics counters of messages a node dropped (where, and why)
 DROP_COUNTERS = (".foreign", ".rate_limited", ".lost", "take_errors", "_dropped_")
 
@@ -61,13 +66,54 @@ def dropped(diagnostics: dict[str, dict[str, str]]) -> dict[str, dict[str, int]]
     return out
 
 
+def foreign_publishers(diagnostics: dict[str, dict[str, str]]) -> dict[str, list[str]]:
+    """Per topic: the publishers the simulator named that are not the run's own nodes."""
+    sim = diagnostics.get("fence_sorter/simulator") or {}
+    prefix = "foreign_publishers."
+    return {k[len(prefix) :]: v.split("; ") for k, v in sim.items() if k.startswith(prefix) and v}
+
+
+def disputed_ids(records) -> list[int]:
+    """Parcel ids with two specs: seen by the monitor, flagged in an outcome, or named by a
+    node (``parcels.disputed_ids``)."""
+    ids = set(getattr(records, "disputed", ()))
+    ids |= {pid for pid, o in records.outcomes.items() if o.get("disputed")}
+    for values in records.diagnostics.values():
+        for k, v in values.items():
+            if k.endswith(".disputed_ids") and v:
+                ids |= {int(x) for x in v.split(",") if x.strip().isdigit()}
+    return sorted(ids)
+
+
+def parcel_table(outcomes: dict, expected, divert: set[int], disputed) -> list[dict]:
+    """Every parcel of the run's stream with its outcome (``MISSING`` where it has none)."""
+    rows = []
+    for pid in expected:
+        o = outcomes.get(pid)
+        rows.append(
+            {
+                "parcel_id": pid,
+                "divert": pid in divert,
+                "outcome": o["reason_name"] if o else "MISSING",
+                "sorted": bool(o and o["sorted"]),
+                "disputed": pid in disputed,
+            }
+        )
+    return rows
+
+
 def summarise(records, belt_speed: float, expected_ids=None, divert_ids=None) -> dict:
     """Summary of a run: parcels, outcomes by reason, capacity, peaks, timing, node figures,
-    foreign traffic and dropped messages. ``expected_ids``/``divert_ids``: the run's stream."""
+    foreign traffic and dropped messages. ``expected_ids``/``divert_ids``: the run's stream;
+    with them the figures cover that stream only (an outcome for another id is counted apart),
+    and every parcel of it is listed with its outcome."""
     outcomes = records.outcomes
-    divert = {pid for pid, p in records.parcels.items() if p["divert"]}
+    if expected_ids is not None:
+        outcomes = {pid: o for pid, o in outcomes.items() if pid in set(expected_ids)}
     if divert_ids is not None:
-        divert |= set(divert_ids)
+        divert = set(divert_ids)
+    else:
+        divert = {pid for pid, p in records.parcels.items() if p["divert"]}
     by_reason = Counter(o["reason_name"] for o in outcomes.values())
     missed = Counter(
         o["reason_name"] for pid, o in outcomes.items() if not o["sorted"] and pid in divert
@@ -88,6 +134,17 @@ def summarise(records, belt_speed: float, expected_ids=None, divert_ids=None) ->
     scanner = records.diagnostics.get("fence_sorter/scanner")
     sensors = records.diagnostics.get("fence_sorter/sensors")
     expected = sorted(expected_ids) if expected_ids is not None else None
+    disputed = disputed_ids(records)
+    forged_parcels = getattr(records, "forged_parcels", {})
+    forged_commands = getattr(records, "forged_commands", {})
+    lost = [
+        {
+            "parcel_id": pid,
+            "why": outcomes[pid]["reason_name"] if pid in outcomes else "no outcome",
+        }
+        for pid in sorted(divert)
+        if not (pid in outcomes and outcomes[pid]["sorted"])
+    ]
     return {
         "parcels_expected": len(expected) if expected is not None else None,
         "parcels_seen": len(records.parcels),
@@ -103,6 +160,17 @@ def summarise(records, belt_speed: float, expected_ids=None, divert_ids=None) ->
         ),
         "foreign_parcel_messages": getattr(records, "foreign_parcel_messages", 0),
         "foreign_command_messages": getattr(records, "foreign_command_messages", 0),
+        "forged_parcel_messages": sum(forged_parcels.values()),
+        "forged_command_messages": sum(forged_commands.values()),
+        "forged_parcel_ids": sorted(
+            pid for pid in forged_parcels if expected is None or pid in expected
+        ),
+        "unexpected_parcel_messages": getattr(records, "unexpected_parcel_messages", 0),
+        "outcomes_outside_stream": len(records.outcomes) - len(outcomes),
+        "foreign_publishers": foreign_publishers(records.diagnostics),
+        "disputed": disputed,
+        "divert_not_sorted": lost,
+        "parcels": parcel_table(outcomes, expected, divert, set(disputed)) if expected else [],
         "dropped": dropped(records.diagnostics),
         "divert": len(divert),
         "sorted": len(sorted_ids),
@@ -136,17 +204,56 @@ def summarise(records, belt_speed: float, expected_ids=None, divert_ids=None) ->
     }
 
 
+def foreign_traffic(s: dict) -> list[str]:
+    """What came from outside the run, one phrase each (empty: nothing)."""
+    out = []
+    if s["foreign_parcel_messages"] or s["foreign_command_messages"]:
+        out.append(
+            f"{s['foreign_parcel_messages']} parcels and {s['foreign_command_messages']} "
+            "commands of another run"
+        )
+    forged = s.get("forged_parcel_messages", 0) + s.get("forged_command_messages", 0)
+    if forged:
+        ids = s.get("forged_parcel_ids", [])
+        out.append(
+            f"{s['forged_parcel_messages']} parcels and {s['forged_command_messages']} commands "
+            "with the run's id that its key does not vouch for"
+            + (f" (forging parcel ids {ids[:20]} of the run)" if ids else "")
+        )
+    for topic, names in sorted(s.get("foreign_publishers", {}).items()):
+        out.append(f"publishers of {topic} that are not the run's: {'; '.join(names)}")
+    return out
+
+
+def _lost(s: dict) -> str:
+    rows = s.get("divert_not_sorted", [])
+    if not rows:
+        return "every divert parcel of the run was sorted"
+    text = ", ".join(f"{r['parcel_id']} ({r['why']})" for r in rows[:20])
+    more = f" and {len(rows) - 20} more" if len(rows) > 20 else ""
+    return f"divert parcels of the run not sorted: {text}{more}"
+
+
 def verdict(s: dict) -> tuple[int, str] | None:
-    """The exit status the run's own stream calls for, with its reason; None: clean."""
+    """The exit status the run's own stream calls for, with its reason (naming the run's own
+    parcels that were lost, and why); None: clean."""
+    foreign = foreign_traffic(s)
+    context = f"; foreign traffic: {'; '.join(foreign)}" if foreign else ""
     if s["divert_without_outcome"]:
         ids = s["divert_without_outcome"]
-        return EXIT_INCOMPLETE, f"{len(ids)} divert parcels of the run got no outcome: {ids[:20]}"
-    foreign = s["foreign_parcel_messages"] + s["foreign_command_messages"]
+        return EXIT_INCOMPLETE, (
+            f"{len(ids)} divert parcels of the run got no outcome: {ids[:20]}; {_lost(s)}"
+            + context
+        )
+    if s.get("disputed"):
+        return EXIT_DISPUTED, (
+            f"parcels of the run given two specs (disputed): {s['disputed'][:20]}; {_lost(s)}"
+            + context
+        )
     if foreign:
         return EXIT_FOREIGN, (
-            f"foreign traffic on the run's domain: {s['foreign_parcel_messages']} parcels, "
-            f"{s['foreign_command_messages']} commands of another run (refused, not in the "
-            "figures)"
+            f"foreign traffic on the run's domain (refused, not in the figures): "
+            f"{'; '.join(foreign)}; {_lost(s)}"
         )
     return None
 
@@ -180,12 +287,10 @@ def format_summary(s: dict) -> str:
             f"without command   {s['no_command']} divert parcels got NO_COMMAND (no command "
             "before the point of no return: a controller outage costs these)"
         )
-    foreign = s["foreign_parcel_messages"] + s["foreign_command_messages"]
-    if foreign:
-        lines.append(
-            f"foreign traffic   {s['foreign_parcel_messages']} parcels, "
-            f"{s['foreign_command_messages']} commands of another run (refused, not counted)"
-        )
+    for phrase in foreign_traffic(s):
+        lines.append(f"foreign traffic   {phrase} (refused, not counted)")
+    if s.get("disputed"):
+        lines.append(f"disputed          {s['disputed'][:20]} (two specs for one parcel id)")
     for node, counts in sorted(s["dropped"].items()):
         lines.append(
             f"dropped ({node:<9}) " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items()))

@@ -1,10 +1,12 @@
 """The run's exit status from its own stream (runner.summary): a divert parcel without an
-outcome (3), foreign traffic (4), and the dropped-message counters in the summary."""
+outcome (3), foreign traffic (4: another run, forgeries with the run's id, foreign publishers),
+a disputed parcel (6), and the dropped-message counters in the summary."""
 
 from __future__ import annotations
 
 from fence_sorter.runner.monitor import Records
 from fence_sorter.runner.summary import (
+    EXIT_DISPUTED,
     EXIT_FOREIGN,
     EXIT_INCOMPLETE,
     format_summary,
@@ -53,7 +55,12 @@ def test_divert_parcel_without_outcome_exits_3_even_if_never_seen() -> None:
     s = summarise(r, 1.0, [1, 2, 3, 4], [1, 3, 4])  # 4: in the stream, never on /parcels
     code, why = verdict(s)
     assert code == EXIT_INCOMPLETE and s["divert_without_outcome"] == [3, 4]
-    assert "2 divert parcels of the run got no outcome: [3, 4]" == why
+    assert why == (
+        "2 divert parcels of the run got no outcome: [3, 4]; divert parcels of the run not "
+        "sorted: 3 (no outcome), 4 (no outcome)"
+    )
+    table = {row["parcel_id"]: row["outcome"] for row in s["parcels"]}
+    assert table == {1: "SORTED", 2: "NOT_DIVERTED", 3: "MISSING", 4: "MISSING"}
 
 
 def test_foreign_traffic_exits_4_and_stays_out_of_the_figures() -> None:
@@ -68,10 +75,68 @@ def test_foreign_traffic_exits_4_and_stays_out_of_the_figures() -> None:
     }
     s = summarise(r, 1.0, [1, 2, 3], [1, 3])
     code, why = verdict(s)
-    assert code == EXIT_FOREIGN and "5000 parcels, 7 commands of another run" in why
+    assert code == EXIT_FOREIGN and "5000 parcels and 7 commands of another run" in why
+    assert why.endswith("divert parcels of the run not sorted: 1 (NO_COMMAND)")
     assert s["parcels_seen"] == 3 and s["divert"] == 2 and s["no_command"] == 1
     assert s["dropped"] == {"simulator": {"parcels.foreign": 5000, "commands.lost": 2}}
     text = format_summary(s)
-    assert "foreign traffic   5000 parcels, 7 commands" in text
+    assert "foreign traffic   5000 parcels and 7 commands of another run" in text
     assert "without command   1 divert parcels got NO_COMMAND" in text
     assert "dropped (simulator) commands.lost 2, parcels.foreign 5000" in text
+
+
+def test_forgeries_with_the_run_id_stay_out_of_the_figures_and_exit_4() -> None:
+    """Forged parcels (the run's id, no valid tag) of real ids and of new ids, and an outcome
+    for a parcel outside the stream: the figures cover the stream only, the exit names the
+    forged ids of the run."""
+    r = records(forged_parcels={2: 1, 3: 1, 9001: 1}, forged_commands={1: 2})
+    r.outcomes = {
+        1: outcome("SORTED", True),
+        2: outcome("NOT_DIVERTED"),
+        3: outcome("SORTED", True),
+        9001: outcome("SORTED", True),  # a forged parcel that reached the line
+    }
+    s = summarise(r, 1.0, [1, 2, 3], [1, 3])
+    code, why = verdict(s)
+    assert code == EXIT_FOREIGN
+    assert s["outcomes"] == 3 and s["sorted"] == 2 and s["outcomes_outside_stream"] == 1
+    assert s["forged_parcel_messages"] == 3 and s["forged_command_messages"] == 2
+    assert s["forged_parcel_ids"] == [2, 3]
+    assert "forging parcel ids [2, 3] of the run" in why
+    assert why.endswith("every divert parcel of the run was sorted")
+
+
+def test_a_second_clock_publisher_is_named_and_exits_4() -> None:
+    r = records()
+    r.outcomes = {
+        1: outcome("SORTED", True),
+        2: outcome("NOT_DIVERTED"),
+        3: outcome("SORTED", True),
+    }
+    r.diagnostics["fence_sorter/simulator"] = {
+        "foreign_publishers./clock": "/intruder (gid 0102)",
+        "foreign_publishers./parcels": "",
+    }
+    s = summarise(r, 1.0, [1, 2, 3], [1, 3])
+    code, why = verdict(s)
+    assert s["foreign_publishers"] == {"/clock": ["/intruder (gid 0102)"]}
+    assert code == EXIT_FOREIGN and "publishers of /clock that are not the run's: /intruder" in why
+
+
+def test_a_disputed_parcel_exits_6_naming_it() -> None:
+    """Two specs for one id, seen by the monitor, flagged in an outcome or named by a node."""
+    r = records(disputed={1})
+    r.outcomes = {
+        1: outcome("SORTED", True),
+        2: {**outcome("NOT_DIVERTED"), "disputed": True},
+        3: outcome("SORTED", True),
+    }
+    r.diagnostics["fence_sorter/controller"] = {
+        "parcels.disputed_ids": "3",
+        "parcels.conflict": "1",
+    }
+    s = summarise(r, 1.0, [1, 2, 3], [1, 3])
+    code, why = verdict(s)
+    assert code == EXIT_DISPUTED and s["disputed"] == [1, 2, 3]
+    assert why.startswith("parcels of the run given two specs (disputed): [1, 2, 3]")
+    assert [row["disputed"] for row in s["parcels"]] == [True, True, True]
