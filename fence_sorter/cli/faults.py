@@ -1,7 +1,8 @@
 """``fence-sorter faults``: the fault-injection campaign of the node suite -> docs/reliability.md.
 
-Repeated Ctrl-C, floods on /parcels and /fence_commands, hostile and malformed messages, bad
-files, scenes, streams and parameters (:mod:`fence_sorter.verification.faults`). Exit codes:
+Repeated Ctrl-C, floods on /parcels and /fence_commands, insiders with the run's own id
+(forged duplicates, a flood, a second /clock), hostile and malformed messages, bad files,
+scenes, streams and parameters (:mod:`fence_sorter.verification.faults`). Exit codes:
 0 every case met its target, 1 some did not (named), 2 bad arguments.
 """
 
@@ -13,7 +14,7 @@ from pathlib import Path
 
 from fence_sorter.verification.faults import campaign
 
-CASES = ("wire", "cli", "floods", "interrupts")
+CASES = ("wire", "cli", "floods", "insiders", "interrupts")
 
 
 def register(parser: argparse.ArgumentParser) -> None:

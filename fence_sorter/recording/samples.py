@@ -57,7 +57,9 @@ def _base_sample(typename: str, field: str, counter: _Counter) -> Any:
     if typename == "bool":
         return True
     if typename in _INT_TYPES:
-        return k % 100 + 1  # in range of every integer type, never 0
+        # in range of every integer type, never 0; the seed (k // 1000) shifts it, so a message
+        # of integers alone differs between seeds too
+        return (k + k // 1000) % 100 + 1
     if typename == "float32":
         return k + 0.25  # exactly representable in float32
     if typename == "float64":

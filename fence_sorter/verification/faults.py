@@ -17,6 +17,8 @@ Cases:
   nodes run on.
 - **bad input**: files, scenes, streams and parameters given to the command line; each must
   exit with its status and one line, no traceback.
+- **insiders**: forged duplicates, a flood and a second /clock with the run's own id
+  (:mod:`fence_sorter.verification.insiders`).
 """
 
 from __future__ import annotations
@@ -48,6 +50,7 @@ from fence_sorter.runner.processes import (
     node_env,
     run_domain_id,
 )
+from fence_sorter.verification import insiders
 from fence_sorter.verification.machine import machine_info
 
 REPO = Path(__file__).resolve().parents[2]
@@ -903,7 +906,17 @@ def _cli_md(sec: dict) -> list[str]:
     return [*L, ""]
 
 
-SECTIONS = {"interrupts": _interrupts_md, "floods": _floods_md, "wire": _wire_md, "cli": _cli_md}
+def _insiders_md(sec: dict) -> list[str]:
+    return insiders.insiders_md(sec, _meta_lines(sec["meta"]))
+
+
+SECTIONS = {
+    "interrupts": _interrupts_md,
+    "floods": _floods_md,
+    "insiders": _insiders_md,
+    "wire": _wire_md,
+    "cli": _cli_md,
+}
 
 
 def render_report(data: dict, json_name: str = "reliability.json") -> str:
@@ -960,6 +973,8 @@ def verdicts(data: dict) -> dict[str, bool]:
         out["interrupts"] = all(
             t["leftovers"] == 0 and t["exit_after_s"] <= 5.0 for t in data["interrupts"]["rows"]
         )
+    if "insiders" in data:
+        out["insiders"] = all(insiders.row_ok(r) for r in data["insiders"]["rows"])
     if "floods" in data:
         out["floods"] = all(
             not f["summary"].get("divert_without_outcome") and f["leftovers"] == 0
@@ -1027,6 +1042,10 @@ def campaign(
             rows.append(flood_row(f))
             progress(f"flood {topic}: sent {f.sent}, exit {f.exit_code}, leftovers {f.leftovers}")
         data["floods"] = {"rows": rows, "meta": meta("floods", wall0)}
+    if "insiders" in which:
+        wall0 = time.monotonic()
+        data["insiders"] = insiders.section(workdir, progress)
+        data["insiders"]["meta"] = meta("insiders", wall0)
     if "interrupts" in which:
         wall0 = time.monotonic()
         rows = []

@@ -83,6 +83,7 @@ def test_msg_defs_are_the_registered_types(typestore: Typestore) -> None:
         "FenceState",
         "LoadState",
         "Parcel",
+        "RunClock",
         "SortEvent",
         "SortOutcome",
     ]

@@ -199,8 +199,12 @@ def test_malformed_parcels_are_rejected_and_counted(suite) -> None:
     wait(monitor, lambda: 104 in rec.outcomes, 30, "the valid parcel's outcome")
     monitor.spin_for(1.0)  # the next heartbeats carry the counts
     sim, ctl = heartbeat(monitor, "simulator"), heartbeat(monitor, "controller")
-    assert sim["bad_parcels"] == "4", sim
-    assert ctl["rejected_parcels"] == "4", ctl  # 3 malformed (divert) + the duplicate id
+    assert sim["bad_parcels"] == "3", sim  # the 3 malformed ones
+    assert ctl["rejected_parcels"] == "3", ctl
+    # the same parcel again: a duplicate (the same spec), refused and counted, not a dispute
+    for node in (sim, ctl):
+        assert node["parcels.duplicate"] == "1" and node["parcels.conflict"] == "0", node
+        assert node["parcels.disputed_ids"] == "", node
     assert rec.outcomes[104]["reason_name"] == "NOT_DIVERTED"
     assert not ({101, 102, 103} & rec.outcomes.keys())  # rejected: no outcome invented
     assert group.nodes["simulator"].proc.poll() is None

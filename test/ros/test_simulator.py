@@ -123,7 +123,7 @@ def test_simulator_sorts_reports_and_survives_bad_parcels(env, tmp_path: Path, p
         parcel(10, scan_position_x=-1.0, mass=math.nan)
         parcel(11, scan_position_x=-1.0, mass=-3.0)
         parcel(12, scan_position_x=-1.0, width_b=0.6)  # 0.25 + 0.6 m > s = 0.7 m
-        parcel(1, scan_position_x=-1.0)  # duplicate id
+        parcel(1, scan_position_x=-1.0)  # the same id with another spec: a conflict
         alpha_k = math.radians(40.0)
         pub_commands.publish(
             convert.command_to_msg(StrokeCommand(1, r_s=0.42, t1=0.35, alpha_k=alpha_k), t0)
@@ -158,10 +158,13 @@ def test_simulator_sorts_reports_and_survives_bad_parcels(env, tmp_path: Path, p
         assert any(m.ns == "fence" for a in got["markers"] for m in a.markers)
 
         # malformed parcels and the unknown command are counted; the node keeps running
-        _spin_until(executor, proc, lambda: _sim_diag(got).get("bad_parcels") == "4")
+        _spin_until(executor, proc, lambda: _sim_diag(got).get("bad_parcels") == "3")
         d = _sim_diag(got)
-        for key in ("non_finite", "mass", "wider_than_belt", "duplicate_id"):
+        for key in ("non_finite", "mass", "wider_than_belt"):
             assert d[f"bad_parcels.{key}"] == "1", d
+        # parcel 1 again with another spec: the first stays (it was sorted), the id is disputed
+        assert d["parcels.conflict"] == "1" and d["parcels.disputed_ids"] == "1", d
+        assert out[1].disputed and not any(out[i].disputed for i in (2, 3, 4))
         assert d["commands_rejected.unknown_parcel"] == "1"
         assert 0.5 < float(d["real_time_factor_achieved"]) < 1.5  # paced at rtf 1 (loaded CI)
         for key in ("cycle_lateness_p50_ms", "cycle_lateness_p99_ms", "cycle_lateness_p99_9_ms"):
