@@ -9,6 +9,9 @@
 #   5. ament       lib/fence_sorter/<executables>, ament index marker, share/fence_sorter
 #   6. kernel      compile the Numba physics kernel into its on-disk cache and its solve loop
 #                  into an ahead-of-time extension (about a minute once; one line per part)
+#   7. npm         `npm ci` in every Node.js project of the tests (test/js/*/package-lock.json,
+#                  e.g. Foxglove's own client); without npm one line says so and the tests that
+#                  need it skip
 #
 # Every step is skipped when the sha256 of its inputs matches the stamp it left behind in
 # .venv/.fence_sorter_stamps/, so a rerun with nothing changed takes a second or two.
@@ -211,6 +214,37 @@ step_kernel() {
   stamp_write kernel "$key"
 }
 
+# -- 7. npm -----------------------------------------------------------------------------------
+# Every test/js/<name>/ with a package-lock.json: the exact packages of its lock into its
+# node_modules/, again only when the lock, package.json or the npm/node versions change.
+step_npm() {
+  local locks=() lock dir name key worked=0
+  for lock in "$ROOT"/test/js/*/package-lock.json; do
+    [[ -f "$lock" ]] && locks+=("$lock")
+  done
+  ((${#locks[@]})) || return 0
+  if ! command -v npm >/dev/null 2>&1; then
+    log "npm not found: the Node.js test clients (test/js/*) are not installed; their tests skip"
+    return 0
+  fi
+  for lock in "${locks[@]}"; do
+    dir="$(dirname "$lock")"
+    name="npm-$(basename "$dir")"
+    key="$(inputs_hash "$lock" "$dir/package.json" -s "$(npm --version 2>&1)" \
+      -s "$(node --version 2>&1)")"
+    if stamp_ok "$name" "$key" && [[ -d "$dir/node_modules" ]]; then continue; fi
+    worked=1
+    log "npm ci in ${dir#"$ROOT"/}"
+    mkdir -p "$ROOT/.build"
+    if ! (cd "$dir" && npm ci --no-audit --no-fund) >"$ROOT/.build/$name.log" 2>&1; then
+      tail -n 20 "$ROOT/.build/$name.log" >&2
+      die "npm ci in $dir failed; full log: $ROOT/.build/$name.log"
+    fi
+    stamp_write "$name" "$key"
+  done
+  WORKED=$worked
+}
+
 main() {
   local start=$SECONDS
   cd "$ROOT"
@@ -220,6 +254,7 @@ main() {
   timed package step_package
   timed "ament layout" step_ament
   timed kernel step_kernel
+  timed npm step_npm
   log "ready in $((SECONDS - start)) s (venv $VENV; shell: source scripts/env.sh)"
 }
 

@@ -11,6 +11,9 @@ import argparse
 import sys
 from pathlib import Path
 
+from fence_sorter.recording.topics import CLOCK
+from fence_sorter.visualisation.foxglove_address import AddressError, parse_address
+
 
 def register(parser: argparse.ArgumentParser) -> None:
     parser.description = (
@@ -26,7 +29,13 @@ def register(parser: argparse.ArgumentParser) -> None:
         type=float,
         default=0.0,
         metavar="S",
-        help="wait up to S s for a subscriber before starting",
+        help="wait up to S s for a subscriber (or a Foxglove client) before starting",
+    )
+    parser.add_argument(
+        "--foxglove",
+        metavar="[HOST:]PORT",
+        help="serve the bag to the Foxglove app over the Foxglove WebSocket protocol at "
+        "ws://HOST:PORT while it is replayed (HOST default 127.0.0.1; docs/foxglove.md)",
     )
     parser.set_defaults(func=run)
 
@@ -38,6 +47,13 @@ def run(args: argparse.Namespace) -> int:
         print(f"fence-sorter replay: error: --rate must be in (0, inf), got {args.rate}",
               file=sys.stderr)  # fmt: skip
         return 2
+    address = None
+    if args.foxglove is not None:
+        try:
+            address = parse_address(args.foxglove)
+        except AddressError as exc:
+            print(f"fence-sorter replay: error: {exc}", file=sys.stderr)
+            return 2
     try:
         contents = read_bag(Path(args.bag))
     except BagReadError as exc:
@@ -56,11 +72,25 @@ def run(args: argparse.Namespace) -> int:
             return 2
     from fence_sorter.nodes.replay import replay  # lazy: loads rosbags
 
+    server = None
+    hooks = {}
+    if address is not None:
+        try:
+            server = _foxglove_server(contents, address, args.topics)
+        except RuntimeError as exc:
+            print(f"fence-sorter replay: error: --foxglove {args.foxglove}: {exc}",
+                  file=sys.stderr)  # fmt: skip
+            return 2
+        print(f"serving the bag to Foxglove on ws://{server.host}:{server.port}", flush=True)
+        hooks = {"on_publish": _foxglove_forward(server), "ready": server.has_clients}
     try:
-        result = replay(contents, args.rate, args.topics, wait_for_subscribers=args.wait)
+        result = replay(contents, args.rate, args.topics, wait_for_subscribers=args.wait, **hooks)
     except KeyboardInterrupt:
         print("fence-sorter replay: interrupted", file=sys.stderr)
         return 130
+    finally:
+        if server is not None:
+            server.stop()
     counts = ", ".join(f"{t} {n}" for t, n in sorted(result.published.items()))
     print(
         f"replayed {sum(result.published.values())} messages ({counts}) in "
@@ -73,3 +103,28 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
     return 1 if contents.issues else 0
+
+
+def _foxglove_server(contents, address: tuple[str, int], topics: list[str] | None):
+    """A Foxglove server with a channel per replayed topic (the bag's embedded definitions)."""
+    # lazy: foxglove-sdk and rosbags only when serving
+    from fence_sorter.recording.msgtypes import make_typestore
+    from fence_sorter.visualisation.foxglove_live import LiveServer
+
+    server = LiveServer(make_typestore(), host=address[0], port=address[1])
+    for topic, msgtype in sorted(contents.types.items()):
+        if topics is None or topic in topics:
+            server.add_topic(topic, msgtype, contents.msgdefs.get(msgtype))
+    return server
+
+
+def _foxglove_forward(server):
+    """Each replayed message to the Foxglove server as it is published (CDR as recorded);
+    /clock is the server's time."""
+
+    def forward(m) -> None:
+        server.log(m.topic, m.raw, m.t_ns)
+        if m.topic == CLOCK:
+            server.broadcast_time(m.t_ns)
+
+    return forward

@@ -46,6 +46,12 @@ def register(parser: argparse.ArgumentParser) -> None:
         "(the truth in its metadata; docs/calibration.md)",
     )
     parser.add_argument(
+        "--foxglove",
+        metavar="[HOST:]PORT",
+        help="serve every topic of the run to the Foxglove app over the Foxglove WebSocket "
+        "protocol at ws://HOST:PORT (HOST default 127.0.0.1; docs/foxglove.md)",
+    )
+    parser.add_argument(
         "--stream", default="default", help="stream config (YAML) or CSV manifest, or a name"
     )
     parser.add_argument("--seed", type=int, help="seed of a random stream (default: the file's)")
@@ -96,6 +102,7 @@ def run(args: argparse.Namespace) -> int:
         domain=args.domain,
         keep_logs=args.keep_logs,
         sensors=args.sensors,
+        foxglove=args.foxglove,
     )
     say = (lambda s: print(s, file=sys.stderr)) if args.json else print
     # from here to the exit SIGINT/SIGTERM are flags the job checks (no traceback, no

@@ -602,6 +602,34 @@ SENSORS_PARAMETERS: tuple[ParamSpec, ...] = (
 )
 
 
+FOXGLOVE_PARAMETERS: tuple[ParamSpec, ...] = (
+    ParamSpec(
+        "host",
+        "127.0.0.1",
+        "Address the Foxglove WebSocket server binds (an IP address or localhost); "
+        "127.0.0.1: this machine only (docs/security.md)",
+        read_only=True,
+    ),
+    ParamSpec(
+        "port",
+        8765,
+        "TCP port of the Foxglove WebSocket server; 0: a free one (logged)",
+        True,
+        0,
+        65535,
+    ),
+    ParamSpec("topics", list(TOPIC_TYPES), "Topics served to Foxglove", read_only=True),
+    ParamSpec(
+        "client_backlog",
+        1024,
+        "Outgoing messages held per client; beyond it the oldest are dropped and the client "
+        "is counted as slow on /diagnostics",
+        True,
+        16,
+        1_000_000,
+    ),
+)
+
 #: node name -> every parameter it declares (the common ones first)
 NODE_PARAMETERS: dict[str, tuple[ParamSpec, ...]] = {
     "simulator": COMMON_PARAMETERS + SIMULATOR_PARAMETERS,
@@ -609,6 +637,7 @@ NODE_PARAMETERS: dict[str, tuple[ParamSpec, ...]] = {
     "controller": COMMON_PARAMETERS + CONTROLLER_PARAMETERS,
     "recorder": COMMON_PARAMETERS + RECORDER_PARAMETERS,
     "sensors": COMMON_PARAMETERS + SENSORS_PARAMETERS,
+    "foxglove": COMMON_PARAMETERS + FOXGLOVE_PARAMETERS,
 }
 
 

@@ -22,7 +22,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from fence_sorter.nodes.qos import RELIABLE_QOS, topic_qos
 from fence_sorter.nodes.recorder import message_class
-from fence_sorter.recording.bagread import BagContents
+from fence_sorter.recording.bagread import BagContents, BagMessage
 from fence_sorter.recording.topics import REPLAY_DEPTH, TOPICS
 
 NODE_NAME = "replay"
@@ -59,11 +59,15 @@ def replay(
     topics: Iterable[str] | None = None,
     wait_for_subscribers: float = 0.0,
     say: Callable[[str], None] = print,
+    on_publish: Callable[[BagMessage], None] | None = None,
+    ready: Callable[[], bool] | None = None,
 ) -> ReplayResult:
     """Publish the bag's messages over DDS on the current ROS_DOMAIN_ID; returns counts.
 
     ``wait_for_subscribers`` > 0: wait up to that long [s] for at least one subscriber on a
-    replayed topic before starting (so a node started just before does not miss the start).
+    replayed topic before starting (so a node started just before does not miss the start);
+    ``ready``: a further condition that ends that wait (a Foxglove client subscribed).
+    ``on_publish`` sees every message right after it is published (``replay --foxglove``).
     """
     if not rate > 0:
         raise ValueError(f"--rate must be > 0, got {rate}")
@@ -83,8 +87,10 @@ def replay(
             pubs[topic] = node.create_publisher(message_class(msgtype), topic, offered(qos))
         if wait_for_subscribers > 0:
             deadline = time.monotonic() + wait_for_subscribers
-            while time.monotonic() < deadline and not any(
-                p.get_subscription_count() for p in pubs.values()
+            while (
+                time.monotonic() < deadline
+                and not any(p.get_subscription_count() for p in pubs.values())
+                and not (ready is not None and ready())
             ):
                 time.sleep(0.05)
         t0 = msgs[0].t_ns
@@ -103,6 +109,8 @@ def replay(
                 result.max_lateness = max(result.max_lateness, now - due)
             pubs[m.topic].publish(m.raw)
             result.published[m.topic] += 1
+            if on_publish is not None:
+                on_publish(m)
         result.wall_time = time.monotonic() - start
         # the node goes only once its reliable subscribers have acknowledged every message
         # (a repair of the tail can take a heartbeat period on a loaded machine)

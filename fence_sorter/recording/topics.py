@@ -49,6 +49,8 @@ TF_DEPTH = 100
 #: the recorder's subscriptions: history kept while its executor is busy (the writer thread
 #: has its own queue)
 RECORDER_DEPTH = 1000
+#: the Foxglove node's subscriptions: history kept while its executor is busy
+FOXGLOVE_DEPTH = 1000
 #: replay's publishers (it publishes as fast as the bag's pace asks)
 REPLAY_DEPTH = 1000
 
@@ -120,6 +122,7 @@ NODE_SUBSCRIPTIONS: dict[str, tuple[str, ...]] = {
     "controller": (PARCELS,),
     "recorder": tuple(SUITE_TOPICS),
     "sensors": (FENCE_STATE, LOAD_STATES, PARCELS),
+    "foxglove": tuple(SUITE_TOPICS),
 }
 #: the measured topics a real sorter's sensors publish (docs/calibration.md), published in a
 #: run by the sensors node (``fence-sorter run --sensors``) and recorded with the suite's

@@ -46,6 +46,7 @@ from fence_sorter.runner.processes import (
 from fence_sorter.runner.summary import summarise, verdict
 from fence_sorter.scene import load_scene, resolve_scene
 from fence_sorter.stream import load_stream, resolve_stream
+from fence_sorter.visualisation.foxglove_address import AddressError, parse_address
 
 DEFAULT_SCENE = "impact_flexible"
 DEFAULT_STREAM = "default"
@@ -54,7 +55,7 @@ SCAN_LINE_X = -3.0
 START_DELAY = 0.5
 #: sim time a parcel needs after its scan to leave the line (line end ~3 m) plus margin [s]
 LINE_END_X = 3.0
-STOP_ORDER = ("scanner", "controller", "simulator", "sensors", "recorder")
+STOP_ORDER = ("scanner", "controller", "simulator", "sensors", "recorder", "foxglove")
 #: controller parameters the simulator takes too (the limits of its outcomes' damage margins)
 DAMAGE_LIMITS = ("w_dop", "a_ndop")
 #: the nodes that share the run's id (parameter run_id) on /parcels and /fence_commands
@@ -99,6 +100,7 @@ class RunOptions:
     domain: int | None = None  # ROS domain (None: ROS_DOMAIN_ID if set, else a free one)
     keep_logs: bool = False  # keep the node logs of a clean run too
     sensors: str | None = None  # sensors file or name: the sensors node runs (and is recorded)
+    foxglove: str | None = None  # [HOST:]PORT: the Foxglove node serves the run there
 
 
 @dataclass
@@ -129,6 +131,7 @@ class Plan:
     sensors_path: Path | None = None  # the sensors file of a run with sensors
     truth: dict | None = None  # what a calibration bag of the run is made from (its metadata)
     state_rate: float = 0.0  # the state's rate the sensors need [Hz of sim time]; 0: default
+    foxglove: tuple[str, int] | None = None  # host and port of the Foxglove node
     #: the run's identity on the wire (drawn per run; messages with another are foreign)
     run_id: int = field(default_factory=lambda: 1 + secrets.randbelow(2**63 - 1))
     #: the run's key (hex; fence_sorter.provenance): its nodes' tags on what they send, handed
@@ -188,6 +191,12 @@ def prepare(opts: RunOptions) -> Plan:
         truth["seed"] = node_params.get("sensors", {}).get("seed", truth["seed"])
         cfg = load_sensors_arg(sensors_path)
         state_rate = sensors_state_rate(cfg, base, opts.rtf, opts.sensors)
+    foxglove = None
+    if opts.foxglove is not None:
+        try:
+            foxglove = parse_address(opts.foxglove)
+        except AddressError as exc:
+            raise BadInput(str(exc)) from None
     sim_duration = START_DELAY + stream[-1].arrival_time + (LINE_END_X - SCAN_LINE_X) / v + 5.0
     try:
         domain = choose_domain(opts.domain)
@@ -207,6 +216,7 @@ def prepare(opts: RunOptions) -> Plan:
         truth=truth,
         state_rate=state_rate,
         stream={s.parcel_id: s for s in stream},
+        foxglove=foxglove,
     )
 
 
@@ -429,6 +439,21 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None], stop: StopReq
         gate = ["simulator", "controller", MONITOR_NAME]
         gate += ["recorder"] if opts.bag else []
         gate += ["sensors"] if plan.sensors_path else []
+        gate += ["foxglove"] if plan.foxglove else []
+        if plan.foxglove:
+            host, port = plan.foxglove
+            group.start(
+                "foxglove",
+                node_command(
+                    "foxglove_bridge",
+                    _ros_args(
+                        "foxglove",
+                        plan,
+                        opts,
+                        [f"host:={host}", f"port:={port}", "use_sim_time:=true"],
+                    ),
+                ),
+            )
         if opts.bag:
             Path(opts.bag).mkdir(parents=True, exist_ok=True)
             rec_args = _recorder_args(plan, opts, log_dir)
@@ -522,6 +547,7 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None], stop: StopReq
             ("controller", 120.0),
             *((("recorder", 60.0),) if opts.bag else ()),
             *((("sensors", 60.0),) if plan.sensors_path else ()),
+            *((("foxglove", 60.0),) if plan.foxglove else ()),
             ("simulator", 60.0),
             ("scanner", 60.0),
         ):

@@ -1,0 +1,101 @@
+// Foxglove's own WebSocket client (@foxglove/ws-protocol) with its ROS 2 decoder
+// (@foxglove/rosmsg + @foxglove/rosmsg2-serialization): connects to a fence_sorter Foxglove
+// server, subscribes to the named topics and writes every message it decodes as one JSON line
+// {topic, log_time, schema, message} to OUT. Used by test/ros/test_foxglove_live.py.
+//
+//   node client.mjs URL OUT TIMEOUT_S [--stall] TOPIC...
+//
+// It retries the connection until the server is up (within TIMEOUT_S), prints
+// "subscribed TOPIC" for each subscription and "closed N" when the server goes away (the end
+// of the run), then exits 0. --stall: once subscribed to every topic, stop reading the socket
+// (prints "stalled"): a slow client whose outbox on the server fills up. The server speaks the subprotocol "foxglove.sdk.v1";
+// FoxgloveClient.SUPPORTED_SUBPROTOCOL still names the older "foxglove.websocket.v1", so the
+// socket is opened here with the new name and handed to FoxgloveClient.
+import { createWriteStream } from "node:fs";
+import rosmsg from "@foxglove/rosmsg";
+import serialization from "@foxglove/rosmsg2-serialization";
+import wsProtocol from "@foxglove/ws-protocol";
+import WebSocket from "ws";
+
+// CommonJS packages: their exports come as one default object
+const { parse } = rosmsg;
+const { MessageReader } = serialization;
+const { FoxgloveClient } = wsProtocol;
+
+const SUBPROTOCOL = "foxglove.sdk.v1";
+const [url, outPath, timeoutText, ...rest] = process.argv.slice(2);
+const stall = rest[0] === "--stall";
+const topics = stall ? rest.slice(1) : rest;
+if (!url || !outPath || !timeoutText || topics.length === 0) {
+  console.error("usage: node client.mjs URL OUT TIMEOUT_S TOPIC...");
+  process.exit(2);
+}
+const deadline = Date.now() + 1000 * Number(timeoutText);
+const out = createWriteStream(outPath);
+
+// BigInt (uint64, int64) as decimal strings, typed arrays as plain arrays
+function plain(_key, value) {
+  if (typeof value === "bigint") return value.toString();
+  if (ArrayBuffer.isView(value)) return Array.from(value, (v) => (typeof v === "bigint" ? v.toString() : v));
+  return value;
+}
+
+function connect() {
+  const ws = new WebSocket(url, [SUBPROTOCOL]);
+  ws.binaryType = "arraybuffer";
+  let opened = false;
+  ws.on("open", () => {
+    opened = true;
+  });
+  ws.on("error", () => {
+    if (!opened) {
+      ws.terminate();
+      if (Date.now() > deadline) {
+        console.error(`no Foxglove server at ${url} within ${timeoutText} s`);
+        process.exit(1);
+      }
+      setTimeout(connect, 100);
+    }
+  });
+  const client = new FoxgloveClient({ ws });
+  const readers = new Map(); // subscription id -> {topic, schema, reader}
+  let received = 0;
+  client.on("advertise", (channels) => {
+    for (const channel of channels) {
+      if (!topics.includes(channel.topic)) continue;
+      if (channel.encoding !== "cdr" || channel.schemaEncoding !== "ros2msg") {
+        console.error(`${channel.topic}: encoding ${channel.encoding}/${channel.schemaEncoding}`);
+        process.exit(1);
+      }
+      const reader = new MessageReader(parse(channel.schema, { ros2: true }));
+      const id = client.subscribe(channel.id);
+      readers.set(id, { topic: channel.topic, schema: channel.schemaName, reader });
+      console.log(`subscribed ${channel.topic}`);
+    }
+    if (stall && readers.size === topics.length) {
+      ws._socket.pause(); // nothing more is read: the server's outbox for this client fills
+      console.log("stalled");
+    }
+  });
+  client.on("message", ({ subscriptionId, timestamp, data }) => {
+    const entry = readers.get(subscriptionId);
+    if (!entry) return;
+    const bytes = new Uint8Array(data.buffer, data.byteOffset, data.byteLength);
+    const message = entry.reader.readMessage(bytes);
+    received += 1;
+    out.write(
+      JSON.stringify(
+        { topic: entry.topic, log_time: timestamp.toString(), schema: entry.schema, message },
+        plain,
+      ) + "\n",
+    );
+  });
+  client.on("close", () => {
+    if (!opened) return;
+    console.log(`closed ${received}`);
+    out.end(() => process.exit(0));
+  });
+}
+
+process.on("SIGTERM", () => out.end(() => process.exit(0)));
+connect();

@@ -1,0 +1,150 @@
+"""The Foxglove WebSocket server (foxglove-sdk) of fence_sorter against Foxglove's own npm client
+(@foxglove/ws-protocol, decoding with @foxglove/rosmsg2-serialization), ROS-free: CDR bytes made
+by rosbags' type store go out unchanged on ros2msg/cdr channels and the npm client decodes the
+same values; a late joiner gets the latched robot description; a client that stops reading is
+counted as slow; bad addresses are refused with the option and the allowed values."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from fence_sorter.recording.msgtypes import make_typestore
+from fence_sorter.testing import stop_process, wait_until
+from fence_sorter.testing_foxglove import Client, client_missing
+from fence_sorter.visualisation.foxglove_address import AddressError, parse_address
+from fence_sorter.visualisation.foxglove_live import LiveServer
+
+needs_client = pytest.mark.skipif(client_missing() is not None, reason=str(client_missing()))
+
+OUTCOME = "fence_sorter_msgs/msg/SortOutcome"
+STRING = "std_msgs/msg/String"
+
+
+def _outcome(ts, k: int):
+    """A SortOutcome with distinct values per k (rosbags message object)."""
+    t = ts.types
+    stamp = t["builtin_interfaces/msg/Time"](sec=3 + k, nanosec=250_000_000 + k)
+    header = t["std_msgs/msg/Header"](stamp=stamp, frame_id="sorter")
+    return t[OUTCOME](
+        header=header,
+        parcel_id=100 + k,
+        sorted=bool(k % 2),
+        reason=f"reason {k}",
+        reason_code=k % 7,
+        peak_normal_force=1234.5678 + k / 3.0,
+        peak_normal_force_stiff=2e4 / (k + 1),
+        peak_normal_accel=98.25 * k,
+        impact_normal_speed=1.0 / 7.0 + k,
+        exit_speed_y=-0.1 * k,
+        y_max=0.9,
+        time_in_working_space=0.61,
+        w_dop=2.4,
+        a_ndop=150.0,
+        impact_speed_margin=1e-3 * k,
+        accel_margin=-0.5,
+        drop_height=0.29,
+    )
+
+
+@pytest.fixture
+def server(request):
+    """A server on a free port of 127.0.0.1 (backlog: the indirect parameter, else 1024)."""
+    srv = LiveServer(make_typestore(), port=0, backlog=getattr(request, "param", 1024))
+    try:
+        yield srv
+    finally:
+        srv.stop()
+
+
+@pytest.mark.slow
+@needs_client
+def test_npm_client_decodes_what_rosbags_serialised(server: LiveServer, tmp_path: Path) -> None:
+    ts = server.typestore
+    server.add_topic("/sort_outcomes", OUTCOME)
+    server.add_topic("/robot_description", STRING)
+    urdf = '<robot name="fence_sorter"><link name="sorter"/></robot>'
+    # published before any client: a late joiner gets it all the same (latched)
+    server.log("/robot_description", ts.serialize_cdr(ts.types[STRING](data=urdf), STRING), 7)
+    client = Client(
+        f"ws://127.0.0.1:{server.port}", tmp_path / "out.jsonl",
+        ["/sort_outcomes", "/robot_description"], timeout=30,
+    )  # fmt: skip
+    try:
+        wait_until(
+            lambda: sum(len(c.subscriptions) for c in server.clients.values()) == 2,
+            30, "the npm client's two subscriptions",
+        )  # fmt: skip
+        sent = [_outcome(ts, k) for k in range(40)]
+        for k, msg in enumerate(sent):
+            server.log("/sort_outcomes", ts.serialize_cdr(msg, OUTCOME), 1_000_000_000 + k)
+        wait_until(lambda: len(client.messages()) >= 41, 30, "41 messages at the npm client")
+    finally:
+        stop_process(client.proc)
+    got = client.messages()
+    outcomes = [m for m in got if m["topic"] == "/sort_outcomes"]
+    described = [m for m in got if m["topic"] == "/robot_description"]
+    assert [m["message"]["data"] for m in described] == [urdf] and described[0]["log_time"] == "7"
+    assert len(outcomes) == len(sent)
+    for k, (m, msg) in enumerate(zip(outcomes, sent, strict=True)):
+        assert m["schema"] == OUTCOME and m["log_time"] == str(1_000_000_000 + k)
+        d = m["message"]
+        assert d["header"]["stamp"] == {
+            "sec": msg.header.stamp.sec,
+            "nanosec": msg.header.stamp.nanosec,
+        }
+        assert d["header"]["frame_id"] == "sorter"
+        for name in (
+            "parcel_id", "sorted", "reason", "reason_code", "peak_normal_force",
+            "peak_normal_force_stiff", "peak_normal_accel", "impact_normal_speed",
+            "exit_speed_y", "impact_speed_margin", "drop_height",
+        ):  # fmt: skip
+            assert d[name] == getattr(msg, name), name  # bit for bit: the same CDR
+    stats = server.stats()
+    assert stats["forwarded.sort_outcomes"] == "40" and stats["resent_to_late_joiners"] == "1"
+    assert stats["slow_clients"] == "0"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("server", [16], indirect=True)
+@needs_client
+def test_a_client_that_stops_reading_is_counted_slow(server: LiveServer, tmp_path: Path) -> None:
+    ts = server.typestore
+    server.add_topic("/big", STRING)
+    client = Client(
+        f"ws://127.0.0.1:{server.port}", tmp_path / "out.jsonl", ["/big"], timeout=30, stall=True
+    )
+    try:
+        wait_until(lambda: client.said("stalled") and server.has_clients(), 30, "a stalled client")
+        data = ts.serialize_cdr(ts.types[STRING](data="x" * 100_000), STRING)
+        # 16 held per client, the socket's buffers hold a few MB: 300 MB cannot fit
+        for k in range(3000):
+            server.log("/big", data, k)
+        wait_until(lambda: server.stats()["slow_clients"] == "1", 30, "the slow client counted")
+    finally:
+        stop_process(client.proc)
+    stats = server.stats()
+    # more than its outbox holds went its way (the SDK may disconnect it once its control
+    # queue fills too, and then forwards no more)
+    assert stats["offered"] == "3000" and int(stats["forwarded.big"]) > 16
+    assert stats["slow_client_addresses"].startswith("127.0.0.1:")
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        ("8765", ("127.0.0.1", 8765)),
+        ("0.0.0.0:9000", ("0.0.0.0", 9000)),
+        ("localhost:1", ("localhost", 1)),
+        ("[::1]:65535", ("::1", 65535)),
+    ],
+)
+def test_addresses(text: str, expected: tuple[str, int]) -> None:
+    assert parse_address(text) == expected
+
+
+@pytest.mark.parametrize("text", ["0", "65536", "host:80", "8765x", "", "127.0.0.1:"])
+def test_bad_addresses_name_the_option_and_range(text: str) -> None:
+    with pytest.raises(AddressError, match=r"^--foxglove .*(PORT in 1-65535|IP address)"):
+        parse_address(text)
