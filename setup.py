@@ -58,6 +58,7 @@ setup(
             "controller = fence_sorter.nodes.controller:main",
             "recorder = fence_sorter.nodes.recorder:main",
             "sensors = fence_sorter.nodes.sensors:main",
+            "foxglove_bridge = fence_sorter.nodes.foxglove_bridge:main",
             "fence-sorter = fence_sorter.cli.main:main",
         ],
     },

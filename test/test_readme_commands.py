@@ -43,6 +43,12 @@ COVERED: dict[str, str] = {
     "fence-sorter run --sensors camera60 --bag bags/cal": (
         "test/ros/test_sensors_run.py::test_the_bag_carries_the_truth_and_calibrate_fits_it"
     ),
+    "fence-sorter run --parcels 4 --foxglove 8765 --bag /tmp/fg": (
+        "test/ros/test_foxglove_live.py::test_npm_client_gets_the_runs_joint_states_and_outcomes"
+    ),
+    "fence-sorter replay bags/example_4_parcels --foxglove 8765 --wait 30": (
+        "test/ros/test_foxglove_live.py::test_replay_serves_the_bag_to_the_npm_client"
+    ),
     "fence-sorter bench-suite": HERE,
     "fence-sorter analyze bags/example_4_parcels": HERE,
     "fence-sorter analyze bags/example_4_parcels --json --out /tmp/ex": (

@@ -29,6 +29,10 @@ from fence_sorter.visualisation.foxglove_address import AddressError, parse_addr
 from fence_sorter.visualisation.foxglove_live import LiveServer
 
 
+class ServeError(RuntimeError):
+    """The server cannot start (one line: the address and the SDK's reason)."""
+
+
 class FoxgloveNode(FenceSorterNode):
     """Serves the run's topics to Foxglove (foxglove-sdk WebSocket server, ros2msg/cdr)."""
 
@@ -47,9 +51,13 @@ class FoxgloveNode(FenceSorterNode):
                     f"({', '.join(ALL_TOPICS)})"
                 )
         host, port = str(p["host"]), int(p["port"])
-        self.server = LiveServer(
-            make_typestore(), host=host, port=port, backlog=int(p["client_backlog"])
-        )
+        self.server: LiveServer | None = None
+        try:
+            self.server = LiveServer(
+                make_typestore(), host=host, port=port, backlog=int(p["client_backlog"])
+            )
+        except RuntimeError as exc:  # the SDK's FoxgloveError: a port in use, no such address
+            raise ServeError(f"cannot serve on {host}:{port}: {exc}") from None
         self.lost = 0  # messages the middleware reports lost before this node took them
         self.served_subscriptions = []
         for name in p["topics"]:
@@ -112,13 +120,15 @@ class FoxgloveNode(FenceSorterNode):
         for param in parameters:
             if param.name == "host":
                 try:
-                    parse_address(f"{param.value}:1", "host")
+                    parse_address(f"{param.value}:1", "parameter host")
                 except AddressError as exc:
                     return str(exc)
         return None
 
     def destroy_node(self) -> None:
-        self.server.stop()
+        if self.server is not None:
+            self.server.stop()
+            self.server = None
         super().destroy_node()
 
 
@@ -127,7 +137,7 @@ def main(args: Sequence[str] | None = None) -> int:
     is taken) or a topic is unknown."""
     try:
         return run_node(FoxgloveNode, args)
-    except (ValueError, RuntimeError) as exc:
+    except (ValueError, ServeError) as exc:
         print(f"foxglove: {exc}", file=sys.stderr)
         return 2
 

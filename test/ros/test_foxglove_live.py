@@ -11,6 +11,7 @@ import dataclasses
 import json
 import math
 import os
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -51,12 +52,31 @@ def _plain(value):
 
 
 def _bag(path: Path) -> dict[str, list]:
-    out: dict[str, list] = {"/joint_states": [], "/sort_outcomes": [], "/diagnostics": []}
+    return _bag_topics(path, ["/joint_states", "/sort_outcomes", "/diagnostics"])
+
+
+def _bag_topics(path: Path, topics: list[str]) -> dict[str, list]:
+    """The messages of ``topics`` in the bag (rosbags), in log-time order."""
+    out: dict[str, list] = {t: [] for t in topics}
     with AnyReader([path]) as reader:
         conns = [c for c in reader.connections if c.topic in out]
         for conn, _t, raw in reader.messages(connections=conns):
             out[conn.topic].append(reader.deserialize(raw, conn.msgtype))
     return out
+
+
+def _listening(port: int) -> list[str]:
+    """The local addresses of the TCP sockets listening on ``port`` (``ss -ltn``)."""
+    out = subprocess.run(["ss", "-ltnH"], capture_output=True, text=True, check=True).stdout
+    return sorted(
+        f.split()[3] for f in out.splitlines() if f.split()[3].rsplit(":", 1)[-1] == str(port)
+    )
+
+
+def _run_env() -> dict[str, str]:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH")]))
+    return env
 
 
 def _stamp(d: dict) -> tuple[int, int]:
@@ -67,8 +87,7 @@ def _stamp(d: dict) -> tuple[int, int]:
 def test_npm_client_gets_the_runs_joint_states_and_outcomes(tmp_path: Path) -> None:
     port = free_port()
     bag = tmp_path / "bag"
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH")]))
+    env = _run_env()
     cmd = [sys.executable, "-m", "fence_sorter.cli.main", "run", "--parcels", "4"]
     cmd += ["--bag", str(bag), "--foxglove", f"127.0.0.1:{port}", "--json"]
     cmd += ["--log-dir", str(tmp_path / "logs")]
@@ -80,6 +99,7 @@ def test_npm_client_gets_the_runs_joint_states_and_outcomes(tmp_path: Path) -> N
                 lambda: all(client.said(f"subscribed {t}") for t in TOPICS) or run.poll(),
                 240, "the npm client's subscriptions",
             )  # fmt: skip
+            listening = _listening(port)
             stdout, stderr = run.communicate(timeout=300)
             assert run.returncode == 0, stdout + stderr
             # the node stops with the run: the server closes the connection
@@ -88,6 +108,8 @@ def test_npm_client_gets_the_runs_joint_states_and_outcomes(tmp_path: Path) -> N
             pytest.fail("the run did not end within 300 s")
         finally:
             stop_process(client.proc)
+    # the server's socket: on loopback only, as --foxglove 127.0.0.1:PORT asked
+    assert listening == [f"127.0.0.1:{port}"], listening
     summary = json.loads(stdout)
     assert summary["exit_codes"].get("foxglove") == 0, summary["exit_codes"]
     assert client.said("closed"), client.lines
@@ -122,3 +144,50 @@ def test_npm_client_gets_the_runs_joint_states_and_outcomes(tmp_path: Path) -> N
     assert last is not None, "no heartbeat of the Foxglove node in the bag"
     assert last["forwarded.sort_outcomes"] == "4" and last["slow_clients"] == "0"
     assert last["address"] == f"127.0.0.1:{port}" and last["clients"] == "1"
+
+
+def test_replay_serves_the_bag_to_the_npm_client(tmp_path: Path, env: dict[str, str]) -> None:
+    """``fence-sorter replay BAG --foxglove PORT --wait S``: the replay starts once the npm
+    client subscribes; the outcomes and the robot description it gets equal the bag's, and
+    /joint_states from its first message on to the bag's end, without a gap."""
+    port = free_port()
+    bag = REPO / "bags" / "example_4_parcels"
+    topics = ["/joint_states", "/sort_outcomes", "/robot_description"]
+    cmd = [sys.executable, "-m", "fence_sorter.cli.main", "replay", str(bag), "--rate", "4"]
+    cmd += ["--foxglove", str(port), "--wait", "120"]
+    out = tmp_path / "client.jsonl"
+    with managed_process(cmd, {**env, "PYTHONPATH": _run_env()["PYTHONPATH"]}, cwd=REPO) as rep:
+        client = Client(f"ws://127.0.0.1:{port}", out, topics, timeout=120)
+        try:
+            stdout, stderr = rep.communicate(timeout=240)
+            assert rep.returncode == 0, stdout + stderr
+            wait_until(lambda: client.proc.poll() is not None, 30, "the client's end")
+        finally:
+            stop_process(client.proc)
+    assert f"serving the bag to Foxglove on ws://127.0.0.1:{port}" in stdout
+    got = client.messages()
+    recorded = _bag_topics(bag, topics)
+    for topic in ("/sort_outcomes", "/robot_description"):
+        mine = [m["message"] for m in got if m["topic"] == topic]
+        assert mine == [_plain(m) for m in recorded[topic]], topic
+    states = [m["message"] for m in got if m["topic"] == "/joint_states"]
+    in_bag = [_plain(m) for m in recorded["/joint_states"]]
+    first = next(k for k, m in enumerate(in_bag) if _stamp(m) == _stamp(states[0]))
+    assert states == in_bag[first:] and len(states) > 0.9 * len(in_bag)
+
+
+def test_a_port_in_use_fails_the_run_naming_the_node(tmp_path: Path) -> None:
+    """Another program listens on the port: the Foxglove node exits 2 at start with one line,
+    the run ends with exit 1 and says which node failed."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        cmd = [sys.executable, "-m", "fence_sorter.cli.main", "run", "--parcels", "1"]
+        cmd += ["--foxglove", f"127.0.0.1:{port}", "--log-dir", str(tmp_path / "logs")]
+        proc = subprocess.run(cmd, env=_run_env(), cwd=REPO, capture_output=True, text=True,
+                              timeout=300)  # fmt: skip
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    assert "node foxglove exited with status 2" in proc.stderr, proc.stderr
+    log = (tmp_path / "logs" / "foxglove.log").read_text()
+    assert f"127.0.0.1:{port}" in log and "foxglove:" in log, log
