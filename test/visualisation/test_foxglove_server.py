@@ -45,6 +45,7 @@ def _outcome(ts, k: int):
         impact_speed_margin=1e-3 * k,
         accel_margin=-0.5,
         drop_height=0.29,
+        disputed=k == 3,
     )
 
 
@@ -98,7 +99,7 @@ def test_npm_client_decodes_what_rosbags_serialised(server: LiveServer, tmp_path
         for name in (
             "parcel_id", "sorted", "reason", "reason_code", "peak_normal_force",
             "peak_normal_force_stiff", "peak_normal_accel", "impact_normal_speed",
-            "exit_speed_y", "impact_speed_margin", "drop_height",
+            "exit_speed_y", "impact_speed_margin", "drop_height", "disputed",
         ):  # fmt: skip
             assert d[name] == getattr(msg, name), name  # bit for bit: the same CDR
     stats = server.stats()
