@@ -9,6 +9,10 @@
 #   5. ament       lib/fence_sorter/<executables>, ament index marker, share/fence_sorter
 #   6. kernel      compile the Numba physics kernel into its on-disk cache and its solve loop
 #                  into an ahead-of-time extension (about a minute once; one line per part)
+#   7. browser     Debian's chromium for the browser tests (apt-get; skipped at once when
+#                  /usr/bin/chromium exists; without apt-get or root: one line, and on)
+#   8. npm         `npm ci` in every test/js/*/ with a package-lock.json (the Node clients of
+#                  the tests, pinned by their lock files); without npm: one line, and on
 #
 # Every step is skipped when the sha256 of its inputs matches the stamp it left behind in
 # .venv/.fence_sorter_stamps/, so a rerun with nothing changed takes a second or two.
@@ -211,6 +215,44 @@ step_kernel() {
   stamp_write kernel "$key"
 }
 
+# -- 7. browser --------------------------------------------------------------------------------
+# Only the browser tests need it; a machine without it skips them (with the reason).
+step_browser() {
+  [[ -x /usr/bin/chromium ]] && return 0
+  if ! command -v apt-get >/dev/null 2>&1 || [[ "$(id -u)" != 0 ]]; then
+    log "no chromium and no apt-get as root: the browser tests will be skipped"
+    return 0
+  fi
+  WORKED=1
+  log "installing Debian's chromium (apt-get, once)"
+  if ! { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
+    --no-install-recommends chromium; } >"$ROOT/.build/chromium.log" 2>&1; then
+    log "chromium could not be installed (log: .build/chromium.log): the browser tests will be skipped"
+  fi
+}
+
+# -- 8. npm ------------------------------------------------------------------------------------
+# Each Node project under test/js/ is installed from its lock file, keyed on the lock's hash.
+step_npm() {
+  local lock dir name key worked=0
+  for lock in "$ROOT"/test/js/*/package-lock.json; do
+    [[ -f "$lock" ]] || continue
+    dir="$(dirname "$lock")"
+    name="npm-$(basename "$dir")"
+    key="$(inputs_hash "$lock" "$dir/package.json")"
+    if stamp_ok "$name" "$key" && [[ -d "$dir/node_modules" ]]; then continue; fi
+    if ! command -v npm >/dev/null 2>&1; then
+      log "no npm: ${dir#"$ROOT"/} not installed, its tests will be skipped"
+      continue
+    fi
+    worked=1
+    log "npm ci in ${dir#"$ROOT"/}"
+    (cd "$dir" && npm ci --no-audit --no-fund --loglevel=error) || die "npm ci in $dir failed"
+    stamp_write "$name" "$key"
+  done
+  WORKED=$worked
+}
+
 main() {
   local start=$SECONDS
   cd "$ROOT"
@@ -220,6 +262,9 @@ main() {
   timed package step_package
   timed "ament layout" step_ament
   timed kernel step_kernel
+  mkdir -p "$ROOT/.build"
+  timed browser step_browser
+  timed npm step_npm
   log "ready in $((SECONDS - start)) s (venv $VENV; shell: source scripts/env.sh)"
 }
 

@@ -62,6 +62,7 @@ def searched_files() -> list[Path]:
             if f.is_file()
             and f.suffix in SUFFIXES
             and "__pycache__" not in f.parts
+            and "node_modules" not in f.parts  # the npm packages of test/js/*/, not ours
             and f.resolve() != Path(__file__).resolve()
         ]
     return files
