@@ -96,16 +96,18 @@ def test_example_recording_renders_in_the_web_viewer(tmp_path):
     seen("default", (50, 100, 200), LEFT, 300)  # chute outline
     colours = margin_colours(EXAMPLE)
     assert len(colours) == 3
-    for colour in colours.values():
-        seen("damage", colour, LEFT, 15)
+    for colour in colours.values():  # a mark of radius 0.04 m: 15 to 25 pixels
+        seen("damage", colour, LEFT, 8)
     # every plot of the time-series tab draws its series in the colours its title names
     contact, tip, alpha, speed = PLOTS
-    seen("default", rl.N_COLOR, contact, 30)
-    seen("default", rl.N_STIFF_COLOR, contact, 30)
-    seen("default", rl.STEPS_COLOR, tip, 30)
-    seen("default", rl.SAMPLED_COLOR, tip, 30)
-    seen("default", rl.ALPHA_COLOR, alpha, 100)
-    seen("default", rl.DIVERT_COLOR, speed, 100)
+    # (thin lines: a few pixels each; at 1280 x 800 the example draws 20 N, 51 N_stiff, 9
+    # solver-step and 755 sampled tip-deflection, 103 alpha_w and 135 speed pixels)
+    seen("default", rl.N_COLOR, contact, 10)
+    seen("default", rl.N_STIFF_COLOR, contact, 20)
+    seen("default", rl.STEPS_COLOR, tip, 4)
+    seen("default", rl.SAMPLED_COLOR, tip, 200)
+    seen("default", rl.ALPHA_COLOR, alpha, 50)
+    seen("default", rl.DIVERT_COLOR, speed, 50)
     # mid-run: the fence deflected into the belt and a parcel on it
     seen("mid", (230, 80, 30), LEFT, 200)
     # the damage-risk tab: the chart's w_n / w_dop and a_N / a_Ndop marks and its limit line
@@ -114,7 +116,8 @@ def test_example_recording_renders_in_the_web_viewer(tmp_path):
     seen("damage", rl.MARGIN_COLORS[0], RIGHT, 100)
     # the end: the damage marks under the belt, each in its parcel's margin colour
     for colour in colours.values():
-        seen("end", colour, LEFT, 15)
-    # the 3D tab: the belt's borders and the scan line at its start are in the picture
-    seen("3d", (220, 220, 60), LEFT, 100)
-    seen("3d", (255, 60, 60), LEFT, 30)
+        seen("end", colour, LEFT, 8)
+    # the 3D tab: the belt (lit grey), the chute and the scan line at the belt's start
+    seen("3d", (70, 70, 70), LEFT, 5000)
+    seen("3d", (121, 140, 203), LEFT, 1000)
+    seen("3d", (255, 60, 60), LEFT, 15)
