@@ -9,7 +9,9 @@
 #   5. ament       lib/fence_sorter/<executables>, ament index marker, share/fence_sorter
 #   6. kernel      compile the Numba physics kernel into its on-disk cache and its solve loop
 #                  into an ahead-of-time extension (about a minute once; one line per part)
-#   7. npm         `npm ci` in every Node.js project of the tests (test/js/*/package-lock.json,
+#   7. browser     Debian's chromium for the browser tests (apt-get; skipped at once when
+#                  /usr/bin/chromium exists; without apt-get or root: one line, and on)
+#   8. npm         `npm ci` in every Node.js project of the tests (test/js/*/package-lock.json,
 #                  e.g. Foxglove's own client); without npm one line says so and the tests that
 #                  need it skip
 #
@@ -214,7 +216,23 @@ step_kernel() {
   stamp_write kernel "$key"
 }
 
-# -- 7. npm -----------------------------------------------------------------------------------
+# -- 7. browser --------------------------------------------------------------------------------
+# Only the browser tests need it; a machine without it skips them (with the reason).
+step_browser() {
+  [[ -x /usr/bin/chromium ]] && return 0
+  if ! command -v apt-get >/dev/null 2>&1 || [[ "$(id -u)" != 0 ]]; then
+    log "no chromium and no apt-get as root: the browser tests will be skipped"
+    return 0
+  fi
+  WORKED=1
+  log "installing Debian's chromium (apt-get, once)"
+  if ! { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
+    --no-install-recommends chromium; } >"$ROOT/.build/chromium.log" 2>&1; then
+    log "chromium could not be installed (log: .build/chromium.log): the browser tests will be skipped"
+  fi
+}
+
+# -- 8. npm -----------------------------------------------------------------------------------
 # Every test/js/<name>/ with a package-lock.json: the exact packages of its lock into its
 # node_modules/, again only when the lock, package.json or the npm/node versions change.
 step_npm() {
@@ -254,6 +272,8 @@ main() {
   timed package step_package
   timed "ament layout" step_ament
   timed kernel step_kernel
+  mkdir -p "$ROOT/.build"
+  timed browser step_browser
   timed npm step_npm
   log "ready in $((SECONDS - start)) s (venv $VENV; shell: source scripts/env.sh)"
 }

@@ -55,6 +55,9 @@ COVERED: dict[str, str] = {
         "test/ros/test_recording.py::test_analysis_of_the_run_matches_the_live_outcomes"
     ),
     "fence-sorter rrd bags/example_4_parcels --out /tmp/ex.rrd": HERE,
+    "fence-sorter views --mid 10.3": (
+        "test/views/test_views_browser.py::test_example_recording_renders_in_the_web_viewer"
+    ),
     "fence-sorter replay bags/example_4_parcels --rate 2": (
         "test/ros/test_recording.py::test_replay_republishes_the_run"
     ),

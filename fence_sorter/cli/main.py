@@ -37,6 +37,7 @@ SUBCOMMANDS: dict[str, str] = {
     "bag": "bag tools standing in for `ros2 bag` (info)",
     "topic": "topic tools standing in for `ros2 topic` (list, echo, hz) over rclpy",
     "rrd": "convert a recorded bag into a Rerun recording (.rrd)",
+    "views": "screenshots of a Rerun recording in Rerun's web viewer under headless Chromium",
     "bench-suite": "node suite benchmark: pacing, lost messages, controller latency, unpaced RTF",
     "optimize": "maximise the sorting capacity W_t over X = [R_s, v, t1, R_z] (sections 3-4)",
     "faults": "fault-injection campaign of the node suite (writes docs/reliability.md)",

@@ -50,6 +50,19 @@ SPEED_AXIS_MAX = 3.0
 #: and a_N's) from MARGIN_COLORS[0] at MARGIN_RANGE[0] (over the limit) to [2] at [1]
 MARGIN_COLORS = ((220, 40, 40), (240, 200, 40), (60, 180, 75))
 MARGIN_RANGE = (-0.25, 0.5)
+#: colours the plots' titles name (no legends): N and N_stiff, solver steps and samples
+N_COLOR = (40, 110, 220)
+N_STIFF_COLOR = (235, 120, 20)
+STEPS_COLOR = (40, 110, 220)
+SAMPLED_COLOR = (120, 120, 120)
+ALPHA_COLOR = (200, 50, 50)
+#: labels of parcels and damage marks: dark, so the text reads on any background
+LABEL_COLOR = (25, 25, 25)
+RISK = "risk"  # root of the damage-risk chart (one column per parcel, value / limit upwards)
+#: the top view's damage marks: a grid below the belt, this many per row, rows this far apart
+RISK_MARKS_PER_ROW = 4
+RISK_ROW = 0.16  # [m]
+RISK_ROWS_FRAMED = 4  # rows the top view's bounds leave room for
 
 
 @dataclass(frozen=True)
@@ -108,54 +121,111 @@ def top_view_bounds(scene: SceneGeometry, margin: float = 0.3) -> tuple[tuple, t
         y_max = max(y_max, cy + 0.5 * sy)
     if scene.scan_line_x is not None:
         x0, x1 = min(x0, scene.scan_line_x), max(x1, scene.scan_line_x)
-    return (x0 - margin, x1 + margin), (-y_max - margin, margin)
+    below = RISK_ROW * (RISK_ROWS_FRAMED + 1)  # the damage marks' grid under the belt
+    return (x0 - margin, x1 + margin), (-y_max - margin, below + margin)
 
 
-def blueprint(scene: SceneGeometry | None = None):
+def risk_mark_position(scene: SceneGeometry, k: int) -> tuple[float, float]:
+    """Top-view position (view coordinates) of the k-th damage mark (k = 0, 1, ...): a grid
+    under the belt (the side away from the chute), RISK_MARKS_PER_ROW marks a row, so the
+    labels never pile up where the parcels leave the belt."""
+    x0, x1 = scene.belt_x
+    col, row = k % RISK_MARKS_PER_ROW, k // RISK_MARKS_PER_ROW
+    step = (x1 - x0) / RISK_MARKS_PER_ROW
+    return (x0 + 0.05 * step + col * step, RISK_ROW * (row + 1))
+
+
+def camera_target(scene: SceneGeometry) -> tuple[float, float, float]:
+    """Centre of belt, chute and scan line in the frame sorter [m]: where the 3D eye looks."""
+    (x0, x1), (vy0, vy1) = top_view_bounds(scene, margin=0.0)
+    return (0.5 * (x0 + x1), -0.5 * (vy0 + min(vy1, 0.0)), 0.0)
+
+
+def camera_position(scene: SceneGeometry) -> tuple[float, float, float]:
+    """The 3D eye: from the fence side (y < 0) and above, far enough that the whole belt
+    (scan line to end) and the chute are in the picture [m]."""
+    (x0, x1), _ = top_view_bounds(scene, margin=0.0)
+    cx, cy, _ = camera_target(scene)
+    reach = 1.2 * (x1 - x0)  # about 1.15 reach away: the belt spans 3/4 of a 60 degree view
+    return (cx, cy - 0.6 * reach, 0.75 * reach)
+
+
+def blueprint(scene: SceneGeometry | None = None, paused: bool = False):
     """Default layout: the top view (2D, framed on the belt and chute when ``scene`` is given)
     on the left with the 3D scene in a tab behind it; on the right the time series (forces,
-    tip deflection, alpha_w, speeds) with the damage-risk plots in a tab behind them. Every
-    plot's time axis is linked to the others (one instant at one x position)."""
+    tip deflection, alpha_w, speeds) with the damage-risk plots in a tab behind them.
+
+    Every plot shows the whole timeline (the same time range in all of them, not each its own
+    data's), so one instant is at one x position in every plot. No plot has a legend: each
+    title says what its colours mean (a legend of per-parcel series covers the data).
+    ``paused``: a recording that is complete opens paused (a live one follows its data)."""
     import rerun.blueprint as rrb  # lazy: Rerun (0.5 s), only to log
 
     bounds = None
     if scene is not None:
         x_range, y_range = top_view_bounds(scene)
         bounds = rrb.VisualBounds2D(x_range=x_range, y_range=y_range)
+    whole = rrb.TimeRange(
+        start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.infinite()
+    )
 
-    def plot(name: str, origin: str, y_from_zero: float | None = None):
-        axis_y = rrb.ScalarAxis(range=(0.0, y_from_zero)) if y_from_zero else None
+    def plot(name: str, origin: str, y_range: tuple[float, float] | None = None):
         return rrb.TimeSeriesView(
-            name=name, origin=origin, axis_x=rrb.TimeAxis(link="LinkToGlobal"), axis_y=axis_y
+            name=name,
+            origin=origin,
+            axis_x=rrb.TimeAxis(link="Independent", view_range=whole),
+            axis_y=rrb.ScalarAxis(range=y_range) if y_range else None,
+            plot_legend=rrb.PlotLegend(visible=False),
         )
 
-    return rrb.Blueprint(
-        rrb.Horizontal(
-            rrb.Tabs(
-                rrb.Spatial2DView(name="top view", origin=TOP, visual_bounds=bounds),
-                rrb.Spatial3DView(name="sorter 3D", origin="world"),
-                active_tab=0,
+    layout = rrb.Horizontal(
+        rrb.Tabs(
+            rrb.Spatial2DView(name="top view", origin=TOP, visual_bounds=bounds),
+            rrb.Spatial3DView(
+                name="sorter 3D",
+                origin="world",
+                eye_controls=rrb.EyeControls3D(
+                    position=camera_position(scene), look_target=camera_target(scene)
+                )
+                if scene is not None
+                else None,
             ),
-            rrb.Tabs(
-                rrb.Vertical(
-                    plot("contact force N, N_stiff [N]", "plots/contact"),
-                    plot("fence tip deflection [m]", "plots/fence/tip_deflection"),
-                    plot("drive angle alpha_w [rad]", "plots/fence/alpha_w"),
-                    plot("parcel speed [m/s]", "plots/speed", SPEED_AXIS_MAX),
-                    name="time series",
-                ),
-                rrb.Vertical(
-                    plot("impact speed w_n against w_dop [m/s]", "damage/w_n"),
-                    plot("peak acceleration a_N against a_Ndop [m/s^2]", "damage/a_N"),
-                    plot("peak force N against a_Ndop m_p [N]", "damage/N"),
-                    name="damage risk",
-                ),
-                active_tab=0,
-            ),
-            column_shares=[3, 2],
+            active_tab=0,
         ),
-        collapse_panels=True,
+        rrb.Tabs(
+            rrb.Vertical(
+                plot("contact force [N]: N blue, N_stiff orange", "plots/contact"),
+                plot(
+                    "fence tip deflection [m]: solver steps blue, sampled grey",
+                    "plots/fence/tip_deflection",
+                ),
+                plot("drive angle alpha_w [rad]", "plots/fence/alpha_w"),
+                plot(
+                    "parcel speed [m/s]: to divert orange, to pass grey",
+                    "plots/speed",
+                    (0.0, SPEED_AXIS_MAX),
+                ),
+                name="time series",
+            ),
+            rrb.Vertical(
+                rrb.Spatial2DView(
+                    name="per parcel: w_n / w_dop blue, a_N / a_Ndop orange, limit red",
+                    origin=RISK,
+                ),
+                plot("impact speed w_n [m/s]: o parcels, x w_dop", "damage/w_n"),
+                plot("peak acceleration a_N [m/s^2]: o parcels, x a_Ndop", "damage/a_N"),
+                plot("peak force N [N]: o parcels, x a_Ndop m_p", "damage/N"),
+                row_shares=[2, 1, 1, 1],
+                name="damage risk",
+            ),
+            active_tab=0,
+        ),
+        column_shares=[3, 2],
     )
+    parts = [layout]
+    if paused:
+        parts.append(rrb.TimePanel(timeline=TIMELINE, play_state="paused", state="collapsed"))
+    return rrb.Blueprint(*parts, collapse_panels=True)
 
 
 def open_recording(
@@ -167,7 +237,8 @@ def open_recording(
 ):
     """A RecordingStream saving to ``path`` (.rrd), and/or streaming to a viewer: a spawned one
     (``spawn``) or one listening at ``url`` (gRPC, e.g. rerun+http://127.0.0.1:9876/proxy),
-    with :func:`blueprint` (``scene`` frames the top view) as the default layout."""
+    with :func:`blueprint` (``scene`` frames the top view) as the default layout; without
+    ``url`` (no live viewer follows it) the recording opens paused."""
     rr = _rr()
     rec = rr.RecordingStream(APP_ID, recording_id=recording_id)
     if spawn:
@@ -178,7 +249,7 @@ def open_recording(
     if spawn or url:
         sinks.append(rr.GrpcSink(url) if url else rr.GrpcSink())
     if sinks:
-        rec.set_sinks(*sinks, default_blueprint=blueprint(scene))
+        rec.set_sinks(*sinks, default_blueprint=blueprint(scene, paused=url is None))
     return rec
 
 
@@ -207,7 +278,8 @@ class RerunLogger:
         self._series: dict[str, tuple[list[float], list[float]]] = {}
         self.margins: dict[int, float] = {}  # parcel id -> damage margin, once known
         self._damage_styled: set[str] = set()
-        self._risk_marks: dict[int, tuple] = {}  # parcel id -> (top-view point, colour, label)
+        # parcel id -> (colour, label, w_n / w_dop, a_N / a_Ndop)
+        self._risk_marks: dict[int, tuple] = {}
         self._frames = _SceneColumns()
         self._log_static()
 
@@ -259,6 +331,22 @@ class RerunLogger:
                 rr.LineStrips2D.columns(strips=strips, colors=colors, labels=b.labels).partition(
                     n
                 ),
+            )
+            # the ids as dark labels of their own (a label takes its entity's colour: the
+            # parcels' orange, grey or green under pale text is unreadable)
+            centers = np.array(b.centers).reshape(-1, 3)
+            tops = centers + np.array(b.half_sizes).reshape(-1, 3) * (0.0, 0.0, 1.0)
+            send(
+                "world/parcel_labels",
+                index,
+                rr.Points3D.columns(positions=tops, labels=b.labels).partition(n),
+            )
+            send(
+                f"{TOP}/parcel_labels",
+                index,
+                rr.Points2D.columns(
+                    positions=centers[:, :2] * (1.0, -1.0), labels=b.labels
+                ).partition(n),
             )
             origins = np.array(b.origins).reshape(-1, 3)
             vectors = np.array(b.vectors).reshape(-1, 3)
@@ -318,10 +406,14 @@ class RerunLogger:
         self._log_static_styles()
         rec.log(
             "plots/fence/tip_deflection",
-            rr.SeriesLines(names="tip deflection, sampled [m]"),
+            rr.SeriesLines(names="tip deflection, sampled [m]", colors=[SAMPLED_COLOR]),
             static=True,
         )
-        rec.log("plots/fence/alpha_w", rr.SeriesLines(names="alpha_w [rad]"), static=True)
+        rec.log(
+            "plots/fence/alpha_w",
+            rr.SeriesLines(names="alpha_w [rad]", colors=[ALPHA_COLOR]),
+            static=True,
+        )
 
     def _log_static_top(self) -> None:
         """The static scene of the top view (view coordinates (x, -y), drawn under the rest)."""
@@ -365,13 +457,19 @@ class RerunLogger:
         force_color = [(255, 0, 255)]
         styles = {
             "world/fence": rr.LineStrips3D.from_fields(colors=fence_color, radii=0.01),
-            "world/parcels": rr.Boxes3D.from_fields(fill_mode="solid", show_labels=True),
+            "world/parcels": rr.Boxes3D.from_fields(fill_mode="solid", show_labels=False),
+            "world/parcel_labels": rr.Points3D.from_fields(
+                colors=[LABEL_COLOR], radii=0.005, show_labels=True
+            ),
+            f"{TOP}/parcel_labels": rr.Points2D.from_fields(
+                colors=[LABEL_COLOR], radii=0.004, show_labels=True, draw_order=7.0
+            ),
             "world/contact_forces": rr.Arrows3D.from_fields(colors=force_color, radii=0.008),
             f"{TOP}/fence": rr.LineStrips2D.from_fields(
                 colors=fence_color, radii=0.015, draw_order=4.0
             ),
             f"{TOP}/parcels": rr.LineStrips2D.from_fields(
-                radii=0.012, show_labels=True, draw_order=3.0
+                radii=0.012, show_labels=False, draw_order=3.0
             ),
             f"{TOP}/contact_forces": rr.Arrows2D.from_fields(
                 colors=force_color, radii=0.012, draw_order=5.0
@@ -410,13 +508,23 @@ class RerunLogger:
             pid = p.parcel_id
             if pid not in self._series_ids:
                 self._series_ids.add(pid)
-                rec.log(f"plots/contact/{pid}/N", rr.SeriesLines(names=f"N {pid}"), static=True)
                 rec.log(
-                    f"plots/contact/{pid}/N_stiff",
-                    rr.SeriesLines(names=f"N_stiff {pid}"),
+                    f"plots/contact/{pid}/N",
+                    rr.SeriesLines(names=f"N {pid}", colors=[N_COLOR]),
                     static=True,
                 )
-                rec.log(f"plots/speed/{pid}", rr.SeriesLines(names=f"parcel {pid}"), static=True)
+                rec.log(
+                    f"plots/contact/{pid}/N_stiff",
+                    rr.SeriesLines(names=f"N_stiff {pid}", colors=[N_STIFF_COLOR]),
+                    static=True,
+                )
+                rec.log(
+                    f"plots/speed/{pid}",
+                    rr.SeriesLines(
+                        names=f"parcel {pid}", colors=[DIVERT_COLOR if p.divert else PASS_COLOR]
+                    ),
+                    static=True,
+                )
             if 1 <= p.stage <= 4:  # forces only while the fence works on it (E1 .. E4)
                 self._scalar(f"plots/contact/{pid}/N", t, float(p.n))
                 self._scalar(f"plots/contact/{pid}/N_stiff", t, float(p.n_stiff))
@@ -447,14 +555,15 @@ class RerunLogger:
         at the outcome time and the parcel's colour in the views."""
         rr, rec, pid = self.rr, self.rec, ev.parcel_id
         series = (
-            (f"plots/contact/{pid}/N_steps", f"N {pid} (solver steps)", ev.t, ev.normal_force),
+            (f"plots/contact/{pid}/N_steps", f"N {pid} (solver steps)", N_COLOR, ev.t,
+             ev.normal_force),
             (f"plots/contact/{pid}/N_stiff_course", f"N_stiff {pid} (stiff obstacle)",
-             ev.stiff_t, ev.stiff_force),
+             N_STIFF_COLOR, ev.stiff_t, ev.stiff_force),
             (f"plots/fence/tip_deflection/steps/{pid}", f"tip deflection, stroke {pid} [m]",
-             ev.t, ev.tip_deflection),
+             STEPS_COLOR, ev.t, ev.tip_deflection),
         )  # fmt: skip
-        for entity, name, t, values in series:
-            rec.log(entity, rr.SeriesLines(names=name), static=True)
+        for entity, name, colour, t, values in series:
+            rec.log(entity, rr.SeriesLines(names=name, colors=[colour]), static=True)
             if len(t):
                 rec.send_columns(
                     entity,
@@ -464,22 +573,18 @@ class RerunLogger:
         if risk is None:
             return
         self.margins[pid] = min(risk["impact_speed_margin"], risk["accel_margin"])
-        # where the event left the parcel, in its margin's colour: the top view keeps every
-        # parcel's damage risk in sight after it has left the belt
-        if len(ev.x):
-            self._risk_marks[pid] = (
-                (float(ev.x[-1]), -float(ev.y[-1])),
-                margin_color(self.margins[pid]),
-                f"{pid}: m_w {risk['impact_speed_margin']:+.2f}, m_a {risk['accel_margin']:+.2f}",
-            )
-            marks = list(self._risk_marks.values())
-            rec.set_time(TIMELINE, duration=float(ev.t_outcome))
-            rec.log(
-                f"{TOP}/damage_risk",
-                rr.Points2D([m[0] for m in marks], colors=[m[1] for m in marks],
-                            labels=[m[2] for m in marks], radii=0.03, draw_order=6.0),
-            )  # fmt: skip
+        # a mark per parcel in its margin's colour, labelled with its id and margins, in a
+        # grid under the belt (where the parcels leave the belt, their marks would pile up)
         w_n = ev.impact_speed[0] if len(ev.impact_speed) else math.nan
+        a_ratio = 1.0 - risk["accel_margin"]
+        self._risk_marks[pid] = (
+            margin_color(self.margins[pid]),
+            f"{pid}: m_w {risk['impact_speed_margin']:+.2f}, m_a {risk['accel_margin']:+.2f}",
+            w_n / risk["w_dop"] if risk["w_dop"] > 0 else math.nan,
+            a_ratio,
+        )
+        rec.set_time(TIMELINE, duration=float(ev.t_outcome))
+        self._log_risk_marks()
         peak_n = (1.0 - risk["accel_margin"]) * risk["a_ndop"] * ev.mass
         points = (
             ("damage/w_n/value", "w_n", w_n),
@@ -496,12 +601,62 @@ class RerunLogger:
                 style = rr.SeriesPoints(
                     names=name,
                     markers="cross" if entity.endswith("limit") else "circle",
-                    colors=[MARGIN_COLORS[0]] if entity.endswith("limit") else None,
+                    colors=[MARGIN_COLORS[0] if entity.endswith("limit") else N_COLOR],
                     marker_sizes=4.0,
                 )
                 rec.log(entity, style, static=True)
             if math.isfinite(value):
                 rec.log(entity, rr.Scalars(float(value)))
+
+    def _log_risk_marks(self) -> None:
+        """The top view's damage marks and the damage-risk chart, every parcel so far (in
+        the order of their outcomes)."""
+        rr, rec = self.rr, self.rec
+        marks = list(self._risk_marks.items())
+        at = np.array([risk_mark_position(self.scene, k) for k in range(len(marks))])
+        rec.log(
+            f"{TOP}/damage_risk",
+            rr.Points2D(at, colors=[m[0] for _, m in marks], radii=0.04, draw_order=6.0),
+        )  # fmt: skip
+        # the labels dark, beside their marks (a label is centred on its point)
+        step = (self.scene.belt_x[1] - self.scene.belt_x[0]) / RISK_MARKS_PER_ROW
+        rec.log(
+            f"{TOP}/damage_risk_labels",
+            rr.Points2D(at + (0.5 * step, 0.0), colors=[LABEL_COLOR], radii=0.001,
+                        labels=[m[1] for _, m in marks], draw_order=6.0),
+        )  # fmt: skip
+        # the chart: per parcel a column at x = k (k-th outcome), w_n / w_dop (circle, left)
+        # and a_N / a_Ndop (square, right) upwards, the limit at 1; view y points down
+        cols = np.arange(len(marks), dtype=float)
+        w = np.array([m[2] for _, m in marks], dtype=float)
+        a = np.array([m[3] for _, m in marks], dtype=float)
+        ok = np.isfinite(w)
+        rec.log(
+            f"{RISK}/w_n",
+            rr.Points2D(np.column_stack((cols[ok] - 0.15, -w[ok])), radii=0.06,
+                        colors=[N_COLOR]),
+        )  # fmt: skip
+        ok = np.isfinite(a)
+        rec.log(
+            f"{RISK}/a_N",
+            rr.Points2D(np.column_stack((cols[ok] + 0.15, -a[ok])), radii=0.06,
+                        colors=[N_STIFF_COLOR]),
+        )  # fmt: skip
+        rec.log(
+            f"{RISK}/parcels",
+            rr.Points2D(np.column_stack((cols, np.full(cols.size, 0.12))), radii=0.001,
+                        colors=[LABEL_COLOR], labels=[f"parcel {pid}" for pid, _ in marks]),
+        )  # fmt: skip
+        # the limit (red), 0 (grey) and a pale frame that keeps the labels in the picture
+        right = max(len(marks) - 0.4, 3.6)
+        rec.log(
+            f"{RISK}/scale",
+            rr.LineStrips2D(
+                [[(-0.6, -1.0), (right, -1.0)], [(-0.6, 0.0), (right, 0.0)],
+                 [(-0.6, -1.3), (right, -1.3), (right, 0.3), (-0.6, 0.3), (-0.6, -1.3)]],
+                colors=[MARGIN_COLORS[0], SAMPLED_COLOR, (225, 225, 225)], radii=0.01,
+            ),
+        )  # fmt: skip
 
     def close(self) -> None:
         self.flush()

@@ -206,12 +206,13 @@ def blueprint_views(path: Path) -> dict[str, tuple[str, dict | None]]:
 
 
 def blueprint_axes(path: Path) -> dict[str, dict[str, object]]:
-    """Per time-series view name: its TimeAxis link and its ScalarAxis range, as stored."""
+    """Per time-series view name: its TimeAxis link and view range, its ScalarAxis range and
+    whether it shows a legend, as stored."""
     from rerun.chunk import RrdReader
 
     reader = RrdReader(path)
     (store,) = reader.blueprints()
-    names, link, y_range = {}, {}, {}
+    names, link, y_range, x_range, legend = {}, {}, {}, {}, {}
     for chunk in reader.stream(store=store):
         parts = chunk.entity_path.split("/")
         if len(parts) < 3 or parts[1] != "view":
@@ -222,11 +223,17 @@ def blueprint_axes(path: Path) -> dict[str, dict[str, object]]:
             names[parts[2]] = batch.column("ViewBlueprint:display_name").to_pylist()[0][0]
         if "TimeAxis:link" in cols:
             link[parts[2]] = batch.column("TimeAxis:link").to_pylist()[0][0]
+        if "TimeAxis:view_range" in cols:
+            x_range[parts[2]] = batch.column("TimeAxis:view_range").to_pylist()[0][0]
+        if "PlotLegend:visible" in cols:
+            legend[parts[2]] = batch.column("PlotLegend:visible").to_pylist()[0][0]
         if "ScalarAxis:range" in cols:
             y_range[parts[2]] = batch.column("ScalarAxis:range").to_pylist()[0][0]
     return {
         "time_link": {names[k]: v for k, v in link.items()},
         "y_range": {names[k]: v for k, v in y_range.items()},
+        "x_range": {names[k]: v for k, v in x_range.items()},
+        "legend": {names[k]: v for k, v in legend.items()},
     }
 
 
@@ -268,7 +275,8 @@ def test_damage_colours_and_the_logged_event(tmp_path):
     assert rows["/plots/contact/3/N_steps"] == 101 == rows["/plots/fence/tip_deflection/steps/3"]
     assert rows["/plots/contact/3/N_stiff_course"] == 50
     assert rows["/damage/w_n/value"] == rows["/damage/a_N/limit"] == 1
-    assert rows["/top/damage_risk"] == 1  # where the parcel left the belt, in its colour
+    assert rows["/top/damage_risk"] == rows["/top/damage_risk_labels"] == 1  # its mark
+    assert rows["/risk/w_n"] == rows["/risk/a_N"] == rows["/risk/parcels"] == 1  # the chart
 
 
 def test_top_view_footprints_are_the_rotated_boxes():
@@ -336,15 +344,20 @@ def test_rrd_from_the_example_bag(example, tmp_path):
     )
     views = blueprint_views(out)
     kinds = sorted(kind for kind, _, _ in views.values())
-    assert kinds == ["2D", "3D"] + ["TimeSeries"] * 7, views
-    # alpha_w and the tip deflection on plots of their own, with units; every plot's time
-    # axis linked to the others; the speed axis from 0
-    assert views["fence tip deflection [m]"][1] == "plots/fence/tip_deflection"
-    assert views["drive angle alpha_w [rad]"][1] == "plots/fence/alpha_w"
+    assert kinds == ["2D", "2D", "3D"] + ["TimeSeries"] * 7, views
+    # alpha_w and the tip deflection on plots of their own, with units; every plot shows the
+    # whole timeline (one range for all: one instant at one x position), no legend; the speed
+    # axis from 0
+    by_origin = {v[1]: n for n, v in views.items()}
+    assert "[m]" in by_origin["plots/fence/tip_deflection"]
+    assert by_origin["plots/fence/alpha_w"] == "drive angle alpha_w [rad]"
     axes = blueprint_axes(out)
-    assert sorted(axes["time_link"]) == sorted(n for n, v in views.items() if v[0] == "TimeSeries")
-    assert set(axes["time_link"].values()) == {2}  # LinkAxis.LinkToGlobal
-    assert axes["y_range"] == {"parcel speed [m/s]": [0.0, 3.0]}
+    plots = sorted(n for n, v in views.items() if v[0] == "TimeSeries")
+    assert sorted(axes["time_link"]) == plots == sorted(axes["x_range"])
+    assert set(axes["time_link"].values()) == {1}  # LinkAxis.Independent: its own view_range
+    assert all(r == {"start": None, "end": None} for r in axes["x_range"].values())  # infinite
+    assert axes["legend"] == dict.fromkeys(plots, False)
+    assert axes["y_range"] == {by_origin["plots/speed"]: [0.0, 3.0]}
     kind, origin, bounds = views["top view"]
     assert (kind, origin) == ("2D", "top")
     # framed on the bag's scene: belt x -3 .. 3 m, chute up to y0 = 1.3 m (view y = -1.3)
@@ -426,3 +439,28 @@ def test_rerun_child_process_logs_what_the_loop_offers(tmp_path):
     assert blueprint_views(out)["top view"][:2] == ("2D", "top")
     assert rows["/events/outcomes"] == 1
     assert "/world/chute" in static
+
+
+def test_damage_marks_and_the_3d_eye_frame_the_scene():
+    """The top view's damage marks sit in a grid under the belt, one label width apart, none
+    on another, the first rows inside the view's bounds; the 3D eye looks at the middle of
+    belt and chute from the fence side, from above, farther than the belt is long (the
+    browser test's 3D screenshot shows the whole belt)."""
+    from fence_sorter.visualisation import rerun_log as rl
+
+    scene = rl.SceneGeometry(0.7, (-3.0, 3.0), (0.5, 1.0, 1.6, 0.6), -3.0)
+    n = rl.RISK_MARKS_PER_ROW * rl.RISK_ROWS_FRAMED
+    marks = np.array([rl.risk_mark_position(scene, k) for k in range(n + 5)])
+    assert len({tuple(m) for m in marks}) == len(marks)
+    step = (scene.belt_x[1] - scene.belt_x[0]) / rl.RISK_MARKS_PER_ROW
+    first_row = marks[: rl.RISK_MARKS_PER_ROW, 0]
+    assert np.allclose(np.diff(first_row), step) and np.all(marks[:, 1] > 0.0)  # under the belt
+    (x0, x1), (y0, y1) = rl.top_view_bounds(scene)
+    inside = marks[:n]
+    assert np.all((inside[:, 0] > x0) & (inside[:, 0] + step < x1 + 1e-9) & (inside[:, 1] < y1))
+    target = np.array(rl.camera_target(scene))
+    eye = np.array(rl.camera_position(scene))
+    assert target[0] == pytest.approx(0.0) and target[1] == pytest.approx(0.65)  # y 0 .. 1.3
+    assert eye[1] < 0.0 < eye[2]
+    distance = np.linalg.norm(eye - target)
+    assert distance > scene.belt_x[1] - scene.belt_x[0]

@@ -1,0 +1,123 @@
+"""The example run's Rerun recording in Rerun's own web viewer under headless Chromium.
+
+The recording is made from the example bag with the current logging code (``fence-sorter
+rrd``); ``fence-sorter views`` serves it on 127.0.0.1 and opens it in Debian's chromium
+driven by playwright-core (``test/js/browser/``). The test fails on an error the viewer
+reports (console or page), on a view that never settles, and on an empty view: the
+screenshots must show, in their own panels, the colours the recording draws with (belt
+borders, scan line, chute, fence, every parcel's damage mark in its margin's colour, each
+plot's series, the damage-risk chart). Outside requests the viewer makes (web fonts, usage
+analytics, release check) are refused in the browser, so nothing leaves the machine.
+"""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from fence_sorter.visualisation import browser
+from fence_sorter.visualisation import rerun_log as rl
+
+ROOT = Path(__file__).resolve().parents[2]
+EXAMPLE = ROOT / "bags" / "example_4_parcels"
+
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(
+        browser.missing_tools() is not None, reason=f"no browser: {browser.missing_tools()}"
+    ),
+]
+
+#: panels of the default layout at WIDTH x HEIGHT: left (top view / 3D), right (plots)
+LEFT = (0, 64, 760, 770)
+RIGHT = (775, 64, 1280, 770)
+#: the four plots of the time-series tab, top to bottom (x0, y0, x1, y1)
+PLOTS = [(775, 64 + k * 177, 1280, 64 + (k + 1) * 177) for k in range(4)]
+
+
+def margin_colours(bag: Path) -> dict[int, tuple[int, int, int]]:
+    """Each parcel's damage-margin colour, from the bag's outcomes (independent of the
+    recording: the analysis's closed forms)."""
+    from fence_sorter.analysis.events import risk_of
+    from fence_sorter.analysis.run import OUTCOME_FIELDS
+    from fence_sorter.recording.bagread import read_bag
+
+    out = {}
+    for m in read_bag(bag).by_topic("/sort_outcomes"):
+        risk = risk_of({n: getattr(m.msg, n, math.nan) for n in OUTCOME_FIELDS})
+        margin = min(risk["impact_speed_margin"], risk["accel_margin"])
+        if math.isfinite(margin):
+            out[int(m.msg.parcel_id)] = rl.margin_color(margin)
+    return out
+
+
+def colour_pixels(png: Path, colour: tuple[int, int, int], box, tol: int = 12) -> int:
+    """Pixels of ``png`` within ``tol`` of ``colour`` inside ``box`` = (x0, y0, x1, y1)."""
+    x0, y0, x1, y1 = box
+    img = np.asarray(Image.open(png).convert("RGB")).astype(int)[y0:y1, x0:x1]
+    return int((np.abs(img - np.asarray(colour)).max(axis=-1) <= tol).sum())
+
+
+def fence_sorter(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "fence_sorter.cli.main", *args],
+        capture_output=True, text=True, timeout=1800,
+    )  # fmt: skip
+
+
+def test_example_recording_renders_in_the_web_viewer(tmp_path):
+    """``fence-sorter views`` on the example bag's recording: exit 0 (every view settled, no
+    viewer error), five screenshots, and in each the colours its panels draw with."""
+    rrd = tmp_path / "example.rrd"
+    made = fence_sorter("rrd", str(EXAMPLE), "--out", str(rrd))
+    assert made.returncode == 0, made.stderr
+    res = fence_sorter("views", str(rrd), "--out", str(tmp_path / "views"), "--mid", "10.3")
+    assert res.returncode == 0, res.stdout + res.stderr
+    lines = {line.split()[0]: line for line in res.stdout.splitlines()}
+    assert sorted(lines) == ["3d", "damage", "default", "end", "mid"]
+    for line in lines.values():
+        assert "settled True" in line and "viewer errors 0" in line, line
+    png = {name: tmp_path / "views" / f"{name}.png" for name in lines}
+
+    def seen(name, colour, box, at_least):
+        n = colour_pixels(png[name], colour, box)
+        assert n >= at_least, f"{name}: {n} pixels of {colour} in {box}, expected >= {at_least}"
+
+    # the top view as it opens: belt borders, scan line, chute; the damage marks of every
+    # parcel with an outcome, each in its margin's colour (the bag's closed forms)
+    seen("default", (220, 220, 60), LEFT, 1000)  # belt borders
+    seen("default", (255, 60, 60), LEFT, 100)  # scan line
+    seen("default", (50, 100, 200), LEFT, 300)  # chute outline
+    colours = margin_colours(EXAMPLE)
+    assert len(colours) == 3
+    for colour in colours.values():  # a mark of radius 0.04 m: 15 to 25 pixels
+        seen("damage", colour, LEFT, 8)
+    # every plot of the time-series tab draws its series in the colours its title names
+    contact, tip, alpha, speed = PLOTS
+    # (thin lines: a few pixels each; at 1280 x 800 the example draws 20 N, 51 N_stiff, 9
+    # solver-step and 755 sampled tip-deflection, 103 alpha_w and 135 speed pixels)
+    seen("default", rl.N_COLOR, contact, 10)
+    seen("default", rl.N_STIFF_COLOR, contact, 20)
+    seen("default", rl.STEPS_COLOR, tip, 4)
+    seen("default", rl.SAMPLED_COLOR, tip, 200)
+    seen("default", rl.ALPHA_COLOR, alpha, 50)
+    seen("default", rl.DIVERT_COLOR, speed, 50)
+    # mid-run: the fence deflected into the belt and a parcel on it
+    seen("mid", (230, 80, 30), LEFT, 200)
+    # the damage-risk tab: the chart's w_n / w_dop and a_N / a_Ndop marks and its limit line
+    seen("damage", rl.N_COLOR, RIGHT, 30)
+    seen("damage", rl.N_STIFF_COLOR, RIGHT, 30)
+    seen("damage", rl.MARGIN_COLORS[0], RIGHT, 100)
+    # the end: the damage marks under the belt, each in its parcel's margin colour
+    for colour in colours.values():
+        seen("end", colour, LEFT, 8)
+    # the 3D tab: the belt (lit grey), the chute and the scan line at the belt's start
+    seen("3d", (70, 70, 70), LEFT, 5000)
+    seen("3d", (121, 140, 203), LEFT, 1000)
+    seen("3d", (255, 60, 60), LEFT, 15)
