@@ -58,7 +58,7 @@ from fence_sorter.nodes.base import FenceSorterNode, spin_node
 from fence_sorter.nodes.intake import ParcelRegistry, TopicIntake
 from fence_sorter.nodes.parameters import SIMULATOR_PARAMETERS
 from fence_sorter.nodes.qos import CLOCK_QOS, INPUT_QOS, topic_qos
-from fence_sorter.nodes.sources import foreign_publishers, sign_clock
+from fence_sorter.nodes.sources import SourceWatch, sign_clock
 from fence_sorter.nodes.tf_publisher import TfPublisher
 from fence_sorter.recording import topics
 from fence_sorter.runner.processes import keep_on
@@ -181,7 +181,7 @@ class SimulatorNode(FenceSorterNode):
         )
         self._run_clock_msg = RunClock(run_id=run_id)
         # publishers of the run's topics that are not the run's own nodes, from the graph
-        self.foreign: dict[str, set[str]] = {name: set() for name, _ in WATCHED_SOURCES}
+        self.sources = SourceWatch(WATCHED_SOURCES)
         self._graph_timer = self.create_timer(
             GRAPH_PERIOD, self._watch_sources, clock=RosClock(clock_type=ClockType.STEADY_TIME)
         )
@@ -256,11 +256,8 @@ class SimulatorNode(FenceSorterNode):
     def _watch_sources(self) -> None:
         """Name every publisher of a watched topic that is not its owner (a second /clock,
         an insider on /parcels or /fence_commands), for the heartbeat."""
-        for topic, owner in WATCHED_SOURCES:
-            found = foreign_publishers(self, topic, owner)
-            if found and not self.foreign[topic].issuperset(found):
-                self.get_logger().error(f"{topic}: publishers other than {owner}: {found}")
-            self.foreign[topic].update(found)
+        for topic, names in self.sources.poll(self, time.monotonic()).items():
+            self.get_logger().error(f"{topic}: a publisher that is not the run's: {names}")
 
     def _on_command(self, msg: FenceCommand) -> None:
         self._send(("command", convert.command_from_msg(msg)))
@@ -583,9 +580,7 @@ class SimulatorNode(FenceSorterNode):
         values.update(self.parcel_intake.values())
         values.update(self.command_intake.values())
         values.update(self.parcel_registry.values())
-        values.update(
-            {f"foreign_publishers.{k}": "; ".join(sorted(v)) for k, v in self.foreign.items()}
-        )
+        values.update(self.sources.values())
         if self.rerun is not None:
             values["rerun_frames_sent"] = str(self.rerun.sent)
             values["rerun_frames_dropped"] = str(self.rerun.dropped)

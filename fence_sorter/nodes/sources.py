@@ -4,7 +4,7 @@
 side: :func:`sign` and :func:`authentic` on fence_sorter_msgs messages with an ``auth`` field
 (the tag covers :func:`fence_sorter.provenance.message_payload`), :class:`PinnedClock`,
 which takes a node's sim time from /run_clock under the key instead of /clock, and
-:func:`foreign_publishers`, which names the other publishers of a topic from the graph.
+:class:`SourceWatch`, which names the other publishers of a topic from the graph.
 """
 
 from __future__ import annotations
@@ -52,7 +52,7 @@ class PinnedClock:
     rclpy's TimeSource takes /clock from anyone on the domain; this replaces its subscription
     (same QoS: best effort, depth 1) with one to /run_clock that hands only authentic, not
     older messages on to the TimeSource. A second /clock publisher then moves no node's time;
-    it is named from the graph (:func:`foreign_publishers`) instead.
+    it is named from the graph (:class:`SourceWatch`) instead.
     """
 
     COUNTERS = ("accepted", "foreign_source", "stale")
@@ -89,6 +89,13 @@ class PinnedClock:
         return {f"run_clock.{k}": str(getattr(self, k)) for k in self.COUNTERS}
 
 
+#: the node name of a graph endpoint whose node has not announced itself (yet)
+UNKNOWN_NODE = "_NODE_NAME_UNKNOWN_"
+#: an endpoint without a node name is named only after this long [s]: a new node's endpoints
+#: reach the graph before its name does (a raw DDS writer never names itself)
+UNNAMED_GRACE = 3.0
+
+
 def endpoint_name(info) -> str:
     """``namespace/node`` of a graph endpoint, with the first bytes of its GID."""
     ns = info.node_namespace.rstrip("/")
@@ -96,12 +103,38 @@ def endpoint_name(info) -> str:
     return f"{ns}/{info.node_name} (gid {gid})"
 
 
-def foreign_publishers(node, topic: str, owner: str) -> list[str]:
-    """The publishers of ``topic`` in the graph that are not node ``owner`` of ``node``'s
-    namespace, by :func:`endpoint_name`."""
-    ns = node.get_namespace().rstrip("/")
-    return [
-        endpoint_name(e)
-        for e in node.get_publishers_info_by_topic(topic)
-        if not (e.node_name == owner and e.node_namespace.rstrip("/") == ns)
-    ]
+class SourceWatch:
+    """The publishers of some topics that are not the node that owns each, from the graph.
+
+    ``owners``: (topic, owner node name) pairs; an owner is matched in the watching node's
+    namespace. A named foreign publisher is kept at once, an unnamed one once it has stayed
+    unnamed for :data:`UNNAMED_GRACE` (a node of the run in the middle of its start-up is not
+    taken for an intruder). What is found stays found (``foreign``): a second /clock that
+    published for 2 s is still named at the end of the run.
+    """
+
+    def __init__(self, owners: tuple[tuple[str, str], ...]) -> None:
+        self.owners = owners
+        self.foreign: dict[str, set[str]] = {topic: set() for topic, _ in owners}
+        self._unnamed_since: dict[bytes, float] = {}
+
+    def poll(self, node, now: float) -> dict[str, list[str]]:
+        """Look at the graph once (``now``: a steady clock [s]); the newly found, by topic."""
+        ns = node.get_namespace().rstrip("/")
+        new: dict[str, list[str]] = {}
+        for topic, owner in self.owners:
+            for e in node.get_publishers_info_by_topic(topic):
+                if e.node_name == owner and e.node_namespace.rstrip("/") == ns:
+                    continue
+                if e.node_name == UNKNOWN_NODE:
+                    since = self._unnamed_since.setdefault(bytes(e.endpoint_gid), now)
+                    if now - since < UNNAMED_GRACE:
+                        continue
+                name = endpoint_name(e)
+                if name not in self.foreign[topic]:
+                    self.foreign[topic].add(name)
+                    new.setdefault(topic, []).append(name)
+        return new
+
+    def values(self) -> dict[str, str]:
+        return {f"foreign_publishers.{k}": "; ".join(sorted(v)) for k, v in self.foreign.items()}

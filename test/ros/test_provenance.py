@@ -133,3 +133,43 @@ def test_registry_tells_a_duplicate_from_a_conflict() -> None:
         "parcels.conflict": "1",
         "parcels.disputed_ids": "4",
     }
+
+
+class Endpoint:
+    def __init__(self, node: str, gid: int, ns: str = "/") -> None:
+        self.node_name, self.node_namespace = node, ns
+        self.endpoint_gid = [1, 15, 120, 253, gid, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0]
+
+
+class Graph:
+    """A node's view of the graph: the publishers of each topic."""
+
+    def __init__(self) -> None:
+        self.publishers: dict[str, list[Endpoint]] = {}
+
+    def get_namespace(self) -> str:
+        return "/"
+
+    def get_publishers_info_by_topic(self, topic: str) -> list[Endpoint]:
+        return self.publishers.get(topic, [])
+
+
+def test_source_watch_names_intruders_not_a_node_of_the_run_starting_up() -> None:
+    from fence_sorter.nodes.sources import UNKNOWN_NODE, UNNAMED_GRACE, SourceWatch
+
+    graph, watch = Graph(), SourceWatch((("/clock", "simulator"), ("/parcels", "scanner")))
+    graph.publishers["/clock"] = [Endpoint("simulator", 1)]
+    graph.publishers["/parcels"] = [Endpoint(UNKNOWN_NODE, 2, ns="_NODE_NAMESPACE_UNKNOWN_")]
+    assert watch.poll(graph, 0.0) == {}  # the scanner's endpoint, before its name arrives
+    graph.publishers["/parcels"] = [Endpoint("scanner", 2)]
+    assert watch.poll(graph, 1.0) == {}
+    graph.publishers["/clock"].append(Endpoint("intruder", 3))
+    assert watch.poll(graph, 1.2) == {"/clock": ["/intruder (gid 010f78fd03000000)"]}
+    graph.publishers["/clock"] = [Endpoint("simulator", 1)]  # the intruder has gone: still named
+    raw = Endpoint(UNKNOWN_NODE, 4, ns="_NODE_NAMESPACE_UNKNOWN_")  # a raw DDS writer
+    graph.publishers["/parcels"].append(raw)
+    assert watch.poll(graph, 2.0) == {}
+    assert watch.poll(graph, 2.0 + UNNAMED_GRACE) == {
+        "/parcels": ["_NODE_NAMESPACE_UNKNOWN_/_NODE_NAME_UNKNOWN_ (gid 010f78fd04000000)"]
+    }
+    assert watch.values()["foreign_publishers./clock"] == "/intruder (gid 010f78fd03000000)"
