@@ -506,7 +506,11 @@ class PacedLoop:
                 next_gc = k + s.publish_every
                 if gen == 2:
                     next_full_gc = k + round(FULL_GC_PERIOD / period)
-            cycles += 1
+            # cycles: the grid's deadlines, run or not; a stalled loop (stopped, starved)
+            # misses every deadline that passed while it did not run, not only the one it
+            # woke for
+            cycles += 1 + tick.skipped
+            misses += tick.skipped
             if wake is not None:
                 self.work.add(done - wake)
                 if done > deadline + period:

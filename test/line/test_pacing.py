@@ -73,6 +73,24 @@ def test_catch_up_beyond_the_cap_slips_sim_time():
     assert nxt.t_sim - tick.t_sim == pytest.approx(1e-3)
 
 
+@pytest.mark.parametrize("stop_s", [0.004, 0.1, 3.0])
+def test_a_stopped_loop_reports_every_deadline_it_did_not_run(stop_s: float):
+    """A loop stopped for ``stop_s`` (SIGSTOP, a starved CPU) wakes once; the deadlines that
+    passed meanwhile are cycles not run: floor(lateness / period) of them, with or without a
+    slip (3 s at 1 kHz: 2999 skipped, the late wake-up itself the 3000th miss)."""
+    clock = FakeClock()
+    p = pacer(clock, max_catch_up=0.01)
+    first = p.wait()
+    clock.now += stop_s
+    tick = p.wait()
+    assert tick.skipped == math.floor(tick.lateness / 1e-3)
+    assert tick.skipped == round(stop_s / 1e-3) - 1  # the first deadline is the wake's own
+    # the grid index counts every deadline (run, skipped or dropped by a slip) up to the cap
+    kept = min(tick.skipped, int(0.01 / 1e-3))
+    assert tick.k == first.k + 1 + kept
+    assert p.wait().skipped == 0  # on time again
+
+
 def test_unpaced_never_waits():
     clock = FakeClock()
     p = pacer(clock, rtf=0.0, unpaced_step=0.02)
