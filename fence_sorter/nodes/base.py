@@ -8,6 +8,7 @@ module-level ``main()`` that calls :func:`run_node`.
 
 from __future__ import annotations
 
+import inspect
 import signal
 import sys
 from collections.abc import Sequence
@@ -27,6 +28,11 @@ from fence_sorter.nodes.parameters import COMMON_PARAMETERS, ParamSpec
 from fence_sorter.nodes.qos import topic_qos
 from fence_sorter.nodes.sources import PinnedClock, authentic
 from fence_sorter.recording.topics import DIAGNOSTICS
+
+#: the signature of a subscription callback that takes rclpy's message info too
+_MSG_AND_INFO = inspect.Signature(
+    [inspect.Parameter(n, inspect.Parameter.POSITIONAL_ONLY) for n in ("msg", "info")]
+)
 
 
 def make_executor(events: bool, context=None) -> Executor:
@@ -105,17 +111,33 @@ class FenceSorterNode(Node):
             return SetParametersResult(successful=False, reason=reason)
         return SetParametersResult(successful=True)
 
-    def create_intake_subscription(self, msg_type, topic: str, callback, qos, intake):
+    def create_intake_subscription(
+        self, msg_type, topic: str, callback, qos, intake, with_info: bool = False
+    ):
         """A subscription whose callback sees only what ``intake`` (a
         :class:`fence_sorter.nodes.intake.TopicIntake`) admits (the run's id, the sender's tag
         under the run's key, the rate), with the middleware's message-lost event counted in it
-        where the RMW provides that event."""
+        where the RMW provides that event. ``with_info``: the callback takes ``(msg, info)``,
+        rclpy's message info (``received_timestamp``: ns on the system clock when the
+        middleware received it)."""
 
         key = self.run_key
 
         def admitted(msg) -> None:
             if intake.admit(msg.run_id, lambda: authentic(msg, key)):
                 callback(msg)
+
+        def admitted_with_info(*args) -> None:
+            # rclpy's SingleThreadedExecutor calls (msg, info); its EventsExecutor (9.1) passes
+            # the (msg, info) tuple as one argument
+            msg, info = args if len(args) == 2 else args[0]
+            if intake.admit(msg.run_id, lambda: authentic(msg, key)):
+                callback(msg, info)
+
+        # rclpy picks the message-info call by the callback's signature: two arguments
+        admitted_with_info.__signature__ = _MSG_AND_INFO
+        if with_info:
+            admitted = admitted_with_info
 
         try:
             return self.create_subscription(

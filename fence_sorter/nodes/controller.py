@@ -101,14 +101,18 @@ class ControllerStats:
     """Counters and latency samples reported on /diagnostics (ROS-free)."""
 
     def __init__(self, window: int = 10000):
-        self.latency = deque(maxlen=window)  # parcel callback to command published [s] (wall)
+        self.latency = deque(maxlen=window)  # parcel received to command published [s] (wall)
+        # the parcel's publication (the scanner's send time) to the command published [s]: a
+        # process stopped as a whole receives late, so only this one sees its stop
+        self.latency_from_send = deque(maxlen=window)
         self.lead = deque(maxlen=window)  # command sim time before the front reaches R_s [s]
         self.received = self.commands = self.infeasible = self.late = 0
         self.rejected = self.not_diverted = self.evaluations = self.replans = 0
         self.rejected_by_key: Counter[str] = Counter()  # InputError.key -> parcels
 
-    def percentile(self, q: float) -> float:
-        return float(np.percentile(self.latency, q)) if self.latency else math.nan
+    def percentile(self, q: float, samples=None) -> float:
+        samples = self.latency if samples is None else samples
+        return float(np.percentile(samples, q)) if samples else math.nan
 
     def values(self) -> dict[str, str]:
         return {
@@ -123,6 +127,10 @@ class ControllerStats:
             "latency_p50_ms": f"{1e3 * self.percentile(50):.3f}",
             "latency_p99_ms": f"{1e3 * self.percentile(99):.3f}",
             "latency_max_ms": f"{1e3 * max(self.latency, default=math.nan):.3f}",
+            "latency_from_send_p99_ms": f"{1e3 * self.percentile(99, self.latency_from_send):.3f}",
+            "latency_from_send_max_ms": (
+                f"{1e3 * max(self.latency_from_send, default=math.nan):.3f}"
+            ),
             "min_lead_s": f"{min(self.lead, default=math.nan):.4f}",
             **{f"rejected_parcels.{k}": str(v) for k, v in sorted(self.rejected_by_key.items())},
         }
@@ -231,6 +239,7 @@ class ControllerNode(FenceSorterNode):
                 self.on_parcel,
                 INPUT_QOS,
                 self.parcel_intake,
+                with_info=True,
             )
             self.get_logger().info("listening on /parcels")
         # the run starts its stream on this news: a heartbeat now, not in up to 1 s, once sim
@@ -239,13 +248,18 @@ class ControllerNode(FenceSorterNode):
             self._listen_timer.cancel()
             self.publish_heartbeat()
 
-    def on_parcel(self, msg) -> None:
-        """Hand the parcel to :func:`handle_parcel`; publish what it returns."""
-        wall0 = time.perf_counter()
+    def on_parcel(self, msg, info=None) -> None:
+        """Hand the parcel to :func:`handle_parcel`; publish what it returns. Its latency runs
+        from the middleware's reception of the parcel (``info['received_timestamp']``, system
+        clock), so time the message waited for the callback (a busy or stopped executor)
+        counts too."""
+        received, sent = message_times_ns(info)
         cmd = handle_parcel(self, msg)
         if cmd is not None:
             self._pub.publish(cmd)
-            self.stats.latency.append(time.perf_counter() - wall0)
+            now = time.time_ns()
+            self.stats.latency.append(1e-9 * (now - received))
+            self.stats.latency_from_send.append(1e-9 * (now - sent))
 
     def heartbeat_status(self) -> DiagnosticStatus:
         status = super().heartbeat_status()
@@ -260,6 +274,21 @@ class ControllerNode(FenceSorterNode):
         values.update(self.registry.values())
         status.values.extend(KeyValue(key=k, value=v) for k, v in values.items())
         return status
+
+
+def message_times_ns(info) -> tuple[int, int]:
+    """The middleware's reception time of a message and its publisher's send time [ns, system
+    clock] from rclpy's message info (``received_timestamp``, ``source_timestamp``); now for
+    either when it is missing (a direct call)."""
+    now = time.time_ns()
+    out = []
+    for key in ("received_timestamp", "source_timestamp"):
+        try:
+            t = int(info[key])
+        except (TypeError, KeyError, ValueError):
+            t = 0
+        out.append(t if t > 0 else now)
+    return out[0], out[1]
 
 
 def handle_parcel(node: ControllerNode, msg):
