@@ -22,8 +22,8 @@ from fence_sorter.recording.bagread import (
     STORAGE_SUFFIXES,
     BagIssue,
     BagReadError,
-    _recover_mcap,
     bag_files,
+    recover_mcap,
 )
 from fence_sorter.recording.writer import STAGING_DIR
 
@@ -119,14 +119,14 @@ def _mcap_segment(path: Path, types: dict[str, str]) -> SegmentInfo:
             seg.start_ns, seg.end_ns = stats.message_start_time, stats.message_end_time
         seg.compression = ",".join(sorted({c.compression for c in summary.chunk_indexes})) or ""
         return seg
-    seg_types, _, records, problem = _recover_mcap(path)
-    types.update(seg_types)
-    seg.counts = dict(Counter(topic for topic, _, _, _ in records))
-    seg.messages = len(records)
-    if records:
-        stamps = [t for _, _, t, _ in records]
+    rec = recover_mcap(path)
+    types.update(rec.types)
+    seg.counts = dict(Counter(topic for topic, _, _, _ in rec.records))
+    seg.messages = rec.recovered
+    if rec.records:
+        stamps = [t for _, _, t, _ in rec.records]
         seg.start_ns, seg.end_ns = min(stamps), max(stamps)
-    seg.health = f"{problem}; {seg.messages} messages recovered"
+    seg.health = f"{rec.problem}; {rec.recovered} messages recovered"
     return seg
 
 

@@ -166,8 +166,26 @@ def _read_with_rosbags(path: Path) -> tuple[dict[str, str], dict[str, str], list
     return types, defs, records
 
 
-def _recover_mcap(path: Path) -> tuple[dict[str, str], dict[str, str], list, str]:
-    """Records of an MCAP file read as a stream up to the first damaged record."""
+@dataclass
+class Recovered:
+    """What one damaged MCAP segment yields (:func:`recover_mcap`): its topics' types, the
+    embedded definitions, every message record read (topic, type, log time, CDR bytes) and
+    what is wrong with the file. ``recovered`` is what every tool reports for the segment
+    (``bag info``, ``analyze``, ``rrd``): all its records, whatever a reader then keeps."""
+
+    types: dict[str, str]
+    defs: dict[str, str]
+    records: list
+    problem: str
+
+    @property
+    def recovered(self) -> int:
+        return len(self.records)
+
+
+def recover_mcap(path: Path) -> Recovered:
+    """The one reader of a damaged or unclosed MCAP segment: its records read as a stream up
+    to the first damaged record."""
     # lazy: mcap (40 ms), only to read a bag's chunks
     from mcap.records import Channel, Message, Schema
     from mcap.stream_reader import StreamReader
@@ -199,32 +217,33 @@ def _recover_mcap(path: Path) -> tuple[dict[str, str], dict[str, str], list, str
         ch.topic: schemas[ch.schema_id].name for ch in channels.values() if ch.schema_id in schemas
     }
     defs = {s.name: s.data.decode("utf-8", "replace") for s in schemas.values()}
-    return types, defs, records, problem
+    return Recovered(types, defs, records, problem)
 
 
 def read_file_into(out: BagContents, path: Path, topics: set[str] | None = None) -> None:
-    """Read one storage file into ``out``; problems become issues naming the file."""
+    """Read one storage file into ``out``; problems become issues naming the file (a damaged
+    MCAP segment's with the count of :func:`recover_mcap`, as ``bag info`` reports it)."""
     file = str(path)
     out.files.append(file)
+    recovered = None
     try:
         if path.stat().st_size == 0:
             out.issues.append(BagIssue(file, "empty file (0 bytes)"))
             return
         types, defs, records = _read_with_rosbags(path)
-        problem = None
     except Exception as exc:
         if path.suffix != ".mcap":
             out.issues.append(BagIssue(file, f"unreadable: {type(exc).__name__}: {exc}"))
             return
-        types, defs, records, problem = _recover_mcap(path)
-        problem = f"{problem}; rosbags: {exc}"
+        recovered = recover_mcap(path)
+        types, defs, records = recovered.types, recovered.defs, recovered.records
     out.types.update(types)
     for msgtype, text in defs.items():
         out.msgdefs.setdefault(msgtype, text)
     store = _typestore_for(defs, out.issues, file)
-    n = _decode_into(out, records, store, file, topics)
-    if problem is not None:
-        out.issues.append(BagIssue(file, problem, recovered=n))
+    _decode_into(out, records, store, file, topics)
+    if recovered is not None:
+        out.issues.append(BagIssue(file, recovered.problem, recovered=recovered.recovered))
 
 
 def read_bag(path: Path | str, topics: Iterable[str] | None = None) -> BagContents:

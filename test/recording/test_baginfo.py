@@ -132,3 +132,32 @@ def test_counts_include_topics_declared_but_absent(tmp_path):
     info = bag_info(bag).to_json()
     assert set(info["counts"]) == set(bag_info(EXAMPLE).counts)
     assert any("listed in metadata.yaml but missing" in issue for issue in info["issues"])
+
+
+def test_bag_info_analyze_and_rrd_recover_the_same_from_a_truncated_segment(tmp_path):
+    """One reader (bagread.recover_mcap) behind all three tools: for a segment cut in the
+    middle each reports the messages the independent streaming reader recovers, whatever
+    topics it then keeps (analyze reads only its own)."""
+    bag = tmp_path / "bag"
+    shutil.copytree(EXAMPLE, bag)
+    damaged = bag / "example_4_parcels_1.mcap"
+    cut = damaged.read_bytes()[: damaged.stat().st_size // 2]
+    damaged.write_bytes(cut)
+    expected, per_topic = recoverable(cut)
+    assert 0 < expected and len(per_topic) > 1
+
+    info = run_cli("bag", "info", str(bag), "--json")
+    assert info.returncode == 1
+    seg = next(s for s in json.loads(info.stdout)["segments"] if s["file"] == str(damaged))
+    assert seg["messages"] == expected and f"; {expected} messages recovered" in seg["health"]
+
+    analyze = run_cli("analyze", str(bag), "--json", "--no-plots")
+    assert analyze.returncode == 1
+    issues = [i for i in json.loads(analyze.stdout)["issues"] if i["file"] == str(damaged)]
+    assert [i["recovered"] for i in issues if "truncated" in i["problem"]] == [expected]
+
+    rrd = run_cli("rrd", str(bag), "--out", str(tmp_path / "b.rrd"))
+    assert rrd.returncode == 1
+    line = next(ln for ln in rrd.stderr.splitlines() if damaged.name in ln and "truncated" in ln)
+    assert line.endswith(f"({expected} messages recovered)")
+    assert f"({expected} messages recovered)" in analyze.stderr
