@@ -16,8 +16,22 @@ EXIT_FOREIGN = 4
 #: exit status: a parcel of the run was disputed: two authentic messages (or a message and the
 #: run's stream) gave its id different specs; the first one was sorted
 EXIT_DISPUTED = 6
-#: the diagnostics counters of messages a node dropped (where, and why)
-DROP_COUNTERS = (".foreign", ".rate_limited", ".lost", "take_errors", "_dropped_")
+#: the diagnostics counters of messages a node dropped or refused (where, and why): intake
+#: refusals (foreign run or source, rate), middleware losses, duplicates and conflicts of a
+#: parcel id, and every validation refusal by its reason (the dotted per-reason keys; their
+#: unsuffixed totals are not counted twice)
+DROP_COUNTERS = (
+    ".foreign",
+    ".rate_limited",
+    ".lost",
+    ".duplicate",
+    ".conflict",
+    "take_errors",
+    "_dropped_",
+    "bad_parcels.",
+    "rejected_parcels.",
+    "commands_rejected.",
+)
 
 
 def _num(text: str | None) -> float:

@@ -1,6 +1,6 @@
 """The run's exit status from its own stream (runner.summary): a divert parcel without an
 outcome (3), foreign traffic (4: another run, forgeries with the run's id, foreign publishers),
-a disputed parcel (6), and the dropped-message counters in the summary."""
+a disputed parcel (6), and the dropped and refused message counters in the summary."""
 
 from __future__ import annotations
 
@@ -140,3 +140,55 @@ def test_a_disputed_parcel_exits_6_naming_it() -> None:
     assert code == EXIT_DISPUTED and s["disputed"] == [1, 2, 3]
     assert why.startswith("parcels of the run given two specs (disputed): [1, 2, 3]")
     assert [row["disputed"] for row in s["parcels"]] == [True, True, True]
+
+
+def test_dropped_lists_every_refusal_counter_by_reason_and_no_total_twice() -> None:
+    r = records()
+    r.outcomes = {
+        1: outcome("SORTED", True),
+        2: outcome("NOT_DIVERTED"),
+        3: outcome("SORTED", True),
+    }
+    r.diagnostics["fence_sorter/simulator"] = {
+        "bad_parcels": "3",  # the totals of the per-reason counters below
+        "commands_rejected": "2",
+        "bad_parcels.mass": "2",
+        "bad_parcels.scan_time": "1",
+        "commands_rejected.duplicate": "2",
+        "parcels_dropped_loop_down": "1",
+        "parcels.rate_limited": "0",
+    }
+    r.diagnostics["fence_sorter/controller"] = {
+        "rejected_parcels": "4",
+        "rejected_parcels.duplicate_id": "4",
+        "parcels.foreign": "7",
+        "parcels.foreign_source": "3",
+        "parcels.duplicate": "2",
+        "parcels.conflict": "1",
+        "parcels.disputed_ids": "5",  # ids, not a count
+    }
+    r.diagnostics["fence_sorter/sensors"] = {"bad_parcels.size": "1", "camera.lost": "5"}
+    s = summarise(r, 1.0, [1, 2, 3], [1, 3])
+    assert s["dropped"] == {
+        "simulator": {
+            "bad_parcels.mass": 2,
+            "bad_parcels.scan_time": 1,
+            "commands_rejected.duplicate": 2,
+            "parcels_dropped_loop_down": 1,
+        },
+        "controller": {
+            "rejected_parcels.duplicate_id": 4,
+            "parcels.foreign": 7,
+            "parcels.foreign_source": 3,
+            "parcels.duplicate": 2,
+            "parcels.conflict": 1,
+        },
+        "sensors": {"bad_parcels.size": 1, "camera.lost": 5},
+    }
+    # every refusal a node counts is in dropped: the per-reason counters add up to the totals
+    sim = s["dropped"]["simulator"]
+    assert sum(v for k, v in sim.items() if k.startswith("bad_parcels.")) == 3
+    assert (
+        "dropped (controller) parcels.conflict 1, parcels.duplicate 2, parcels.foreign 7, "
+        "parcels.foreign_source 3, rejected_parcels.duplicate_id 4"
+    ) in format_summary(s)
