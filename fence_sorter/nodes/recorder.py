@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import importlib
 import json
+import math
 import os
 import queue
 import sys
@@ -127,6 +128,7 @@ class _Topic:
     header: bool = False  # messages start with a std_msgs/Header
     received: int = 0
     written: int = 0
+    not_written: int = 0  # after a write error (the bag ends there)
     subscription: Subscription | None = None
 
 
@@ -160,6 +162,10 @@ class RecorderNode(FenceSorterNode):
         self._queued_max = 0
         self._lock = threading.Lock()
         self.write_error: str | None = None
+        # the node's clock [s] (sim time in a run) when writing failed, and the newest log
+        # time in the files then (the bag ends there)
+        self.write_failed_at = math.nan
+        self.bag_ends_at = math.nan
         self.topics: list[_Topic] = []
         for name in p["topics"]:
             if name not in ALL_TOPICS:
@@ -221,6 +227,8 @@ class RecorderNode(FenceSorterNode):
             for t_ns, (topic, data) in held.ready(everything=stopping):
                 if self._guard(writer.write, topic.handle, t_ns, data):
                     topic.written += 1
+                else:
+                    topic.not_written += 1
             if item is None:
                 if stopping:
                     break
@@ -229,8 +237,9 @@ class RecorderNode(FenceSorterNode):
         try:
             writer.close()
         except Exception as exc:
-            self.write_error = f"{type(exc).__name__}: {exc}"
-            print(f"[recorder] bag {self.path}: closing failed: {self.write_error}",
+            error = f"{type(exc).__name__}: {exc}"
+            self.write_error = self.write_error or error
+            print(f"[recorder] bag {self.path}: closing failed: {error}",
                   file=sys.stderr, flush=True)  # fmt: skip
 
     def _guard(self, func, *args) -> bool:
@@ -241,7 +250,18 @@ class RecorderNode(FenceSorterNode):
             return True
         except Exception as exc:  # a full disk must not kill the node silently
             self.write_error = f"{type(exc).__name__}: {exc}"
-            self.get_logger().error(f"bag {self.path}: writing failed: {self.write_error}")
+            self.write_failed_at = self.get_clock().now().nanoseconds * 1e-9
+            durable = self.writer.durable_ns
+            self.bag_ends_at = durable * 1e-9 if durable is not None else math.nan
+            self.get_logger().error(
+                f"bag {self.path}: writing failed at t = {self.write_failed_at:.3f} s "
+                f"(the bag ends at t = {self.bag_ends_at:.3f} s; recording stops, the run goes "
+                f"on): {self.write_error}"
+            )
+            try:  # the error on /diagnostics now, not at the next heartbeat
+                self.publish_heartbeat()
+            except Exception as pub_exc:  # the context may be going down
+                print(f"[recorder] heartbeat not sent: {pub_exc}", file=sys.stderr, flush=True)
             return False
 
     def close(self) -> None:
@@ -301,6 +321,15 @@ class RecorderNode(FenceSorterNode):
         if self.write_error:
             status.level = DiagnosticStatus.ERROR
             status.message = f"writing failed: {self.write_error}"
+            status.values.extend(
+                KeyValue(key=k, value=v)
+                for k, v in {
+                    "write_error": self.write_error,
+                    "write_failed_at_sim_s": f"{self.write_failed_at:.3f}",
+                    "bag_ends_sim_s": f"{self.bag_ends_at:.3f}",
+                    "messages_dropped_write_failed": str(sum(t.not_written for t in self.topics)),
+                }.items()
+            )
         return status
 
     def publishers_unmatched(self) -> list[str]:

@@ -135,6 +135,10 @@ class SegmentedBagWriter:
         self._next_index = 0
         self._is_open = False
         self.bytes_written = 0
+        #: the newest timestamp handed to :meth:`write`, and the newest one a reader finds in
+        #: the files (flushed or in a closed segment) [ns]; None before any
+        self.last_ns: int | None = None
+        self.durable_ns: int | None = None
 
     # -- lifecycle -----------------------------------------------------------------------------
     def open(self) -> SegmentedBagWriter:
@@ -193,6 +197,8 @@ class SegmentedBagWriter:
         seg.count += 1
         self.bytes_written += size
         self.topics[handle].count += 1
+        if self.last_ns is None or timestamp_ns > self.last_ns:
+            self.last_ns = int(timestamp_ns)
         if seg.bytes >= self.max_segment_bytes:
             self.rotate()
         else:
@@ -229,6 +235,7 @@ class SegmentedBagWriter:
         except OSError as exc:
             raise BagWriteError(f"{self.path}: cannot flush segment {seg.name}: {exc}") from exc
         self.flushes += 1
+        self.durable_ns = self.last_ns
 
     def rotate(self) -> None:
         """Close the open segment (if it holds messages) and list it in metadata.yaml."""
@@ -257,6 +264,7 @@ class SegmentedBagWriter:
         for handle, conn in seg.connections.items():
             self.topics[handle].closed_count += counts.get(conn.id, 0)
         self.segments.append(SegmentInfo(dst.name, start, duration, seg.count, dst.stat().st_size))
+        self.durable_ns = self.last_ns
         self._write_metadata()
 
     def close(self) -> None:

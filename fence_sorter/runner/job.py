@@ -43,7 +43,7 @@ from fence_sorter.runner.processes import (
     node_env,
     wait_until,
 )
-from fence_sorter.runner.summary import summarise, verdict
+from fence_sorter.runner.summary import recording_failure, summarise, verdict
 from fence_sorter.scene import load_scene, resolve_scene
 from fence_sorter.stream import load_stream, resolve_stream
 from fence_sorter.visualisation.foxglove_address import AddressError, parse_address
@@ -566,10 +566,13 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None], stop: StopReq
         expected = set(plan.expected_ids)
         sim_start = None
         outcomes_seen, last_outcome = 0, time.monotonic()
+        recording_told = False
         while True:
             monitor.spin_for(0.1)
             stop.check()
             rec = monitor.records
+            if not recording_told:
+                recording_told = _tell_recording_failure(rec, say)
             if expected <= rec.outcomes.keys():
                 break
             if len(rec.outcomes) > outcomes_seen:
@@ -663,6 +666,8 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None], stop: StopReq
         if monitor is not None:
             monitor.close()
     bad_exit = {n: c for n, c in exit_codes.items() if c not in (0, None)}
+    if summary["recording_failed"]:  # the recorder's exit status 1 is that failure (exit 5)
+        bad_exit.pop("recorder", None)
     if code == EXIT_OK and bad_exit:
         code, message = EXIT_FAILED, f"nodes did not exit cleanly: {bad_exit}"
     if left:
@@ -682,6 +687,20 @@ def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None], stop: StopReq
     summary["process_groups"] = list(group.pgids)
     summary["leftover_processes"] = left
     return RunResult(code, summary, message, log_dir, list(group.pgids), left, exit_codes, records)
+
+
+def _tell_recording_failure(records, say: Callable[[str], None]) -> bool:
+    """Say once that the recorder failed to write (its /diagnostics error): when, and the sim
+    time where the bag ends; the run goes on unrecorded. True once said."""
+    failure = recording_failure(records.diagnostics)
+    if failure is None:
+        return False
+    say(
+        f"recorder: writing the bag failed at sim time {failure['failed_at_sim_s']:.2f} s: "
+        f"{failure['error']}; the bag ends at sim time {failure['bag_ends_sim_s']:.2f} s, "
+        "the run goes on unrecorded"
+    )
+    return True
 
 
 def _recorder_args(plan: Plan, opts: RunOptions, log_dir: Path) -> list[str]:

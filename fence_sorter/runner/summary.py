@@ -16,6 +16,9 @@ EXIT_FOREIGN = 4
 #: exit status: a parcel of the run was disputed: two authentic messages (or a message and the
 #: run's stream) gave its id different specs; the first one was sorted
 EXIT_DISPUTED = 6
+#: exit status: the recorder could not write the bag (a full disk, any write error): the run
+#: went on unrecorded from the time the summary names (docs/recording.md)
+EXIT_RECORDING = 5
 #: the diagnostics counters of messages a node dropped or refused (where, and why): intake
 #: refusals (foreign run or source, rate), middleware losses, duplicates and conflicts of a
 #: parcel id, and every validation refusal by its reason (the dotted per-reason keys; their
@@ -39,6 +42,11 @@ def _num(text: str | None) -> float:
         return float(text)  # type: ignore[arg-type]
     except (TypeError, ValueError):
         return math.nan
+
+
+def _count(text: str | None) -> int:
+    n = _num(text)
+    return int(n) if math.isfinite(n) else 0
 
 
 def _max(values) -> float:
@@ -114,6 +122,21 @@ def parcel_table(outcomes: dict, expected, divert: set[int], disputed) -> list[d
             }
         )
     return rows
+
+
+def recording_failure(diagnostics: dict[str, dict[str, str]]) -> dict | None:
+    """What the recorder said of a failed write (its /diagnostics error): the error, the sim
+    time it happened and the sim time of the last message in the bag; None: no failure."""
+    rec = diagnostics.get("fence_sorter/recorder") or {}
+    if not rec.get("write_error"):
+        return None
+    return {
+        "error": rec["write_error"],
+        "failed_at_sim_s": _num(rec.get("write_failed_at_sim_s")),
+        "bag_ends_sim_s": _num(rec.get("bag_ends_sim_s")),
+        "bag": rec.get("bag"),
+        "messages_not_written": _count(rec.get("messages_dropped_write_failed")),
+    }
 
 
 def summarise(records, belt_speed: float, expected_ids=None, divert_ids=None) -> dict:
@@ -215,6 +238,7 @@ def summarise(records, belt_speed: float, expected_ids=None, divert_ids=None) ->
         "scanner": scanner or {},
         "sensors": sensors or {},
         "sim_time_s": records.sim_time,
+        "recording_failed": recording_failure(records.diagnostics),
     }
 
 
@@ -264,6 +288,13 @@ def verdict(s: dict) -> tuple[int, str] | None:
             f"parcels of the run given two specs (disputed): {s['disputed'][:20]}; {_lost(s)}"
             + context
         )
+    rec = s.get("recording_failed")
+    if rec:
+        return EXIT_RECORDING, (
+            f"the bag could not be written: {rec['error']} at sim time "
+            f"{rec['failed_at_sim_s']:.2f} s; the bag ends at sim time "
+            f"{rec['bag_ends_sim_s']:.2f} s, the run went on unrecorded; {_lost(s)}" + context
+        )
     if foreign:
         return EXIT_FOREIGN, (
             f"foreign traffic on the run's domain (refused, not in the figures): "
@@ -305,6 +336,13 @@ def format_summary(s: dict) -> str:
         lines.append(f"foreign traffic   {phrase} (refused, not counted)")
     if s.get("disputed"):
         lines.append(f"disputed          {s['disputed'][:20]} (two specs for one parcel id)")
+    rec = s.get("recording_failed")
+    if rec:
+        lines.append(
+            f"recording FAILED  {rec['error']} at sim time {rec['failed_at_sim_s']:.2f} s; "
+            f"the bag ends at {rec['bag_ends_sim_s']:.2f} s ({rec['messages_not_written']} "
+            "messages not written)"
+        )
     for node, counts in sorted(s["dropped"].items()):
         lines.append(
             f"dropped ({node:<9}) " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items()))

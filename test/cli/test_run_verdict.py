@@ -1,6 +1,7 @@
 """The run's exit status from its own stream (runner.summary): a divert parcel without an
 outcome (3), foreign traffic (4: another run, forgeries with the run's id, foreign publishers),
-a disputed parcel (6), and the dropped and refused message counters in the summary."""
+a recorder that could not write (5), a disputed parcel (6), and the dropped and refused
+message counters in the summary."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ from fence_sorter.runner.summary import (
     EXIT_DISPUTED,
     EXIT_FOREIGN,
     EXIT_INCOMPLETE,
+    EXIT_RECORDING,
     format_summary,
     summarise,
     verdict,
@@ -192,3 +194,32 @@ def test_dropped_lists_every_refusal_counter_by_reason_and_no_total_twice() -> N
         "dropped (controller) parcels.conflict 1, parcels.duplicate 2, parcels.foreign 7, "
         "parcels.foreign_source 3, rejected_parcels.duplicate_id 4"
     ) in format_summary(s)
+
+
+def test_a_recorder_write_error_exits_5_naming_the_error_and_where_the_bag_ends() -> None:
+    r = records()
+    r.outcomes = {
+        1: outcome("SORTED", True),
+        2: outcome("NOT_DIVERTED"),
+        3: outcome("SORTED", True),
+    }
+    r.diagnostics["fence_sorter/recorder"] = {
+        "bag": "/b",
+        "write_error": "BagWriteError: /b: cannot flush segment b_1: [Errno 28] No space left",
+        "write_failed_at_sim_s": "12.345",
+        "bag_ends_sim_s": "11.900",
+        "messages_dropped_write_failed": "4711",
+    }
+    s = summarise(r, 1.0, [1, 2, 3], [1, 3])
+    code, why = verdict(s)
+    assert code == EXIT_RECORDING == 5
+    assert why == (
+        "the bag could not be written: BagWriteError: /b: cannot flush segment b_1: [Errno 28] "
+        "No space left at sim time 12.35 s; the bag ends at sim time 11.90 s, the run went on "
+        "unrecorded; every divert parcel of the run was sorted"
+    )
+    assert s["recording_failed"]["messages_not_written"] == 4711
+    assert "recording FAILED  BagWriteError" in format_summary(s)
+    # a divert parcel without an outcome is the graver verdict
+    del r.outcomes[3]
+    assert verdict(summarise(r, 1.0, [1, 2, 3], [1, 3]))[0] == EXIT_INCOMPLETE
