@@ -14,7 +14,7 @@ from pathlib import Path
 
 from fence_sorter.verification.faults import campaign
 
-CASES = ("wire", "cli", "floods", "insiders", "interrupts")
+CASES = ("wire", "cli", "floods", "insiders", "interrupts", "freezes")
 
 
 def register(parser: argparse.ArgumentParser) -> None:

@@ -106,3 +106,68 @@ def test_controller_killed_mid_run_is_restarted_and_the_run_goes_on(tmp_path: Pa
     logs = re.search(r"logs (\S+)", err).group(1)
     assert s["log_dir"] is None and not Path(logs).exists()
     assert wait_until(lambda: not tagged(TAG, tag), 10.0)
+
+
+def test_a_pacing_loop_stopped_3_s_misses_every_deadline_it_did_not_run(tmp_path: Path) -> None:
+    """SIGSTOP of the loop process for 3 s at 1 kHz: about 3000 deadline misses (each cycle
+    not run), not the handful of late wake-ups; the line resumes and every divert parcel is
+    sorted as planned."""
+    from fence_sorter.verification.faults import freeze_met, freeze_trial
+
+    row = freeze_trial("pacing loop", tmp_path, stop_s=3.0)
+    assert row["stopped_pid_found"], row
+    sim = {k: float(v) for k, v in row["simulator"].items()}
+    # the stop is at least 3 s of missed deadlines (the machine's own misses come on top)
+    assert 2990 <= sim["deadline_misses"] <= sim["cycles"]
+    assert sim["cycle_lateness_max_ms"] >= 2990.0
+    assert sim["deadline_misses"] >= sim["cycle_lateness_max_ms"] - 10.0
+    assert row["exit_code"] == 0, row
+    assert row["sorted_divert"] == row["divert"] > 0, (row["by_reason"], row["missed_examples"])
+    assert freeze_met(row)
+
+
+def test_a_controller_stopped_3_s_shows_in_its_latency_from_the_parcels_send(
+    tmp_path: Path,
+) -> None:
+    """SIGSTOP of the controller for 3 s with a parcel scanned every 1.5 s: the first one
+    scanned during the stop waits at least 3 - 1.5 s in the middleware, so its command's
+    latency from the scanner's send time is >= 1.5 s (or the parcel was too late to plan:
+    late_no_command); the latency from reception, stamped by the stopped process itself when
+    it runs again, cannot see the stop. Every divert parcel has an outcome."""
+    from fence_sorter.verification.faults import FREEZE_SPACING, freeze_met, freeze_trial
+
+    row = freeze_trial("controller", tmp_path, stop_s=3.0)
+    assert row["stopped_pid_found"], row
+    c = {k: float(v) for k, v in row["controller"].items()}
+    waited = 1e3 * (3.0 - FREEZE_SPACING)
+    if c["late_no_command"] == 0:  # every parcel of the stop was planned after it
+        assert c["latency_from_send_max_ms"] >= waited, c
+        assert c["latency_max_ms"] < c["latency_from_send_max_ms"] - 1000.0, c
+    assert not row["divert_without_outcome"] and row["exit_code"] in (0, 3), row
+    assert freeze_met(row)
+
+
+def test_a_full_disk_is_reported_when_it_happens_and_the_run_exits_5(tmp_path: Path) -> None:
+    """Recording into a 256 KiB tmpfs (mounted here, as root): the recorder's write fails
+    with ENOSPC; the runner says so at once with the sim time where the bag ends, the run goes
+    on unrecorded to every outcome, the summary names it and the exit status is 5. The bag
+    left on the full disk ends where the recorder said (read back from a copy)."""
+    from fence_sorter.recording.bagread import read_bag
+    from fence_sorter.verification.faults import freeze_met, freeze_trial
+
+    row = freeze_trial("disk full", tmp_path)
+    if "not_run" in row:
+        pytest.skip(f"cannot mount a tmpfs here: {row['not_run']}")
+    rec = row["recording_failed"]
+    assert row["exit_code"] == 5, row
+    assert rec and "No space left on device" in rec["error"], rec
+    assert row["recording_told"].startswith(
+        f"recorder: writing the bag failed at sim time {rec['failed_at_sim_s']:.2f} s"
+    )
+    assert f"the bag ends at sim time {rec['bag_ends_sim_s']:.2f} s" in row["recording_told"]
+    assert 0.0 < rec["bag_ends_sim_s"] <= rec["failed_at_sim_s"]
+    assert rec["messages_not_written"] > 0
+    assert not row["divert_without_outcome"] and row["sorted_divert"] == row["divert"]
+    last = max(m.t_ns for m in read_bag(row["bag_copy"]).messages) * 1e-9
+    assert last == pytest.approx(rec["bag_ends_sim_s"], abs=2e-3)
+    assert freeze_met(row)
