@@ -1,4 +1,4 @@
-"""Compile the physics kernel: ``python -m fence_sorter.physics.warmup``.
+"""Compile the physics kernel: ``python -m fence_sorter.warmup``.
 
 scripts/bootstrap.sh runs it once per change of the physics sources, so that no ``simulate``
 after set-up compiles (about a minute in silence otherwise) or goes through Numba's dispatcher
@@ -15,11 +15,10 @@ import argparse
 import time
 from dataclasses import replace
 
+from fence_sorter.physics import kernel
+from fence_sorter.physics.kernel import aot
+from fence_sorter.physics.simulate import simulate
 from fence_sorter.scene import load_scene
-
-from . import kernel
-from .kernel import aot
-from .simulate import simulate
 
 PARTS = (
     ("compiled loop, stiff fence", "positioned_stiff", "adaptive"),

@@ -207,12 +207,13 @@ step_ament() {
 # solve runs the ahead-of-time extension (kernel/aot.py) instead of Numba's dispatcher.
 step_kernel() {
   local key sources
-  mapfile -t sources < <(find "$ROOT/fence_sorter/physics" -name '*.py' | sort)
+  mapfile -t sources < <(find "$ROOT/fence_sorter/physics" "$ROOT/fence_sorter/warmup.py" \
+    -name '*.py' | sort)
   key="$(inputs_hash "${sources[@]}" -s "$(<"$STAMPS/package")")"
   if stamp_ok kernel "$key"; then return 0; fi
   WORKED=1
   log "compiling the physics kernel (about a minute of CPU, once per change of the physics)"
-  "$PY" -m fence_sorter.physics.warmup
+  "$PY" -m fence_sorter.warmup
   stamp_write kernel "$key"
 }
 

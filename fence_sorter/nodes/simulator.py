@@ -39,6 +39,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
+from fence_sorter.affinity import keep_on
 from fence_sorter.capacity.constraints import ConstraintProfile
 from fence_sorter.line import (
     EventTrace,
@@ -61,7 +62,6 @@ from fence_sorter.nodes.qos import CLOCK_QOS, INPUT_QOS, topic_qos
 from fence_sorter.nodes.sources import SourceWatch, sign_clock
 from fence_sorter.nodes.tf_publisher import TfPublisher
 from fence_sorter.recording import topics
-from fence_sorter.runner.processes import keep_on
 from fence_sorter.scene import load_scene
 from fence_sorter.stamps import time_to_sec
 from fence_sorter.visualisation.rerun_live import RerunProcess

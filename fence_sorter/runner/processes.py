@@ -25,6 +25,7 @@ from functools import partial
 from pathlib import Path
 from typing import IO
 
+from fence_sorter.affinity import keep_on
 from fence_sorter.resources import checkout_root, data_path
 
 #: Domain ids of `fence-sorter run`'s automatic choice (the tests use 100..199); Fast DDS's
@@ -161,22 +162,6 @@ class NodeProcess:
             return "\n".join(self.log_path.read_text(errors="replace").splitlines()[-lines:])
         except OSError:
             return ""
-
-
-def keep_on(pid: int, cpus: set[int] | None) -> None:
-    """Every thread of process ``pid`` on ``cpus`` (None: left as it is); a process or thread
-    that has just ended is passed over."""
-    if cpus is None:
-        return
-    try:
-        tids = os.listdir(f"/proc/{pid}/task")
-    except OSError:
-        return
-    for tid in tids:
-        try:
-            os.sched_setaffinity(int(tid), cpus)
-        except OSError:
-            pass
 
 
 class ProcessGroup:

@@ -44,7 +44,6 @@ from collections import Counter
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from fence_sorter.cli.main import main as cli_main
 from fence_sorter.resources import data_path
 from fence_sorter.runner.monitor import Monitor
 from fence_sorter.runner.processes import (
@@ -1267,11 +1266,17 @@ def campaign(
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The flooding child process of the campaign (the campaign itself is ``fence-sorter
+    faults``)."""
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ["flood"]:
         return flood_main(argv[1:])
-
-    return cli_main(["faults", *argv])
+    print(
+        "faults: error: the first argument must be 'flood' (the campaign is "
+        "`fence-sorter faults`)",
+        file=sys.stderr,
+    )
+    return 2
 
 
 if __name__ == "__main__":

@@ -33,6 +33,8 @@ SCENES = ("impact_flexible", "slide_flexible", "positioned_stiff", "arbitrary_st
 ROUNDS = 5  # fresh processes per tree and scene, alternating
 CALLS = 20  # timed calls per process
 WARM_UP = 3  # untimed calls per process before the timed ones
+#: the warm-up module of a tree: this tree's, then the one of trees older than it
+WARMUP_MODULES = ("fence_sorter.warmup", "fence_sorter.physics.warmup")
 OUT_JSON = "docs/versus.json"
 OUT_MD = "docs/versus.md"
 
@@ -83,16 +85,20 @@ def tree_env(tree: Path) -> dict[str, str]:
 
 def prepare(tree: Path) -> bool:
     """Compile ``tree``'s kernel as scripts/bootstrap.sh does for a clone (``python -m
-    fence_sorter.physics.warmup``: the JIT's cache and the ahead-of-time solve), so that both
-    trees solve through the same kind of entry; False when the tree has no such module."""
-    p = subprocess.run(
-        [sys.executable, "-m", "fence_sorter.physics.warmup"],
-        cwd=tree,
-        env=tree_env(tree),
-        capture_output=True,
-        text=True,
-    )
-    return p.returncode == 0
+    fence_sorter.warmup``, ``fence_sorter.physics.warmup`` in older trees: the JIT's cache and
+    the ahead-of-time solve), so that both trees solve through the same kind of entry; False
+    when the tree has no such module."""
+    for module in WARMUP_MODULES:
+        p = subprocess.run(
+            [sys.executable, "-m", module],
+            cwd=tree,
+            env=tree_env(tree),
+            capture_output=True,
+            text=True,
+        )
+        if p.returncode == 0:
+            return True
+    return False
 
 
 def run_child(tree: Path, scene: str, calls: int, warm_up: int) -> dict:
@@ -176,7 +182,7 @@ def render(data: dict) -> str:
             for n in ("head", "base")
         }
         lines += [
-            f"Each tree's kernel compiled first (`python -m fence_sorter.physics.warmup`): "
+            f"Each tree's kernel compiled first (`python -m fence_sorter.warmup`): "
             f"`{head}` solved through {entry['head']}, `{base}` through {entry['base']}.",
             "",
         ]

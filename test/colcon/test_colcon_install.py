@@ -116,7 +116,7 @@ def ws(tmp_path_factory) -> Workspace:
     (root / "src").rename(root / "src.moved")  # the sources are out of reach from here on
     # the compiled physics kernel of the installed copy, once (as bootstrap.sh's kernel step)
     start = time.monotonic()
-    out = w.run(f"{python} -m fence_sorter.physics.warmup", timeout=900)
+    out = w.run(f"{python} -m fence_sorter.warmup", timeout=900)
     assert out.returncode == 0, out.stderr[-3000:]
     print(f"kernel compiled from install/: {time.monotonic() - start:.1f} s")
     return w

@@ -22,8 +22,8 @@ import pytest
 from fence_sorter.physics import kernel as K
 from fence_sorter.physics.kernel import aot
 from fence_sorter.physics.simulate import simulate
-from fence_sorter.physics.warmup import solve_bench_scenes
 from fence_sorter.scene import load_scene
+from fence_sorter.warmup import solve_bench_scenes
 
 SCENES = ("positioned_stiff", "arbitrary_stiff", "impact_flexible", "slide_flexible")
 

@@ -6,7 +6,7 @@ is cached: ~80 % is Numba's one-time set-up of its typing and target registries
 (docs/numerics.md, "Start-up of a process"). An extension module built by ``numba.pycc``
 from the same source loads in a few milliseconds and calls no dispatcher.
 
-:func:`build` (``python -m fence_sorter.physics.warmup``, which scripts/bootstrap.sh runs once
+:func:`build` (``python -m fence_sorter.warmup``, which scripts/bootstrap.sh runs once
 per change of the physics) solves the bench scenes with the
 JIT, takes the signatures ``loop.solve`` was compiled for (the types of the ``LoopModel`` and
 ``LoopState`` fields as the engine passes them) and exports one entry per signature, compiled
@@ -193,7 +193,7 @@ class Solve:
             if why:
                 log.warning(
                     "%s: the JIT solves (its first call in a process costs ~0.3-1 s; "
-                    "python -m fence_sorter.physics.warmup builds it)",
+                    "python -m fence_sorter.warmup builds it)",
                     why,
                 )
         return self.entries
