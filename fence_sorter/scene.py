@@ -36,6 +36,7 @@ from fence_sorter.resources import ResourceNotFound, data_path, find_data
 from fence_sorter.textinput import TextInputError, load_yaml, read_text
 
 __all__ = [
+    "DEFAULT_SCENE",
     "LoadedScene",
     "SceneError",
     "available_scenes",
@@ -43,6 +44,9 @@ __all__ = [
     "resolve_scene",
     "scene_dirs",
 ]
+
+#: the scene of a run, and of every node, when none is named (config/scenes/)
+DEFAULT_SCENE = "impact_flexible"
 
 
 class SceneError(ParameterError):

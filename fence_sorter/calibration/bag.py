@@ -32,6 +32,7 @@ from fence_sorter.recording.topics import (
     TOPIC_TYPES,
 )
 from fence_sorter.recording.writer import SegmentedBagWriter
+from fence_sorter.stamps import time_to_sec
 
 from .replay import ParcelEvent
 from .sensors import Measurements, drive_angle
@@ -168,10 +169,6 @@ def write_measured_bag(
     return Path(path)
 
 
-def _t(stamp) -> float:
-    return stamp.sec + stamp.nanosec * 1e-9
-
-
 def fit_stroke(
     enc_t: np.ndarray, enc_angle: np.ndarray, alpha_k: float, t1: float, t_start: float
 ) -> tuple[float, float, float]:
@@ -231,10 +228,10 @@ def read_measured_bag(path: Path | str) -> MeasuredBag:
             )
     m = Measurements()
     enc = bag.by_topic(DRIVE_ENCODER)
-    m.enc_t = np.array([_t(x.msg.header.stamp) for x in enc])
+    m.enc_t = np.array([time_to_sec(x.msg.header.stamp) for x in enc])
     m.enc_angle = np.array([float(x.msg.position[0]) for x in enc])
     cam = bag.by_topic(CAMERA_POSES)
-    m.cam_t = np.array([_t(x.msg.header.stamp) for x in cam])
+    m.cam_t = np.array([time_to_sec(x.msg.header.stamp) for x in cam])
     m.cam_id = np.array([int(x.msg.parcel_id) for x in cam], dtype=np.int64)
     m.cam_x = np.array([x.msg.pose.position.x for x in cam])
     m.cam_y = np.array([x.msg.pose.position.y for x in cam])
@@ -243,7 +240,7 @@ def read_measured_bag(path: Path | str) -> MeasuredBag:
     )
     m.cam_latency = float(np.median([x.t_ns * 1e-9 for x in cam] - m.cam_t))
     strain = bag.by_topic(FENCE_ROOT_MOMENT)
-    m.str_t = np.array([_t(x.msg.header.stamp) for x in strain])
+    m.str_t = np.array([time_to_sec(x.msg.header.stamp) for x in strain])
     m.str_moment = np.array([x.msg.wrench.torque.z for x in strain])
     parcels = {int(x.msg.parcel_id): x.msg for x in bag.by_topic(PARCELS)}
     events = []
@@ -253,7 +250,8 @@ def read_measured_bag(path: Path | str) -> MeasuredBag:
         p = parcels.get(pid)
         if p is None or not cmd.feasible:
             continue
-        t0, ak, t1 = fit_stroke(m.enc_t, m.enc_angle, cmd.alpha_k, cmd.t1, _t(cmd.start_time))
+        start = time_to_sec(cmd.start_time)
+        t0, ak, t1 = fit_stroke(m.enc_t, m.enc_angle, cmd.alpha_k, cmd.t1, start)
         parcel = ParcelParams(**{f: float(getattr(p, f)) for f in PARCEL_FIELDS})
         events.append(ParcelEvent(pid, parcel, ak, t1, cmd.r_s, t0))
     events.sort(key=lambda e: e.t_start)

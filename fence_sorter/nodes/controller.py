@@ -31,11 +31,9 @@ from fence_sorter.nodes.qos import INPUT_QOS, topic_qos
 from fence_sorter.nodes.sources import sign
 from fence_sorter.physics.params import ParameterError, ParcelParams
 from fence_sorter.recording import topics
-from fence_sorter.scene import load_scene
+from fence_sorter.scene import DEFAULT_SCENE, load_scene
 from fence_sorter.stream import load_stream
 from fence_sorter_msgs.msg import FenceCommand, Parcel
-
-DEFAULT_SCENE = "impact_flexible"
 
 
 def request_from_spec(spec: ParcelSpec) -> LoadRequest:

@@ -17,10 +17,10 @@ import yaml
 
 from fence_sorter.capacity.constraints import ConstraintProfile
 from fence_sorter.recording.topics import TOPIC_TYPES
+from fence_sorter.scene import DEFAULT_SCENE
 
 ParamValue = bool | int | float | str | list[str] | list[float] | list[int]
 
-DEFAULT_SCENE = "impact_flexible"
 #: the damage limits of an outcome when the simulator is given none (the paper's (10), (11))
 _LIMITS = ConstraintProfile()
 #: the highest CPU number of this machine (the simulator's ``loop_cpu`` range)

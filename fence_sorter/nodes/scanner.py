@@ -38,12 +38,9 @@ from fence_sorter.nodes.qos import topic_qos
 from fence_sorter.nodes.sources import sign
 from fence_sorter.physics.params import ParameterError
 from fence_sorter.recording import topics
-from fence_sorter.scene import load_scene
-from fence_sorter.stream import ParcelSpec, load_stream
+from fence_sorter.scene import DEFAULT_SCENE, load_scene
+from fence_sorter.stream import DEFAULT_STREAM, ParcelSpec, load_stream
 from fence_sorter_msgs.msg import Parcel
-
-DEFAULT_SCENE = "impact_flexible"
-DEFAULT_STREAM = "default"
 
 
 def fill_parcel(

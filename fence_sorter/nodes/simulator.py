@@ -62,7 +62,7 @@ from fence_sorter.nodes.qos import CLOCK_QOS, INPUT_QOS, topic_qos
 from fence_sorter.nodes.sources import SourceWatch, sign_clock
 from fence_sorter.nodes.tf_publisher import TfPublisher
 from fence_sorter.recording import topics
-from fence_sorter.scene import load_scene
+from fence_sorter.scene import DEFAULT_SCENE, load_scene
 from fence_sorter.stamps import time_to_sec
 from fence_sorter.visualisation.rerun_live import RerunProcess
 from fence_sorter.visualisation.rerun_log import SceneGeometry
@@ -76,7 +76,6 @@ from fence_sorter_msgs.msg import (
     SortOutcome,
 )
 
-DEFAULT_SCENE = "impact_flexible"
 #: unpaced, the loop waits for this node to publish up to this much sim time behind it [s]
 UNPACED_PUBLISH_LEAD = 0.1
 #: the node process's GIL switch interval while running [s] (see start())

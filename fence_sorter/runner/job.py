@@ -44,12 +44,10 @@ from fence_sorter.runner.processes import (
     wait_until,
 )
 from fence_sorter.runner.summary import recording_failure, summarise, verdict
-from fence_sorter.scene import load_scene, resolve_scene
-from fence_sorter.stream import load_stream, resolve_stream
+from fence_sorter.scene import DEFAULT_SCENE, load_scene, resolve_scene
+from fence_sorter.stream import DEFAULT_STREAM, load_stream, resolve_stream
 from fence_sorter.visualisation.foxglove_address import AddressError, parse_address
 
-DEFAULT_SCENE = "impact_flexible"
-DEFAULT_STREAM = "default"
 DEFAULT_PARCELS = 20
 SCAN_LINE_X = -3.0
 START_DELAY = 0.5
@@ -116,7 +114,7 @@ class RunResult:
 
 
 @dataclass
-class Plan:
+class RunPlan:
     """What the job will run (validated input)."""
 
     scene_path: Path
@@ -141,7 +139,7 @@ class Plan:
     stream: dict[int, ParcelSpec] = field(default_factory=dict, repr=False)
 
 
-def prepare(opts: RunOptions) -> Plan:
+def prepare(opts: RunOptions) -> RunPlan:
     """Check every input before anything starts; BadInput names the option and the range."""
     if opts.parcels is not None and opts.parcels < 1:
         raise BadInput(f"--parcels must be in [1, inf), got {opts.parcels}")
@@ -202,7 +200,7 @@ def prepare(opts: RunOptions) -> Plan:
         domain = choose_domain(opts.domain)
     except DomainError as exc:
         raise BadInput(str(exc)) from None
-    return Plan(
+    return RunPlan(
         scene_path,
         v,
         width,
@@ -298,7 +296,7 @@ def sensors_seed(opts: RunOptions) -> int:
     return (opts.seed if opts.seed is not None else 0) + 1
 
 
-def _ros_args(node: str, plan: Plan, opts: RunOptions, extra: list[str]) -> list[str]:
+def _ros_args(node: str, plan: RunPlan, opts: RunOptions, extra: list[str]) -> list[str]:
     args: list[str] = []
     params_file = data_path("config", f"{node}.yaml")
     if params_file.is_file():
@@ -317,7 +315,7 @@ def _ros_args(node: str, plan: Plan, opts: RunOptions, extra: list[str]) -> list
 STALL_TIMEOUT = 10.0
 
 
-def loop_cpu(plan: Plan, rtf: float, cpus: set[int]) -> tuple[int, bool]:
+def loop_cpu(plan: RunPlan, rtf: float, cpus: set[int]) -> tuple[int, bool]:
     """The simulator's ``loop_cpu`` for this run and whether the run sets it: a ``--param``
     override as given (-1 turns pinning off), else config/simulator.yaml's if >= 0, else, for
     a paced run on two CPUs or more, the last CPU (set by the run)."""
@@ -395,7 +393,9 @@ def run_job(
             stop.restore()
 
 
-def _run(plan: Plan, opts: RunOptions, say: Callable[[str], None], stop: StopRequest) -> RunResult:
+def _run(
+    plan: RunPlan, opts: RunOptions, say: Callable[[str], None], stop: StopRequest
+) -> RunResult:
     domain = plan.domain
     log_dir = Path(opts.log_dir or tempfile.mkdtemp(prefix=LOG_DIR_PREFIX))
     log_dir.mkdir(parents=True, exist_ok=True)
@@ -703,7 +703,7 @@ def _tell_recording_failure(records, say: Callable[[str], None]) -> bool:
     return True
 
 
-def _recorder_args(plan: Plan, opts: RunOptions, log_dir: Path) -> list[str]:
+def _recorder_args(plan: RunPlan, opts: RunOptions, log_dir: Path) -> list[str]:
     """The recorder's parameters: the bag; with sensors the measured topics too and the truth
     in the bag's metadata (custom_data, :data:`fence_sorter.calibration.bag.TRUTH_KEY`)."""
     args = [f"output_dir:={Path(opts.bag).resolve()}", "use_sim_time:=true"]

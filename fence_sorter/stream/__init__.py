@@ -1,6 +1,7 @@
 """Parcel streams for the scanner (ROS-free): random from distributions, or CSV manifests."""
 
 from fence_sorter.stream.model import (
+    DEFAULT_STREAM,
     Distribution,
     ParcelSpec,
     StreamConfig,
@@ -12,6 +13,7 @@ from fence_sorter.stream.model import (
 )
 
 __all__ = [
+    "DEFAULT_STREAM",
     "Distribution",
     "ParcelSpec",
     "StreamConfig",

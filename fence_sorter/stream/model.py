@@ -23,6 +23,9 @@ from fence_sorter.physics.params import ParameterError
 from fence_sorter.resources import find_data
 from fence_sorter.textinput import TextInputError, load_yaml, read_text
 
+#: the stream of a run and of the scanner when none is named (config/streams/)
+DEFAULT_STREAM = "default"
+
 
 class StreamError(ParameterError):
     """A stream config, manifest or parcel is invalid; the message names where and why."""

@@ -61,7 +61,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 
-from fence_sorter.physics.params import FenceParams
+from fence_sorter.jsonsafe import json_safe
+from fence_sorter.physics.params import SCIPY_METHODS, FenceParams
 from fence_sorter.physics.scenario import RECORDABLE
 from fence_sorter.scene import load_scene
 from fence_sorter.verification.machine import REPO, git_revision, load_average, machine_info
@@ -83,7 +84,6 @@ REFERENCE_DT = 1.5625e-5  # [s] our trapezoidal reference; checked at REFERENCE_
 REFERENCE_TOLERANCE = 1e-12
 REFERENCE_MAX_ITERATIONS = 30
 SCIPY_REFERENCE = ("scipy:LSODA", 1e-10)  # checked at rtol / 10
-SCIPY_METHODS = ("scipy:RK45", "scipy:DOP853", "scipy:Radau", "scipy:BDF", "scipy:LSODA")
 QUICK_SCIPY_METHODS = ("scipy:LSODA", "scipy:BDF")
 RTOL_LADDER = (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9)
 QUICK_RTOL_LADDER = (1e-3, 1e-5, 1e-7)
@@ -1128,16 +1128,6 @@ def run_bench(
 
 
 # -- JSON -----------------------------------------------------------------------------------------
-def _jsonable(x):
-    if isinstance(x, float):
-        return x if math.isfinite(x) else None
-    if isinstance(x, dict):
-        return {k: _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    return x
-
-
 def report_dict(report: BenchReport) -> dict:
     """The report as plain JSON data (derived figures such as medians included)."""
     d = dc.asdict(report)
@@ -1161,7 +1151,7 @@ def report_dict(report: BenchReport) -> dict:
     d["jit"].update(
         jit_wall=report.jit.jit_wall, nojit_wall=report.jit.nojit_wall, ratio=report.jit.ratio
     )
-    return _jsonable(d)
+    return json_safe(d)
 
 
 def _from_json(kind, value):

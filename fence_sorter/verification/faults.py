@@ -54,7 +54,7 @@ from fence_sorter.runner.processes import (
     run_domain_id,
 )
 from fence_sorter.verification import insiders
-from fence_sorter.verification.machine import machine_info
+from fence_sorter.verification.machine import git_revision, machine_info
 
 REPO = Path(__file__).resolve().parents[2]
 #: the run id of the wire case's nodes
@@ -1145,18 +1145,6 @@ def write_report(path: Path, data: dict) -> None:
     path.with_suffix(".json").write_text(json.dumps(data, indent=1, sort_keys=True) + "\n")
 
 
-def git_commit() -> str:
-    try:
-        return subprocess.run(
-            ["git", "-C", str(REPO), "rev-parse", "--short", "HEAD"],
-            capture_output=True,
-            text=True,
-            check=True,
-        ).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
-
-
 def verdicts(data: dict) -> dict[str, bool]:
     """Whether each section met its target."""
     out = {}
@@ -1206,7 +1194,7 @@ def campaign(
             argv += ["--trials", str(trials), "--seed", str(seed)]
         return {
             "command": shlex.join(argv),
-            "commit": git_commit(),
+            "commit": git_revision(),
             "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
             "machine": machine,
             "wall_s": time.monotonic() - wall0,
