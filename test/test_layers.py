@@ -26,7 +26,10 @@ LAYERS: tuple[tuple[str, frozenset[str]], ...] = (
         ),
     ),
     ("physics", frozenset({"physics"})),
-    ("inputs", frozenset({"inputs", "scene", "stream", "capacity", "recording", "warmup"})),
+    (
+        "model",
+        frozenset({"inputs", "scene", "stream", "capacity", "recording", "pool", "warmup"}),
+    ),
     ("line", frozenset({"line"})),
     ("analysis", frozenset({"analysis", "calibration", "optimize", "visualisation"})),
     ("nodes", frozenset({"nodes"})),

@@ -28,11 +28,9 @@ from __future__ import annotations
 
 import contextlib
 import math
-import multiprocessing
 import os
 import resource
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -41,6 +39,7 @@ from scipy.optimize import least_squares
 from fence_sorter.physics.params import SolverParams
 from fence_sorter.physics.parcel import initial_pose, parcel_body
 from fence_sorter.physics.simulate import Scenario
+from fence_sorter.pool import evaluation_pool
 
 from .bag import MeasuredBag
 from .replay import PARAMETERS, ParcelEvent, ReplayError, replay, scene_value
@@ -303,17 +302,14 @@ class Evaluator:
         self.pool = None
         self._stack = contextlib.ExitStack()
         if "://" in scheduler:
-            # lazy: loads the kernel (Numba), SciPy
-            from fence_sorter.optimize.executor import evaluation_pool
-
             self.pool = self._stack.enter_context(evaluation_pool(scheduler, workers))
         elif self.workers > 1:
-            # compile (or load) the kernel once here, so the forked workers inherit it
-            replay(base, eds[0].ev)
             self.pool = self._stack.enter_context(
-                ProcessPoolExecutor(
+                evaluation_pool(
+                    None,
                     self.workers,
-                    mp_context=multiprocessing.get_context("fork"),
+                    # compile (or load) the kernel once here, so the forked workers inherit it
+                    warm_up=lambda: replay(base, eds[0].ev),
                     initializer=_init_worker,
                     initargs=(base, eds),
                 )
