@@ -357,21 +357,7 @@ def generate(
 
 
 # -- CSV manifests -----------------------------------------------------------------------------
-MANIFEST_COLUMNS = (
-    "parcel_id",
-    "arrival_time",
-    "length_a",
-    "width_b",
-    "height",
-    "mass",
-    "cog_offset_x",
-    "cog_offset_y",
-    "lateral_gap",
-    "yaw_deg",
-    "mu_belt",
-    "mu_fence",
-    "divert",
-)
+MANIFEST_COLUMNS = ("parcel_id", "arrival_time", *PARCEL_FIELDS, "divert")
 REQUIRED_COLUMNS = ("parcel_id", "arrival_time", "length_a", "width_b", "height", "mass", "divert")
 _TRUE, _FALSE = ("1", "true", "yes", "y"), ("0", "false", "no", "n")
 
