@@ -6,7 +6,7 @@
 SHELL := /bin/bash
 .SHELLFLAGS := -euo pipefail -c
 ENV := source scripts/env.sh
-LINT_PATHS := fence_sorter test scripts
+LINT_PATHS := fence_sorter benchmarks test scripts
 
 .PHONY: all bootstrap run test lint format check clean
 

@@ -36,7 +36,7 @@ def share_data_files() -> list[tuple[str, list[str]]]:
 setup(
     name=PACKAGE_NAME,
     version=read_version(),
-    packages=find_packages(exclude=["test", "test.*"]),
+    packages=find_packages(exclude=["test", "test.*", "benchmarks", "benchmarks.*"]),
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE_NAME}"]),
         (f"share/{PACKAGE_NAME}", ["package.xml"]),

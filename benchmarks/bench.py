@@ -1,4 +1,4 @@
-"""Speed and memory benchmarks of the default configuration (``fence-sorter bench``).
+"""Speed and memory benchmarks of the default configuration (``python -m benchmarks bench``).
 
 Everything is measured side by side in one run of one process (plus a few fresh child
 processes for what needs one: the kernel with the JIT disabled, a cold Numba cache, the resident
@@ -1086,7 +1086,7 @@ def run_bench(
     ladder: Sequence[float] = RTOL_LADDER,
     cap: float = SCIPY_CAP_S,
     quick: bool = False,
-    command: str = "fence-sorter bench",
+    command: str = "python -m benchmarks bench",
     log: Log = _quiet,
 ) -> BenchReport:
     """Benchmark ``scenes``; see the module docstring for what is measured and how."""

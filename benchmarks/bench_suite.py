@@ -8,7 +8,7 @@ parcel's front reached R_s. Unpaced (rtf 0): sim time over wall time between the
 heartbeats around the stream (first scan to last outcome), with all topics published.
 
 :func:`write_section` replaces only the part of docs/benchmarks.md between the suite markers
-(the rest of that file is `fence-sorter bench`'s).
+(the rest of that file is `python -m benchmarks bench`'s).
 """
 
 from __future__ import annotations
@@ -21,9 +21,9 @@ from collections.abc import Sequence
 from dataclasses import asdict
 from pathlib import Path
 
+from benchmarks.stall_probe import StallReport, run_probe
 from fence_sorter.recording import topics
 from fence_sorter.runner.job import RunOptions, run_job
-from fence_sorter.verification.stall_probe import StallReport, run_probe
 
 #: length of each host stall probe around the paced run [s of busy time]
 PROBE_S = 10.0
@@ -262,7 +262,7 @@ def render(fig: dict, command: str, machine: dict, revision: str) -> str:
     ]
     lines = [
         BEGIN,
-        "## Node suite (issue 5): `fence-sorter bench-suite`",
+        "## Node suite (issue 5): `python -m benchmarks bench-suite`",
         "",
         f"Command: `{command}` at {revision}, {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}"
         f", {f['bench_wall_s']:.0f} s. Machine: {machine.get('cpu', '?')}, "
@@ -328,7 +328,7 @@ def _probe_line(probes: list[dict]) -> str:
     ]
     return (
         f"Host stall probe ({reps[0].policy} busy loop, "
-        "`python -m fence_sorter.verification.stall_probe`, before and after the paced run): "
+        "`python -m benchmarks.stall_probe`, before and after the paced run): "
         + "; ".join(parts)
         + ". A gap is time the loop did not run at all (hypervisor or kernel), which no pacing "
         "can hide: each gap >= 1 ms is a missed 1 kHz deadline whatever the simulator does."

@@ -25,13 +25,18 @@ from pathlib import Path
 
 import numpy as np
 
+from fence_sorter.calibration.bag import read_measured_bag, write_measured_bag
+from fence_sorter.calibration.emulate import (
+    draw_events,
+    emulate_bag,
+    measure_events,
+    truth_events,
+    truth_record,
+)
+from fence_sorter.calibration.fit import CalibrationResult, FitError, calibrate
+from fence_sorter.calibration.replay import with_values
+from fence_sorter.calibration.sensors import load_sensors
 from fence_sorter.scene import load_scene
-
-from .bag import read_measured_bag, write_measured_bag
-from .emulate import draw_events, emulate_bag, measure_events, truth_events, truth_record
-from .fit import CalibrationResult, FitError, calibrate
-from .replay import with_values
-from .sensors import load_sensors
 
 SCENE = "impact_flexible"
 TRUTH = {

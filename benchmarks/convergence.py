@@ -3,8 +3,8 @@
 Each bench scene is solved by its default method (``adaptive``) with ``solver.rtol`` replaced
 (atol = 1e-2 rtol, as ``accuracy.configure`` sets it) and its peak contact force compared with
 the one of docs/accuracy/reference/<scene>.npz (``fence-sorter accuracy`` writes them). Run
-``python -m fence_sorter.verification.convergence`` for the markdown table of docs/numerics.md
-("Convergence of the adaptive scheme with rtol"); test/physics/test_convergence.py asserts it.
+``python -m benchmarks.convergence`` for the markdown table of docs/numerics.md
+("Convergence of the adaptive scheme with rtol"); test/campaigns/test_convergence.py asserts it.
 """
 
 from __future__ import annotations
@@ -109,7 +109,7 @@ def table(points: list[ConvergencePoint], rtols=RTOLS) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
-        prog="python -m fence_sorter.verification.convergence",
+        prog="python -m benchmarks.convergence",
         description="Peak-force error of the adaptive default against the committed "
         "references over rtol (error / steps / wall ms per cell).",
     )

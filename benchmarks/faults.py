@@ -1,5 +1,5 @@
 """The fault-injection campaign of the node suite: the faults of issue 16, injected again and
-counted, written to docs/reliability.md (``fence-sorter faults``).
+counted, written to docs/reliability.md (``python -m benchmarks faults``).
 
 Cases:
 
@@ -213,7 +213,7 @@ def interrupt_trial(rng: random.Random, workdir: Path, parcels: int = 20) -> Int
 
 # -- floods ----------------------------------------------------------------------------------
 def flood_main(argv: list[str]) -> int:
-    """``python -m fence_sorter.verification.faults flood TOPIC --domain N [--rate R]
+    """``python -m benchmarks.faults flood TOPIC --domain N [--rate R]
     [--seconds S]``: publish another run's messages at R per second for S s; print the count
     sent as JSON."""
     ap = argparse.ArgumentParser(prog="faults flood")
@@ -356,7 +356,7 @@ def flood_trial(topic: str, workdir: Path, rate: float, seconds: float) -> Flood
             [
                 sys.executable,
                 "-m",
-                "fence_sorter.verification.faults",
+                "benchmarks.faults",
                 "flood",
                 topic,
                 "--domain",
@@ -1119,7 +1119,7 @@ def render_report(data: dict, json_name: str = "reliability.json") -> str:
     L = [
         "# Reliability: the fault-injection campaign",
         "",
-        "`fence-sorter faults` (fence_sorter/verification/faults.py) injects the faults below "
+        "`python -m benchmarks faults` (benchmarks/faults.py) injects the faults below "
         "into the node suite and counts what it refused, dropped and sorted; every figure "
         f"comes from the run named in its section (data: {json_name}).",
         "",
@@ -1261,7 +1261,7 @@ def main(argv: list[str] | None = None) -> int:
         return flood_main(argv[1:])
     print(
         "faults: error: the first argument must be 'flood' (the campaign is "
-        "`fence-sorter faults`)",
+        "`python -m benchmarks faults`)",
         file=sys.stderr,
     )
     return 2

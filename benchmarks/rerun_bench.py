@@ -1,4 +1,4 @@
-"""Cost of Rerun logging per frame: ``python -m fence_sorter.visualisation.rerun_bench [BAG]``.
+"""Cost of Rerun logging per frame: ``python -m benchmarks.rerun_bench [BAG]``.
 
 Logs the frames of a recorded run (default: the committed example bag) ``--repeat`` times into
 a temporary .rrd with :class:`~fence_sorter.visualisation.rerun_log.RerunLogger`, as the live

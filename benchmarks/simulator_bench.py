@@ -1,5 +1,5 @@
 """Pacing and speed of the simulator node with publishing: ``python -m
-fence_sorter.nodes.simulator_bench --rtf 1 --sim 60`` (``--rtf 0``: unpaced).
+benchmarks.simulator_bench --rtf 1 --sim 60`` (``--rtf 0``: unpaced).
 
 Runs :class:`SimulatorNode` in this process (its own pacing thread, the executor in another
 thread, every topic published over DDS on an isolated domain) fed with a 2400 parcels/h stream:

@@ -4,10 +4,10 @@ A process that does nothing but read the steady clock sees every interval in whi
 run as a gap between two consecutive readings. On a quiet bare-metal core the gaps stay in the
 microseconds; on a shared virtual machine the hypervisor deschedules the vCPU (steal time)
 and the gaps reach milliseconds whatever the guest does. A paced loop cannot meet a deadline
-that falls inside such a gap, so :mod:`fence_sorter.verification.bench_suite` runs this probe
+that falls inside such a gap, so :mod:`benchmarks.bench_suite` runs this probe
 beside the node suite and reports the host's stalls next to the simulator's deadline misses.
 
-The probe runs in a child process (``python -m fence_sorter.verification.stall_probe``) at
+The probe runs in a child process (``python -m benchmarks.stall_probe``) at
 the simulator's pacing priority (SCHED_FIFO 50 when permitted, else normal scheduling, and
 the report says which), so it competes for the CPU as the pacing thread does. It busy-waits
 for the whole probe: run it on a machine with a core to spare, and only for seconds.
@@ -105,7 +105,7 @@ def run_probe(duration: float, priority: int = 50, timeout: float | None = None)
     cmd = [
         sys.executable,
         "-m",
-        "fence_sorter.verification.stall_probe",
+        "benchmarks.stall_probe",
         "--duration",
         repr(duration),
         "--priority",

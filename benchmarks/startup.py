@@ -1,6 +1,6 @@
 """Where a new process's first solve spends its time (a benchmark, not a test).
 
-``python -m fence_sorter.verification.startup [--scene NAME ...] [--rounds N] [--out DIR]``.
+``python -m benchmarks.startup [--scene NAME ...] [--rounds N] [--out DIR]``.
 
 Each round starts a fresh interpreter per scene that times, in order: importing NumPy and
 SciPy's linear algebra, Numba, the physics (``physics.simulate``: the kernel's dispatchers, no
@@ -33,9 +33,10 @@ import tempfile
 import time
 from pathlib import Path
 
+from fence_sorter.verification.machine import REPO, git_revision, load_average, machine_info
+from fence_sorter.verification.report import fmt, table
+
 from ..scene import available_scenes
-from .machine import REPO, git_revision, load_average, machine_info
-from .report import fmt, table
 
 PROBE = r"""
 import json, sys, time
@@ -275,7 +276,7 @@ def main(argv=None) -> int:
         if scene not in known:
             ap.error(f"--scene: unknown scene {scene!r}; one of {', '.join(known)}")
     data = {
-        "command": "python -m fence_sorter.verification.startup "
+        "command": "python -m benchmarks.startup "
         + " ".join(argv if argv is not None else sys.argv[1:]),
         "revision": git_revision(),
         "load_average": load_average(),

@@ -1,13 +1,13 @@
 """The solve's speed against a base commit, both measured in one run on one machine.
 
-``python -m fence_sorter.verification.versus BASE`` checks BASE out into a temporary git
-worktree and times ``simulate()`` of one event on each bench scene (model build included, as
-in ``fence-sorter bench``) in fresh processes of this tree and of BASE, alternating: the same
-interpreter and libraries, ``PYTHONPATH`` and the working directory pointing at each tree, each
-tree with its own compiled-kernel cache (its ``__pycache__``). Each process compiles or loads
-its kernel and warms up before the timed calls, with the garbage collector off. Per scene: the
-median wall time of every timed call of each tree and their ratio (this tree / BASE: below 1
-is faster). The figures go to ``docs/versus.json`` and are rendered to ``docs/versus.md``.
+``python -m benchmarks.versus BASE`` checks BASE out into a temporary git worktree and times
+``simulate()`` of one event on each bench scene (model build included, as in ``python -m benchmarks
+bench``) in fresh processes of this tree and of BASE, alternating: the same interpreter and
+libraries, ``PYTHONPATH`` and the working directory pointing at each tree, each tree with its own
+compiled-kernel cache (its ``__pycache__``). Each process compiles or loads its kernel and warms up
+before the timed calls, with the garbage collector off. Per scene: the median wall time of every
+timed call of each tree and their ratio (this tree / BASE: below 1 is faster). The figures go to
+``docs/versus.json`` and are rendered to ``docs/versus.md``.
 
 Exit codes: 0 measured, 2 bad arguments (one line naming the argument), 1 a child failed.
 """
@@ -214,7 +214,7 @@ def render(data: dict) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
-        prog="python -m fence_sorter.verification.versus",
+        prog="python -m benchmarks.versus",
         description="time simulate() per event on the bench scenes, this tree against BASE",
     )
     parser.add_argument("base", metavar="BASE", help="the commit to compare against")
@@ -241,7 +241,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         base = commit_of(args.base)
     except ValueError as exc:
         return error(str(exc))
-    command = shlex.join(["python", "-m", "fence_sorter.verification.versus", *sys.argv[1:]])
+    command = shlex.join(["python", "-m", "benchmarks.versus", *sys.argv[1:]])
     load_before = load_average()
     with tempfile.TemporaryDirectory(prefix="versus-") as tmp:
         base_tree = Path(tmp) / "base"

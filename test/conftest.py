@@ -5,8 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-
-from fence_sorter.testing import ros_env, run_domain_id
+from processes import ros_env, run_domain_id
 
 
 def pytest_configure(config: pytest.Config) -> None:

@@ -122,13 +122,16 @@ def managed_process(
                 stream.close()
 
 
-def run_cli(*args: str, timeout: float = 600.0) -> subprocess.CompletedProcess:
-    """``fence-sorter ARGS`` as a separate process run from the checkout."""
+def run_cli(
+    *args: str, timeout: float = 600.0, module: str = "fence_sorter.cli.main"
+) -> subprocess.CompletedProcess:
+    """``fence-sorter ARGS`` as a separate process run from the checkout (``module``
+    ``benchmarks``: ``python -m benchmarks ARGS``, the campaigns)."""
     repo = Path(__file__).resolve().parents[1]
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(repo), env.get("PYTHONPATH")]))
     return subprocess.run(
-        [sys.executable, "-m", "fence_sorter.cli.main", *args],
+        [sys.executable, "-m", module, *args],
         capture_output=True,
         text=True,
         timeout=timeout,

@@ -31,18 +31,23 @@ LAYERS: tuple[tuple[str, frozenset[str]], ...] = (
         frozenset({"inputs", "scene", "stream", "capacity", "recording", "pool", "warmup"}),
     ),
     ("line", frozenset({"line"})),
-    ("analysis", frozenset({"analysis", "calibration", "optimize", "visualisation"})),
+    (
+        "analysis",
+        frozenset({"analysis", "calibration", "optimize", "verification", "visualisation"}),
+    ),
     ("nodes", frozenset({"nodes"})),
-    ("runner", frozenset({"runner", "testing"})),
-    ("verification", frozenset({"verification"})),
+    ("runner", frozenset({"runner"})),
     ("cli", frozenset({"cli"})),
 )
 #: the layers whose modules may import rclpy and the ROS message packages (nodes and above)
-ROS_LAYERS = frozenset({"nodes", "runner", "verification", "cli"})
+ROS_LAYERS = frozenset({"nodes", "runner", "cli"})
 #: rclpy and the ROS message and interface packages (rosbags reads bags without ROS)
 ROS_PACKAGES = re.compile(r"^(rclpy|rcl_interfaces|[a-z0-9_]+_msgs)(\.|$)")
 
 ARCHITECTURE = Path(__file__).resolve().parents[1] / "docs" / "architecture.md"
+#: what stands beside the package in the checkout, never imported by it: the campaigns and the
+#: tests' helpers (not installed)
+OUTSIDE = re.compile(r"^(benchmarks|test|processes|conftest)(\.|$)")
 
 
 def unit_of(module: str) -> str:
@@ -109,6 +114,11 @@ def ros_below_nodes(root: Path = PACKAGE, layers=LAYERS) -> list[str]:
     return sorted(set(bad))
 
 
+def outside_imports(root: Path = PACKAGE) -> list[str]:
+    """``file:line module`` of every import of the checkout's campaigns or test helpers."""
+    return sorted({f"{w}:{n} {t}" for w, n, t in imports_of(root) if OUTSIDE.match(t)})
+
+
 def test_the_layer_check_finds_an_upward_import_inside_a_function(tmp_path):
     pkg = tmp_path / "pkg"
     for sub in ("low", "high"):
@@ -126,6 +136,8 @@ def test_the_layer_check_finds_an_upward_import_inside_a_function(tmp_path):
     assert unit_graph(pkg)["high"] == {"low"}
     assert cycles(unit_graph(pkg)) == [["high", "low"]]
     assert ros_below_nodes(pkg, layers) == ["pkg/high/b.py:2 rclpy"]
+    (pkg / "stray.py").write_text("def f():\n    from benchmarks import bench\n")
+    assert outside_imports(pkg) == ["pkg/stray.py:2 benchmarks", "pkg/stray.py:2 benchmarks.bench"]
 
 
 def test_no_module_imports_a_layer_above_its_own():
@@ -137,6 +149,11 @@ def test_the_units_import_each_other_without_a_cycle():
     graph = unit_graph()
     assert "physics" in graph["line"] and "nodes" in graph["runner"]
     assert cycles(graph) == []
+
+
+def test_the_package_imports_neither_the_campaigns_nor_the_tests():
+    """benchmarks/ and test/ are not installed: an import of them would fail in an install."""
+    assert outside_imports() == []
 
 
 def test_ros_is_imported_only_from_the_nodes_up():

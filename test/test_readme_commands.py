@@ -15,8 +15,7 @@ import shlex
 from pathlib import Path
 
 import pytest
-
-from fence_sorter.testing import run_cli
+from processes import run_cli
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -49,7 +48,7 @@ COVERED: dict[str, str] = {
     "fence-sorter replay bags/example_4_parcels --foxglove 8765 --wait 30": (
         "test/ros/test_foxglove_live.py::test_replay_serves_the_bag_to_the_npm_client"
     ),
-    "fence-sorter bench-suite": HERE,
+    "python -m benchmarks bench-suite": HERE,
     "fence-sorter analyze bags/example_4_parcels": HERE,
     "fence-sorter analyze bags/example_4_parcels --json --out /tmp/ex": (
         "test/ros/test_recording.py::test_analysis_of_the_run_matches_the_live_outcomes"
@@ -80,7 +79,7 @@ COVERED: dict[str, str] = {
     "--set solver.rtol=1e-6": HERE,
     "fence-sorter accuracy": ACCURACY,
     "fence-sorter stability": "test/cli/test_stability_cli.py::test_quick_writes_the_report",
-    "fence-sorter bench": HERE,
+    "python -m benchmarks bench": HERE,
     "fence-sorter optimize --case positioned --alpha-k 40 --constraints 7,8,11 --json": HERE,
     "fence-sorter optimize --case arbitrary --alpha-k 35 --w-dop 2.4 --mu1 0.5 --mu2 0.3": HERE,
     "fence-sorter bag info bags/example_4_parcels": (
@@ -159,7 +158,7 @@ RUN_HERE: dict[str, tuple[list[str], str]] = {
         ["run", "--duration", "4", "--rtf", "2", "--bag", "{tmp}/run1"],
         "parcels seen",
     ),
-    "fence-sorter bench-suite": (
+    "python -m benchmarks bench-suite": (
         ["bench-suite", "--duration", "3", "--unpaced-parcels", "3", "--no-write"],
         "deadline",
     ),
@@ -214,7 +213,7 @@ RUN_HERE: dict[str, tuple[list[str], str]] = {
         ],
         "sorted",
     ),
-    "fence-sorter bench": (
+    "python -m benchmarks bench": (
         [
             "bench",
             "--quick",
@@ -309,19 +308,33 @@ def test_the_covering_test_runs_the_command(command: str) -> None:
     wanted = [t for t in tokens if t.startswith("--")]
     if tokens[0] == "fence-sorter":
         wanted.append(tokens[1])
+    if tokens[:3] == ["python", "-m", "benchmarks"]:
+        wanted.append(tokens[3])
     missing = [w for w in wanted if w not in source]
     assert missing == [], f"{COVERED[command]} does not use {missing} of {command!r}"
 
 
+def program(command: str) -> str:
+    """The module a README command runs: ``python -m benchmarks ...`` the campaigns, else the
+    command line ``fence-sorter``."""
+    if command.startswith("python -m benchmarks "):
+        return "benchmarks"
+    return "fence_sorter.cli.main"
+
+
 #: each distinct run of RUN_HERE once
-_RUNS = sorted({(tuple(args), expected) for args, expected in RUN_HERE.values()})
+_RUNS = sorted({(program(c), tuple(args), expected) for c, (args, expected) in RUN_HERE.items()})
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("args", "expected"), _RUNS, ids=[" ".join(a[:2]) for a, _ in _RUNS])
-def test_readme_command_runs(args: tuple[str, ...], expected: str, tmp_path: Path) -> None:
+@pytest.mark.parametrize(
+    ("module", "args", "expected"), _RUNS, ids=[" ".join(a[:2]) for _, a, _ in _RUNS]
+)
+def test_readme_command_runs(
+    module: str, args: tuple[str, ...], expected: str, tmp_path: Path
+) -> None:
     args = [a.replace("{tmp}", str(tmp_path)) for a in args]
-    done = run_cli(*args, timeout=600)
+    done = run_cli(*args, timeout=600, module=module)
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
     assert expected in done.stdout, done.stdout[-2000:]
 

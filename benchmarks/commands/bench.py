@@ -1,6 +1,6 @@
-"""``fence-sorter bench``: speed and memory of the default configuration, side by side.
+"""``python -m benchmarks bench``: speed and memory of the default configuration, side by side.
 
-Runs :mod:`fence_sorter.verification.bench` (per scene: the default configuration against a
+Runs :mod:`benchmarks.bench` (per scene: the default configuration against a
 converged reference and the fastest SciPy baseline at the same error, stiff-fence event times,
 peak memory, the model each scene builds against the full model, the kernel with and without
 the JIT), prints the report and writes it as JSON (default ``docs/benchmarks.json``) and as
@@ -21,8 +21,8 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from fence_sorter.verification import bench as B
-from fence_sorter.verification.bench_suite import BEGIN, END
+from benchmarks import bench as B
+from benchmarks.bench_suite import BEGIN, END
 
 EXIT_OK = 0
 EXIT_BAD_ARGS = 2
@@ -95,8 +95,8 @@ def _error(message: str) -> int:
 
 
 def _suite_section(out: Path) -> str:
-    """The node-suite section ``fence-sorter bench-suite`` keeps in the same file (between its
-    markers): carried over, since this command regenerates everything else."""
+    """The node-suite section ``python -m benchmarks bench-suite`` keeps in the same file
+    (between its markers): carried over, since this command regenerates everything else."""
     old = out.read_text(encoding="utf-8") if out.is_file() else ""
     if BEGIN not in old or END not in old or old.index(BEGIN) > old.index(END):
         return ""
@@ -188,8 +188,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m fence_sorter.cli.bench``: the subcommand on its own."""
-    parser = argparse.ArgumentParser(prog="fence-sorter bench")
+    """``python -m benchmarks.commands.bench``: the subcommand on its own."""
+    parser = argparse.ArgumentParser(prog="python -m benchmarks bench")
     add_arguments(parser)
     return run(parser.parse_args(argv))
 

@@ -1,6 +1,6 @@
-"""``fence-sorter bench-suite``: the node suite against the issue 5 targets.
+"""``python -m benchmarks bench-suite``: the node suite against the issue 5 targets.
 
-Runs :mod:`fence_sorter.verification.bench_suite` (a paced run at rtf 1.0 for 60 s at
+Runs :mod:`benchmarks.bench_suite` (a paced run at rtf 1.0 for 60 s at
 2400 pcs/h, then an unpaced run), prints the section and writes it between the suite markers
 of the output file (default ``docs/benchmarks.md``; the rest of the file is left as it is).
 
@@ -15,9 +15,9 @@ import shlex
 import sys
 from pathlib import Path
 
+from benchmarks.bench_suite import render, run_bench, write_section
 from fence_sorter.cli.run import add_param_option
 from fence_sorter.runner.job import BadInput
-from fence_sorter.verification.bench_suite import render, run_bench, write_section
 from fence_sorter.verification.machine import git_revision, machine_info
 
 DEFAULT_OUT = "docs/benchmarks.md"
@@ -70,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
     except BadInput as exc:
         print(f"fence-sorter: error: {exc}", file=sys.stderr)
         return 2
-    command = "fence-sorter bench-suite " + " ".join(
+    command = "python -m benchmarks bench-suite " + " ".join(
         shlex.quote(a) for a in sys.argv[2:] if a != "--no-write"
     )
     section = render(fig, command.strip(), machine_info(), git_revision())

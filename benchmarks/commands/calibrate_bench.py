@@ -1,4 +1,4 @@
-"""``fence-sorter calibrate-bench``: the calibration's figures into docs/calibration.md.
+"""``python -m benchmarks calibrate-bench``: the calibration's figures into docs/calibration.md.
 
 Interval coverage over seeds (camera60, impact_flexible), the coverage over fresh noise for
 given seeds' parcels, the b_p flag from 25 Hz poses and the wall time of a 50-parcel,
@@ -52,7 +52,9 @@ def register(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fence_sorter.calibration import bench  # lazy: loads the kernel (Numba), SciPy, rosbags
+    from benchmarks import (
+        calibrate_bench as bench,  # lazy: loads the kernel (Numba), SciPy, rosbags
+    )
 
     for option, value, low in (
         ("--seeds", args.seeds, 0),
@@ -87,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
         report = measure(bench, args)
         commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
                                 text=True, check=False).stdout.strip() or "unknown"  # fmt: skip
-        command = "nice -n 10 fence-sorter calibrate-bench " + " ".join(sys.argv[2:])
+        command = "nice -n 10 python -m benchmarks calibrate-bench " + " ".join(sys.argv[2:])
         report.update(command=command.strip(), commit=commit)
     section = bench.render(report, command.strip(), commit)
     if args.json and not args.from_json:

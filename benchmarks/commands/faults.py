@@ -1,8 +1,9 @@
-"""``fence-sorter faults``: the fault-injection campaign of the node suite -> docs/reliability.md.
+"""``python -m benchmarks faults``: the fault-injection campaign of the node suite ->
+docs/reliability.md.
 
 Repeated Ctrl-C, floods on /parcels and /fence_commands, insiders with the run's own id
 (forged duplicates, a flood, a second /clock), hostile and malformed messages, bad files,
-scenes, streams and parameters (:mod:`fence_sorter.verification.faults`). Exit codes:
+scenes, streams and parameters (:mod:`benchmarks.faults`). Exit codes:
 0 every case met its target, 1 some did not (named), 2 bad arguments.
 """
 
@@ -12,7 +13,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from fence_sorter.verification.faults import campaign
+from benchmarks.faults import campaign
 
 CASES = ("wire", "cli", "floods", "insiders", "interrupts", "freezes")
 

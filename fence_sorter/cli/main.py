@@ -17,7 +17,8 @@ import importlib
 import signal
 import sys
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 
 from fence_sorter import __version__
 
@@ -30,7 +31,6 @@ SUBCOMMANDS: dict[str, str] = {
     "modes": "natural frequencies and tip deflection of a scene's flexible fence",
     "accuracy": "work-precision diagrams: error against wall time for every method",
     "stability": "stability campaign over stiff and extreme cases (invariants and verdicts)",
-    "bench": "speed and memory of the default configuration against SciPy baselines",
     "run": "run the node suite on a parcel stream and print a summary",
     "replay": "republish a recorded bag over DDS with its original timing (scaled)",
     "analyze": "analyse a recorded bag: per-parcel table, capacity, plots, check vs live outcomes",
@@ -38,28 +38,51 @@ SUBCOMMANDS: dict[str, str] = {
     "topic": "topic tools standing in for `ros2 topic` (list, echo, hz) over rclpy",
     "rrd": "convert a recorded bag into a Rerun recording (.rrd)",
     "views": "screenshots of a Rerun recording in Rerun's web viewer under headless Chromium",
-    "bench-suite": "node suite benchmark: pacing, lost messages, controller latency, unpaced RTF",
     "optimize": "maximise the sorting capacity W_t over X = [R_s, v, t1, R_z] (sections 3-4)",
-    "faults": "fault-injection campaign of the node suite (writes docs/reliability.md)",
     "emulate": "write a measured bag (encoder, camera, strain) of the twin with known truth",
     "calibrate": "fit friction, contact and fence damping parameters to a measured bag",
     "validate": "predict held-out parcels of a measured bag with a (calibrated) scene",
-    "calibrate-bench": "calibration benchmark: interval coverage, identifiability, wall time",
 }
+
+
+@dataclass(frozen=True)
+class CommandLine:
+    """A command with subcommands: ``prog``'s subcommand ``a-b`` lives in the module
+    ``<package>.a_b``; ``subcommands`` maps each to its one-line help, in ``--help`` order."""
+
+    prog: str
+    description: str
+    package: str
+    subcommands: Mapping[str, str]
+
+    def module_name(self, command: str) -> str:
+        """The module under :attr:`package` that defines ``command``."""
+        return f"{self.package}.{command.replace('-', '_')}"
+
+
+#: ``fence-sorter``
+FENCE_SORTER = CommandLine(
+    "fence-sorter",
+    "Digital twin of a rotary active fence parcel sorter.",
+    "fence_sorter.cli",
+    SUBCOMMANDS,
+)
 
 
 def module_name(command: str) -> str:
     """The module under fence_sorter.cli that defines ``command``."""
-    return f"fence_sorter.cli.{command.replace('-', '_')}"
+    return FENCE_SORTER.module_name(command)
 
 
-def _unavailable(command: str, error: BaseException) -> Callable[[argparse.Namespace], int]:
+def _unavailable(
+    cli: CommandLine, command: str, error: BaseException
+) -> Callable[[argparse.Namespace], int]:
     """Return a func that reports why the module of ``command`` cannot be loaded."""
 
     def func(args: argparse.Namespace) -> int:
         del args
         print(
-            f"fence-sorter: subcommand module {module_name(command)} cannot be loaded: "
+            f"{cli.prog}: subcommand module {cli.module_name(command)} cannot be loaded: "
             f"{type(error).__name__}: {error}",
             file=sys.stderr,
         )
@@ -68,33 +91,34 @@ def _unavailable(command: str, error: BaseException) -> Callable[[argparse.Names
     return func
 
 
-def build_parser(argv: Sequence[str] = ()) -> argparse.ArgumentParser:
+def build_parser(
+    argv: Sequence[str] = (), cli: CommandLine = FENCE_SORTER
+) -> argparse.ArgumentParser:
     """Return the top-level parser. Every subcommand is listed with its help; only the one
     named in ``argv`` (if any) is configured, so only its module is imported."""
-    parser = argparse.ArgumentParser(
-        prog="fence-sorter",
-        description="Digital twin of a rotary active fence parcel sorter.",
-    )
+    parser = argparse.ArgumentParser(prog=cli.prog, description=cli.description)
     parser.add_argument("--version", action="version", version=f"fence-sorter {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
     chosen = next((a for a in argv if not a.startswith("-")), None)
-    for command, help_text in SUBCOMMANDS.items():
+    for command, help_text in cli.subcommands.items():
         sub = subparsers.add_parser(command, help=help_text)
         if command == chosen:
-            configure(command, sub)
+            configure(command, sub, cli)
     return parser
 
 
-def configure(command: str, parser: argparse.ArgumentParser) -> None:
+def configure(
+    command: str, parser: argparse.ArgumentParser, cli: CommandLine = FENCE_SORTER
+) -> None:
     """Import the module of ``command`` and let it add its arguments and ``func`` to ``parser``;
     a module that cannot be loaded becomes a subcommand that says why (exit 1), so it cannot
     take the others down."""
     try:
         # lazy: the one dispatch of the command line: only the chosen subcommand's module
-        module = importlib.import_module(module_name(command))
+        module = importlib.import_module(cli.module_name(command))
         module.register(parser)
     except Exception as exc:
-        parser.set_defaults(func=_unavailable(command, exc))
+        parser.set_defaults(func=_unavailable(cli, command, exc))
 
 
 def _interrupt_once(signum: int, frame: object) -> None:
@@ -107,7 +131,7 @@ def _interrupt_once(signum: int, frame: object) -> None:
     raise KeyboardInterrupt(signal.Signals(signum).name)
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def main(argv: Sequence[str] | None = None, cli: CommandLine = FENCE_SORTER) -> int:
     """Parse the command line and run the chosen subcommand; return its exit code. As the
     process's own command (``argv`` None) it also owns the signals: Ctrl-C during start-up is
     exit 130 in one line, and none after the command is done changes the exit status."""
@@ -117,7 +141,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         signal.signal(signal.SIGTERM, _interrupt_once)
     try:
         argv = sys.argv[1:] if argv is None else list(argv)
-        parser = build_parser(argv)
+        parser = build_parser(argv, cli)
         args = parser.parse_args(argv)
         func = getattr(args, "func", None)
         if func is None:
@@ -126,7 +150,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         else:
             code = int(func(args) or 0)
     except KeyboardInterrupt:
-        print("fence-sorter: interrupted", file=sys.stderr)
+        print(f"{cli.prog}: interrupted", file=sys.stderr)
         code = 130
     if own:  # the interpreter's exit resets Python-level handlers to default, not SIG_IGN
         signal.signal(signal.SIGINT, signal.SIG_IGN)

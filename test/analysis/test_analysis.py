@@ -15,11 +15,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from processes import run_cli
 
 from fence_sorter.analysis import analyze_bag
 from fence_sorter.analysis.run import Series, check_row, crossing
 from fence_sorter.recording.bagread import read_bag
-from fence_sorter.testing import run_cli
 
 REPO = Path(__file__).resolve().parents[2]
 EXAMPLE = REPO / "bags" / "example_4_parcels"

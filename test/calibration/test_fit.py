@@ -10,7 +10,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from fence_sorter.calibration import bench
+from benchmarks import calibrate_bench as bench
 from fence_sorter.calibration import fit as fit_module
 from fence_sorter.calibration.bag import fit_stroke, read_measured_bag
 from fence_sorter.calibration.emulate import draw_events, emulate_bag

@@ -1,5 +1,5 @@
-"""``fence-sorter bench`` run as a process: --quick writes the markdown report (tables, the JIT
-comparison) and the JSON figures; bad arguments exit 2 with one line. No timing assertions:
+"""``python -m benchmarks bench`` run as a process: --quick writes the markdown report (tables, the
+JIT comparison) and the JSON figures; bad arguments exit 2 with one line. No timing assertions:
 speed targets live in the benchmark report, never in unit tests. ROS-free."""
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
+from benchmarks import bench as B
 from fence_sorter.cli import bench as bench_cli
-from fence_sorter.verification import bench as B
 
 REPO = Path(__file__).resolve().parents[2]
 TIMEOUT = 600.0
@@ -33,11 +33,11 @@ SECTIONS = (
 
 
 def bench(*args: str) -> subprocess.CompletedProcess:
-    """The subcommand on its own (``python -m fence_sorter.cli.bench``)."""
+    """The subcommand on its own (``python -m benchmarks.commands.bench``)."""
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH")]))
     return subprocess.run(
-        [sys.executable, "-m", "fence_sorter.cli.bench", *args],
+        [sys.executable, "-m", "benchmarks.commands.bench", *args],
         capture_output=True,
         text=True,
         timeout=TIMEOUT,
@@ -63,7 +63,7 @@ def test_quick_writes_the_report(tmp_path: Path) -> None:
     md = md_path.read_text(encoding="utf-8")
     for section in SECTIONS:
         assert section in md, section
-    assert "`fence-sorter bench --out " in md and "--quick`" in md
+    assert "`python -m benchmarks bench --out " in md and "--quick`" in md
     assert "NUMBA_DISABLE_JIT=1" in md and "| wall median [ms] |" in md
     assert "| positioned_stiff | adaptive " in md
     assert "## Default configuration per scene" in r.stdout  # the report is printed too
@@ -130,9 +130,9 @@ def test_bad_repeats_exit_2() -> None:
 
 
 def test_bench_keeps_the_node_suite_section_of_the_file(tmp_path):
-    """``fence-sorter bench`` regenerates docs/benchmarks.md but must carry over the section
-    ``fence-sorter bench-suite`` writes between its markers."""
-    from fence_sorter.cli.bench import _suite_section
+    """``python -m benchmarks bench`` regenerates docs/benchmarks.md but must carry over the
+    section ``python -m benchmarks bench-suite`` writes between its markers."""
+    from benchmarks.commands.bench import _suite_section
 
     out = tmp_path / "benchmarks.md"
     assert _suite_section(out) == ""

@@ -9,7 +9,7 @@ import math
 import pytest
 from scipy import stats
 
-from fence_sorter.calibration.bench import (
+from benchmarks.calibrate_bench import (
     TRUTH,
     binomial_share,
     coverage_figures,

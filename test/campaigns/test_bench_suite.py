@@ -1,11 +1,14 @@
-"""bench-suite writes only its own section of docs/benchmarks.md; lost-message arithmetic."""
+"""bench-suite writes only its own section of docs/benchmarks.md; lost-message arithmetic; bad
+options are exit 2 naming them."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from fence_sorter.runner.monitor import Records
-from fence_sorter.verification.bench_suite import (
+import pytest
+from processes import run_cli
+
+from benchmarks.bench_suite import (
     BEGIN,
     END,
     lost,
@@ -14,6 +17,7 @@ from fence_sorter.verification.bench_suite import (
     unpaced_rtf,
     write_section,
 )
+from fence_sorter.runner.monitor import Records
 
 
 def test_section_is_appended_then_replaced_in_place(tmp_path: Path) -> None:
@@ -63,3 +67,18 @@ def test_unpaced_rtf_counts_the_stream_not_the_empty_belt_around_it() -> None:
     assert stream_sim_span(rec) == 262.0 - 200.5
     rec.parcels, rec.outcomes = {}, {}  # nothing seen: the whole run
     assert unpaced_rtf(rec) == (375.0 - 0.1) / 5
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("args", "named"),
+    [
+        (("bench-suite", "--duration", "-5", "--no-write"), "--duration must be in (0, inf)"),
+        (("bench-suite", "--param", "physics_rate=500", "--no-write"), "must be NODE:KEY=VALUE"),
+    ],
+)
+def test_bad_input_exits_2_naming_it(args, named):
+    done = run_cli(*args, timeout=120, module="benchmarks")
+    assert done.returncode == 2, done.stderr
+    assert named in done.stderr
+    assert "Traceback" not in done.stderr

@@ -1,7 +1,7 @@
-"""How ``fence-sorter bench`` times a run (``bench.timed_run``): the garbage collector is off
-during the timed call and back in its previous state after it (also when the call raises), and
-no collection runs inside the call; the same function times our runs and the SciPy baselines.
-No timing assertions (speed targets live in docs/benchmarks.md)."""
+"""How ``python -m benchmarks bench`` times a run (``bench.timed_run``): the garbage collector is
+off during the timed call and back in its previous state after it (also when the call raises), and
+no collection runs inside the call; the same function times our runs and the SciPy baselines. No
+timing assertions (speed targets live in docs/benchmarks.md)."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import gc
 
 import pytest
 
+from benchmarks import bench as B
 from fence_sorter.physics import simulate as S
 from fence_sorter.scene import load_scene
-from fence_sorter.verification import bench as B
 
 
 @pytest.fixture

@@ -1,4 +1,4 @@
-"""`fence-sorter calibrate-bench` refuses bad options before any work: exit 2, one line
+"""`python -m benchmarks calibrate-bench` refuses bad options before any work: exit 2, one line
 naming the option and its allowed range; --from-json renders an earlier run's figures."""
 
 from __future__ import annotations
@@ -7,8 +7,8 @@ import json
 
 import pytest
 
-from fence_sorter.calibration.bench import BEGIN, END, TRUTH
-from fence_sorter.cli import main as cli_main
+from benchmarks import cli as cli_main
+from benchmarks.calibrate_bench import BEGIN, END, TRUTH
 
 
 @pytest.mark.parametrize(
@@ -42,7 +42,7 @@ def test_from_json_renders_the_measured_figures_with_their_command(tmp_path, cap
     misses in bold) into the doc's generated section, and nothing else of the doc."""
     n = len(TRUTH)
     report = {
-        "command": "nice -n 10 fence-sorter calibrate-bench --seeds 2",
+        "command": "nice -n 10 python -m benchmarks calibrate-bench --seeds 2",
         "commit": "abc1234",
         "coverage": {"seeds": 2, "parcels": 8, "share_inside": dict.fromkeys(TRUTH, 0.5),
                      "share_inside_first": dict.fromkeys(TRUTH, 0.5),
@@ -58,7 +58,7 @@ def test_from_json_renders_the_measured_figures_with_their_command(tmp_path, cap
     text = doc.read_text(encoding="utf-8")
     assert text.startswith("before\n") and text.endswith("\nafter\n")
     assert "stale figures" not in text
-    assert "`nice -n 10 fence-sorter calibrate-bench --seeds 2` at abc1234" in text
+    assert "`nice -n 10 python -m benchmarks calibrate-bench --seeds 2` at abc1234" in text
     assert "| 100 | " + " | ".join(["+0.50"] * n) + " |" in text
     assert "| 101 | " + " | ".join(["**-2.50**"] * n) + " |" in text
     assert "50 % (1 of 2; " in text

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import pytest
 
-from fence_sorter.verification.convergence import (
+from benchmarks.convergence import (
     COST_GROWTH,
     GAIN,
     RTOLS,
@@ -50,7 +50,7 @@ def test_peak_force_error_falls_100x_from_rtol_1e4_to_1e7_at_a_smoothly_growing_
     ],
 )
 def test_bad_options_exit_2_with_one_line_naming_them(args, names, capsys) -> None:
-    from fence_sorter.verification.convergence import main
+    from benchmarks.convergence import main
 
     with pytest.raises(SystemExit) as exc:
         main(args)

@@ -1,4 +1,4 @@
-"""The fault campaign's command-line table (fence_sorter.verification.faults): a bad stream,
+"""The fault campaign's command-line table (benchmarks.faults): a bad stream,
 a bad scene and a bad option each exit 2 with one line, and the report says so."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from fence_sorter.verification import faults as F
+from benchmarks import faults as F
 
 pytestmark = pytest.mark.faults
 
@@ -22,7 +22,7 @@ def test_bad_input_cases_exit_2_with_one_line_and_are_reported(tmp_path: Path) -
     by_name = {r.case.name: r for r in results}
     assert "mu_fence must be in [0, 2]" in by_name["mu_fence 5"].line
     assert "--parcels must be in [1, inf)" in by_name["--parcels 0"].line
-    meta = {"command": "fence-sorter faults --cases cli", "commit": "x", "date": "d"}
+    meta = {"command": "python -m benchmarks faults --cases cli", "commit": "x", "date": "d"}
     out = tmp_path / "reliability.md"
     data = {"cli": {"rows": [F.cli_row(r) for r in results], "meta": {**meta, "machine": "m"}}}
     data["cli"]["meta"]["wall_s"] = 1.0

@@ -8,7 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from fence_sorter.verification import accuracy, bench, faults, stability, startup, versus
+from benchmarks import bench, faults, startup, versus
+from fence_sorter.verification import accuracy, stability
 from fence_sorter.verification.report import fmt, table, tables
 
 DOCS = Path(__file__).resolve().parents[2] / "docs"
@@ -145,8 +146,8 @@ def test_bench_markdown_of_a_small_report_is_the_one_written_by_hand() -> None:
 
 
 def test_bench_renders_again_from_its_json_keeping_the_suite_section(tmp_path: Path) -> None:
+    from benchmarks.bench_suite import BEGIN, END
     from fence_sorter.cli import bench as bench_cli
-    from fence_sorter.verification.bench_suite import BEGIN, END
 
     out = tmp_path / "benchmarks.md"
     out.write_text(f"old\n\n{BEGIN}\n| suite |\n|---|\n{END}\n", encoding="utf-8")
@@ -158,9 +159,9 @@ def test_bench_renders_again_from_its_json_keeping_the_suite_section(tmp_path: P
 
 
 def without_suite_section(markdown: str) -> str:
-    """The markdown ``fence-sorter bench`` writes, without the node-suite section
-    ``fence-sorter bench-suite`` keeps in the same file."""
-    from fence_sorter.verification.bench_suite import BEGIN, END
+    """The markdown ``python -m benchmarks bench`` writes, without the node-suite section
+    ``python -m benchmarks bench-suite`` keeps in the same file."""
+    from benchmarks.bench_suite import BEGIN, END
 
     if BEGIN in markdown and END in markdown:
         head, rest = markdown.split(BEGIN, 1)
@@ -206,7 +207,7 @@ def test_startup_readme_is_its_json_rendered() -> None:
 def test_calibration_md_figures_are_its_json_rendered() -> None:
     """docs/calibration.md's generated section (coverage, per-block counts, per-seed z, fresh
     noise) has the tables ``calibrate-bench --from-json docs/calibration.json`` renders."""
-    from fence_sorter.calibration import bench as calibration_bench
+    from benchmarks import calibrate_bench as calibration_bench
 
     data = json.loads((DOCS / "calibration.json").read_text(encoding="utf-8"))
     doc = (DOCS / "calibration.md").read_text(encoding="utf-8")

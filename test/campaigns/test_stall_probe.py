@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from fence_sorter.verification.stall_probe import busy_probe, run_probe, summarise
+from benchmarks.stall_probe import busy_probe, run_probe, summarise
 
 
 def test_busy_probe_reports_each_gap_of_a_scripted_clock():
@@ -20,7 +20,7 @@ def test_busy_probe_reports_each_gap_of_a_scripted_clock():
         return next(ticks)
 
     slept: list[float] = []
-    import fence_sorter.verification.stall_probe as sp
+    import benchmarks.stall_probe as sp
 
     burst, sp.BURST = sp.BURST, 0.005
     try:
@@ -49,7 +49,7 @@ def test_bad_probe_options_exit_2_naming_the_range(args):
     import sys
 
     done = subprocess.run(
-        [sys.executable, "-m", "fence_sorter.verification.stall_probe", *args],
+        [sys.executable, "-m", "benchmarks.stall_probe", *args],
         capture_output=True,
         text=True,
         timeout=60,

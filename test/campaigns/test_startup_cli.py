@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from fence_sorter.verification import startup
+from benchmarks import startup
 
 
 @pytest.mark.parametrize(

@@ -1,4 +1,4 @@
-"""``python -m fence_sorter.verification.versus``: bad arguments exit 2 with one line; the
+"""``python -m benchmarks.versus``: bad arguments exit 2 with one line; the
 child processes solve the scene of the tree they are given; the report renders from its JSON.
 No timing assertions (the figures are the command's output, not a test's)."""
 
@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from fence_sorter.verification import versus
+from benchmarks import versus
 from fence_sorter.verification.machine import REPO
 from fence_sorter.verification.report import tables
 
@@ -42,7 +42,7 @@ def test_rounds_alternate_fresh_processes_of_each_tree() -> None:
 
 def test_report_renders_from_its_json() -> None:
     data = {
-        "command": "python -m fence_sorter.verification.versus abc1234",
+        "command": "python -m benchmarks.versus abc1234",
         "finished": "2026-01-01 10:00 UTC",
         "head": "def5678",
         "base": "abc1234",

@@ -11,9 +11,9 @@ import subprocess
 from pathlib import Path
 
 import pytest
+from processes import run_cli
 
 from fence_sorter.cli import main as cli_main
-from fence_sorter.testing import run_cli
 
 REPO = Path(__file__).resolve().parents[2]
 

@@ -8,8 +8,7 @@ import os
 from pathlib import Path
 
 import pytest
-
-from fence_sorter.testing import run_cli
+from processes import run_cli
 
 REPO = Path(__file__).resolve().parents[2]
 EXAMPLE_MCAP = REPO / "bags" / "example_4_parcels" / "example_4_parcels_0.mcap"

@@ -8,10 +8,10 @@ import sys
 from pathlib import Path
 
 import pytest
+from processes import managed_process, venv_executable
 
 from fence_sorter import __version__
 from fence_sorter.cli import main as cli_main
-from fence_sorter.testing import managed_process, venv_executable
 
 FENCE_SORTER = venv_executable("fence-sorter")
 TIMEOUT = 60.0

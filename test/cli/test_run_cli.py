@@ -6,8 +6,7 @@ import os
 from pathlib import Path
 
 import pytest
-
-from fence_sorter.testing import run_cli, wait_until
+from processes import run_cli, wait_until
 
 
 @pytest.mark.slow

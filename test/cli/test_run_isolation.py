@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 import pytest
+from processes import run_cli
 
 from fence_sorter.runner.processes import (
     RUN_DOMAIN_RANGE,
@@ -20,7 +21,6 @@ from fence_sorter.runner.processes import (
     domain_in_use,
     domain_ports,
 )
-from fence_sorter.testing import run_cli
 
 
 @pytest.fixture

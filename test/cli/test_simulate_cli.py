@@ -8,8 +8,7 @@ import subprocess
 from pathlib import Path
 
 import pytest
-
-from fence_sorter.testing import run_cli
+from processes import run_cli
 
 REPO = Path(__file__).resolve().parents[2]
 TIMEOUT = 120.0

@@ -8,8 +8,8 @@ import subprocess
 from pathlib import Path
 
 import pytest
+from processes import run_cli
 
-from fence_sorter.testing import run_cli
 from fence_sorter.verification import stability as S
 
 REPO = Path(__file__).resolve().parents[2]

@@ -25,9 +25,9 @@ import time
 from pathlib import Path
 
 import pytest
+from processes import run_domain_id, stop_process
 
 from fence_sorter.resources import SHARE_DIRS, installed_files
-from fence_sorter.testing import run_domain_id, stop_process
 
 pytestmark = [pytest.mark.install, pytest.mark.ros, pytest.mark.slow]
 

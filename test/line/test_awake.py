@@ -8,9 +8,9 @@ import subprocess
 import sys
 
 import pytest
+from processes import process_alive, wait_until
 
 from fence_sorter.line.awake import start_spinners, stop_spinners
-from fence_sorter.testing import process_alive, wait_until
 
 
 def _policy(pid: int) -> int:

@@ -16,6 +16,7 @@ import termios
 import time
 
 import pytest
+from processes import process_alive, wait_until
 
 from fence_sorter.line import LineConfig, Outcome, OutcomeCode, SortingLine
 from fence_sorter.line.worker import (
@@ -29,7 +30,6 @@ from fence_sorter.line.worker import (
     _frame,
 )
 from fence_sorter.scene import load_scene
-from fence_sorter.testing import process_alive, wait_until
 
 from .test_line import heavy, stroke
 

@@ -17,9 +17,9 @@ from mcap.exceptions import EndOfFile
 from mcap.reader import make_reader
 from mcap.records import Channel, Message
 from mcap.stream_reader import StreamReader
+from processes import run_cli
 
 from fence_sorter.recording.baginfo import bag_info, format_info
-from fence_sorter.testing import run_cli
 
 pytestmark = pytest.mark.slow  # bag readers and the CLI in a process: seconds each
 

@@ -7,11 +7,11 @@ import sys
 from pathlib import Path
 
 import pytest
+from processes import managed_process
 
 from fence_sorter.nodes.roundtrip import DEFAULT_SEED
 from fence_sorter.recording.msgtypes import make_typestore, message_names, msgtype_name
 from fence_sorter.recording.samples import diff_values, sample_values
-from fence_sorter.testing import managed_process
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

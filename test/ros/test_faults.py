@@ -19,9 +19,9 @@ from pathlib import Path
 import pytest
 import yaml
 
+from benchmarks.faults import command_msg, parcel_msg
 from fence_sorter.runner.processes import ProcessGroup, leftovers, node_command
 from fence_sorter.scene import load_scene
-from fence_sorter.verification.faults import command_msg, parcel_msg
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.faults]
 

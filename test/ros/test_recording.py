@@ -16,11 +16,11 @@ import pytest
 import yaml
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
+from processes import managed_process, run_cli, wait_until
 from rosbags.rosbag2 import Reader
 
 from fence_sorter.recording.bagread import read_bag
 from fence_sorter.recording.topics import TOPIC_TYPES
-from fence_sorter.testing import managed_process, run_cli, wait_until
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

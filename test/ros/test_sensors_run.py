@@ -12,6 +12,7 @@ from dataclasses import asdict
 
 import numpy as np
 import pytest
+from processes import run_cli
 
 from fence_sorter.calibration.bag import read_measured_bag
 from fence_sorter.calibration.fit import event_data, predict
@@ -33,7 +34,6 @@ from fence_sorter.recording.topics import (
     PARCELS,
 )
 from fence_sorter.scene import load_scene
-from fence_sorter.testing import run_cli
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

@@ -13,8 +13,7 @@ import signal
 from pathlib import Path
 
 import pytest
-
-from fence_sorter.testing import managed_process, wait_until
+from processes import managed_process, wait_until
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -94,7 +93,7 @@ def test_simulator_sorts_reports_and_survives_bad_parcels(env, tmp_path: Path, p
         f"    cycle_trace: {tmp_path / 'cycles.npz'}\n"
     )
     cmd = ["simulator", "--ros-args", "--params-file", str(params)]
-    from fence_sorter.testing import venv_executable
+    from processes import venv_executable
 
     cmd[0] = venv_executable("python")
     cmd[1:1] = ["-m", "fence_sorter.nodes.simulator"]
@@ -196,7 +195,7 @@ def test_simulator_sorts_reports_and_survives_bad_parcels(env, tmp_path: Path, p
 
 
 def test_bad_scene_exits_2_with_one_line(env) -> None:
-    from fence_sorter.testing import venv_executable
+    from processes import venv_executable
 
     cmd = [
         venv_executable("python"),
@@ -326,7 +325,7 @@ def _loop_process(pid: int) -> int:
 def test_a_killed_loop_process_ends_the_node_with_status_1(env, probe) -> None:
     """kill -9 of the pacing loop's process: the node says so (FATAL, diagnostics ERROR) and
     exits 1 instead of publishing a frozen clock."""
-    from fence_sorter.testing import venv_executable
+    from processes import venv_executable
 
     executor, _, got = probe
     cmd = [venv_executable("python"), "-m", "fence_sorter.nodes.simulator", "--ros-args"]

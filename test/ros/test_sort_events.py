@@ -13,11 +13,11 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 import pytest
+from processes import run_cli
 
 from fence_sorter.analysis import analyze_bag
 from fence_sorter.analysis.events import EVENT_PEAK_RTOL, SortEventData
 from fence_sorter.recording.bagread import read_bag
-from fence_sorter.testing import run_cli
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

@@ -13,10 +13,10 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
+from processes import run_cli
 
 from fence_sorter.recording.bagread import read_bag
 from fence_sorter.runner.processes import ProcessGroup, leftovers, node_command
-from fence_sorter.testing import run_cli
 
 from .test_faults import ros_args, wait
 

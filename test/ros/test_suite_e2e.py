@@ -8,9 +8,9 @@ import json
 from pathlib import Path
 
 import pytest
+from processes import run_cli
 
 from fence_sorter.runner.processes import leftovers
-from fence_sorter.testing import run_cli
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

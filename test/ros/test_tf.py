@@ -13,8 +13,7 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
-
-from fence_sorter.testing import run_cli
+from processes import run_cli
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

@@ -8,8 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
-
-from fence_sorter.testing import managed_process
+from processes import managed_process
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

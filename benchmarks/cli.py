@@ -1,0 +1,30 @@
+"""``python -m benchmarks <campaign> ...``: the campaigns that regenerate the reports of docs/.
+
+The same dispatch as ``fence-sorter`` (:class:`fence_sorter.cli.main.CommandLine`): the
+campaign ``a-b`` lives in ``benchmarks.commands.a_b``, which exposes ``register(parser)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from fence_sorter.cli import main as fence_sorter_cli
+
+#: campaign -> its one-line help, in the order of ``--help``
+CAMPAIGNS = {
+    "bench": "speed and memory of the default configuration against SciPy baselines",
+    "bench-suite": "node suite benchmark: pacing, lost messages, controller latency, unpaced RTF",
+    "faults": "fault-injection campaign of the node suite (writes docs/reliability.md)",
+    "calibrate-bench": "calibration benchmark: interval coverage, identifiability, wall time",
+}
+BENCHMARKS = fence_sorter_cli.CommandLine(
+    "python -m benchmarks",
+    "Campaigns that regenerate this repository's reports (docs/).",
+    "benchmarks.commands",
+    CAMPAIGNS,
+)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the campaign named in ``argv`` (None: the process's arguments); its exit code."""
+    return fence_sorter_cli.main(argv, BENCHMARKS)

@@ -1,0 +1,1 @@
+"""``python -m benchmarks <campaign>``: one module per campaign, as ``fence_sorter.cli``'s."""
