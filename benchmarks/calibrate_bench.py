@@ -33,7 +33,8 @@ from fence_sorter.calibration.emulate import (
     truth_events,
     truth_record,
 )
-from fence_sorter.calibration.fit import CalibrationResult, FitError, calibrate
+from fence_sorter.calibration.events import FitError
+from fence_sorter.calibration.fit import CalibrationResult, calibrate
 from fence_sorter.calibration.replay import with_values
 from fence_sorter.calibration.sensors import load_sensors
 from fence_sorter.scene import load_scene

@@ -73,7 +73,8 @@ def run(args: argparse.Namespace) -> int:
         return error(f"--fresh-noise must be comma-separated integers in [0, inf), "
                      f"got {args.fresh_noise!r}")  # fmt: skip
     # lazy: loads the kernel (Numba), SciPy, rosbags
-    from fence_sorter.calibration.fit import CalibrationInputError, check_scheduler
+    from fence_sorter.calibration.evaluate import check_scheduler
+    from fence_sorter.calibration.events import CalibrationInputError
 
     try:
         check_scheduler(args.scheduler)

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import contextlib
 import math
-import os
 import resource
 import time
 from dataclasses import dataclass, field, replace
@@ -36,21 +35,22 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.optimize import least_squares
 
-from fence_sorter.physics.params import SolverParams
-from fence_sorter.physics.parcel import initial_pose, parcel_body
 from fence_sorter.physics.simulate import Scenario
-from fence_sorter.pool import evaluation_pool
 
 from .bag import MeasuredBag
-from .replay import PARAMETERS, ParcelEvent, ReplayError, replay, scene_value
-from .sensors import camera_to_sorter, drive_angle, geometric_centre, sorter_to_camera
+from .evaluate import Evaluator
+from .events import (
+    CalibrationInputError,
+    EventData,
+    FitError,
+    align_camera,
+    event_data,
+    pre_stroke_centre,
+)
+from .replay import PARAMETERS, ParcelEvent, scene_value
+from .sensors import camera_to_sorter, drive_angle, sorter_to_camera
 
 Z95 = 1.959964
-#: seconds before a stroke where the root moment is read as the gauge's noise
-PRE_WINDOW = 0.5
-#: after a stroke's cycle, how long the fence rings down before a root moment reads it at rest
-#: [s] (the line's solver.settle_time: a run's fence follows its stroke's solve that long)
-RING_DOWN = SolverParams().settle_time
 #: initial noise levels of the first pass: position [m], yaw [rad], root moment [N m]
 NOMINAL_SIGMA = (2e-3, 1e-2, 1.0)
 SIGMA_FLOOR = (1e-8, 1e-8, 1e-8)
@@ -61,101 +61,6 @@ TOL = 1e-8  # least_squares' xtol, ftol, gtol
 START_FTOL = 1e-4
 F_SCALE = 3.0  # the robust loss's scale [noise levels]
 CACHED_POINTS = 8  # replayed parameter sets and Jacobians a problem keeps
-
-
-class CalibrationInputError(ValueError):
-    """Bad input to a calibration (exit 2): the message names what is wrong."""
-
-
-class FitError(RuntimeError):
-    """The fit failed: a replay diverged or the optimiser did not converge (exit 3)."""
-
-
-@dataclass
-class EventData:
-    """One parcel's measured samples, sorter frame, times from its stroke start [s]."""
-
-    ev: ParcelEvent
-    cam_tau: np.ndarray
-    cam_x: np.ndarray
-    cam_y: np.ndarray
-    cam_yaw: np.ndarray
-    str_tau: np.ndarray
-    str_m: np.ndarray
-
-
-def pre_stroke_centre(base: Scenario, ev: ParcelEvent, tau: np.ndarray):
-    """Geometric centre and yaw of a parcel riding the belt before its stroke (tau <= 0)."""
-    body = parcel_body(ev.parcel, base.conveyor)
-    xc, yc, yaw = initial_pose(body, ev.r_s, ev.parcel.lateral_gap, ev.parcel.yaw)
-    x0, y0 = geometric_centre(xc, yc, yaw, ev.parcel.cog_offset_x, ev.parcel.cog_offset_y)
-    v = base.conveyor.belt_speed
-    return x0 + v * tau, np.full_like(tau, y0), np.full_like(tau, yaw)
-
-
-def align_camera(base: Scenario, mb: MeasuredBag) -> tuple[tuple[float, float, float], float]:
-    """The camera frame in the sorter frame (x, y, yaw) from the pre-stroke poses (Kabsch), and
-    the RMS distance left [m]."""
-    m = mb.m
-    src, dst = [], []
-    for ev in mb.events:
-        sel = (m.cam_id == ev.parcel_id) & (m.cam_t < ev.t_start)
-        if not sel.any():
-            continue
-        px, py, _ = pre_stroke_centre(base, ev, m.cam_t[sel] - ev.t_start)
-        src.append(np.column_stack([m.cam_x[sel], m.cam_y[sel]]))
-        dst.append(np.column_stack([px, py]))
-    if not src or sum(len(s) for s in src) < 3:
-        raise CalibrationInputError(
-            f"{mb.path}: the camera sees fewer than 3 parcel poses before the strokes start; "
-            "the camera frame cannot be aligned"
-        )
-    a, b = np.concatenate(src), np.concatenate(dst)
-    ca, cb = a.mean(axis=0), b.mean(axis=0)
-    h = (a - ca).T @ (b - cb)
-    theta = math.atan2(h[0, 1] - h[1, 0], h[0, 0] + h[1, 1])
-    c, s = math.cos(theta), math.sin(theta)
-    rot = np.array([[c, -s], [s, c]])
-    d = cb - rot @ ca
-    rms = float(np.sqrt(np.mean(np.sum((a @ rot.T + d - b) ** 2, axis=1))))
-    return (float(d[0]), float(d[1]), theta), rms
-
-
-def event_data(mb: MeasuredBag, ring_down: float = RING_DOWN) -> list[EventData]:
-    """Each parcel's samples (camera frame), times from its stroke start, to its replay's end.
-
-    The root moment's window is what its replay explains with the fence at rest before the
-    stroke: from PRE_WINDOW before the stroke, but not within ``ring_down`` after the previous
-    stroke's cycle (the fence still rings; a run's line follows it for solver.settle_time), and
-    up to the next stroke's start (whose solve starts with the fence at rest).
-    """
-    m = mb.m
-    out = []
-    events = sorted(mb.events, key=lambda e: e.t_start)
-    for ev in mb.events:
-        k = events.index(ev)
-        sel = m.cam_id == ev.parcel_id
-        tau = m.cam_t[sel] - ev.t_start
-        keep = tau < ev.t_end - 1e-6
-        lo, hi = ev.t_start - PRE_WINDOW, ev.t_start + ev.t_end - 1e-6
-        if k > 0:
-            prev = events[k - 1]
-            lo = max(lo, prev.t_start + 2.0 * prev.t1 + ring_down)
-        if k + 1 < len(events):
-            hi = min(hi, events[k + 1].t_start - 1e-6)
-        ssel = (m.str_t >= lo) & (m.str_t < hi)
-        out.append(
-            EventData(
-                ev,
-                tau[keep],
-                m.cam_x[sel][keep],
-                m.cam_y[sel][keep],
-                m.cam_yaw[sel][keep],
-                m.str_t[ssel] - ev.t_start,
-                m.str_moment[ssel],
-            )
-        )
-    return out
 
 
 def noise_levels(base: Scenario, eds: list[EventData], offset) -> tuple[float, float, float]:
@@ -199,185 +104,6 @@ def stroke_covariance(enc_t: np.ndarray, enc_angle: np.ndarray, ev: ParcelEvent,
         cols.append((drive_angle([plus], t) - drive_angle([minus], t)) / (2.0 * h))
     j = np.column_stack(cols)
     return noise**2 * np.linalg.pinv(j.T @ j)
-
-
-def predict(base: Scenario, ed: EventData, values: dict[str, float]):
-    """The twin's replay sampled where this parcel was measured: x, y, yaw, moment."""
-    tr = replay(base, ed.ev, values)
-    x, y, yaw = tr.pose_at(ed.cam_tau)
-    return x, y, yaw, tr.moment_at(ed.str_tau)
-
-
-# -- parallel evaluation -----------------------------------------------------------------------
-_WORKER: dict = {}
-
-
-def _init_worker(base: Scenario, eds: list[EventData]) -> None:
-    _WORKER["base"], _WORKER["eds"] = base, eds
-
-
-def _predict_all(base: Scenario, eds: list[EventData], idx, values_list):
-    """Predictions of parcels ``idx`` of ``eds`` for each parameter set, or the message of the
-    first replay that failed."""
-    out = []
-    for values in values_list:
-        row = []
-        for i in idx:
-            try:
-                row.append(predict(base, eds[i], values))
-            except ReplayError as exc:
-                return str(exc)
-        out.append(row)
-    return out
-
-
-def _predict_strokes(base: Scenario, eds: list[EventData], idx, values, widths):
-    """Per parcel of ``idx``, its predictions with each stroke parameter (STROKE_FIELDS) moved
-    by + and - its width (``widths`` by parcel id; six: start +-, alpha_k +-, t1 +-), or the
-    message of the first replay that failed. A later start samples the same replay earlier."""
-    out = []
-    for i in idx:
-        ed = eds[i]
-        dt0, dak, dt1 = widths[ed.ev.parcel_id]
-        try:
-            tr = replay(base, ed.ev, values)
-            row = []
-            for d in (dt0, -dt0):
-                row.append((*tr.pose_at(ed.cam_tau - d), tr.moment_at(ed.str_tau - d)))
-            for name, w in (("alpha_k", dak), ("t1", dt1)):
-                for d in (w, -w):
-                    ev = replace(ed.ev, **{name: getattr(ed.ev, name) + d})
-                    row.append(predict(base, replace(ed, ev=ev), values))
-        except ReplayError as exc:
-            return str(exc)
-        out.append(row)
-    return out
-
-
-def _run_chunk(task, idx: list[int], *args):
-    """``task`` (:func:`_predict_all`, :func:`_predict_strokes`) on the parcels this worker
-    process holds (:func:`_init_worker`)."""
-    return task(_WORKER["base"], _WORKER["eds"], idx, *args)
-
-
-def _run_detached(task, base: Scenario, eds: list[EventData], *args):
-    """``task`` on every parcel of ``eds``, for a worker that holds none (a Dask cluster's)."""
-    return task(base, eds, range(len(eds)), *args)
-
-
-#: how parcels' replays are run in parallel: ``processes`` (a pool of forked processes),
-#: ``dask`` (the same processes driven by Dask's multiprocessing scheduler) or the address of
-#: a Dask distributed scheduler (tcp://host:8786)
-SCHEDULERS = ("processes", "dask")
-
-
-def check_scheduler(scheduler: str) -> str:
-    """``scheduler`` if it is one of SCHEDULERS or a Dask scheduler address, else
-    CalibrationInputError naming the allowed values."""
-    if scheduler in SCHEDULERS or "://" in scheduler:
-        return scheduler
-    raise CalibrationInputError(
-        f"--scheduler {scheduler}: allowed: {', '.join(SCHEDULERS)} or a Dask scheduler "
-        "address such as tcp://127.0.0.1:8786"
-    )
-
-
-class Evaluator:
-    """Replays every parcel for a list of parameter sets, parcels split over processes.
-
-    A call replays each parcel once per parameter set (a Jacobian's sets in one batch); the
-    parcels are split into interleaved chunks, one task per chunk, run by ``scheduler``
-    (:data:`SCHEDULERS`) on ``workers`` processes that hold the parcels from their start."""
-
-    def __init__(
-        self,
-        base: Scenario,
-        eds: list[EventData],
-        workers: int | None = None,
-        scheduler: str = "processes",
-    ):
-        self.base, self.eds = base, eds
-        self.scheduler = check_scheduler(scheduler)
-        self.workers = max(1, min(workers or os.cpu_count() or 1, len(eds)))
-        self.pool = None
-        self._stack = contextlib.ExitStack()
-        if "://" in scheduler:
-            self.pool = self._stack.enter_context(evaluation_pool(scheduler, workers))
-        elif self.workers > 1:
-            self.pool = self._stack.enter_context(
-                evaluation_pool(
-                    None,
-                    self.workers,
-                    # compile (or load) the kernel once here, so the forked workers inherit it
-                    warm_up=lambda: replay(base, eds[0].ev),
-                    initializer=_init_worker,
-                    initargs=(base, eds),
-                )
-            )
-        else:
-            _init_worker(base, eds)
-        n = len(eds)
-        k = min(n, 2 * self.workers) if self.workers > 1 or "://" in scheduler else 1
-        self.chunks = [list(range(i, n, k)) for i in range(k)]
-        self.replays = 0
-        self.on_replays = None  # callback(count) for a progress bar
-
-    def close(self) -> None:
-        """Shut the processes down (and wait for them, so their CPU time is counted)."""
-        self._stack.close()
-        self.pool = None
-
-    def _parts(self, task, *args) -> list:
-        """``task``'s result per chunk of parcels (``args`` after the chunk's indices)."""
-        if "://" in self.scheduler:
-            futures = [
-                self.pool.submit(_run_detached, task, self.base, [self.eds[i] for i in c], *args)
-                for c in self.chunks
-            ]
-            return [f.result() for f in futures]
-        if self.scheduler == "dask":
-            import dask  # lazy: Dask (0.2-1.6 s), only to evaluate in parallel
-
-            tasks = [dask.delayed(_run_chunk, pure=False)(task, c, *args) for c in self.chunks]
-            if self.pool is None:
-                return list(dask.compute(*tasks, scheduler="synchronous"))
-            return list(dask.compute(*tasks, scheduler="processes", pool=self.pool))
-        if self.pool is None:
-            return [_run_chunk(task, c, *args) for c in self.chunks]
-        futures = [self.pool.submit(_run_chunk, task, c, *args) for c in self.chunks]
-        return [f.result() for f in futures]
-
-    def _gather(self, parts, rows: int) -> list:
-        """Per row of the chunks' results, the list over every parcel; FitError on a failure."""
-        out = [[None] * len(self.eds) for _ in range(rows)]
-        for chunk, part in zip(self.chunks, parts, strict=True):
-            if isinstance(part, str):
-                raise FitError(part)
-            for j, row in enumerate(part):
-                for i, pred in zip(chunk, row, strict=True):
-                    out[j][i] = pred
-        return out
-
-    def _count(self, replays: int) -> None:
-        self.replays += replays
-        if self.on_replays is not None:
-            self.on_replays(replays)
-
-    def __call__(self, values_list: list[dict[str, float]]):
-        """Per parameter set, the list (per event) of predictions."""
-        out = self._gather(self._parts(_predict_all, values_list), len(values_list))
-        self._count(len(values_list) * len(self.eds))
-        return out
-
-    def strokes(self, values: dict[str, float], widths) -> list:
-        """Per parcel, its six predictions of :func:`_predict_strokes` (``widths``: per parcel,
-        the steps of its start, alpha_k and t1)."""
-        by_id = {ed.ev.parcel_id: tuple(w) for ed, w in zip(self.eds, widths, strict=True)}
-        parts = self._parts(_predict_strokes, values, by_id)
-        (out,) = self._gather([p if isinstance(p, str) else [p] for p in parts], 1)
-        self._count(5 * len(self.eds))
-        return out
-        return out
 
 
 # -- residuals ---------------------------------------------------------------------------------

@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from .fit import CalibrationResult, EventData
+from .events import EventData
+from .fit import CalibrationResult
 from .replay import PARAMETERS
 
 

@@ -18,7 +18,8 @@ import numpy as np
 from fence_sorter.physics.simulate import Scenario, simulate
 
 from .bag import MeasuredBag
-from .fit import Evaluator, align_camera, event_data
+from .evaluate import Evaluator
+from .events import align_camera, event_data
 from .replay import event_scenario
 from .sensors import camera_to_sorter
 

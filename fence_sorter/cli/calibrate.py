@@ -128,13 +128,10 @@ def load_bag_and_scene(args):
 
 
 def run(args: argparse.Namespace) -> int:
-    from fence_sorter.calibration.fit import (  # lazy: loads the kernel (Numba), SciPy, rosbags
-        CalibrationInputError,
-        FitError,
-        calibrate,
-        check_fit_names,
-        check_scheduler,
-    )
+    # lazy: loads the kernel (Numba), SciPy, rosbags
+    from fence_sorter.calibration.evaluate import check_scheduler
+    from fence_sorter.calibration.events import CalibrationInputError, FitError
+    from fence_sorter.calibration.fit import calibrate, check_fit_names
     from fence_sorter.calibration.report import format_result, plot_residuals, write_scene
 
     if args.bootstrap < 0 or args.holdout < 0:

@@ -35,7 +35,7 @@ def register(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     # lazy: loads the kernel (Numba), SciPy, rosbags
-    from fence_sorter.calibration.fit import CalibrationInputError, FitError
+    from fence_sorter.calibration.events import CalibrationInputError, FitError
     from fence_sorter.calibration.validate import plot_checks, validate
 
     if args.last < 0:

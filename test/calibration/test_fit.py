@@ -14,6 +14,7 @@ from benchmarks import calibrate_bench as bench
 from fence_sorter.calibration import fit as fit_module
 from fence_sorter.calibration.bag import fit_stroke, read_measured_bag
 from fence_sorter.calibration.emulate import draw_events, emulate_bag
+from fence_sorter.calibration.events import FitError, event_data
 from fence_sorter.calibration.fit import (
     F_SCALE,
     FD_STEP,
@@ -21,7 +22,6 @@ from fence_sorter.calibration.fit import (
     Z95,
     _covariance,
     calibrate,
-    event_data,
     stroke_covariance,
     weighted,
 )
@@ -278,7 +278,7 @@ def test_a_fit_left_in_a_wrong_basin_fails_instead_of_reporting_numbers(monkeypa
     """Without the escape, seed 228's fit would report mu_fence 11 % low with an interval
     0.1 % wide: the fit fails (exit 3) naming the poses' scatter against their noise."""
     monkeypatch.setattr(fit_module, "_escape", lambda problem, sol, *args, **kw: sol)
-    with pytest.raises(fit_module.FitError, match=r"scattering [3-5]\.\d times their noise"):
+    with pytest.raises(FitError, match=r"scattering [3-5]\.\d times their noise"):
         bench._run(bench.SCENE, bench.TRUTH, "camera60", "default", 8, 228, list(bench.TRUTH))
 
 

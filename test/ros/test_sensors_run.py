@@ -15,7 +15,7 @@ import pytest
 from processes import run_cli
 
 from fence_sorter.calibration.bag import read_measured_bag
-from fence_sorter.calibration.fit import event_data, predict
+from fence_sorter.calibration.events import event_data, predict
 from fence_sorter.calibration.replay import root_moment_factor
 from fence_sorter.calibration.sensors import (
     camera_to_sorter,
