@@ -17,6 +17,9 @@ import time
 from datetime import UTC, datetime
 from pathlib import Path
 
+from fence_sorter.verification import stability_cases as C
+from fence_sorter.verification.machine import git_revision, machine_info
+
 EXIT_OK = 0
 EXIT_UNMET = 1
 EXIT_BAD_ARGS = 2
@@ -60,10 +63,12 @@ def _line(cr) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fence_sorter.verification import stability as S  # lazy: loads the kernel (Numba), SciPy
+    # lazy: loads the kernel (Numba), SciPy
+    from fence_sorter.verification import stability as S
+    from fence_sorter.verification import stability_report as R
 
     if args.list:
-        for c in S.CASES:
+        for c in C.CASES:
             print(f"{c.name:24s} {c.speed:4s} {c.expected:9s} {c.description}")
         return EXIT_OK
     names = None
@@ -71,12 +76,12 @@ def run(args: argparse.Namespace) -> int:
         names = [n for item in args.cases for n in item.split(",") if n.strip()]
         names = [n.strip() for n in names]
     try:
-        cases = S.select_cases(names, quick=args.quick)
+        cases = C.select_cases(names, quick=args.quick)
     except KeyError as exc:
         unknown = exc.args[0]
         print(
             f"fence-sorter: error: unknown stability case {unknown}; "
-            f"allowed: {', '.join(S.case_names())}",
+            f"allowed: {', '.join(C.case_names())}",
             file=sys.stderr,
         )
         return EXIT_BAD_ARGS
@@ -100,12 +105,12 @@ def run(args: argparse.Namespace) -> int:
     meta = {
         "command": shlex.join(argv),
         "date": datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC"),
-        "commit": S.git_revision(REPO),
-        "machine": S.machine_info(),
+        "commit": git_revision(REPO),
+        "machine": machine_info(),
         "warm_up_s": warm,
         "wall_time_s": wall,
     }
-    paths = S.write_report(results, args.out, meta)
+    paths = R.write_report(results, args.out, meta)
     missed = [cr.case.name for cr in results if not cr.meets_expectation]
     print(
         f"{len(results)} case(s) in {wall:.1f} s; report: {paths['readme']}",

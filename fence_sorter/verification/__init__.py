@@ -1,5 +1,6 @@
-"""Numerical verification of the twin: work-precision (accuracy), stability campaign, benchmarks.
+"""Numerical verification of a scene: work-precision (accuracy) and the stability campaign.
 
 Each module is a plain library (scenes in, a results object and files out); the CLI modules
-``fence_sorter/cli/{accuracy,stability,bench}.py`` only parse arguments and print.
+``fence_sorter/cli/{accuracy,stability}.py`` only parse arguments and print. The campaigns that
+regenerate this repository's reports live beside the package, in ``benchmarks/``.
 """

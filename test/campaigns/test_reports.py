@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from benchmarks import bench, faults, startup, versus
-from fence_sorter.verification import accuracy, stability
+from fence_sorter.verification import accuracy, stability_report
 from fence_sorter.verification.report import fmt, table, tables
 
 DOCS = Path(__file__).resolve().parents[2] / "docs"
@@ -52,7 +52,7 @@ def test_accuracy_summary_is_computed_from_the_runs() -> None:
 def test_stability_readme_tables_are_those_of_its_results_json() -> None:
     data = json.loads((DOCS / "stability" / "results.json").read_text(encoding="utf-8"))
     committed = tables((DOCS / "stability" / "README.md").read_text(encoding="utf-8"))
-    (rendered,) = tables(stability.render_readme(data))
+    (rendered,) = tables(stability_report.render_readme(data))
     assert len(rendered) == 2 + len(data["cases"])  # one row per case
     assert committed == [rendered]
 

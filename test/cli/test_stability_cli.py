@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 from processes import run_cli
 
-from fence_sorter.verification import stability as S
+from fence_sorter.verification import stability_cases as C
 
 REPO = Path(__file__).resolve().parents[2]
 TIMEOUT = 600.0
@@ -31,7 +31,7 @@ def test_quick_writes_the_report(tmp_path: Path) -> None:
     assert TABLE_HEADER in readme
     assert "fence-sorter stability" in readme and "--quick" in readme
     rows = [line for line in readme.splitlines() if line.startswith("| `")]
-    fast = [c.name for c in S.fast_cases()]
+    fast = [c.name for c in C.fast_cases()]
     assert [row.split("`")[1] for row in rows] == fast
     data = json.loads((out / "results.json").read_text(encoding="utf-8"))
     assert [c["name"] for c in data["cases"]] == fast
@@ -81,4 +81,4 @@ def test_quick_and_cases_are_exclusive() -> None:
 def test_list() -> None:
     r = fence_sorter("stability", "--list")
     assert r.returncode == 0
-    assert [line.split()[0] for line in r.stdout.splitlines()] == S.case_names()
+    assert [line.split()[0] for line in r.stdout.splitlines()] == C.case_names()

@@ -19,7 +19,7 @@ from fence_sorter.physics.scenario import PER_SCENARIO_SIZE, per_scenario
 from fence_sorter.physics.simulate import SortingModel, simulate
 from fence_sorter.physics.stepper import STAGE_NAMES, Diagnosis, Failure, Stepper
 from fence_sorter.scene import SceneError, load_scene
-from fence_sorter.verification import stability as S
+from fence_sorter.verification import stability_cases as C
 
 S_ALL = ("trajectory", "fence", "forces", "stages")
 # a contact far too stiff for the fixed step: the iteration fails down to min_dt
@@ -121,7 +121,7 @@ def test_a_step_below_min_dt_fails_the_solve() -> None:
 
 
 def test_wall_time_limit_stops_the_loop() -> None:
-    case = next(c for c in S.CASES if c.name == "wall_time_limit")
+    case = next(c for c in C.CASES if c.name == "wall_time_limit")
     sc = load_scene(case.scene, case.override_strings()).scenario
     r = simulate(sc)
     assert not r.success and r.diagnosis.startswith("wall-time limit 0.5 s reached at t = ")
