@@ -21,3 +21,8 @@ checkout (``source scripts/env.sh`` first):
 The package's own verification a user runs on a scene of theirs stays in the package
 (``fence-sorter accuracy``, ``fence-sorter stability``).
 """
+
+from pathlib import Path
+
+#: the checkout the campaigns measure and write their reports into
+REPO = Path(__file__).resolve().parents[1]

@@ -61,11 +61,12 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 
+from benchmarks import REPO
 from fence_sorter.jsonsafe import json_safe
 from fence_sorter.physics.params import SCIPY_METHODS, FenceParams
 from fence_sorter.physics.scenario import RECORDABLE
 from fence_sorter.scene import load_scene
-from fence_sorter.verification.machine import REPO, git_revision, load_average, machine_info
+from fence_sorter.verification.machine import git_revision, load_average, machine_info
 from fence_sorter.verification.report import table
 
 SCENES = ("impact_flexible", "slide_flexible", "positioned_stiff", "arbitrary_stiff")

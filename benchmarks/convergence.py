@@ -18,13 +18,14 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks import REPO
 from fence_sorter.physics.params import ParameterError, SolverParams
 from fence_sorter.physics.simulate import simulate
 from fence_sorter.physics.stepper import collector_off
 from fence_sorter.scene import load_scene
 from fence_sorter.verification.accuracy import ATOL_PER_RTOL, SCENES
 
-REFERENCE_DIR = Path(__file__).resolve().parents[2] / "docs" / "accuracy" / "reference"
+REFERENCE_DIR = REPO / "docs" / "accuracy" / "reference"
 RTOLS = (1e-4, 1e-5, 1e-6, 1e-7)
 GAIN = 100.0  # the error at the tightest rtol at least this much below the loosest's
 MONOTONE = 2.0  # ... and no error more than this above the one of the looser rtol before it

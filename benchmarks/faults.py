@@ -56,7 +56,6 @@ from fence_sorter.runner.processes import (
 from fence_sorter.verification import insiders
 from fence_sorter.verification.machine import git_revision, machine_info
 
-REPO = Path(__file__).resolve().parents[2]
 #: the run id of the wire case's nodes
 WIRE_RUN = 4242
 #: a run id no run of the suite draws in practice: the flooding "other run"

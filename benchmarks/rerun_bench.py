@@ -14,14 +14,13 @@ import tempfile
 import time
 from pathlib import Path
 
+from benchmarks import REPO
 from fence_sorter.visualisation.rerun_log import (
     RerunLogger,
     bag_frames,
     open_recording,
     scene_from_bag,
 )
-
-REPO = Path(__file__).resolve().parents[2]
 
 
 def bench(bag: Path, repeat: int, runs: int, scene_every: list[int]) -> list[str]:

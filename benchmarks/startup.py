@@ -33,10 +33,10 @@ import tempfile
 import time
 from pathlib import Path
 
-from fence_sorter.verification.machine import REPO, git_revision, load_average, machine_info
+from benchmarks import REPO
+from fence_sorter.scene import available_scenes
+from fence_sorter.verification.machine import git_revision, load_average, machine_info
 from fence_sorter.verification.report import fmt, table
-
-from ..scene import available_scenes
 
 PROBE = r"""
 import json, sys, time

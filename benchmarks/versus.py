@@ -26,7 +26,8 @@ from collections.abc import Callable, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
 
-from fence_sorter.verification.machine import REPO, git_revision, load_average, machine_info
+from benchmarks import REPO
+from fence_sorter.verification.machine import git_revision, load_average, machine_info
 from fence_sorter.verification.report import table
 
 SCENES = ("impact_flexible", "slide_flexible", "positioned_stiff", "arbitrary_stiff")
@@ -182,7 +183,7 @@ def render(data: dict) -> str:
             for n in ("head", "base")
         }
         lines += [
-            f"Each tree's kernel compiled first (`python -m fence_sorter.warmup`): "
+            f"Each tree's kernel compiled first (as scripts/bootstrap.sh's kernel step does): "
             f"`{head}` solved through {entry['head']}, `{base}` through {entry['base']}.",
             "",
         ]

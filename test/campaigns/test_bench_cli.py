@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from benchmarks import bench as B
-from fence_sorter.cli import bench as bench_cli
+from benchmarks.commands import bench as bench_cli
 
 REPO = Path(__file__).resolve().parents[2]
 TIMEOUT = 600.0

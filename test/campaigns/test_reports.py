@@ -147,7 +147,7 @@ def test_bench_markdown_of_a_small_report_is_the_one_written_by_hand() -> None:
 
 def test_bench_renders_again_from_its_json_keeping_the_suite_section(tmp_path: Path) -> None:
     from benchmarks.bench_suite import BEGIN, END
-    from fence_sorter.cli import bench as bench_cli
+    from benchmarks.commands import bench as bench_cli
 
     out = tmp_path / "benchmarks.md"
     out.write_text(f"old\n\n{BEGIN}\n| suite |\n|---|\n{END}\n", encoding="utf-8")
