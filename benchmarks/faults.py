@@ -1188,7 +1188,7 @@ def campaign(
     machine = ", ".join(info[k] for k in ("cpu", "cores", "memory"))
 
     def meta(name: str, wall0: float) -> dict:
-        argv = ["nice", "-n", "10", "fence-sorter", "faults", "--cases", name]
+        argv = ["nice", "-n", "10", "python", "-m", "benchmarks", "faults", "--cases", name]
         if name == "interrupts":
             argv += ["--trials", str(trials), "--seed", str(seed)]
         return {
@@ -1253,8 +1253,8 @@ def campaign(
 
 
 def main(argv: list[str] | None = None) -> int:
-    """The flooding child process of the campaign (the campaign itself is ``fence-sorter
-    faults``)."""
+    """The flooding child process of the campaign (the campaign itself is ``python -m
+    benchmarks faults``)."""
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ["flood"]:
         return flood_main(argv[1:])

@@ -18,8 +18,11 @@ import pytest
 from processes import run_cli
 
 REPO = Path(__file__).resolve().parents[1]
+#: the documents whose commands are run here: the front door and the user guide
+DOCUMENTS = ("README.md", "docs/guide.md")
 
 HERE = "test/test_readme_commands.py::test_readme_command_runs"
+REPORTS_MADE = "test/test_readme_commands.py::test_make_reports_writes_every_generated_report"
 MAKE = "test/test_readme_commands.py::test_make_targets_run_the_documented_commands"
 ACCURACY = (
     "test/cli/test_accuracy_cli.py::test_quick_report_has_the_command_plots_and_reference_check"
@@ -28,6 +31,7 @@ ACCURACY = (
 #: README command -> "test file::test function" that runs it
 COVERED: dict[str, str] = {
     "make run": MAKE,
+    "make reports": REPORTS_MADE,
     "fence-sorter check": "test/cli/test_cli.py::test_check_passes_in_the_bootstrapped_env",
     "fence-sorter demo-roundtrip": "test/cli/test_cli.py::test_demo_roundtrip",
     "simulator --ros-args -p real_time_factor:=2.0": (
@@ -265,8 +269,8 @@ RUN_HERE: dict[str, tuple[list[str], str]] = {
 
 
 def readme_commands() -> list[str]:
-    """The command lines of the README's ``bash`` blocks, comments stripped."""
-    text = (REPO / "README.md").read_text()
+    """The command lines of the ``bash`` blocks of the README and the guide, comments stripped."""
+    text = "\n".join((REPO / f).read_text() for f in DOCUMENTS)
     commands = []
     for block in re.findall(r"```bash\n(.*?)```", text, re.S):
         for line in block.splitlines():
@@ -356,3 +360,33 @@ def test_make_targets_run_the_documented_commands() -> None:
     test = dry("test")
     assert "scripts/bootstrap.sh" in test and "source scripts/env.sh" in test
     assert "ruff check" in test and "pytest -q test/" in test
+
+
+#: every generated report of docs/ -> the command of `make reports` that writes it
+REPORTS = {
+    "docs/accuracy/README.md": "fence-sorter accuracy --out docs/accuracy",
+    "docs/stability/README.md": "fence-sorter stability",
+    "docs/paper/fig8.csv": "fence-sorter optimize --sweep all --no-resume --out docs/paper",
+    "docs/paper/decision-table.csv": "decision-table",
+    "docs/benchmarks.md": "python -m benchmarks bench",
+    "docs/reliability.md": "python -m benchmarks faults",
+    "docs/calibration.md": "python -m benchmarks calibrate-bench",
+    "docs/startup/README.md": "python -m benchmarks.startup",
+}
+
+
+def test_make_reports_writes_every_generated_report() -> None:
+    """`make reports` runs the command of every generated report (each report names the
+    command it was made with), the node-suite section of benchmarks.md included: what make
+    would run, without running it (hours of CPU)."""
+    import subprocess
+
+    run = subprocess.run(
+        ["make", "-n", "reports"], cwd=REPO, capture_output=True, text=True, check=True
+    ).stdout
+    run = " ".join(run.replace("\\\n", " ").split())
+    for report, command in REPORTS.items():
+        assert (REPO / report).is_file(), report
+        assert command in run, f"make reports does not write {report} ({command})"
+    assert "python -m benchmarks bench-suite" in run
+    assert "--doc docs/calibration.md" in run and "scripts/env.sh" in run

@@ -8,7 +8,7 @@ markdown rendered from that JSON (default ``docs/benchmarks.md``); ``--from-json
 markdown again from an earlier run's JSON without measuring anything.
 
 Exit codes: 0 the bench ran (targets that fail are reported in the tables, not as an exit
-code), 2 bad arguments (one line ``fence-sorter: error: ...``; an unknown scene names the
+code), 2 bad arguments (one line ``benchmarks: error: ...``; an unknown scene names the
 allowed ones).
 """
 
@@ -90,7 +90,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _error(message: str) -> int:
-    print(f"fence-sorter: error: {message}", file=sys.stderr)
+    print(f"benchmarks: error: {message}", file=sys.stderr)
     return EXIT_BAD_ARGS
 
 
@@ -146,7 +146,7 @@ def run(args: argparse.Namespace) -> int:
     methods = B.QUICK_SCIPY_METHODS if args.quick else B.SCIPY_METHODS
     ladder = B.QUICK_RTOL_LADDER if args.quick else B.RTOL_LADDER
 
-    argv = ["fence-sorter", "bench"]
+    argv = ["python", "-m", "benchmarks", "bench"]
     if args.out != DEFAULT_OUT:
         argv += ["--out", args.out]
     if args.scenes:

@@ -49,14 +49,14 @@ def register(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     if not args.duration > 0 or args.unpaced_parcels < 1:
         print(
-            "fence-sorter: error: --duration must be in (0, inf) s and --unpaced-parcels in "
+            "benchmarks: error: --duration must be in (0, inf) s and --unpaced-parcels in "
             "[1, inf)",
             file=sys.stderr,
         )
         return 2
     out = Path(args.out)
     if not args.no_write and not out.parent.is_dir():
-        print(f"fence-sorter: error: --out {out}: no such directory", file=sys.stderr)
+        print(f"benchmarks: error: --out {out}: no such directory", file=sys.stderr)
         return 2
 
     try:
@@ -68,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
             rrd=args.rrd,
         )
     except BadInput as exc:
-        print(f"fence-sorter: error: {exc}", file=sys.stderr)
+        print(f"benchmarks: error: {exc}", file=sys.stderr)
         return 2
     command = "python -m benchmarks bench-suite " + " ".join(
         shlex.quote(a) for a in sys.argv[2:] if a != "--no-write"

@@ -43,7 +43,7 @@ def register(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.trials < 1:
         print(
-            f"fence-sorter: error: --trials must be in [1, inf), got {args.trials}",
+            f"benchmarks: error: --trials must be in [1, inf), got {args.trials}",
             file=sys.stderr,
         )
         return 2

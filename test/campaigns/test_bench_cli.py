@@ -126,7 +126,7 @@ def test_unknown_scene_is_one_line_naming_the_allowed() -> None:
 def test_bad_repeats_exit_2() -> None:
     r = bench("--repeats", "0", "--out", os.devnull)
     assert r.returncode == 2
-    assert r.stderr.strip().startswith("fence-sorter: error: --repeats")
+    assert r.stderr.strip().startswith("benchmarks: error: --repeats")
 
 
 def test_bench_keeps_the_node_suite_section_of_the_file(tmp_path):
