@@ -39,7 +39,6 @@ import os
 import pickle
 import select
 import signal
-import struct
 import subprocess
 import sys
 import threading
@@ -53,6 +52,7 @@ import numpy as np
 
 from fence_sorter.inputs import InputError, ParcelSpec, StrokeCommand
 
+from .frames import HEADER, FrameBuffer, Inbox, Outbox, frame, read_exact
 from .line import LineConfig, SortingLine
 from .pacing import CycleTrace, LatenessHistogram, Pacer
 
@@ -67,13 +67,8 @@ FULL_GC_PERIOD = 10.0
 UNPACED_BACKLOG = 1 << 18
 #: paced, unsent bytes beyond this mean the reader is gone: the loop fails
 PACED_BACKLOG = 1 << 26
-#: a frame is pickled in a cycle's slack only if its kind's mean cost, times this, fits
-FLUSH_COST_SAFETY = 2.0
-#: ... or once it has been held back this long [s]
-FLUSH_MAX_HOLD = 0.01
 #: pipe buffer asked for (Linux F_SETPIPE_SZ; the default is 64 KiB)
 PIPE_SIZE = 1 << 20
-_HEADER = struct.Struct("<I")
 _F_SETPIPE_SZ = 1031
 _PR_SET_PDEATHSIG, _PR_SET_NAME = 1, 15
 #: the loop's process's name (/proc/PID/comm), started either way
@@ -180,119 +175,6 @@ class Gauges:
         return float(self.header[index])
 
 
-# -- frames ---------------------------------------------------------------------------------------
-def _frame(obj: object) -> bytes:
-    data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
-    return _HEADER.pack(len(data)) + data
-
-
-class FrameBuffer:
-    """Reassembles frames from bytes read off a pipe."""
-
-    def __init__(self) -> None:
-        self.buf = bytearray()
-
-    def feed(self, data: bytes) -> list:
-        self.buf += data
-        out, buf, pos = [], self.buf, 0
-        while len(buf) - pos >= 4:
-            (n,) = _HEADER.unpack_from(buf, pos)
-            if len(buf) - pos - 4 < n:
-                break
-            out.append(pickle.loads(buf[pos + 4 : pos + 4 + n]))
-            pos += 4 + n
-        if pos:
-            del buf[:pos]
-        return out
-
-
-class _Outbox:
-    """Frames waiting for the pipe (loop side): kept as objects by :meth:`send` (cheap, in
-    the cycle), pickled and written without blocking by :meth:`flush` (in the cycle's slack,
-    as much as fits), in order."""
-
-    def __init__(self, fd: int) -> None:
-        self.fd = fd
-        self.objects: deque = deque()
-        self.buf = bytearray()
-        self.cost: dict[str, float] = {}  # running mean time to pickle a frame, by kind [s]
-        self.held_since = math.inf  # when the first waiting frame was first put off
-        os.set_blocking(fd, False)
-
-    def send(self, obj: tuple) -> None:
-        self.objects.append(obj)
-
-    def flush(self, until: float = math.inf, clock=time.perf_counter) -> None:
-        """Pickle the frames sent, oldest first, while each one's expected cost (its kind's
-        running mean, x ``FLUSH_COST_SAFETY``) ends before ``until`` on ``clock``; a frame
-        held for ``FLUSH_MAX_HOLD`` goes anyway. Then write what the pipe takes now."""
-        objects, cost = self.objects, self.cost
-        while objects:
-            kind = objects[0][0]
-            now = clock()
-            if now + FLUSH_COST_SAFETY * cost.get(kind, 0.0) > until:
-                self.held_since = min(self.held_since, now)
-                if now - self.held_since < FLUSH_MAX_HOLD:
-                    break
-            self.buf += _frame(objects.popleft())
-            spent = clock() - now
-            cost[kind] = 0.9 * cost.get(kind, spent) + 0.1 * spent
-            self.held_since = math.inf
-        while self.buf:
-            try:
-                n = os.write(self.fd, self.buf)
-            except BlockingIOError:
-                return
-            del self.buf[:n]
-
-    def drain(self, limit: int, inbox: _Inbox | None = None) -> None:
-        """Block until at most ``limit`` bytes are unsent, reading ``inbox`` meanwhile (so a
-        writer blocked on the other pipe cannot deadlock with this one); returns early when the
-        node asks the loop to stop."""
-        self.flush()
-        while len(self.buf) > limit or self.objects:
-            rfds = [inbox.fd] if inbox is not None else []
-            r, w, _ = select.select(rfds, [self.fd], [], 1.0)
-            if r:
-                inbox.read()
-                if inbox.stop_requested:
-                    return  # the loop ends now, whatever is unsent
-            if w:
-                self.flush()
-
-
-class _Inbox:
-    """Frames from the node (loop side), read without blocking."""
-
-    def __init__(self, fd: int) -> None:
-        self.fd = fd
-        self.frames = FrameBuffer()
-        self.items: list = []
-        self.closed = False
-        os.set_blocking(fd, False)
-
-    def read(self) -> None:
-        while not self.closed:
-            try:
-                data = os.read(self.fd, 1 << 16)
-            except BlockingIOError:
-                return
-            if not data:  # the node is gone
-                self.closed = True
-                return
-            self.items += self.frames.feed(data)
-
-    @property
-    def stop_requested(self) -> bool:
-        """The node asked the loop to stop (a stop frame read, or its end of the pipe closed)."""
-        return self.closed or any(item[0] == "stop" for item in self.items)
-
-    def take(self) -> list:
-        self.read()
-        items, self.items = self.items, []
-        return items
-
-
 # -- the loop -------------------------------------------------------------------------------------
 class PacedLoop:
     """The line stepped on a :class:`Pacer` grid: inputs at the start of each cycle, physics,
@@ -303,8 +185,8 @@ class PacedLoop:
         self,
         line: SortingLine,
         settings: LoopSettings,
-        inbox: _Inbox,
-        out: _Outbox,
+        inbox: Inbox,
+        out: Outbox,
         gauges: Gauges,
     ):
         self.line, self.s, self.inbox, self.out = line, settings, inbox, out
@@ -587,16 +469,6 @@ def warm_up(config: LineConfig, scenario) -> None:
         line.snapshot()
 
 
-def _read_exact(fd: int, n: int) -> bytes:
-    data = b""
-    while len(data) < n:
-        chunk = os.read(fd, n - len(data))
-        if not chunk:
-            raise EOFError("the node closed the pipe during set-up")
-        data += chunk
-    return data
-
-
 def main(argv: list[str]) -> int:
     """The process: read the set-up frame, build and warm the line, run the loop until the
     node sends ``stop`` or goes away."""
@@ -628,11 +500,11 @@ def serve(in_fd: int, out_fd: int, gauges_fd: int, parent: int) -> int:
         fcntl.fcntl(out_fd, _F_SETPIPE_SZ, PIPE_SIZE)
     except OSError:
         pass  # the default 64 KiB: the outbox holds the rest
-    out = _Outbox(out_fd)
+    out = Outbox(out_fd)
     try:
-        (n,) = _HEADER.unpack(_read_exact(in_fd, 4))  # the set-up frame, blocking
-        config, scenario, settings = pickle.loads(_read_exact(in_fd, n))
-        inbox = _Inbox(in_fd)
+        (n,) = HEADER.unpack(read_exact(in_fd, 4))  # the set-up frame, blocking
+        config, scenario, settings = pickle.loads(read_exact(in_fd, n))
+        inbox = Inbox(in_fd)
         line = SortingLine(config)
         if settings.warm_up and scenario is not None:
             warm_up(config, scenario)
@@ -766,7 +638,7 @@ class LineProcess:
 
     def send(self, item: object) -> bool:
         """Send one frame; False if the loop's process is gone."""
-        data = _frame(item)
+        data = frame(item)
         with self._lock:
             if self._to_child < 0:
                 return False

@@ -19,15 +19,14 @@ import pytest
 from processes import process_alive, wait_until
 
 from fence_sorter.line import LineConfig, Outcome, OutcomeCode, SortingLine
+from fence_sorter.line.frames import FrameBuffer, frame
 from fence_sorter.line.worker import (
     PIPE_SIZE,
-    FrameBuffer,
     Gauges,
     LineProcess,
     LoopSettings,
     LoopStartError,
     LoopStats,
-    _frame,
 )
 from fence_sorter.scene import load_scene
 
@@ -62,7 +61,7 @@ def _last_stats(frames) -> LoopStats:
 
 def test_frames_reassemble_from_any_split():
     items = [("states", {"t": 0.5}, 1.25), ("log", "warning", "x" * 5000), ("stop",)]
-    data = b"".join(_frame(i) for i in items)
+    data = b"".join(frame(i) for i in items)
     for chunk in (1, 3, 4, 7, 4096, len(data)):
         buf, out = FrameBuffer(), []
         for k in range(0, len(data), chunk):

@@ -17,6 +17,9 @@ from fence_sorter.capacity import LoadRequest, Planner, PlannerConfig
 from fence_sorter.capacity.decision_table import DecisionTable, build_table, write_table
 from fence_sorter.capacity.formulas import pitch
 from fence_sorter.optimize import sweep as sw
+from fence_sorter.optimize import sweep_defs as sd
+from fence_sorter.optimize import sweep_rows as sr
+from fence_sorter.optimize.points import point
 from fence_sorter.physics.params import ParameterError
 from fence_sorter.scene import load_scene
 
@@ -42,7 +45,7 @@ def stand_in(inputs) -> dict:
     a_max = inputs["load_length"]
     delta_c = pitch(v, t1, r_s, a_max, 0.0)
     accel = 40.0 * alpha / t1**2
-    return sw.result_row(
+    return sr.result_row(
         inputs,
         {
             "feasible": True,
@@ -58,21 +61,21 @@ def stand_in(inputs) -> dict:
     )
 
 
-def fake_sweep(solve=stand_in) -> sw.SweepDef:
+def fake_sweep(solve=stand_in) -> sd.SweepDef:
     pts = tuple(
-        sw.point(case="positioned", alpha_k_deg=a, a_ndop=an, constraints="7 8 11")
+        point(case="positioned", alpha_k_deg=a, a_ndop=an, constraints="7 8 11")
         for an in (15.0, 300.0)
         for a in (20.0, 40.0, 60.0)
     )
-    return sw.SweepDef(
+    return sd.SweepDef(
         "fake", "Fig. X", "stand-in", "fake", pts, "alpha_k_deg", "alpha_k [deg]", "a_ndop",
-        "a_Ndop", (sw.P_T1, sw.P_WT), solve=solve,
+        "a_Ndop", (sd.P_T1, sd.P_WT), solve=solve,
     )  # fmt: skip
 
 
 def _strip(rows):
     """Rows as their CSV cells (NaN == NaN there), wall time left out."""
-    return [sw.format_row({**r, "wall_time": 0.0}) for r in rows]
+    return [sr.format_row({**r, "wall_time": 0.0}) for r in rows]
 
 
 # -- resume ------------------------------------------------------------------------------------
@@ -80,7 +83,7 @@ def test_interrupted_sweep_resumes_without_repeating_or_duplicating(tmp_path) ->
     calls: list[str] = []
 
     def counted(inputs):
-        calls.append(sw.point_key(inputs))
+        calls.append(sr.point_key(inputs))
         if len(calls) == 3:  # Ctrl-C while the third point is being solved
             raise KeyboardInterrupt
         return stand_in(inputs)
@@ -88,9 +91,9 @@ def test_interrupted_sweep_resumes_without_repeating_or_duplicating(tmp_path) ->
     full = sw.run_sweep(fake_sweep(), tmp_path / "ref", SyncExecutor(), progress=False)
     with pytest.raises(KeyboardInterrupt):
         sw.run_sweep(fake_sweep(counted), tmp_path, SyncExecutor(), progress=False)
-    assert len(sw.read_rows(tmp_path / "fake.csv")) == 2  # the two finished points were kept
+    assert len(sr.read_rows(tmp_path / "fake.csv")) == 2  # the two finished points were kept
     rows = sw.run_sweep(fake_sweep(counted), tmp_path, SyncExecutor(), progress=False)
-    keys = [r["key"] for r in sw.read_rows(tmp_path / "fake.csv")]
+    keys = [r["key"] for r in sr.read_rows(tmp_path / "fake.csv")]
     assert len(keys) == len(set(keys)) == 6  # no duplicate rows
     assert len(calls) == 3 + 4  # the rerun solved only the 4 open points (3rd one again)
     assert _strip(rows) == _strip(full)  # same final table, in point order
@@ -106,9 +109,9 @@ def test_chunked_parallel_run_and_a_line_cut_mid_write(tmp_path) -> None:
         path = tmp_path / "fake.csv"
         text = path.read_text()
         path.write_text(text[: text.rstrip("\n").rfind("\n") + 1] + text.splitlines()[-1][:25])
-        assert len(sw.read_rows(path)) == 3  # the cut row does not count
+        assert len(sr.read_rows(path)) == 3  # the cut row does not count
         rows = sw.run_sweep(fake_sweep(), tmp_path, ex, progress=False)
-    assert len(rows) == 6 and len(sw.read_rows(path)) == 6
+    assert len(rows) == 6 and len(sr.read_rows(path)) == 6
     assert path.read_text().count("\n") == 7  # header + 6 rows, the cut line is gone
     ref = sw.run_sweep(fake_sweep(), tmp_path / "ref", SyncExecutor(), progress=False)
     assert _strip(rows) == _strip(ref)
@@ -123,7 +126,7 @@ def test_resume_false_starts_afresh(tmp_path) -> None:
         return stand_in(inputs)
 
     sw.run_sweep(fake_sweep(counted), tmp_path, SyncExecutor(), resume=False, progress=False)
-    assert len(calls) == 6 and len(sw.read_rows(tmp_path / "fake.csv")) == 6
+    assert len(calls) == 6 and len(sr.read_rows(tmp_path / "fake.csv")) == 6
 
 
 def test_a_failing_point_is_reported_and_the_others_saved(tmp_path) -> None:
@@ -134,23 +137,23 @@ def test_a_failing_point_is_reported_and_the_others_saved(tmp_path) -> None:
 
     with pytest.raises(sw.SweepError, match="1 point.*no optimum"):
         sw.run_sweep(fake_sweep(flaky), tmp_path, SyncExecutor(), progress=False)
-    assert len(sw.read_rows(tmp_path / "fake.csv")) == 5
+    assert len(sr.read_rows(tmp_path / "fake.csv")) == 5
     assert len(sw.run_sweep(fake_sweep(), tmp_path, SyncExecutor(), progress=False)) == 6
 
 
 # -- rows --------------------------------------------------------------------------------------
 def test_csv_rows_round_trip_exactly(tmp_path) -> None:
-    inputs = sw.point(case="arbitrary", alpha_k_deg=35.0, w_dop=1.981, fixed="R_s=0.0 R_z=1.4")
-    row = {"key": sw.point_key(inputs), **inputs, **stand_in(inputs)}
+    inputs = point(case="arbitrary", alpha_k_deg=35.0, w_dop=1.981, fixed="R_s=0.0 R_z=1.4")
+    row = {"key": sr.point_key(inputs), **inputs, **stand_in(inputs)}
     row.update(
         feasible=False,
         t1=0.1 + 0.2,  # not a short decimal
         m12=math.nan,
         infeasible='(8) push-off: s - y_k <= 0 [m] violated by 0.05, "quoted"; (10) too',
     )
-    with sw.RowWriter(tmp_path / "r.csv") as w:
+    with sr.RowWriter(tmp_path / "r.csv") as w:
         w.write(row)
-    (back,) = sw.read_rows(tmp_path / "r.csv")
+    (back,) = sr.read_rows(tmp_path / "r.csv")
     assert set(back) == set(row)
     for k, v in row.items():
         if isinstance(v, float) and math.isnan(v):
@@ -160,8 +163,8 @@ def test_csv_rows_round_trip_exactly(tmp_path) -> None:
 
 
 def test_result_row_derives_the_figures_from_1_2_and_the_margins() -> None:
-    inputs = sw.point(case="positioned", a_ndop=150.0, load_length=0.7)
-    row = sw.result_row(
+    inputs = point(case="positioned", a_ndop=150.0, load_length=0.7)
+    row = sr.result_row(
         inputs,
         {
             "feasible": True,
@@ -183,31 +186,31 @@ def test_result_row_derives_the_figures_from_1_2_and_the_margins() -> None:
 
 # -- definitions -------------------------------------------------------------------------------
 def test_definitions_follow_the_paper() -> None:
-    fig6, fig7 = sw.get_sweep("fig6"), sw.get_sweep("fig7")
+    fig6, fig7 = sd.get_sweep("fig6"), sd.get_sweep("fig7")
     for fig, cons in ((fig6, "7 8 11"), (fig7, "7 8 11 12")):
         assert len(fig.points) == 36
         assert sorted({p["alpha_k_deg"] for p in fig.points}) == list(range(20, 61, 5))
         assert len({p["a_ndop"] for p in fig.points}) == 4
         assert {(p["case"], p["constraints"], p["load_length"], p["load_width"])
                 for p in fig.points} == {("positioned", cons, 0.7, 0.1)}  # fmt: skip
-    keys = {sw.point_key(p) for p in fig6.points + fig7.points}
+    keys = {sr.point_key(p) for p in fig6.points + fig7.points}
     assert len(keys) == 72  # the benchmark's 72 optima
     (fig4,) = {(p["alpha_k_deg"], p["w_dop"], p["fixed"], p["case"]) for p in
-               sw.get_sweep("fig4").points}  # fmt: skip
+               sd.get_sweep("fig4").points}  # fmt: skip
     assert fig4 == (40.0, 2.4, "R_s=0.0 R_z=1.4", "arbitrary")
-    assert {p["constraints"] for p in sw.get_sweep("fig3").points} == {"7 8 9 10"}
+    assert {p["constraints"] for p in sd.get_sweep("fig3").points} == {"7 8 9 10"}
     # free falls from 0.1, 0.2, 0.3 (the paper's 2.4 m/s) and 0.5 m
-    assert sw.W_DOP_LEVELS == (1.4, 2.0, 2.4, 3.1)
-    lengths = {p["load_length"] for p in sw.get_sweep("fig10").points}
+    assert sd.W_DOP_LEVELS == (1.4, 2.0, 2.4, 3.1)
+    lengths = {p["load_length"] for p in sd.get_sweep("fig10").points}
     assert {0.1, 1.2} <= lengths
-    assert sw.get_sweep("fig9").run == "fig8"
+    assert sd.get_sweep("fig9").run == "fig8"
     assert sw.parse_names("all") == [f"fig{i}" for i in range(3, 11)]
 
 
 def test_nesting_check_flags_a_tighter_problem_with_a_higher_optimum() -> None:
     def rows_of(name):
         out = []
-        for inputs in sw.get_sweep(name).points:
+        for inputs in sd.get_sweep(name).points:
             row = stand_in(inputs)  # W_t grows with a_Ndop (t1 ~ a_Ndop^-1/2)
             if name == "fig7" and inputs["alpha_k_deg"] == 30.0 and inputs["a_ndop"] == 150.0:
                 row["W_t"] *= 1.2  # with (12) on top, 20 % above the optimum without it
@@ -240,10 +243,10 @@ def test_plot_has_the_panels(tmp_path) -> None:
 # -- decision table ----------------------------------------------------------------------------
 def test_finishing_the_decision_sweep_writes_the_table(tmp_path) -> None:
     rows, entries = _decision_rows(tmp_path, 2.0)
-    fake = sw.SweepDef(
-        "decision-table", "controller", "", "decision-fake", tuple(sw.point(case=r["case"],
+    fake = sd.SweepDef(
+        "decision-table", "controller", "", "decision-fake", tuple(point(case=r["case"],
         load_length=r["load_length"], fixed=r["fixed"], constraints=r["constraints"])
-        for r in rows), "load_length", "A", "case", "placement", (sw.P_T1,),
+        for r in rows), "load_length", "A", "case", "placement", (sd.P_T1,),
     )  # fmt: skip
     lines = sw.finish(fake, tmp_path, tmp_path / "table.yaml")
     assert lines[-1].endswith("4 load classes -> " + str(tmp_path / "table.yaml"))
@@ -264,7 +267,7 @@ def _decision_rows(tmp_path, v: float):
     def solve(inputs):
         r_s, t1 = entries[(inputs["case"], inputs["load_length"])]
         d = pitch(v, t1, r_s, inputs["load_length"], 0.0)
-        return sw.result_row(
+        return sr.result_row(
             inputs,
             {
                 "feasible": True,
@@ -276,12 +279,12 @@ def _decision_rows(tmp_path, v: float):
         )
 
     pts = tuple(
-        sw.point(case=c, load_length=a, fixed=f"v={v!r} R_z=1.2", constraints="7 8 9 10 11 12")
+        point(case=c, load_length=a, fixed=f"v={v!r} R_z=1.2", constraints="7 8 9 10 11 12")
         for c, a in entries
     )
-    fake = sw.SweepDef(
+    fake = sd.SweepDef(
         "decision-fake", "controller", "", "decision-fake", pts, "load_length", "A", "case",
-        "placement", (sw.P_T1,), solve=solve,
+        "placement", (sd.P_T1,), solve=solve,
     )  # fmt: skip
     return sw.run_sweep(fake, tmp_path, SyncExecutor(), progress=False), entries
 
@@ -323,12 +326,12 @@ def test_decision_table_for_another_belt_speed_or_a_bad_file_is_refused(tmp_path
 def _write_run(path, name, lower=None, factor=1.0):
     """The stand-in optima of sweep ``name`` as its CSV; the point ``lower`` (inputs subset)
     with W_t scaled by ``factor`` (an optimiser miss)."""
-    with sw.RowWriter(path / f"{sw.get_sweep(name).run}.csv") as w:
-        for inputs in sw.get_sweep(name).points:
+    with sr.RowWriter(path / f"{sd.get_sweep(name).run}.csv") as w:
+        for inputs in sd.get_sweep(name).points:
             row = stand_in(inputs)
             if lower and all(inputs[k] == v for k, v in lower.items()):
                 row["W_t"] *= factor
-            w.write({"key": sw.point_key(inputs), **inputs, **row})
+            w.write({"key": sr.point_key(inputs), **inputs, **row})
 
 
 def test_nesting_repair_restarts_the_looser_problem_from_the_tighter_optimum(
@@ -350,7 +353,7 @@ def test_nesting_repair_restarts_the_looser_problem_from_the_tighter_optimum(
     monkeypatch.setattr(sw, "solve_point", solve_point)
 
     def rows_of(name):
-        return sw._order(sw.get_sweep(name), sw.read_rows(sw._csv(tmp_path, name)))
+        return sw._order(sd.get_sweep(name), sr.read_rows(sw._csv(tmp_path, name)))
 
     assert len(sw.nesting_violations(rows_of)[1]) == 2
     # a repair of other runs leaves fig6 alone (a --sweep fig7 does not rewrite fig6.csv)
@@ -359,7 +362,7 @@ def test_nesting_repair_restarts_the_looser_problem_from_the_tighter_optimum(
     solved, changed = sw.repair_nesting(tmp_path, SyncExecutor(), runs={"fig6", "fig7"})
     assert (solved, changed) == (1, {"fig6"})
     ((inputs, starts, started_from),) = calls
-    assert {k: inputs[k] for k in miss} == miss and inputs["constraints"] == sw.C_POS
+    assert {k: inputs[k] for k in miss} == miss and inputs["constraints"] == sd.C_POS
     tight = {
         r["key"]: r
         for name, a_ndop in (("fig7", 150.0), ("fig6", 50.0))
@@ -380,13 +383,13 @@ def test_a_csv_from_before_started_from_is_read_and_migrated(tmp_path) -> None:
     lines = path.read_text().splitlines()
     old = "\n".join(line.rsplit(",", 1)[0] for line in lines) + "\n"  # drop the last column
     path.write_text(old)
-    rows = sw.read_rows(path)
-    assert len(rows) == len(sw.get_sweep("fig6").points)
+    rows = sr.read_rows(path)
+    assert len(rows) == len(sd.get_sweep("fig6").points)
     assert all(r["started_from"] == "" for r in rows)
     assert path.read_text() == old  # reading alone changes nothing
-    assert _strip(sw.read_rows(path, repair=True)) == _strip(rows)
-    assert path.read_text().splitlines()[0].split(",") == list(sw.COLUMNS)
-    assert _strip(sw.read_rows(path)) == _strip(rows)
+    assert _strip(sr.read_rows(path, repair=True)) == _strip(rows)
+    assert path.read_text().splitlines()[0].split(",") == list(sr.COLUMNS)
+    assert _strip(sr.read_rows(path)) == _strip(rows)
 
 
 @pytest.mark.slow
@@ -405,9 +408,9 @@ def test_infeasible_points_are_drawn_apart_from_every_value(tmp_path, monkeypatc
         return save(fig, *args, **kwargs)
 
     monkeypatch.setattr(Figure, "savefig", keep)
-    sweep = sw.get_sweep("decision-table")
+    sweep = sd.get_sweep("decision-table")
     csv = Path(__file__).resolve().parents[2] / "docs" / "paper" / "decision-table.csv"
-    rows = sw._order(sweep, sw.read_rows(csv))
+    rows = sw._order(sweep, sr.read_rows(csv))
     infeasible = sum(not r["feasible"] for r in rows)
     assert infeasible > 0
     sw.plot_sweep(sweep, rows, tmp_path / "table.png")
