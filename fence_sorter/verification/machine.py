@@ -58,23 +58,18 @@ def load_average() -> str:
         return "unknown"
 
 
+def _git(root: Path | str, *args: str) -> str:
+    """The output of ``git -C root ARGS`` (CalledProcessError, OSError or a timeout)."""
+    return subprocess.run(
+        ["git", "-C", str(root), *args], capture_output=True, text=True, timeout=10, check=True
+    ).stdout.strip()
+
+
 def git_revision(root: Path | str = REPO) -> str:
     """Short HEAD, marked when tracked files differ from it."""
     try:
-        rev = subprocess.run(
-            ["git", "-C", str(root), "rev-parse", "--short", "HEAD"],
-            capture_output=True,
-            text=True,
-            timeout=10,
-            check=True,
-        ).stdout.strip()
-        dirty = subprocess.run(
-            ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
-            capture_output=True,
-            text=True,
-            timeout=10,
-            check=True,
-        ).stdout.strip()
+        rev = _git(root, "rev-parse", "--short", "HEAD")
+        dirty = _git(root, "status", "--porcelain", "--untracked-files=no")
     except (OSError, subprocess.SubprocessError):
         return "unknown"
     return rev + (" (working tree modified)" if dirty else "")
