@@ -18,7 +18,7 @@ Cases:
 - **bad input**: files, scenes, streams and parameters given to the command line; each must
   exit with its status and one line, no traceback.
 - **insiders**: forged duplicates, a flood and a second /clock with the run's own id
-  (:mod:`fence_sorter.verification.insiders`).
+  (:mod:`benchmarks.insiders`).
 - **freezes**: a run whose pacing loop or controller is stopped (SIGSTOP) for 3 s, and one
   recording into a full file system (a small tmpfs); the stop must show in the figures, the
   full disk be reported when it happens (exit status 5).
@@ -44,6 +44,7 @@ from collections import Counter
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from benchmarks import insiders
 from fence_sorter.resources import data_path
 from fence_sorter.runner.monitor import Monitor
 from fence_sorter.runner.processes import (
@@ -53,7 +54,6 @@ from fence_sorter.runner.processes import (
     node_env,
     run_domain_id,
 )
-from fence_sorter.verification import insiders
 from fence_sorter.verification.machine import git_revision, machine_info
 
 #: the run id of the wire case's nodes

@@ -1,5 +1,5 @@
 """Insiders: an adversary on the run's own domain with the run's own id (the fault campaign's
-``insiders`` section, ``fence-sorter faults --cases insiders``).
+``insiders`` section, ``python -m benchmarks faults --cases insiders``).
 
 The run id is public (any /parcels message carries it), so the insider learns it from the
 first real parcel and then, in a process of its own:
@@ -31,6 +31,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from benchmarks import REPO
 from fence_sorter.inputs import ParcelSpec
 
 KINDS = ("duplicates", "flood", "clock")
@@ -41,7 +42,7 @@ FORGED_SPEC = {"length_a": 0.6, "width_b": 0.45, "height": 0.3, "mass": 20.0, "d
 
 
 def insider_main(argv: list[str]) -> int:
-    """``python -m fence_sorter.verification.insiders KIND --domain N [--count C] [--rate R]
+    """``python -m benchmarks.insiders KIND --domain N [--count C] [--rate R]
     [--seconds S] [--jump J]``: act as the insider KIND; print what it sent as JSON."""
     ap = argparse.ArgumentParser(prog="insiders")
     ap.add_argument("kind", choices=KINDS)
@@ -184,6 +185,7 @@ def insider_trial(
             args = [f"--{k}={v}" for k, v in insider.items()]
             done = subprocess.run(
                 [sys.executable, "-m", __name__, kind, "--domain", str(domain), *args],
+                cwd=REPO,  # where python -m finds benchmarks/
                 capture_output=True,
                 text=True,
                 timeout=300.0,

@@ -21,8 +21,8 @@ LAYERS: tuple[tuple[str, frozenset[str]], ...] = (
     (
         "base",
         frozenset(
-            {"fence_sorter", "affinity", "codes", "jsonsafe", "lazy", "resources", "stamps"}
-            | {"textinput"}
+            {"fence_sorter", "affinity", "codes", "jsonsafe", "lazy", "provenance", "resources"}
+            | {"stamps", "textinput"}
         ),
     ),
     ("physics", frozenset({"physics"})),

@@ -1,4 +1,4 @@
-"""Insiders on the run's own domain with the run's own id (fence_sorter.verification.insiders):
+"""Insiders on the run's own domain with the run's own id (benchmarks.insiders):
 forged duplicates just ahead of the scanner, a flood of new ids, a second /clock jumping ahead.
 
 Each is a real ``fence-sorter run`` (its nodes in their own processes over DDS) with the insider
@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from fence_sorter.verification.insiders import InsiderTrial, insider_trial, refused
+from benchmarks.insiders import InsiderTrial, insider_trial, refused
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.faults]
 
