@@ -123,6 +123,7 @@ def write_measured_bag(
             header=_header(ts, t_scan, "sorter"),
             parcel_id=ev.parcel_id,
             run_id=0,
+            auth=0,  # unsigned: a measured bag is no run of the suite
             **{f: getattr(p, f) for f in PARCEL_FIELDS},
             mu_belt=math.nan,
             mu_fence=math.nan,
@@ -134,6 +135,7 @@ def write_measured_bag(
             header=_header(ts, t_scan, "sorter"),
             parcel_id=ev.parcel_id,
             run_id=0,
+            auth=0,  # unsigned: a measured bag is no run of the suite
             start_mode=int(StartMode.AT_TIME),
             r_s=ev.r_s,
             start_time=_stamp(ts, ev.t_start),
