@@ -4,8 +4,7 @@ one line naming the option and the allowed values, before any node or server sta
 from __future__ import annotations
 
 import pytest
-
-from fence_sorter.testing import run_cli
+from processes import run_cli
 
 
 @pytest.mark.parametrize(
