@@ -10,7 +10,7 @@ import subprocess
 import threading
 from pathlib import Path
 
-CLIENT_DIR = Path(__file__).resolve().parents[1] / "test" / "js" / "foxglove"
+CLIENT_DIR = Path(__file__).resolve().parent / "js" / "foxglove"
 CLIENT = CLIENT_DIR / "client.mjs"
 
 

@@ -17,10 +17,9 @@ import sys
 from pathlib import Path
 
 import pytest
+from foxglove_client import Client, client_missing, free_port
 from processes import managed_process, stop_process, wait_until
 from rosbags.highlevel import AnyReader
-
-from fence_sorter.testing_foxglove import Client, client_missing, free_port
 
 pytestmark = [
     pytest.mark.ros,

@@ -9,10 +9,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from foxglove_client import Client, client_missing
 from processes import stop_process, wait_until
 
 from fence_sorter.recording.msgtypes import make_typestore
-from fence_sorter.testing_foxglove import Client, client_missing
 from fence_sorter.visualisation.foxglove_address import AddressError, parse_address
 from fence_sorter.visualisation.foxglove_live import LiveServer
 
