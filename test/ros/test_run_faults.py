@@ -112,7 +112,7 @@ def test_a_pacing_loop_stopped_3_s_misses_every_deadline_it_did_not_run(tmp_path
     """SIGSTOP of the loop process for 3 s at 1 kHz: about 3000 deadline misses (each cycle
     not run), not the handful of late wake-ups; the line resumes and every divert parcel is
     sorted as planned."""
-    from fence_sorter.verification.faults import freeze_met, freeze_trial
+    from benchmarks.faults import freeze_met, freeze_trial
 
     row = freeze_trial("pacing loop", tmp_path, stop_s=3.0)
     assert row["stopped_pid_found"], row
@@ -134,7 +134,7 @@ def test_a_controller_stopped_3_s_shows_in_its_latency_from_the_parcels_send(
     latency from the scanner's send time is >= 1.5 s (or the parcel was too late to plan:
     late_no_command); the latency from reception, stamped by the stopped process itself when
     it runs again, cannot see the stop. Every divert parcel has an outcome."""
-    from fence_sorter.verification.faults import FREEZE_SPACING, freeze_met, freeze_trial
+    from benchmarks.faults import FREEZE_SPACING, freeze_met, freeze_trial
 
     row = freeze_trial("controller", tmp_path, stop_s=3.0)
     assert row["stopped_pid_found"], row
@@ -152,8 +152,8 @@ def test_a_full_disk_is_reported_when_it_happens_and_the_run_exits_5(tmp_path: P
     with ENOSPC; the runner says so at once with the sim time where the bag ends, the run goes
     on unrecorded to every outcome, the summary names it and the exit status is 5. The bag
     left on the full disk ends where the recorder said (read back from a copy)."""
+    from benchmarks.faults import freeze_met, freeze_trial
     from fence_sorter.recording.bagread import read_bag
-    from fence_sorter.verification.faults import freeze_met, freeze_trial
 
     row = freeze_trial("disk full", tmp_path)
     if "not_run" in row:
