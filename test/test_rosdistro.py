@@ -4,6 +4,8 @@ FASTDDS_DEFAULT_PROFILES_FILE; a profile under the other name is ignored without
 
 from __future__ import annotations
 
+import os
+import subprocess
 import sys
 from importlib import metadata
 from pathlib import Path
@@ -78,3 +80,23 @@ def test_node_env_points_the_installed_fastdds_at_the_localhost_profile(tmp_path
     assert env[name] == str(FASTDDS_PROFILE)
     other = {OLD, NEW} - {name}
     assert not other & env.keys()
+
+
+@pytest.mark.parametrize("value", ["humble", "Jazzy", " kilted"])
+def test_bootstrap_refuses_an_unknown_distribution(value: str, tmp_path: Path) -> None:
+    """A bad FENCE_SORTER_ROS_DISTRO: exit 2, one line naming it and the allowed values,
+    before anything is made (the venv it would have used stays absent)."""
+    repo = Path(__file__).resolve().parents[1]
+    venv = tmp_path / "venv"
+    proc = subprocess.run(
+        ["bash", str(repo / "scripts" / "bootstrap.sh")],
+        env={**os.environ, "FENCE_SORTER_ROS_DISTRO": value, "FENCE_SORTER_VENV": str(venv)},
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 2 and proc.stdout == ""
+    assert proc.stderr == (
+        f"bootstrap: FENCE_SORTER_ROS_DISTRO must be jazzy or kilted, got '{value}'\n"
+    )
+    assert not venv.exists()

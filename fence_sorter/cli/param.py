@@ -1,7 +1,8 @@
-"""``fence-sorter param list|get|set NODE [NAME [VALUE]]``: a stand-in for ``ros2 param`` (no
-ros2cli in the ROS 2 wheels), through the node's parameter services over rclpy, joining the
-ROS domain of a run (``--domain``; `fence-sorter run` prints its domain; default
-ROS_DOMAIN_ID) with localhost discovery, as ``fence-sorter topic`` does.
+"""``fence-sorter param list|get|set NODE [NAME [VALUE]]``: a node's parameters at run time.
+
+A stand-in for ``ros2 param`` (no ros2cli in the ROS 2 wheels), through the node's parameter
+services over rclpy, joining the ROS domain of a run (``--domain``; `fence-sorter run` prints
+its domain; default ROS_DOMAIN_ID) with localhost discovery, as ``fence-sorter topic`` does.
 
 - ``list NODE``: every parameter with its type and whether it can change at run time
   (``read-only``: only at start, with ``--param`` or a parameter file).
