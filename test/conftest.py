@@ -24,6 +24,11 @@ def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line(
         "markers", "install: colcon build into a temporary install/, then runs from it"
     )
+    config.addinivalue_line(
+        "markers",
+        "distro: the other ROS 2 distribution set up beside this one, the ROS and CLI tests "
+        "run on it",
+    )
 
 
 @pytest.fixture(scope="session")

@@ -101,6 +101,12 @@ COVERED: dict[str, str] = {
     "fence-sorter topic hz /joint_states --domain 219": (
         "test/ros/test_topic_cli.py::test_hz_reports_the_stamp_rate"
     ),
+    "fence-sorter param list controller --domain 219": (
+        "test/ros/test_param_cli.py::test_param_list_get_set_through_the_services"
+    ),
+    "fence-sorter param set controller a_ndop 150 --domain 219": (
+        "test/ros/test_param_cli.py::test_param_list_get_set_through_the_services"
+    ),
     "fence-sorter run --parcels 4 --bag /tmp/b": (
         "test/ros/test_recording.py::test_run_bag_has_every_topic_and_consistent_counts"
     ),
@@ -123,7 +129,7 @@ NOT_HERE: dict[str, str] = {
         "a full ROS 2 install (colcon workspace)"
     ),
     "cd ~/ws": "a full ROS 2 install (colcon workspace)",
-    "source /opt/ros/kilted/setup.bash": "a full ROS 2 install under /opt/ros",
+    "source /opt/ros/jazzy/setup.bash": "a full ROS 2 install under /opt/ros",
     "colcon build --paths src/fence_sorter src/fence_sorter/msg_defs": "a full ROS 2 install",
     "source install/setup.bash": "a full ROS 2 install (colcon workspace)",
     "ros2 run fence_sorter simulator": "a full ROS 2 install (ros2 CLI)",

@@ -16,6 +16,8 @@ from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
 
+from fence_sorter.rosdistro import fastdds_version, profile_variables, ros_distribution
+
 PACKAGE = "fence_sorter"
 MSG_PACKAGE = "fence_sorter_msgs"
 EXPECTED_RMW = "rmw_fastrtps_cpp"
@@ -93,6 +95,18 @@ def check_rmw() -> str:
             f"RMW is {identifier}{hint}, expected {EXPECTED_RMW}; unset RMW_IMPLEMENTATION"
         )
     return identifier
+
+
+def check_distribution() -> str:
+    """The ROS 2 distribution and Fast DDS version are known, and with them the variable that
+    points Fast DDS at the run's transport profile."""
+    distribution, fastdds = ros_distribution(), fastdds_version()
+    if distribution is None:
+        raise CheckFailed(f"no ROS 2 distribution found (no ros-rclpy, no ROS_DISTRO); {FIX}")
+    if fastdds is None:
+        raise CheckFailed(f"ROS 2 {distribution} without Fast DDS (ros-fastrtps/-fastdds); {FIX}")
+    variables = " and ".join(profile_variables(fastdds))
+    return f"{distribution}, Fast DDS {fastdds} (transport profile through {variables})"
 
 
 def _msg_names() -> list[str]:
@@ -212,6 +226,7 @@ def check_typestore() -> str:
 CHECKS: tuple[tuple[str, Callable[[], str]], ...] = (
     ("rclpy", check_rclpy),
     ("rmw", check_rmw),
+    ("ros 2", check_distribution),
     (MSG_PACKAGE, check_messages),
     ("ament index", check_ament_index),
     ("rosbags typestore", check_typestore),

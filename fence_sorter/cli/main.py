@@ -25,7 +25,7 @@ from fence_sorter import __version__
 #: Subcommand -> its one-line help, in the order of ``--help``. The subcommand ``a-b`` lives in
 #: the module ``fence_sorter.cli.a_b``.
 SUBCOMMANDS: dict[str, str] = {
-    "check": "verify rclpy, fence_sorter_msgs, Fast DDS, ament index and rosbags",
+    "check": "verify rclpy, ROS 2 and Fast DDS versions, fence_sorter_msgs, ament index, rosbags",
     "demo-roundtrip": "send each fence_sorter_msgs message to an echo node, check it comes back",
     "simulate": "run one sorting event from a scene file",
     "modes": "natural frequencies and tip deflection of a scene's flexible fence",
@@ -36,6 +36,7 @@ SUBCOMMANDS: dict[str, str] = {
     "analyze": "analyse a recorded bag: per-parcel table, capacity, plots, check vs live outcomes",
     "bag": "bag tools standing in for `ros2 bag` (info)",
     "topic": "topic tools standing in for `ros2 topic` (list, echo, hz) over rclpy",
+    "param": "parameter tools standing in for `ros2 param` (list, get, set) over rclpy",
     "rrd": "convert a recorded bag into a Rerun recording (.rrd)",
     "views": "screenshots of a Rerun recording in Rerun's web viewer under headless Chromium",
     "optimize": "maximise the sorting capacity W_t over X = [R_s, v, t1, R_z] (sections 3-4)",

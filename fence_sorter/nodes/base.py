@@ -11,6 +11,7 @@ from __future__ import annotations
 import inspect
 import signal
 import sys
+from array import array
 from collections.abc import Sequence
 
 import rclpy
@@ -50,7 +51,10 @@ class FenceSorterNode(Node):
     """Base class of the fence_sorter nodes.
 
     Subclasses set ``NODE_NAME``, ``PARAMETERS`` and ``STATUS``; they may override
-    :meth:`validate_parameters` to refuse parameter changes that the ranges cannot express.
+    :meth:`validate_parameters` to refuse parameter changes that the ranges cannot express, and
+    :meth:`apply_parameters` to put an accepted change to work. A parameter that is not
+    ``read_only`` in its :class:`ParamSpec` is one the node applies when it is set; rcl refuses
+    a change of any other.
     """
 
     NODE_NAME: str = "fence_sorter"
@@ -63,6 +67,8 @@ class FenceSorterNode(Node):
         super().__init__(self.NODE_NAME, **kwargs)
         self.take_errors = 0  # messages lost to rclpy take failures (see spin_node)
         specs = COMMON_PARAMETERS + self.PARAMETERS
+        self.param_specs = {spec.name: spec for spec in specs}
+        self.parameter_changes = 0  # accepted changes at run time (heartbeat parameter_changes)
         names = [spec.name for spec in specs]
         if len(set(names)) != len(names):
             raise ValueError(f"{self.NODE_NAME}: duplicate parameter names in {names}")
@@ -101,14 +107,39 @@ class FenceSorterNode(Node):
         del parameters
         return None
 
+    def apply_parameters(self, parameters: Sequence[Parameter]) -> None:
+        """Put accepted run-time changes to work (called after :meth:`validate_parameters`
+        accepted them, before rcl stores them)."""
+        del parameters
+
     def _on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
+        """A change at run time: each value against its table entry (the check of
+        ``--param``: type, an integer widens to a double, range), then the node's own checks
+        across parameters; refused with the reason, else applied."""
         if self.pinned_clock is not None and any(p.name == "use_sim_time" for p in parameters):
             return SetParametersResult(
                 successful=False, reason="use_sim_time is fixed in a run with a key (/run_clock)"
             )
+        for param in parameters:
+            spec = self.param_specs.get(param.name)
+            if spec is None:
+                continue  # rcl's own (use_sim_time, ...): rcl checks them
+            if spec.read_only:
+                return SetParametersResult(
+                    successful=False, reason=f"{param.name} is read-only (set at start only)"
+                )
+            value = param.value
+            try:
+                spec.coerce(list(value) if isinstance(value, array) else value)
+            except ValueError as exc:
+                return SetParametersResult(
+                    successful=False, reason=f"{param.name} {exc}, got {param.value!r}"
+                )
         reason = self.validate_parameters(parameters)
         if reason:
             return SetParametersResult(successful=False, reason=reason)
+        self.apply_parameters(parameters)
+        self.parameter_changes += 1
         return SetParametersResult(successful=True)
 
     def create_intake_subscription(
@@ -166,6 +197,7 @@ class FenceSorterNode(Node):
                     KeyValue(key=k, value=v)
                     for k, v in (self.pinned_clock.values() if self.pinned_clock else {}).items()
                 ),
+                KeyValue(key="parameter_changes", value=str(self.parameter_changes)),
             ],
         )
 

@@ -26,7 +26,7 @@ from fence_sorter.inputs import InputError, ParcelSpec, validate_parcel
 from fence_sorter.nodes.base import FenceSorterNode, run_node
 from fence_sorter.nodes.convert import parcel_from_msg
 from fence_sorter.nodes.intake import ParcelRegistry, TopicIntake
-from fence_sorter.nodes.parameters import CONTROLLER_PARAMETERS
+from fence_sorter.nodes.parameters import CONTROLLER_PARAMETERS, PLANNER_PARAMETERS
 from fence_sorter.nodes.qos import INPUT_QOS, topic_qos
 from fence_sorter.nodes.sources import sign
 from fence_sorter.physics.params import ParameterError, ParcelParams
@@ -34,6 +34,9 @@ from fence_sorter.recording import topics
 from fence_sorter.scene import DEFAULT_SCENE, load_scene
 from fence_sorter.stream import load_stream
 from fence_sorter_msgs.msg import FenceCommand, Parcel
+
+#: the planner's parameters: a change at run time gives the next parcels a new planner
+PLANNER_KEYS = frozenset(spec.name for spec in PLANNER_PARAMETERS)
 
 
 def request_from_spec(spec: ParcelSpec) -> LoadRequest:
@@ -106,6 +109,7 @@ class ControllerStats:
         self.lead = deque(maxlen=window)  # command sim time before the front reaches R_s [s]
         self.received = self.commands = self.infeasible = self.late = 0
         self.rejected = self.not_diverted = self.evaluations = self.replans = 0
+        self.replanned_configs = 0  # planner settings changed at run time
         self.rejected_by_key: Counter[str] = Counter()  # InputError.key -> parcels
 
     def percentile(self, q: float, samples=None) -> float:
@@ -122,6 +126,7 @@ class ControllerStats:
             "not_diverted": str(self.not_diverted),
             "evaluations": str(self.evaluations),
             "replans": str(self.replans),
+            "planner_changes": str(self.replanned_configs),
             "latency_p50_ms": f"{1e3 * self.percentile(50):.3f}",
             "latency_p99_ms": f"{1e3 * self.percentile(99):.3f}",
             "latency_max_ms": f"{1e3 * max(self.latency, default=math.nan):.3f}",
@@ -143,15 +148,42 @@ class ControllerNode(FenceSorterNode):
     PARAMETERS = CONTROLLER_PARAMETERS
 
     def validate_parameters(self, parameters: Sequence[Parameter]) -> str | None:
-        """Refuse a planner configuration the planner would refuse (names key and range)."""
+        """Refuse a planner configuration the planner would refuse (names key and range).
+
+        At run time the changed values are checked together with the current ones, and the
+        planner they make is built here, so a change that is accepted is one that works."""
         values = {p.name: p.value for p in parameters}
-        if "t1_min" not in values:  # a runtime change: all planner keys are read-only
+        if not PLANNER_KEYS & values.keys():
             return None
+        if hasattr(self, "planner"):  # a change at run time: the others as they are
+            values = {k: self.get_parameter(k).value for k in PLANNER_KEYS} | values
         try:
-            PlannerConfig.from_mapping(values)
-        except ParameterError as exc:
+            config = PlannerConfig.from_mapping(values)
+            if hasattr(self, "planner"):
+                self._next_planner = Planner(self.base, config)
+        except (ParameterError, OSError, ValueError) as exc:
             return str(exc)
         return None
+
+    def apply_parameters(self, parameters: Sequence[Parameter]) -> None:
+        """A new planner for the next parcel (its evaluations are made anew under the new
+        settings; the fence-busy window of the strokes already commanded is kept); the scan
+        line check takes its new values at once."""
+        values = {p.name: p.value for p in parameters}
+        if PLANNER_KEYS & values.keys():
+            planner, self._next_planner = self._next_planner, None
+            planner.busy_until = self.planner.busy_until
+            self.planner, self.config = planner, planner.config
+            self.stats.replanned_configs += 1
+            self.get_logger().info(
+                "planner settings changed ("
+                + ", ".join(f"{k} = {values[k]}" for k in sorted(PLANNER_KEYS & values.keys()))
+                + "): the next parcels are planned with them"
+            )
+        if "scan_line_x" in values:
+            self.scan_line_x = float(values["scan_line_x"])
+        if "scan_line_tolerance" in values:
+            self.scan_line_tolerance = float(values["scan_line_tolerance"])
 
     def __init__(self) -> None:
         super().__init__()

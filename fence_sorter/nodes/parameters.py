@@ -430,52 +430,54 @@ SCANNER_PARAMETERS: tuple[ParamSpec, ...] = (
     ),
 )
 
+#: the controller's planner: each of these may change during a run (the next parcels are
+#: planned with the new settings, fence_sorter.nodes.controller)
 PLANNER_PARAMETERS: tuple[ParamSpec, ...] = (
-    ParamSpec("alpha_k_deg", 40.0, "Fence angle alpha_k of every stroke [deg]", True, 1.0, 89.0),
-    ParamSpec("t1_min", 0.2, "Shortest working time t1, range (5) [s]", True, 0.02, 10.0),
-    ParamSpec("t1_max", 1.5, "Longest working time t1, range (5) [s]", True, 0.02, 10.0),
-    ParamSpec("t1_step", 0.1, "Candidate step of t1 [s]", True, 0.001, 10.0),
-    ParamSpec("r_s_min", -0.4, "Smallest R_s, range (3) [m]", True, -5.0, 5.0),
-    ParamSpec("r_s_max", 1.0, "Largest R_s, range (3) [m]", True, -5.0, 5.0),
-    ParamSpec("r_s_step", 0.2, "Candidate step of R_s [m]", True, 0.001, 10.0),
-    ParamSpec("w_dop", 2.4, "(10) admissible impact speed w_dop [m/s]", True, 1e-6, 100.0),
-    ParamSpec("a_ndop", 300.0, "(11) admissible acceleration a_Ndop [m/s^2]", True, 1e-6, 1e5),
-    ParamSpec("ydot_dop", 2.5, "(12) admissible exit speed ydot_dop [m/s]", True, 1e-6, 100.0),
+    ParamSpec("alpha_k_deg", 40.0, "Fence angle alpha_k of every stroke [deg]", False, 1.0, 89.0),
+    ParamSpec("t1_min", 0.2, "Shortest working time t1, range (5) [s]", False, 0.02, 10.0),
+    ParamSpec("t1_max", 1.5, "Longest working time t1, range (5) [s]", False, 0.02, 10.0),
+    ParamSpec("t1_step", 0.1, "Candidate step of t1 [s]", False, 0.001, 10.0),
+    ParamSpec("r_s_min", -0.4, "Smallest R_s, range (3) [m]", False, -5.0, 5.0),
+    ParamSpec("r_s_max", 1.0, "Largest R_s, range (3) [m]", False, -5.0, 5.0),
+    ParamSpec("r_s_step", 0.2, "Candidate step of R_s [m]", False, 0.001, 10.0),
+    ParamSpec("w_dop", 2.4, "(10) admissible impact speed w_dop [m/s]", False, 1e-6, 100.0),
+    ParamSpec("a_ndop", 300.0, "(11) admissible acceleration a_Ndop [m/s^2]", False, 1e-6, 1e5),
+    ParamSpec("ydot_dop", 2.5, "(12) admissible exit speed ydot_dop [m/s]", False, 1e-6, 100.0),
     ParamSpec(
-        "active_constraints", [7, 8, 9, 10, 11, 12], "Constraints that count, of (7)-(12)", True
+        "active_constraints", [7, 8, 9, 10, 11, 12], "Constraints that count, of (7)-(12)", False
     ),
-    ParamSpec("pitch_gap", 0.1, "Gap Delta between loads in Delta_c (2) [m]", True, 0.0, 10.0),
-    ParamSpec("fence_model", "stiff", "Fence the planner simulates: stiff | scene", True),
-    ParamSpec("max_evaluations", 6, "Twin evaluations per parcel (cached free)", True, 1, 1000),
+    ParamSpec("pitch_gap", 0.1, "Gap Delta between loads in Delta_c (2) [m]", False, 0.0, 10.0),
+    ParamSpec("fence_model", "stiff", "Fence the planner simulates: stiff | scene", False),
+    ParamSpec("max_evaluations", 6, "Twin evaluations per parcel (cached free)", False, 1, 1000),
     ParamSpec(
         "decision_table",
         "",
         "Starting strokes per load class, tried first (config/decision_table.yaml, made by "
         "fence-sorter optimize --sweep decision-table); empty: none",
-        True,
+        False,
     ),
     ParamSpec(
         "start_margin",
         0.1,
         "Command out this long before the front is at R_s [s]",
-        True,
+        False,
         0.0,
         10.0,
     ),
-    ParamSpec("busy_margin", 0.05, "Idle time between two strokes [s]", True, 0.0, 10.0),
-    ParamSpec("quantum_size", 0.05, "Class bin of sizes and cog offsets [m]", True, 1e-4, 1.0),
-    ParamSpec("quantum_mass", 0.2, "Class bin of mass (relative, log steps)", True, 1e-3, 10.0),
-    ParamSpec("quantum_gap", 0.05, "Class bin of the lateral gap [m]", True, 1e-4, 1.0),
-    ParamSpec("quantum_yaw_deg", 5.0, "Class bin of the yaw [deg]", True, 1e-3, 90.0),
+    ParamSpec("busy_margin", 0.05, "Idle time between two strokes [s]", False, 0.0, 10.0),
+    ParamSpec("quantum_size", 0.05, "Class bin of sizes and cog offsets [m]", False, 1e-4, 1.0),
+    ParamSpec("quantum_mass", 0.2, "Class bin of mass (relative, log steps)", False, 1e-3, 10.0),
+    ParamSpec("quantum_gap", 0.05, "Class bin of the lateral gap [m]", False, 1e-4, 1.0),
+    ParamSpec("quantum_yaw_deg", 5.0, "Class bin of the yaw [deg]", False, 1e-3, 90.0),
     ParamSpec(
         "min_exit_speed",
         0.3,
         "(8) reserve: cross y0 = s at least this fast [m/s]",
-        True,
+        False,
         0.0,
         100.0,
     ),
-    ParamSpec("quantum_mu", 0.05, "Class bin of mu1 and mu2", True, 1e-4, 1.0),
+    ParamSpec("quantum_mu", 0.05, "Class bin of mu1 and mu2", False, 1e-4, 1.0),
 )
 
 CONTROLLER_PARAMETERS: tuple[ParamSpec, ...] = (
@@ -487,7 +489,7 @@ CONTROLLER_PARAMETERS: tuple[ParamSpec, ...] = (
         -3.0,
         "The scanner's scan line [m]: a parcel's scan_position_x must lie within "
         "scan_line_tolerance of it",
-        True,
+        False,
         -100.0,
         100.0,
     ),
@@ -495,7 +497,7 @@ CONTROLLER_PARAMETERS: tuple[ParamSpec, ...] = (
         "scan_line_tolerance",
         0.5,
         "Largest distance of a parcel's scan_position_x from scan_line_x [m]",
-        True,
+        False,
         0.0,
         200.0,
     ),

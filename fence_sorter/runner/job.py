@@ -32,8 +32,10 @@ from fence_sorter.physics.params import ParameterError
 from fence_sorter.provenance import RUN_KEY_ENV, new_run_key, run_key
 from fence_sorter.recording.topics import MEASURED, TOPICS
 from fence_sorter.resources import data_path
+from fence_sorter.rosdistro import set_profile
 from fence_sorter.runner.monitor import MONITOR_NAME, Monitor, Records
 from fence_sorter.runner.processes import (
+    FASTDDS_PROFILE,
     DomainError,
     ProcessGroup,
     choose_domain,
@@ -402,8 +404,8 @@ def _run(
     env = node_env(domain, log_dir / "ros", {RUN_KEY_ENV: plan.run_key})
     clean_shm()  # what killed runs (of any program) left in /dev/shm
     # this process's participant (the monitor) on the nodes' transports
-    for var in ("FASTDDS_DEFAULT_PROFILES_FILE", "ROS_AUTOMATIC_DISCOVERY_RANGE"):
-        os.environ[var] = env[var]
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = env["ROS_AUTOMATIC_DISCOVERY_RANGE"]
+    set_profile(os.environ, str(FASTDDS_PROFILE))
     # paced with the loop pinned: every other process of the run keeps off the loop's CPU, so
     # its work does not evict the loop's caches while the loop sleeps (docs/simulator.md)
     allowed = set(os.sched_getaffinity(0))

@@ -27,6 +27,7 @@ from typing import IO
 
 from fence_sorter.affinity import keep_on
 from fence_sorter.resources import checkout_root, data_path
+from fence_sorter.rosdistro import set_profile
 
 #: Domain ids of `fence-sorter run`'s automatic choice (the tests use 100..199); Fast DDS's
 #: default ports allow 0..232 (ROS_DOMAIN_ID, --domain)
@@ -119,14 +120,15 @@ def node_env(
     domain_id: int, log_dir: Path, extra: Mapping[str, str] | None = None
 ) -> dict[str, str]:
     """os.environ plus isolation: own domain, transports on this host only (FASTDDS_PROFILE:
-    shared memory and loopback UDP), rcl logs in ``log_dir``."""
+    shared memory and loopback UDP, under the variable the installed Fast DDS reads), rcl logs
+    in ``log_dir``."""
     env = dict(os.environ)
     env["ROS_DOMAIN_ID"] = str(domain_id)
     # rmw_fastrtps's LOCALHOST range adds a UDP transport of its own, with sockets on every
     # interface (0.0.0.0 and the host's address in `ss -lnuap`); with the profile's transports
     # alone (SUBNET: the rmw adds none) discovery and data stay on this host all the same
     env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "SUBNET"
-    env["FASTDDS_DEFAULT_PROFILES_FILE"] = str(FASTDDS_PROFILE)
+    set_profile(env, str(FASTDDS_PROFILE))
     env["ROS_LOG_DIR"] = str(log_dir)
     env["PYTHONUNBUFFERED"] = "1"
     env.pop("RMW_IMPLEMENTATION", None)

@@ -15,7 +15,7 @@ from fence_sorter.cli import main as cli_main
 
 FENCE_SORTER = venv_executable("fence-sorter")
 TIMEOUT = 60.0
-CHECK_NAMES = ("rclpy", "rmw", "fence_sorter_msgs", "ament index", "rosbags typestore")
+CHECK_NAMES = ("rclpy", "rmw", "ros 2", "fence_sorter_msgs", "ament index", "rosbags typestore")
 
 
 def run_cli(args: list[str], env: dict[str, str]) -> subprocess.CompletedProcess:
@@ -99,6 +99,19 @@ def test_check_passes_in_the_bootstrapped_env(env: dict[str, str]) -> None:
     for name in CHECK_NAMES:
         assert f"OK   {name}:" in result.stdout
     assert "FAIL" not in result.stdout
+    # the distribution and Fast DDS, against the venv's record and the library file on disk
+    record = Path(sys.prefix) / ".fence_sorter_ros_distro"
+    if record.is_file():
+        distro = record.read_text().strip()
+        lib = Path(sys.prefix, "lib")
+        library = next(
+            p.name for p in sorted(lib.glob("libfast*.so.*.*.*")) if "cdr" not in p.name
+        )
+        major_minor = ".".join(library.split(".so.")[1].split(".")[:2])
+        variable = "FASTRTPS" if major_minor.startswith("2.") else "FASTDDS"
+        line = next(ln for ln in result.stdout.splitlines() if ln.startswith("OK   ros 2:"))
+        assert line.startswith(f"OK   ros 2: {distro}, Fast DDS {major_minor}."), line
+        assert line.endswith(f"(transport profile through {variable}_DEFAULT_PROFILES_FILE)")
 
 
 def _shadow_package(root: Path, name: str, body: str) -> Path:

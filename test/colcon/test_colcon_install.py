@@ -40,7 +40,17 @@ NODES = {  # node: the signal that ends it cleanly (both are used)
 }
 TIMEOUT = 120.0
 #: not needed to build or run the package
-NOT_COPIED = (".git", ".venv", ".build", "bags", "docs", "__pycache__", "*_cache", "*.egg-info")
+NOT_COPIED = (
+    ".git",
+    ".venv",
+    ".venv-*",
+    ".build",
+    "bags",
+    "docs",
+    "__pycache__",
+    "*_cache",
+    "*.egg-info",
+)
 
 
 class Workspace:

@@ -1,0 +1,269 @@
+"""``fence-sorter param list|get|set NODE [NAME [VALUE]]``: a node's parameters at run time.
+
+A stand-in for ``ros2 param`` (no ros2cli in the ROS 2 wheels), through the node's parameter
+services over rclpy, joining the ROS domain of a run (``--domain``; `fence-sorter run` prints
+its domain; default ROS_DOMAIN_ID) with localhost discovery, as ``fence-sorter topic`` does.
+
+- ``list NODE``: every parameter with its type and whether it can change at run time
+  (``read-only``: only at start, with ``--param`` or a parameter file).
+- ``get NODE NAME``: the current value (``NAME: VALUE`` in YAML; ``--json``: JSON alone).
+- ``set NODE NAME VALUE``: VALUE is read as ``--param NODE:NAME=VALUE`` reads it (YAML, an
+  integer widens to a double) and, for a fence_sorter node, checked against the same table
+  (``fence_sorter/nodes/parameters.py``) before it is sent; the node checks it again and
+  either applies it at once or refuses it with the reason, which is printed.
+
+Exit codes: 0 done; 1 the node's parameter services did not answer within ``--timeout``, the
+parameter does not exist, or the node refused the value; 2 bad options or a VALUE outside
+the parameter's allowed values; 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+
+import yaml
+
+from fence_sorter.jsonsafe import json_safe
+from fence_sorter.nodes.parameters import NODE_PARAMETERS, ParamOverrideError, parse_override
+
+#: rcl_interfaces ParameterType -> the name printed by ``list``
+TYPE_NAMES = {
+    0: "not set",
+    1: "bool",
+    2: "integer",
+    3: "double",
+    4: "string",
+    5: "byte array",
+    6: "bool array",
+    7: "integer array",
+    8: "double array",
+    9: "string array",
+}
+
+
+class ParamError(RuntimeError):
+    """The node did not answer, or refused (exit 1)."""
+
+
+def register(parser: argparse.ArgumentParser) -> None:
+    parser.description = __doc__.splitlines()[0]
+    parser.set_defaults(func=lambda args: _usage(parser))
+    commands = parser.add_subparsers(dest="param_command", metavar="COMMAND")
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument(
+        "--domain",
+        type=int,
+        default=None,
+        help="ROS domain id to join (0-232; default: ROS_DOMAIN_ID or 0)",
+    )
+    common.add_argument(
+        "--timeout",
+        type=float,
+        default=10.0,
+        help="seconds to wait for the node's parameter services and their answer (default 10)",
+    )
+    p_list = commands.add_parser(
+        "list",
+        parents=[common],
+        help="a node's parameters",
+        description="A node's parameters, with type and whether they can change at run time.",
+    )
+    p_list.add_argument("node")
+    p_list.set_defaults(func=run_list)
+    p_get = commands.add_parser(
+        "get", parents=[common], help="a parameter's value", description="A parameter's value."
+    )
+    p_get.add_argument("node")
+    p_get.add_argument("name")
+    p_get.add_argument("--json", action="store_true", help="the value as JSON")
+    p_get.set_defaults(func=run_get)
+    p_set = commands.add_parser(
+        "set",
+        parents=[common],
+        help="set a parameter while the node runs",
+        description="Set a parameter while the node runs (applied at once, or refused).",
+    )
+    p_set.add_argument("node")
+    p_set.add_argument("name")
+    p_set.add_argument("value")
+    p_set.set_defaults(func=run_set)
+
+
+def _usage(parser: argparse.ArgumentParser) -> int:
+    parser.print_help(sys.stderr)
+    return 2
+
+
+def node_path(node: str) -> str:
+    """``controller`` -> ``/controller`` (the fully qualified name the services hang under)."""
+    return node if node.startswith("/") else f"/{node}"
+
+
+class _Session:
+    """An rclpy context and node on the chosen domain, with clients of one node's services."""
+
+    def __init__(self, domain: int | None, target: str, timeout: float) -> None:
+        import rclpy  # lazy: rclpy (0.25 s), only where ROS runs
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.signals import SignalHandlerOptions
+
+        os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+        self.rclpy = rclpy
+        self.target = node_path(target)
+        self.timeout = timeout
+        self.context = rclpy.Context()
+        kwargs = {"domain_id": domain} if domain is not None else {}
+        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO, **kwargs)
+        self.node = rclpy.create_node(f"fence_sorter_param_{os.getpid()}", context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.rclpy.try_shutdown(context=self.context)
+
+    def call(self, service: str, srv_type, request):
+        """``request`` to ``<node>/<service>``; its response, or ParamError after --timeout."""
+        client = self.node.create_client(srv_type, f"{self.target}/{service}")
+        deadline = time.monotonic() + self.timeout
+        try:
+            while not client.service_is_ready():
+                if time.monotonic() > deadline:
+                    raise ParamError(
+                        f"node {self.target}: no parameter services on the graph within "
+                        f"{self.timeout:g} s (is it running on this domain?)"
+                    )
+                self.executor.spin_once(timeout_sec=0.05)
+            future = client.call_async(request)
+            while not future.done():
+                if time.monotonic() > deadline:
+                    raise ParamError(f"node {self.target}: {service} got no answer")
+                self.executor.spin_once(timeout_sec=0.05)
+            return future.result()
+        finally:
+            self.node.destroy_client(client)
+
+    def describe(self, names: list[str]) -> list:
+        from rcl_interfaces.srv import DescribeParameters  # lazy: ROS messages
+
+        return list(
+            self.call(
+                "describe_parameters", DescribeParameters, DescribeParameters.Request(names=names)
+            ).descriptors
+        )
+
+    def names(self) -> list[str]:
+        from rcl_interfaces.srv import ListParameters  # lazy: ROS messages
+
+        return sorted(
+            self.call("list_parameters", ListParameters, ListParameters.Request()).result.names
+        )
+
+    def get(self, name: str):
+        """The value of ``name`` as Python, or ParamError if the node has no such parameter."""
+        from rcl_interfaces.srv import GetParameters  # lazy: ROS messages
+        from rclpy.parameter import parameter_value_to_python
+
+        values = self.call(
+            "get_parameters", GetParameters, GetParameters.Request(names=[name])
+        ).values
+        if not values or values[0].type == 0:
+            raise ParamError(f"node {self.target} has no parameter {name!r}")
+        return parameter_value_to_python(values[0])
+
+    def set(self, name: str, value) -> None:
+        """Set ``name``; ParamError with the node's reason if it refuses."""
+        from rcl_interfaces.srv import SetParameters  # lazy: ROS messages
+        from rclpy.parameter import Parameter
+
+        request = SetParameters.Request(
+            parameters=[Parameter(name, value=value).to_parameter_msg()]
+        )
+        result = self.call("set_parameters", SetParameters, request).results[0]
+        if not result.successful:
+            raise ParamError(f"node {self.target} refused {name} = {value!r}: {result.reason}")
+
+
+def _run(args: argparse.Namespace, name: str, body) -> int:
+    if args.domain is not None and not 0 <= args.domain <= 232:
+        print(
+            f"fence-sorter param: --domain must be in 0..232, got {args.domain}", file=sys.stderr
+        )
+        return 2
+    if args.timeout <= 0:
+        print(f"fence-sorter param: --timeout must be > 0 s, got {args.timeout}", file=sys.stderr)
+        return 2
+    session = _Session(args.domain, args.node, args.timeout)
+    try:
+        return body(session)
+    except ParamError as exc:
+        print(f"fence-sorter param {name}: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        return 130
+    finally:
+        session.close()
+
+
+def run_list(args: argparse.Namespace) -> int:
+    def body(s: _Session) -> int:
+        names = s.names()
+        for name, desc in zip(names, s.describe(names), strict=True):
+            kind = TYPE_NAMES.get(desc.type, str(desc.type))
+            when = "read-only" if desc.read_only else "settable at run time"
+            print(f"{name}: {kind}, {when}")
+        return 0
+
+    return _run(args, "list", body)
+
+
+def run_get(args: argparse.Namespace) -> int:
+    def body(s: _Session) -> int:
+        value = s.get(args.name)
+        if args.json:
+            print(json.dumps(json_safe(value)))
+        else:
+            print(f"{args.name}: {shown(value)}")
+        return 0
+
+    return _run(args, "get", body)
+
+
+def shown(value) -> str:
+    """A value as YAML reads it back: a string as it is (quoted where YAML would take it for
+    another type), anything else in JSON form (1.0, true, [7, 8])."""
+    if isinstance(value, str):
+        return value if yaml.safe_load(value or "''") == value else json.dumps(value)
+    return json.dumps(json_safe(value))
+
+
+def typed_value(node: str, name: str, text: str):
+    """VALUE as ``--param NODE:NAME=VALUE`` reads it: for a fence_sorter node checked against
+    its table (ParamOverrideError naming NODE:NAME and the allowed values), else plain YAML."""
+    base = node.rsplit("/", 1)[-1]
+    if base in NODE_PARAMETERS:
+        return parse_override(f"{base}:{name}={text}")[2]
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError:
+        return text
+
+
+def run_set(args: argparse.Namespace) -> int:
+    try:
+        value = typed_value(args.node, args.name, args.value)
+    except ParamOverrideError as exc:
+        print(f"fence-sorter param set: {str(exc).removeprefix('--param ')}", file=sys.stderr)
+        return 2
+
+    def body(s: _Session) -> int:
+        s.set(args.name, value)
+        print(f"{args.name}: {shown(value)} (set)")
+        return 0
+
+    return _run(args, "set", body)
