@@ -22,7 +22,7 @@ LAYERS: tuple[tuple[str, frozenset[str]], ...] = (
         "base",
         frozenset(
             {"fence_sorter", "affinity", "codes", "jsonsafe", "lazy", "provenance", "resources"}
-            | {"stamps", "textinput"}
+            | {"rosdistro", "stamps", "textinput"}
         ),
     ),
     ("physics", frozenset({"physics"})),
