@@ -42,7 +42,7 @@ FORGED_SPEC = {"length_a": 0.6, "width_b": 0.45, "height": 0.3, "mass": 20.0, "d
 
 
 def insider_main(argv: list[str]) -> int:
-    """``python -m benchmarks.insiders KIND --domain N [--count C] [--rate R]
+    """``python -m benchmarks.insiders KIND --domain N [--count C] [--rate R] [--subscribers K]
     [--seconds S] [--jump J]``: act as the insider KIND; print what it sent as JSON."""
     ap = argparse.ArgumentParser(prog="insiders")
     ap.add_argument("kind", choices=KINDS)
@@ -52,6 +52,12 @@ def insider_main(argv: list[str]) -> int:
     ap.add_argument("--seconds", type=float, default=2.0)
     ap.add_argument("--jump", type=float, default=6.7e7)
     ap.add_argument("--timeout", type=float, default=120.0)
+    ap.add_argument(
+        "--subscribers",
+        type=int,
+        default=3,
+        help="readers of /parcels to match before forging (simulator, controller, monitor)",
+    )
     a = ap.parse_args(argv)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     import rclpy  # lazy: rclpy (0.25 s), only where ROS runs
@@ -112,9 +118,10 @@ def insider_main(argv: list[str]) -> int:
         report["jump_s"] = a.jump
     else:
         pub = node.create_publisher(Parcel, "/parcels", INPUT_QOS)
-        wait = time.monotonic() + 10.0
-        while pub.get_subscription_count() < 2 and time.monotonic() < wait:
+        wait = time.monotonic() + 30.0
+        while pub.get_subscription_count() < a.subscribers and time.monotonic() < wait:
             executor.spin_once(timeout_sec=0.05)
+        report["subscribers"] = pub.get_subscription_count()
         if a.kind == "duplicates":
             first = int(seen["last_id"]) + 1
             ids = list(range(first, first + a.count))
