@@ -50,6 +50,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from enum import Enum
 from functools import lru_cache
+from typing import Protocol
 
 import numpy as np
 
@@ -84,6 +85,7 @@ class Failure(Enum):
     RUNAWAY_SPEED = "runaway_speed"
     STEP_BELOW_MIN_DT = "step_below_min_dt"
     WALL_TIME_LIMIT = "wall_time_limit"
+    SOLVER_FAILED = "solver_failed"  # a SciPy baseline's solver gave up (its message)
 
 
 @dataclass(frozen=True)
@@ -254,6 +256,20 @@ def _loop_state(n: int, m: int, n_el: int, propagators: tuple, cols: int) -> tup
     )
 
 
+def segments(sc: Scenario) -> tuple[float, tuple[float, ...]]:
+    """The end time of a solve (``solver.t_end``, or the fence cycle 2 t1 plus
+    ``solver.settle_time``) and the times every scheme ends a step on: the drive's breakpoints
+    t1 and 2 t1 before the end (the drive acceleration jumps there), then the end time. The one
+    definition for our schemes (:class:`Stepper`) and the SciPy baselines
+    (``baselines.ScipyStepper``, which restarts its solver on each)."""
+    sv = sc.solver
+    t1 = sc.drive.t1
+    t_cycle = 2.0 * t1
+    t_end = sv.t_end if sv.t_end > 0 else t_cycle + sv.settle_time
+    breaks = [b for b in ((t1, t_cycle) if t1 < t_cycle else (t_cycle,)) if 0.0 < b < t_end]
+    return t_end, (*breaks, t_end)
+
+
 @per_scenario
 def _loop_static(sc: Scenario) -> tuple:
     """What the solve loop reads of a scenario and never writes, built once per scenario and
@@ -267,11 +283,7 @@ def _loop_static(sc: Scenario) -> tuple:
     sv = sc.solver
     adaptive = sv.method == "adaptive"
     h_nom = sv.dt_max if adaptive else sv.dt
-    t_cycle = 2.0 * sc.drive.t1
-    t_end = sv.t_end if sv.t_end > 0 else t_cycle + sv.settle_time
-    t1 = sc.drive.t1
-    breaks = [b for b in ((t1, t_cycle) if t1 < t_cycle else (t_cycle,)) if 0.0 < b < t_end]
-    breaks.append(t_end)
+    t_end, breaks = segments(sc)
     body = model.body
     contact = sc.contact
     v_ref = max(model.belt, 0.1)
@@ -661,9 +673,57 @@ class Stepper:
         return out
 
 
-def run(model: SortingModel) -> SimulationResult:
-    """:func:`simulate.simulate` of one of our schemes: the model solved to its end."""
-    stepper = Stepper(model)
+class SolveStepper(Protocol):
+    """What steps one sorting event, whichever scheme integrates it: :class:`Stepper` (our
+    schemes in the compiled loop) and ``baselines.ScipyStepper`` (a SciPy ``OdeSolver`` on
+    ``kernel.rhs``, its accepted points reduced by the loop's own observer). Both end their
+    steps on :func:`segments` and report through :meth:`Stepper.result`; ``simulate`` and the
+    soft-real-time line step any of them (``simulate.solve_stepper``)."""
+
+    model: SortingModel
+    t_end: float
+    status: str  # running, finished or failed
+    diagnosis: Diagnosis | None  # why a failed solve failed
+
+    @property
+    def t(self) -> float: ...  # the last accepted point
+
+    @property
+    def y(self) -> np.ndarray: ...
+
+    @property
+    def running(self) -> bool: ...
+
+    @property
+    def resultants(self) -> np.ndarray: ...  # R_* at t
+
+    @property
+    def contacts(self) -> np.ndarray: ...  # the contact slots C_* at t
+
+    @property
+    def stage(self) -> Stage: ...
+
+    @property
+    def sorted(self) -> bool: ...
+
+    @property
+    def impacts(self) -> list[tuple[float, float, float]]: ...
+
+    def step(self) -> str | None: ...  # to the next accepted point: None or the diagnosis
+
+    def advance(self, t_target: float = math.inf) -> bool: ...  # False once ended
+
+    def start(self) -> None: ...  # the initial point evaluated and reduced
+
+    def result(
+        self, *, steps: int | None = None, diagnosis: str | None = None, wall: float | None = None
+    ) -> SimulationResult: ...
+
+    def release(self) -> None: ...  # the workspaces handed back (after result)
+
+
+def run(stepper: SolveStepper) -> SimulationResult:
+    """:func:`simulate.simulate`: a stepper's solve to its end, reduced to its result."""
     stepper.advance()
     result = stepper.result()
     stepper.release()
