@@ -57,7 +57,7 @@ def max_spin_torque(
 
 def _limits(f_max: float, t_max: float, v_min: float = 0.0, phidot_min: float = 0.0):
     p = np.zeros(1, K.PARAMS)
-    p[0].f_max, p[0].t_max, p[0].v_min, p[0].phidot_min = f_max, t_max, v_min, phidot_min
+    p["f_max"], p["t_max"], p["v_min"], p["phidot_min"] = f_max, t_max, v_min, phidot_min
     return p
 
 

@@ -44,7 +44,6 @@ from __future__ import annotations
 import gc
 import math
 import time
-from collections import namedtuple
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -182,16 +181,28 @@ def _propagator_cache(model):
 
 
 _UP, _DOWN = 2.0**0.25, 2.0**-0.25  # the adaptive step's ladder rungs
-# the control integers and figures at the start of a solve
+# the control integers and figures at the start of a solve. From Python, a record's fields are
+# read and written through the array (``counters["cur"][0]``, ~0.1 us): an ``np.record``
+# element's attribute costs microseconds, and assigning a whole record array goes field by
+# field, so a solve's start copies the records as their flat int64 / float64 words
 _CTL0 = np.zeros(1, K.COUNTERS)
-_CTL0[0].trial = _CTL0[0].on_belt = _CTL0[0].first = 1
-_CTL0[0].mask = _CTL0[0].stage = _CTL0[0].last_mask0 = _CTL0[0].last_mask1 = -1
+for _name in ("trial", "on_belt", "first"):
+    _CTL0[_name] = 1
+for _name in ("mask", "stage", "last_mask0", "last_mask1"):
+    _CTL0[_name] = -1
 _FC0 = np.zeros(1, K.FIGURES)
-_FC0[0].exit_speed = _FC0[0].impact_speed = _FC0[0].flow = _FC0[0].e0 = math.nan
-_FC0[0].y_max = -math.inf
-# Python numbers of the two records, read once each (``Stepper.result``)
-_COUNTERS = namedtuple("Counters", K.COUNTERS.names)
-_FIGURES = namedtuple("Figures", K.FIGURES.names)
+for _name in ("exit_speed", "impact_speed", "flow", "e0"):
+    _FC0[_name] = math.nan
+_FC0["y_max"] = -math.inf
+_CTL0_WORDS, _FC0_WORDS = _CTL0.view(np.int64), _FC0.view(np.float64)
+
+
+def _word_of(record: np.dtype) -> dict[str, int]:
+    """Each scalar field's position among the record's 8-byte words (its flat view)."""
+    return {name: record.fields[name][1] // 8 for name in record.names if not record[name].shape}
+
+
+_COUNTER_WORD, _FIGURE_WORD = _word_of(K.COUNTERS), _word_of(K.FIGURES)
 
 # per (n_state, modes, elements): the loop states (``kernel.LoopState``) of finished solves,
 # reused by the next one: an event of the optimiser, the line or the benchmark builds ~20
@@ -287,19 +298,15 @@ def _loop_static(sc: Scenario) -> tuple:
     body = model.body
     contact = sc.contact
     v_ref = max(model.belt, 0.1)
-    settings = np.zeros(1, K.SETTINGS)
-    g = settings[0]
-    g.h_nom, g.t_end, g.dt, g.min_dt = h_nom, t_end, sv.dt, sv.min_dt
-    g.tol, g.max_iter, g.atol, g.rtol = sv.tolerance, sv.max_iterations, sv.atol, sv.rtol
-    g.v_ref, g.om_ref = v_ref, v_ref / min(body.length_a, body.width_b)
-    g.width = sc.conveyor.width
-    g.adaptive, g.stop_sorted = float(adaptive), float(sv.stop_when_sorted)
-    g.record = float(bool(sc.record))
-    g.b_p, g.k_p, g.deep, g.speed_limit = contact.b_p, contact.k_p, model.deep, model.speed_limit
-    g.v_min, g.phidot_min = contact.v_min, contact.phidot_min
-    g.up, g.down, g.flush = _UP, _DOWN, K.FLUSH_ANGLE
-    g.gen_alpha = float(sv.method == "generalized_alpha")
-    g.alpha_coefficients = generalized_alpha_coefficients(sv.rho_inf)
+    # one tuple in the record's field order, one array (a field assignment each costs ~1 us)
+    fields = (
+        h_nom, t_end, sv.dt, sv.min_dt, sv.tolerance, sv.max_iterations, sv.atol, sv.rtol,
+        v_ref, v_ref / min(body.length_a, body.width_b), sc.conveyor.width, float(adaptive),
+        float(sv.stop_when_sorted), float(bool(sc.record)), contact.b_p, contact.k_p, model.deep,
+        model.speed_limit, contact.v_min, contact.phidot_min, _UP, _DOWN, K.FLUSH_ANGLE,
+        float(sv.method == "generalized_alpha"), generalized_alpha_coefficients(sv.rho_inf),
+    )  # fmt: skip
+    settings = np.array([fields], dtype=K.SETTINGS)
     cols = int(1.5 * t_end / h_nom) + 64 if sc.record else 1
     modes = (model.phi, model.rigid_modal, model.omega, model.zeta)
     if model.flexible:
@@ -380,11 +387,11 @@ class Stepper:
         self._solve = None  # the entry for ``_args`` (``kernel.solve.entry``), on first use
         # kernel.solve zeroes the other state rows and the scratch arrays on its first call
         counters = self.counters
-        counters[:] = _CTL0
-        self.figures[:] = _FC0
+        counters.view(np.int64)[:] = _CTL0_WORDS
+        self.figures.view(np.float64)[:] = _FC0_WORDS
         self.times[0] = 0.0
         self.states[0] = y0
-        counters[0].n_props = n_props[0]
+        counters["n_props"][0] = n_props[0]
         self.busy = 0.0
         self.status = "running"
         self.diagnosis: Diagnosis | None = None
@@ -393,12 +400,12 @@ class Stepper:
 
     @property
     def t(self) -> float:
-        return float(self.times[self.counters[0].cur])
+        return float(self.times[self.counters["cur"][0]])
 
     @property
     def y(self) -> np.ndarray:
         """The state vector at :attr:`t` (a view: copy it to keep it)."""
-        return self.states[self.counters[0].cur]
+        return self.states[self.counters["cur"][0]]
 
     @property
     def running(self) -> bool:
@@ -409,8 +416,8 @@ class Stepper:
         failed (as ``OdeSolver.step``). Raises once the solve has ended."""
         if self.status != "running":
             raise RuntimeError(f"step() on a {self.status} solve")
-        steps = self.counters[0].n_steps
-        while self.status == "running" and self.counters[0].n_steps == steps:
+        steps = self.counters["n_steps"][0]
+        while self.status == "running" and self.counters["n_steps"][0] == steps:
             if self._over_time():
                 break
             self._call(1, math.inf)
@@ -430,7 +437,7 @@ class Stepper:
     def start(self) -> None:
         """Evaluate the forces and reductions at the initial point (the first :meth:`step` or
         :meth:`advance` does it otherwise), for a caller reading the point before stepping."""
-        if not self.counters[0].started:
+        if not self.counters["started"][0]:
             self._call(0, math.inf)
 
     # -- the loop's figures at the last accepted point ----------------------------------------
@@ -438,32 +445,34 @@ class Stepper:
     @property
     def resultants(self) -> np.ndarray:
         """The resultants R_* at :attr:`t`."""
-        return self.resultant_rows[self.counters[0].cur]
+        return self.resultant_rows[self.counters["cur"][0]]
 
     @property
     def contacts(self) -> np.ndarray:
         """The contact slots C_* at :attr:`t`."""
-        return self.contact_rows[self.counters[0].cur]
+        return self.contact_rows[self.counters["cur"][0]]
 
     @property
     def stage(self) -> Stage:
         """The motion stage at :attr:`t`."""
-        return Stage(int(self.counters[0].stage))
+        return Stage(int(self.counters["stage"][0]))
 
     @property
     def sorted(self) -> bool:
         """C_s has crossed the sorting line y0 = s."""
-        return bool(self.counters[0].sorted)
+        return bool(self.counters["sorted"][0])
 
     @property
     def impacts(self) -> list[tuple[float, float, float]]:
         """(onset time [s], w_n [m/s], N_stiff [N]) of every impact so far."""
-        return [(t, w, p) for t, w, p in self.impact_rows[: self.counters[0].n_impacts].tolist()]
+        return [
+            (t, w, p) for t, w, p in self.impact_rows[: self.counters["n_impacts"][0]].tolist()
+        ]
 
     # -- the driver --------------------------------------------------------------------------
 
     def _at_end(self) -> bool:
-        return bool(self.counters[0].stop) or not self.t < self.t_end - 1e-12
+        return bool(self.counters["stop"][0]) or not self.t < self.t_end - 1e-12
 
     def _over_time(self) -> bool:
         """Fail the solve once the time spent stepping exceeds ``solver.max_wall_time``."""
@@ -496,15 +505,15 @@ class Stepper:
         t0 = self.clock()
         status = self._solve(model, state, attempts, float(t_target))
         self.busy += self.clock() - t0
-        self._n_props[0] = self.counters[0].n_props
+        self._n_props[0] = self.counters["n_props"][0]
         if status == K.SOLVE_GROW:
             self._grow()
         elif status == K.SOLVE_DONE:
-            code = int(self.counters[0].diag)
+            code = int(self.counters["diag"][0])
             if code == K.DIAG_NONE:
                 self.status = "finished"
             else:
-                self._fail(_FAILURES[code], self.figures[0].diag_t, self._diag_value(code))
+                self._fail(_FAILURES[code], self.figures["diag_t"][0], self._diag_value(code))
         return status
 
     def _diag_value(self, code: int) -> float:
@@ -512,7 +521,7 @@ class Stepper:
             return math.nan
         if code == K.DIAG_MIN_DT:
             return self.model.sc.solver.min_dt
-        return float(self.figures[0].diag_v)
+        return float(self.figures["diag_v"][0])
 
     def _grow(self) -> None:
         for name in ("impact_rows", "stage_rows"):
@@ -523,7 +532,7 @@ class Stepper:
                 bigger = np.zeros((2 * arr.shape[0], arr.shape[1]))
                 bigger[:used] = arr[:used]
                 setattr(self, name, bigger)
-        used = self.counters[0].n_rec
+        used = self.counters["n_rec"][0]
         if used >= self.record.shape[1]:
             bigger = np.zeros((self.record.shape[0], 2 * self.record.shape[1]))
             bigger[:, :used] = self.record[:, :used]
@@ -548,12 +557,12 @@ class Stepper:
         ``(stop, on_belt)`` as the loop has them after it. Then :meth:`diverged` checks it."""
         counters = self.counters
         if (
-            counters[0].n_impacts >= self.impact_rows.shape[0]
-            or counters[0].n_stages >= self.stage_rows.shape[0]
-            or counters[0].n_rec >= self.record.shape[1]
+            counters["n_impacts"][0] >= self.impact_rows.shape[0]
+            or counters["n_stages"][0] >= self.stage_rows.shape[0]
+            or counters["n_rec"][0] >= self.record.shape[1]
         ):
             self._grow()  # a point adds at most one row to each
-        i = int(self.counters[0].cur)
+        i = int(self.counters["cur"][0])
         self.times[i] = t
         self.states[i] = y
         self.belt_wrench[i] = lam
@@ -581,7 +590,7 @@ class Stepper:
     def diverged(self) -> Diagnosis | None:
         """The loop's divergence checks (NaN, deep penetration, runaway speed) on the last
         observed point; fails the solve on one."""
-        i = int(self.counters[0].cur)
+        i = int(self.counters["cur"][0])
         code = K.diverged(
             self.model.P,
             self.settings,
@@ -591,8 +600,8 @@ class Stepper:
             self.resultant_rows[i],
         )
         if code != K.DIAG_NONE:
-            self.counters[0].diag = code
-            self._fail(_FAILURES[code], self.figures[0].diag_t, self._diag_value(code))
+            self.counters["diag"][0] = code
+            self._fail(_FAILURES[code], self.figures["diag_t"][0], self._diag_value(code))
         return self.diagnosis
 
     # -- the result --------------------------------------------------------------------------
@@ -603,47 +612,47 @@ class Stepper:
         """The :class:`SimulationResult` of the solve so far from the loop's reductions
         (``result.make_result``). ``steps``, ``diagnosis``, ``wall``: a caller integrating
         elsewhere (:meth:`observe`) gives its own."""
-        # Python numbers, read once each
-        counters, figures = (
-            _COUNTERS._make(self.counters.item()),
-            _FIGURES._make(self.figures.item()),
-        )
+        # Python numbers, read once each from the records' flat words
+        words = self.counters.view(np.int64).tolist()
+        counters = {name: words[k] for name, k in _COUNTER_WORD.items()}
+        words = self.figures.view(np.float64).tolist()
+        figures = {name: words[k] for name, k in _FIGURE_WORD.items()}
         stages = [
-            (STAGE_NAMES[int(c)], t) for t, c in self.stage_rows[: counters.n_stages].tolist()
+            (STAGE_NAMES[int(c)], t) for t, c in self.stage_rows[: counters["n_stages"]].tolist()
         ]
         audit = EnergyAudit(
-            max_residual=figures.max_res,
-            min_residual=figures.min_res,
-            flow=figures.flow,
-            e0=figures.e0,
-            t_max=figures.t_max,
-            t_min=figures.t_min,
-            max_rise=figures.max_rise,
-            t_rise=(figures.t_rise0, figures.t_rise1),
-            run_min=figures.run_min,
-            t_run_min=figures.t_run_min,
+            max_residual=figures["max_res"],
+            min_residual=figures["min_res"],
+            flow=figures["flow"],
+            e0=figures["e0"],
+            t_max=figures["t_max"],
+            t_min=figures["t_min"],
+            max_rise=figures["max_rise"],
+            t_rise=(figures["t_rise0"], figures["t_rise1"]),
+            run_min=figures["run_min"],
+            t_run_min=figures["t_run_min"],
         )
         md = self.model
         if diagnosis is None and self.diagnosis is not None:
             diagnosis = self.diagnosis.text
         return make_result(
             md,
-            float(self.times[counters.cur]),
+            float(self.times[counters["cur"]]),
             diagnosis,
-            counters.n_steps if steps is None else steps,
-            counters.n_rejected,
+            counters["n_steps"] if steps is None else steps,
+            counters["n_rejected"],
             self.clock() - self.wall0 if wall is None else wall,
-            counters.n_forced,
-            counters.n_events,
-            sorted_=bool(counters.sorted),
-            touched=bool(counters.touched),
-            exit_speed=figures.exit_speed,
-            impact_speed=figures.impact_speed,
+            counters["n_forced"],
+            counters["n_events"],
+            sorted_=bool(counters["sorted"]),
+            touched=bool(counters["touched"]),
+            exit_speed=figures["exit_speed"],
+            impact_speed=figures["impact_speed"],
             impacts=self.impacts,
-            peak_n=figures.peak_n,
-            peak_tip=figures.peak_tip,
-            max_depth=figures.max_depth,
-            y_max=figures.y_max,
+            peak_n=figures["peak_n"],
+            peak_tip=figures["peak_tip"],
+            max_depth=figures["max_depth"],
+            y_max=figures["y_max"],
             stages=stages,
             audit=audit,
             series=self.series(md.sc.record, stages),
@@ -658,7 +667,7 @@ class Stepper:
         names, rows = _series_layout(tuple(want))
         # one copy of the rows wanted (the record is reused by the next solve once this one is
         # released), a series per row
-        out = dict(zip(names, self.record[rows, : self.counters[0].n_rec], strict=True))
+        out = dict(zip(names, self.record[rows, : self.counters["n_rec"][0]], strict=True))
         if "stage" in out:
             codes = out["stage"].astype(np.intp)
             # the names' string width: the longest present (every stage the run entered was
