@@ -157,14 +157,13 @@ class Outcome:
 def build_model(sc, force_border: bool = False):
     """``SortingModel(sc)``; ``force_border`` switches border contact on even when the load
     cannot reach the border (the model otherwise leaves it out)."""
-    from fence_sorter.physics import kernel as K  # lazy: loads the kernel (Numba)
-    from fence_sorter.physics.simulate import SortingModel
+    from fence_sorter.physics.simulate import SortingModel  # lazy: loads the kernel (Numba)
 
     md = SortingModel(sc)
     if force_border and not md.use_border:
         md.use_border = True
         md.P = md.P.copy()  # the scenario's packing is shared by its models
-        md.P[K.P_USE_BORDER] = 1.0
+        md.P[0].use_border = 1.0
         parts = list(md.parts)
         at = parts.index("fem_fence" if md.flexible else "rigid_fence") + 1
         parts.insert(at, "border_contact")

@@ -6,7 +6,7 @@ A stroke starts when the commanded parcel's front reaches R_s (``START_AT_RS``) 
 time (``START_AT_TIME``); the fence is then busy for one cycle t_c = t1 + t2 = 2 t1. Each stroke
 is one physics :class:`~fence_sorter.physics.simulate.Scenario` (the parcel, DriveParams(alpha_k,
 t1, R_s) with R_s the front position at the start, the line's conveyor/fence/contact/solver)
-stepped by its :class:`~fence_sorter.physics.stepper.Stepper` in step with the line clock,
+stepped by its stepper (``physics.simulate.solve_stepper``) in step with the line clock,
 so the event is integrated as sim time passes, never precomputed. The solve runs on after the
 parcel is sorted to the solver's end (2 t1 + settle_time): the fence shape comes from it through
 the cycle and the ring-down after it, until the next stroke starts (its solve starts with the
@@ -54,8 +54,13 @@ from fence_sorter.physics.params import (
     SolverParams,
 )
 from fence_sorter.physics.parcel import ParcelBody, initial_pose, parcel_body, world_corners
-from fence_sorter.physics.simulate import Scenario, SimulationResult, SortingModel
-from fence_sorter.physics.stepper import Stepper
+from fence_sorter.physics.simulate import (
+    Scenario,
+    SimulationResult,
+    SortingModel,
+    solve_stepper,
+)
+from fence_sorter.physics.stepper import SolveStepper
 
 from .types import (
     NAN,
@@ -192,7 +197,7 @@ class _Tap:
             return None
         return (self.ts[-1], *self.points[-1])
 
-    def add(self, stepper: Stepper) -> bool:
+    def add(self, stepper: SolveStepper) -> bool:
         """Keep the stepper's last accepted point; True if C_s crossed y0 = s at it."""
         t, y = stepper.t, stepper.y.copy()
         res, slots = stepper.resultants, stepper.contacts
@@ -277,7 +282,8 @@ def _position_rate_index(n_state: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 class _Stroke:
-    """One running sorting event: its Scenario, model and :class:`Stepper`, stepped one
+    """One running sorting event: its Scenario, model and stepper (``solve_stepper``: our
+    schemes' ``Stepper`` or a SciPy baseline's, one interface), stepped one
     accepted point at a time as the line time passes."""
 
     def __init__(self, parcel: _Parcel, t_start: float, sc: Scenario):
@@ -285,7 +291,7 @@ class _Stroke:
         self.t_start = t_start
         self.sc = sc
         self.model = SortingModel(sc)
-        self.stepper = Stepper(self.model)
+        self.stepper = solve_stepper(self.model)
         self.tap = _Tap(sc.conveyor.width)
         # the figures of a SORTED outcome: the solve's reductions at the point where C_s
         # crossed y0 = s, as simulate() reports them, however far the solve runs on since

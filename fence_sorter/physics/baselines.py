@@ -1,11 +1,13 @@
-"""SciPy ``solve_ivp`` baselines on the same right-hand side as our schemes.
+"""SciPy ``OdeSolver`` baselines on the same right-hand side as our schemes.
 
 ``solver.method = scipy:<name>`` (RK45, DOP853, Radau, BDF, LSODA; ``params.SCIPY_METHODS``)
 integrates the compiled right-hand side ``kernel.rhs`` (the same forces as the steppers, with
 explicit Karnopp friction) with SciPy's ``OdeSolver`` class of that name, stepped one accepted
-step at a time so the run is observed exactly like ours: each accepted point goes through the
-solve loop's own reductions (``Stepper.observe``, ``kernel.observe``: peaks, impacts, stages,
-sorting, energy audit, recorded series) and its divergence checks (``kernel.diverged``).
+step at a time by :class:`ScipyStepper`, which has the interface of our schemes' ``Stepper``
+(``stepper.SolveStepper``: ``simulate`` and the line step either), so the run is observed
+exactly like ours: each accepted point goes through the solve loop's own reductions
+(``Stepper.observe``, ``kernel.observe``: peaks, impacts, stages, sorting, energy audit,
+recorded series) and its divergence checks (``kernel.diverged``).
 
 What the baseline does and does not do, on purpose:
 
@@ -16,9 +18,9 @@ What the baseline does and does not do, on purpose:
 - No event location: contact onset and release, the N >= 0 clamp and stick/slip switches fall
   inside steps and are handled by the error control alone; that is the baseline.
 - The solver is restarted (fresh history, same tolerances) at the drive's breakpoints t1 and
-  2 t1 (our schemes end steps there too; the drive acceleration jumps at 2 t1, and a
-  segment starting there evaluates the right-hand side on its far side) and when the load
-  crosses into the chute (belt friction off from then on).
+  2 t1 (``stepper.segments``, where our schemes end steps too; the drive acceleration jumps at
+  2 t1, and a segment starting there evaluates the right-hand side on its far side) and when
+  the load crosses into the chute (belt friction off from then on).
 - Stops: the observer's stop (sorted), the end time (``solver.t_end``, or 2 t1 plus
   ``solver.settle_time``), ``solver.max_wall_time``, a solver failure (SciPy's message) or a
   diverged state (``kernel.diverged``: NaN, deep penetration, runaway speed).
@@ -28,6 +30,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 
 import numpy as np
 import scipy.integrate
@@ -35,7 +38,7 @@ from scipy.optimize import brentq
 
 from . import kernel as K
 from .params import SCIPY_METHODS
-from .stepper import Stepper
+from .stepper import Diagnosis, Failure, Stepper, diagnosis_text, segments
 
 
 def solver_class(method: str):
@@ -111,64 +114,111 @@ def _edge_crossing(dense, t0: float, t1: float, width: float) -> tuple[float, np
     return t, np.array(dense(t), dtype=np.float64)
 
 
-def end_time(sc) -> float:
-    """The run's end time: ``solver.t_end``, or the fence cycle 2 t1 plus the settle time."""
-    sv = sc.solver
-    return sv.t_end if sv.t_end > 0 else 2.0 * sc.drive.t1 + sv.settle_time
+class ScipyStepper:
+    """One sorting event integrated by a SciPy ``OdeSolver``, stepped as :class:`Stepper` steps
+    our schemes (``stepper.SolveStepper``): :meth:`step` is one accepted SciPy step, observed by
+    the solve loop's reductions (a :class:`Stepper` that integrates nothing, :attr:`reduce`),
+    which also answer :attr:`resultants`, :attr:`contacts`, :attr:`stage`, :attr:`sorted`,
+    :attr:`impacts` and :meth:`result`. End time and breakpoints are ``stepper.segments``."""
 
+    def __init__(self, model, clock: Callable[[], float] = time.perf_counter):
+        self.wall0 = clock()
+        self.clock = clock
+        self.model = model
+        sc = model.sc
+        self.cls = solver_class(sc.solver.method)
+        self.t_end, self.breakpoints = segments(sc)
+        self.fun = RightHandSide(model)
+        # the reductions and divergence checks of the solve loop, fed SciPy's accepted points
+        self.reduce = Stepper(model, clock)
+        self.solver = None  # the OdeSolver of the current segment (None: start one)
+        self.steps = 0
+        self.status = "running"
+        self.diagnosis: Diagnosis | None = None
+        self._k_break = 0
+        self._t = 0.0
+        y = model.initial_state()
+        self._stop, self.on_belt = self.fun.observe(self.reduce, 0.0, y, True)
+        self._y = np.array(y, dtype=np.float64)
+        self._check_end()
 
-def run_solve_ivp(model):
-    """Integrate one sorting event with a SciPy OdeSolver; returns a SimulationResult."""
-    wall0 = time.perf_counter()
-    sc = model.sc
-    sv = sc.solver
-    cls = solver_class(sv.method)
-    t_end = end_time(sc)
-    breaks = sorted({b for b in (sc.drive.t1, 2.0 * sc.drive.t1) if 0.0 < b < t_end})
-    breaks.append(t_end)
-    fun = RightHandSide(model)
-    # the reductions and divergence checks of the solve loop, fed SciPy's accepted points
-    reduce = Stepper(model)
-    on_belt = True
-    fun.on_belt = on_belt
-    y = model.initial_state()
-    stop, on_belt = fun.observe(reduce, 0.0, y, on_belt)
-    t = 0.0
-    y = np.array(y, dtype=np.float64)
-    width = sc.conveyor.width
-    steps = 0
-    diagnosis = None
-    solver = None
-    k_break = 0
-    while not stop and diagnosis is None and t < t_end - 1e-12:
-        while breaks[k_break] <= t + 1e-12:
-            k_break += 1
-        if solver is None:
+    # -- the stepper interface ---------------------------------------------------------------
+
+    @property
+    def t(self) -> float:
+        return self._t
+
+    @property
+    def y(self) -> np.ndarray:
+        return self._y
+
+    @property
+    def running(self) -> bool:
+        return self.status == "running"
+
+    @property
+    def resultants(self) -> np.ndarray:
+        return self.reduce.resultants
+
+    @property
+    def contacts(self) -> np.ndarray:
+        return self.reduce.contacts
+
+    @property
+    def stage(self):
+        return self.reduce.stage
+
+    @property
+    def sorted(self) -> bool:
+        return self.reduce.sorted
+
+    @property
+    def impacts(self) -> list[tuple[float, float, float]]:
+        return self.reduce.impacts
+
+    def start(self) -> None:
+        """Nothing to do: the initial point is reduced on construction."""
+
+    def step(self) -> str | None:
+        """One accepted step of the SciPy solver (ended at the belt edge when C_s crosses it),
+        reduced; None, or the diagnosis text when the solve failed. Raises once ended."""
+        if self.status != "running":
+            raise RuntimeError(f"step() on a {self.status} solve")
+        sv = self.model.sc.solver
+        fun = self.fun
+        breaks = self.breakpoints
+        t, y, on_belt = self._t, self._y, self.on_belt
+        while breaks[self._k_break] <= t + 1e-12:
+            self._k_break += 1
+        if self.solver is None:
             fun.on_belt = on_belt
-            solver = cls(
-                fun,
-                t,
-                y,
-                breaks[k_break],
-                rtol=sv.rtol,
-                atol=sv.atol,
-                max_step=sv.dt_max,
+            self.solver = self.cls(
+                fun, t, y, breaks[self._k_break], rtol=sv.rtol, atol=sv.atol, max_step=sv.dt_max
             )
-        if time.perf_counter() - wall0 > sv.max_wall_time:
-            diagnosis = f"wall-time limit {sv.max_wall_time:g} s reached at t = {t:.4f} s"
-            break
+        solver = self.solver
+        if self.clock() - self.wall0 > sv.max_wall_time:
+            limit = sv.max_wall_time
+            self._fail(
+                Failure.WALL_TIME_LIMIT,
+                t,
+                limit,
+                diagnosis_text(self.model, Failure.WALL_TIME_LIMIT, t, limit),
+            )
+            return self.diagnosis.text
         try:
             message = solver.step()
         except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
             message = f"{type(exc).__name__}: {exc}"
             solver.status = "failed"
         if solver.status == "failed":
-            diagnosis = f"{sv.method} failed at t = {solver.t:.6f} s: {message}"
-            break
+            text = f"{sv.method} failed at t = {solver.t:.6f} s: {message}"
+            self._fail(Failure.SOLVER_FAILED, float(solver.t), math.nan, text)
+            return text
         t_old, y_old1 = t, y[1]
         t = float(solver.t)
         y = np.array(solver.y, dtype=np.float64)
-        steps += 1
+        self.steps += 1
+        width = self.model.sc.conveyor.width
         if on_belt and y_old1 < width <= y[1]:
             # C_s crossed the belt edge y0 = s inside the step: end the step there (dense
             # output), as our schemes do, so belt friction stops at the crossing
@@ -177,16 +227,55 @@ def run_solve_ivp(model):
             solver.status = "finished"  # restart from the crossing without belt friction
         fun.on_belt = on_belt
         was_on_belt = on_belt
-        stop, on_belt = fun.observe(reduce, t, y, on_belt)
-        failure = reduce.diverged()
-        diagnosis = None if failure is None else failure.text
+        self._stop, on_belt = fun.observe(self.reduce, t, y, on_belt)
+        self._t, self._y, self.on_belt = t, y, on_belt
+        failure = self.reduce.diverged()
+        if failure is not None:
+            self._fail(failure.kind, failure.t, failure.value, failure.text)
+            return failure.text
         if solver.status == "finished":
             fun.after = t  # a new segment starts on a drive breakpoint
-            solver = None
+            self.solver = None
         elif on_belt != was_on_belt:
             fun.after = -math.inf
-            solver = None  # the load left the belt: restart without belt friction
-    return reduce.result(steps=steps, diagnosis=diagnosis, wall=time.perf_counter() - wall0)
+            self.solver = None  # the load left the belt: restart without belt friction
+        self._check_end()
+        return None
+
+    def advance(self, t_target: float = math.inf) -> bool:
+        """Step until the accepted time reaches ``t_target`` (or the end); False once the
+        solve has ended."""
+        while self.status == "running":
+            if self._t >= t_target:
+                return True
+            self.step()
+        return False
+
+    def result(
+        self, *, steps: int | None = None, diagnosis: str | None = None, wall: float | None = None
+    ):
+        """The :class:`SimulationResult` from the loop's reductions of the accepted points."""
+        if diagnosis is None and self.diagnosis is not None:
+            diagnosis = self.diagnosis.text
+        return self.reduce.result(
+            steps=self.steps if steps is None else steps,
+            diagnosis=diagnosis,
+            wall=self.clock() - self.wall0 if wall is None else wall,
+        )
+
+    def release(self) -> None:
+        """Hand the reductions' arrays back for the next solve (after :meth:`result`)."""
+        self.reduce.release()
+
+    # -- internals -----------------------------------------------------------------------------
+
+    def _check_end(self) -> None:
+        if self.status == "running" and (self._stop or not self._t < self.t_end - 1e-12):
+            self.status = "finished"
+
+    def _fail(self, kind: Failure, t: float, value: float, text: str) -> None:
+        self.diagnosis = Diagnosis(kind, t, value, text)
+        self.status = "failed"
 
 
-__all__ = ["RightHandSide", "end_time", "run_solve_ivp", "solver_class"]
+__all__ = ["RightHandSide", "ScipyStepper", "solver_class"]

@@ -56,8 +56,8 @@ def max_spin_torque(
 
 
 def _limits(f_max: float, t_max: float, v_min: float = 0.0, phidot_min: float = 0.0):
-    p = np.zeros(K.N_PARAMS)
-    p[K.P_FMAX], p[K.P_TMAX], p[K.P_VMIN], p[K.P_PHIDOT_MIN] = f_max, t_max, v_min, phidot_min
+    p = np.zeros(1, K.PARAMS)
+    p["f_max"], p["t_max"], p["v_min"], p["phidot_min"] = f_max, t_max, v_min, phidot_min
     return p
 
 

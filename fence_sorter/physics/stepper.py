@@ -49,6 +49,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from enum import Enum
 from functools import lru_cache
+from typing import Protocol
 
 import numpy as np
 
@@ -83,6 +84,7 @@ class Failure(Enum):
     RUNAWAY_SPEED = "runaway_speed"
     STEP_BELOW_MIN_DT = "step_below_min_dt"
     WALL_TIME_LIMIT = "wall_time_limit"
+    SOLVER_FAILED = "solver_failed"  # a SciPy baseline's solver gave up (its message)
 
 
 @dataclass(frozen=True)
@@ -179,19 +181,28 @@ def _propagator_cache(model):
 
 
 _UP, _DOWN = 2.0**0.25, 2.0**-0.25  # the adaptive step's ladder rungs
-_CFG_ORDER = (
-    "G_H_NOM G_T_END G_DT G_MIN_DT G_TOL G_MAX_ITER G_ATOL G_RTOL G_V_REF G_OM_REF G_WIDTH "
-    "G_ADAPTIVE G_STOP_SORTED G_RECORD G_BP G_KP G_DEEP G_SPEED_LIMIT G_VMIN G_PHIDOT_MIN G_UP "
-    "G_DOWN G_FLUSH G_GEN_ALPHA G_ALPHA_M G_ALPHA_F G_BETA G_GAMMA"
-).split()
-assert [getattr(K, g) for g in _CFG_ORDER] == list(range(K.N_CFG)), "Stepper's settings order"
-# the control integers and figures at the start of a solve
-_CTL0 = np.zeros(K.N_CTL, dtype=np.int64)
-_CTL0[K.I_TRIAL] = _CTL0[K.I_ON_BELT] = _CTL0[K.I_FIRST] = 1
-_CTL0[[K.I_MASK, K.I_STAGE, K.I_LAST_MASK0, K.I_LAST_MASK1]] = -1
-_FC0 = np.zeros(K.N_FC)
-_FC0[[K.F_EXIT_SPEED, K.F_IMPACT_SPEED, K.F_FLOW, K.F_E0]] = math.nan
-_FC0[K.F_Y_MAX] = -math.inf
+# the control integers and figures at the start of a solve. From Python, a record's fields are
+# read and written through the array (``counters["cur"][0]``, ~0.1 us): an ``np.record``
+# element's attribute costs microseconds, and assigning a whole record array goes field by
+# field, so a solve's start copies the records as their flat int64 / float64 words
+_CTL0 = np.zeros(1, K.COUNTERS)
+for _name in ("trial", "on_belt", "first"):
+    _CTL0[_name] = 1
+for _name in ("mask", "stage", "last_mask0", "last_mask1"):
+    _CTL0[_name] = -1
+_FC0 = np.zeros(1, K.FIGURES)
+for _name in ("exit_speed", "impact_speed", "flow", "e0"):
+    _FC0[_name] = math.nan
+_FC0["y_max"] = -math.inf
+_CTL0_WORDS, _FC0_WORDS = _CTL0.view(np.int64), _FC0.view(np.float64)
+
+
+def _word_of(record: np.dtype) -> dict[str, int]:
+    """Each scalar field's position among the record's 8-byte words (its flat view)."""
+    return {name: record.fields[name][1] // 8 for name in record.names if not record[name].shape}
+
+
+_COUNTER_WORD, _FIGURE_WORD = _word_of(K.COUNTERS), _word_of(K.FIGURES)
 
 # per (n_state, modes, elements): the loop states (``kernel.LoopState``) of finished solves,
 # reused by the next one: an event of the optimiser, the line or the benchmark builds ~20
@@ -232,8 +243,8 @@ def _loop_state(n: int, m: int, n_el: int, propagators: tuple, cols: int) -> tup
     modal propagator cache ``propagators`` and a record of ``cols`` columns."""
     s = K.N_STATES
     return K.LoopState(
-        np.zeros(K.N_CTL, dtype=np.int64),
-        np.zeros(K.N_FC),
+        np.zeros(1, K.COUNTERS),
+        np.zeros(1, K.FIGURES),
         np.zeros(s),
         np.zeros((s, n)),
         np.zeros((s, 3)),
@@ -256,11 +267,25 @@ def _loop_state(n: int, m: int, n_el: int, propagators: tuple, cols: int) -> tup
     )
 
 
+def segments(sc: Scenario) -> tuple[float, tuple[float, ...]]:
+    """The end time of a solve (``solver.t_end``, or the fence cycle 2 t1 plus
+    ``solver.settle_time``) and the times every scheme ends a step on: the drive's breakpoints
+    t1 and 2 t1 before the end (the drive acceleration jumps there), then the end time. The one
+    definition for our schemes (:class:`Stepper`) and the SciPy baselines
+    (``baselines.ScipyStepper``, which restarts its solver on each)."""
+    sv = sc.solver
+    t1 = sc.drive.t1
+    t_cycle = 2.0 * t1
+    t_end = sv.t_end if sv.t_end > 0 else t_cycle + sv.settle_time
+    breaks = [b for b in ((t1, t_cycle) if t1 < t_cycle else (t_cycle,)) if 0.0 < b < t_end]
+    return t_end, (*breaks, t_end)
+
+
 @per_scenario
 def _loop_static(sc: Scenario) -> tuple:
     """What the solve loop reads of a scenario and never writes, built once per scenario and
     shared by its solves: the ``kernel.LoopModel`` (packed parameters, the load's geometry, the
-    modal basis, the settings ``G_*``, the breakpoints: the drive's acceleration jumps and the
+    modal basis, the settings record, the breakpoints: the drive's acceleration jumps and the
     end time), the end time, the record's first column count and the initial state. A flexible
     fence's basis is read-only (cached per fence): writable copies keep one signature of
     kernel.solve for stiff and flexible models (one compiled specialisation to load from
@@ -269,45 +294,19 @@ def _loop_static(sc: Scenario) -> tuple:
     sv = sc.solver
     adaptive = sv.method == "adaptive"
     h_nom = sv.dt_max if adaptive else sv.dt
-    t_cycle = 2.0 * sc.drive.t1
-    t_end = sv.t_end if sv.t_end > 0 else t_cycle + sv.settle_time
-    t1 = sc.drive.t1
-    breaks = [b for b in ((t1, t_cycle) if t1 < t_cycle else (t_cycle,)) if 0.0 < b < t_end]
-    breaks.append(t_end)
+    t_end, breaks = segments(sc)
     body = model.body
     contact = sc.contact
     v_ref = max(model.belt, 0.1)
-    # one list in the order of the G_* indices (checked at import), one array
-    settings = np.array(
-        [
-            h_nom,
-            t_end,
-            sv.dt,
-            sv.min_dt,
-            sv.tolerance,
-            sv.max_iterations,
-            sv.atol,
-            sv.rtol,
-            v_ref,
-            v_ref / min(body.length_a, body.width_b),
-            sc.conveyor.width,
-            float(adaptive),
-            float(sv.stop_when_sorted),
-            float(bool(sc.record)),
-            contact.b_p,
-            contact.k_p,
-            model.deep,
-            model.speed_limit,
-            contact.v_min,
-            contact.phidot_min,
-            _UP,
-            _DOWN,
-            K.FLUSH_ANGLE,
-            float(sv.method == "generalized_alpha"),
-            *generalized_alpha_coefficients(sv.rho_inf),
-        ],
-        dtype=float,
-    )
+    # one tuple in the record's field order, one array (a field assignment each costs ~1 us)
+    fields = (
+        h_nom, t_end, sv.dt, sv.min_dt, sv.tolerance, sv.max_iterations, sv.atol, sv.rtol,
+        v_ref, v_ref / min(body.length_a, body.width_b), sc.conveyor.width, float(adaptive),
+        float(sv.stop_when_sorted), float(bool(sc.record)), contact.b_p, contact.k_p, model.deep,
+        model.speed_limit, contact.v_min, contact.phidot_min, _UP, _DOWN, K.FLUSH_ANGLE,
+        float(sv.method == "generalized_alpha"), generalized_alpha_coefficients(sv.rho_inf),
+    )  # fmt: skip
+    settings = np.array([fields], dtype=K.SETTINGS)
     cols = int(1.5 * t_end / h_nom) + 64 if sc.record else 1
     modes = (model.phi, model.rigid_modal, model.omega, model.zeta)
     if model.flexible:
@@ -388,11 +387,11 @@ class Stepper:
         self._solve = None  # the entry for ``_args`` (``kernel.solve.entry``), on first use
         # kernel.solve zeroes the other state rows and the scratch arrays on its first call
         counters = self.counters
-        counters[:] = _CTL0
-        self.figures[:] = _FC0
+        counters.view(np.int64)[:] = _CTL0_WORDS
+        self.figures.view(np.float64)[:] = _FC0_WORDS
         self.times[0] = 0.0
         self.states[0] = y0
-        counters[K.I_N_PROPS] = n_props[0]
+        counters["n_props"][0] = n_props[0]
         self.busy = 0.0
         self.status = "running"
         self.diagnosis: Diagnosis | None = None
@@ -401,12 +400,12 @@ class Stepper:
 
     @property
     def t(self) -> float:
-        return float(self.times[self.counters[K.I_CUR]])
+        return float(self.times[self.counters["cur"][0]])
 
     @property
     def y(self) -> np.ndarray:
         """The state vector at :attr:`t` (a view: copy it to keep it)."""
-        return self.states[self.counters[K.I_CUR]]
+        return self.states[self.counters["cur"][0]]
 
     @property
     def running(self) -> bool:
@@ -417,8 +416,8 @@ class Stepper:
         failed (as ``OdeSolver.step``). Raises once the solve has ended."""
         if self.status != "running":
             raise RuntimeError(f"step() on a {self.status} solve")
-        steps = self.counters[K.I_STEPS]
-        while self.status == "running" and self.counters[K.I_STEPS] == steps:
+        steps = self.counters["n_steps"][0]
+        while self.status == "running" and self.counters["n_steps"][0] == steps:
             if self._over_time():
                 break
             self._call(1, math.inf)
@@ -438,7 +437,7 @@ class Stepper:
     def start(self) -> None:
         """Evaluate the forces and reductions at the initial point (the first :meth:`step` or
         :meth:`advance` does it otherwise), for a caller reading the point before stepping."""
-        if not self.counters[K.I_STARTED]:
+        if not self.counters["started"][0]:
             self._call(0, math.inf)
 
     # -- the loop's figures at the last accepted point ----------------------------------------
@@ -446,32 +445,34 @@ class Stepper:
     @property
     def resultants(self) -> np.ndarray:
         """The resultants R_* at :attr:`t`."""
-        return self.resultant_rows[self.counters[K.I_CUR]]
+        return self.resultant_rows[self.counters["cur"][0]]
 
     @property
     def contacts(self) -> np.ndarray:
         """The contact slots C_* at :attr:`t`."""
-        return self.contact_rows[self.counters[K.I_CUR]]
+        return self.contact_rows[self.counters["cur"][0]]
 
     @property
     def stage(self) -> Stage:
         """The motion stage at :attr:`t`."""
-        return Stage(int(self.counters[K.I_STAGE]))
+        return Stage(int(self.counters["stage"][0]))
 
     @property
     def sorted(self) -> bool:
         """C_s has crossed the sorting line y0 = s."""
-        return bool(self.counters[K.I_SORTED])
+        return bool(self.counters["sorted"][0])
 
     @property
     def impacts(self) -> list[tuple[float, float, float]]:
         """(onset time [s], w_n [m/s], N_stiff [N]) of every impact so far."""
-        return [(t, w, p) for t, w, p in self.impact_rows[: self.counters[K.I_N_IMPACTS]].tolist()]
+        return [
+            (t, w, p) for t, w, p in self.impact_rows[: self.counters["n_impacts"][0]].tolist()
+        ]
 
     # -- the driver --------------------------------------------------------------------------
 
     def _at_end(self) -> bool:
-        return bool(self.counters[K.I_STOP]) or not self.t < self.t_end - 1e-12
+        return bool(self.counters["stop"][0]) or not self.t < self.t_end - 1e-12
 
     def _over_time(self) -> bool:
         """Fail the solve once the time spent stepping exceeds ``solver.max_wall_time``."""
@@ -504,15 +505,15 @@ class Stepper:
         t0 = self.clock()
         status = self._solve(model, state, attempts, float(t_target))
         self.busy += self.clock() - t0
-        self._n_props[0] = self.counters[K.I_N_PROPS]
+        self._n_props[0] = self.counters["n_props"][0]
         if status == K.SOLVE_GROW:
             self._grow()
         elif status == K.SOLVE_DONE:
-            code = int(self.counters[K.I_DIAG])
+            code = int(self.counters["diag"][0])
             if code == K.DIAG_NONE:
                 self.status = "finished"
             else:
-                self._fail(_FAILURES[code], self.figures[K.F_DIAG_T], self._diag_value(code))
+                self._fail(_FAILURES[code], self.figures["diag_t"][0], self._diag_value(code))
         return status
 
     def _diag_value(self, code: int) -> float:
@@ -520,17 +521,18 @@ class Stepper:
             return math.nan
         if code == K.DIAG_MIN_DT:
             return self.model.sc.solver.min_dt
-        return float(self.figures[K.F_DIAG_V])
+        return float(self.figures["diag_v"][0])
 
     def _grow(self) -> None:
         for name in ("impact_rows", "stage_rows"):
             arr = getattr(self, name)
-            used = self.counters[K.I_N_IMPACTS if name == "impact_rows" else K.I_N_STAGES]
+            c = self.counters[0]
+            used = c.n_impacts if name == "impact_rows" else c.n_stages
             if used >= arr.shape[0]:
                 bigger = np.zeros((2 * arr.shape[0], arr.shape[1]))
                 bigger[:used] = arr[:used]
                 setattr(self, name, bigger)
-        used = self.counters[K.I_N_REC]
+        used = self.counters["n_rec"][0]
         if used >= self.record.shape[1]:
             bigger = np.zeros((self.record.shape[0], 2 * self.record.shape[1]))
             bigger[:, :used] = self.record[:, :used]
@@ -555,12 +557,12 @@ class Stepper:
         ``(stop, on_belt)`` as the loop has them after it. Then :meth:`diverged` checks it."""
         counters = self.counters
         if (
-            counters[K.I_N_IMPACTS] >= self.impact_rows.shape[0]
-            or counters[K.I_N_STAGES] >= self.stage_rows.shape[0]
-            or counters[K.I_N_REC] >= self.record.shape[1]
+            counters["n_impacts"][0] >= self.impact_rows.shape[0]
+            or counters["n_stages"][0] >= self.stage_rows.shape[0]
+            or counters["n_rec"][0] >= self.record.shape[1]
         ):
             self._grow()  # a point adds at most one row to each
-        i = int(self.counters[K.I_CUR])
+        i = int(self.counters["cur"][0])
         self.times[i] = t
         self.states[i] = y
         self.belt_wrench[i] = lam
@@ -588,7 +590,7 @@ class Stepper:
     def diverged(self) -> Diagnosis | None:
         """The loop's divergence checks (NaN, deep penetration, runaway speed) on the last
         observed point; fails the solve on one."""
-        i = int(self.counters[K.I_CUR])
+        i = int(self.counters["cur"][0])
         code = K.diverged(
             self.model.P,
             self.settings,
@@ -598,8 +600,8 @@ class Stepper:
             self.resultant_rows[i],
         )
         if code != K.DIAG_NONE:
-            self.counters[K.I_DIAG] = code
-            self._fail(_FAILURES[code], self.figures[K.F_DIAG_T], self._diag_value(code))
+            self.counters["diag"][0] = code
+            self._fail(_FAILURES[code], self.figures["diag_t"][0], self._diag_value(code))
         return self.diagnosis
 
     # -- the result --------------------------------------------------------------------------
@@ -610,44 +612,47 @@ class Stepper:
         """The :class:`SimulationResult` of the solve so far from the loop's reductions
         (``result.make_result``). ``steps``, ``diagnosis``, ``wall``: a caller integrating
         elsewhere (:meth:`observe`) gives its own."""
-        # Python numbers, read once each
-        counters, figures = self.counters.tolist(), self.figures.tolist()
+        # Python numbers, read once each from the records' flat words
+        words = self.counters.view(np.int64).tolist()
+        counters = {name: words[k] for name, k in _COUNTER_WORD.items()}
+        words = self.figures.view(np.float64).tolist()
+        figures = {name: words[k] for name, k in _FIGURE_WORD.items()}
         stages = [
-            (STAGE_NAMES[int(c)], t) for t, c in self.stage_rows[: counters[K.I_N_STAGES]].tolist()
+            (STAGE_NAMES[int(c)], t) for t, c in self.stage_rows[: counters["n_stages"]].tolist()
         ]
         audit = EnergyAudit(
-            max_residual=figures[K.F_MAX_RES],
-            min_residual=figures[K.F_MIN_RES],
-            flow=figures[K.F_FLOW],
-            e0=figures[K.F_E0],
-            t_max=figures[K.F_T_MAX],
-            t_min=figures[K.F_T_MIN],
-            max_rise=figures[K.F_MAX_RISE],
-            t_rise=(figures[K.F_T_RISE0], figures[K.F_T_RISE1]),
-            run_min=figures[K.F_RUN_MIN],
-            t_run_min=figures[K.F_T_RUN_MIN],
+            max_residual=figures["max_res"],
+            min_residual=figures["min_res"],
+            flow=figures["flow"],
+            e0=figures["e0"],
+            t_max=figures["t_max"],
+            t_min=figures["t_min"],
+            max_rise=figures["max_rise"],
+            t_rise=(figures["t_rise0"], figures["t_rise1"]),
+            run_min=figures["run_min"],
+            t_run_min=figures["t_run_min"],
         )
         md = self.model
         if diagnosis is None and self.diagnosis is not None:
             diagnosis = self.diagnosis.text
         return make_result(
             md,
-            float(self.times[counters[K.I_CUR]]),
+            float(self.times[counters["cur"]]),
             diagnosis,
-            counters[K.I_STEPS] if steps is None else steps,
-            counters[K.I_REJECTED],
+            counters["n_steps"] if steps is None else steps,
+            counters["n_rejected"],
             self.clock() - self.wall0 if wall is None else wall,
-            counters[K.I_FORCED],
-            counters[K.I_EVENTS],
-            sorted_=bool(counters[K.I_SORTED]),
-            touched=bool(counters[K.I_TOUCHED]),
-            exit_speed=figures[K.F_EXIT_SPEED],
-            impact_speed=figures[K.F_IMPACT_SPEED],
+            counters["n_forced"],
+            counters["n_events"],
+            sorted_=bool(counters["sorted"]),
+            touched=bool(counters["touched"]),
+            exit_speed=figures["exit_speed"],
+            impact_speed=figures["impact_speed"],
             impacts=self.impacts,
-            peak_n=figures[K.F_PEAK_N],
-            peak_tip=figures[K.F_PEAK_TIP],
-            max_depth=figures[K.F_MAX_DEPTH],
-            y_max=figures[K.F_Y_MAX],
+            peak_n=figures["peak_n"],
+            peak_tip=figures["peak_tip"],
+            max_depth=figures["max_depth"],
+            y_max=figures["y_max"],
             stages=stages,
             audit=audit,
             series=self.series(md.sc.record, stages),
@@ -662,7 +667,7 @@ class Stepper:
         names, rows = _series_layout(tuple(want))
         # one copy of the rows wanted (the record is reused by the next solve once this one is
         # released), a series per row
-        out = dict(zip(names, self.record[rows, : self.counters[K.I_N_REC]], strict=True))
+        out = dict(zip(names, self.record[rows, : self.counters["n_rec"][0]], strict=True))
         if "stage" in out:
             codes = out["stage"].astype(np.intp)
             # the names' string width: the longest present (every stage the run entered was
@@ -677,9 +682,57 @@ class Stepper:
         return out
 
 
-def run(model: SortingModel) -> SimulationResult:
-    """:func:`simulate.simulate` of one of our schemes: the model solved to its end."""
-    stepper = Stepper(model)
+class SolveStepper(Protocol):
+    """What steps one sorting event, whichever scheme integrates it: :class:`Stepper` (our
+    schemes in the compiled loop) and ``baselines.ScipyStepper`` (a SciPy ``OdeSolver`` on
+    ``kernel.rhs``, its accepted points reduced by the loop's own observer). Both end their
+    steps on :func:`segments` and report through :meth:`Stepper.result`; ``simulate`` and the
+    soft-real-time line step any of them (``simulate.solve_stepper``)."""
+
+    model: SortingModel
+    t_end: float
+    status: str  # running, finished or failed
+    diagnosis: Diagnosis | None  # why a failed solve failed
+
+    @property
+    def t(self) -> float: ...  # the last accepted point
+
+    @property
+    def y(self) -> np.ndarray: ...
+
+    @property
+    def running(self) -> bool: ...
+
+    @property
+    def resultants(self) -> np.ndarray: ...  # R_* at t
+
+    @property
+    def contacts(self) -> np.ndarray: ...  # the contact slots C_* at t
+
+    @property
+    def stage(self) -> Stage: ...
+
+    @property
+    def sorted(self) -> bool: ...
+
+    @property
+    def impacts(self) -> list[tuple[float, float, float]]: ...
+
+    def step(self) -> str | None: ...  # to the next accepted point: None or the diagnosis
+
+    def advance(self, t_target: float = math.inf) -> bool: ...  # False once ended
+
+    def start(self) -> None: ...  # the initial point evaluated and reduced
+
+    def result(
+        self, *, steps: int | None = None, diagnosis: str | None = None, wall: float | None = None
+    ) -> SimulationResult: ...
+
+    def release(self) -> None: ...  # the workspaces handed back (after result)
+
+
+def run(stepper: SolveStepper) -> SimulationResult:
+    """:func:`simulate.simulate`: a stepper's solve to its end, reduced to its result."""
     stepper.advance()
     result = stepper.result()
     stepper.release()

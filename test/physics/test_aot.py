@@ -134,16 +134,17 @@ def test_arguments_of_other_types_go_to_the_jit(entry) -> None:
     model = tuple(np.zeros((2,) * n, dtype=d) for d, n in model_spec)
     assert aot._fits(model, model_spec)
     counters = state_spec[0]
-    assert counters == (np.dtype(np.int64), 1)  # the loop's integer state
+    assert counters == (K.COUNTERS, 1)  # the loop's integer state, one named record
     state = [np.zeros((2,) * n, dtype=d) for d, n in state_spec]
     assert aot._fits(tuple(state), state_spec)
     for bad in (
-        np.zeros(2, dtype=np.float64),  # same item size, other dtype
-        np.zeros(4, dtype=np.int64)[::2],  # not contiguous
-        np.zeros((2, 1), dtype=np.int64),  # another dimension
+        np.zeros(2 * len(K.COUNTERS.names), dtype=np.int64),  # the same bytes, no record
+        np.zeros(2, dtype=K.FIGURES),  # another record
+        np.zeros(4, dtype=K.COUNTERS)[::2],  # not contiguous
+        np.zeros((2, 1), dtype=K.COUNTERS),  # another dimension
     ):
         assert not aot._fits((bad, *state[1:]), state_spec)
-    frozen = np.zeros(2, dtype=np.int64)
+    frozen = np.zeros(2, dtype=K.COUNTERS)
     frozen.flags.writeable = False
     assert not aot._fits((frozen, *state[1:]), state_spec)
     assert not aot._fits(tuple(state[:-1]), state_spec)

@@ -15,9 +15,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from fence_sorter.physics.baselines import end_time, solver_class
+from fence_sorter.codes import Stage
+from fence_sorter.physics import kernel as K
+from fence_sorter.physics.baselines import solver_class
 from fence_sorter.physics.params import SCIPY_METHODS
-from fence_sorter.physics.simulate import simulate
+from fence_sorter.physics.simulate import SortingModel, simulate, solve_stepper
+from fence_sorter.physics.stepper import segments
 from fence_sorter.scene import load_scene
 
 
@@ -65,7 +68,7 @@ def test_after_sorting_the_load_moves_without_belt_friction():
     sc = replace(sc, solver=replace(sc.solver, method="scipy:LSODA", rtol=1e-5, atol=1e-7))
     r = simulate(sc)
     assert r.success and r.sorted, r.diagnosis
-    assert r.sim_time == pytest.approx(end_time(sc))
+    assert r.sim_time == pytest.approx(segments(sc)[0])
     t_sorted = dict(r.stages)["sorted"]
     t_free = max(t for s, t in r.stages if s == "E4")
     s = r.series
@@ -131,3 +134,39 @@ def test_solver_class_names_the_allowed_methods():
     assert solver_class("scipy:DOP853").__name__ == "DOP853"
     with pytest.raises(ValueError, match="scipy:RK45"):
         solver_class("adaptive")
+
+
+@pytest.mark.parametrize("method", ["adaptive", "scipy:LSODA"])
+def test_both_families_step_through_one_interface(method):
+    """Our scheme's Stepper and a SciPy baseline's ScipyStepper step alike: one accepted point
+    per step() (strictly later, the reductions there), advance(t) stops at the first point at
+    or past t, the solve ends on the shared end time or the sort, and a solve stepped one
+    point at a time is bitwise the one simulate() runs."""
+    sc = scene("positioned_stiff", method=method, rtol=1e-5)
+    whole = simulate(sc)
+    stepper = solve_stepper(SortingModel(sc))
+    stepper.start()
+    assert stepper.t == 0.0 and stepper.running and not stepper.sorted
+    t_half = 0.5 * whole.sim_time
+    assert stepper.advance(t_half) and stepper.t >= t_half
+    times = [stepper.t]
+    while stepper.running:
+        assert stepper.step() is None
+        times.append(stepper.t)
+        assert stepper.resultants[K.R_FENCE_N] >= 0.0 and stepper.contacts.shape[0] == K.N_SLOTS
+    assert np.all(np.diff(times) > 0.0)
+    assert stepper.status == "finished" and stepper.sorted and stepper.stage is Stage.SORTED
+    t_end, breaks = segments(sc)
+    assert breaks[-1] == t_end and stepper.t <= t_end
+    with pytest.raises(RuntimeError, match="finished"):
+        stepper.step()
+    r = stepper.result()
+    stepper.release()
+    assert (r.steps, r.sim_time, r.peak_contact_force, r.exit_speed_y, r.impacts) == (
+        whole.steps,
+        whole.sim_time,
+        whole.peak_contact_force,
+        whole.exit_speed_y,
+        whole.impacts,
+    )
+    assert r.stages == whole.stages and r.method == method

@@ -208,9 +208,9 @@ def test_a_scene_packed_once_solves_as_a_fresh_packing(scene: str) -> None:
     _assert_same(simulate(sc), fresh)
     changed_p = SortingModel(sc)  # a caller changes a parameter: in its own copy of P
     changed_p.P = changed_p.P.copy()
-    changed_p.P[K.P_MU2] = 0.0
+    changed_p.P[0].mu2 = 0.0
     assert simulate(sc, changed_p).peak_contact_force != fresh.peak_contact_force
-    assert SortingModel(sc).P[K.P_MU2] == sc.contact.mu_fence
+    assert SortingModel(sc).P[0].mu2 == sc.contact.mu_fence
     _assert_same(simulate(sc), fresh)
 
 

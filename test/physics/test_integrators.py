@@ -100,7 +100,7 @@ def test_generalized_alpha_damps_the_top_fence_mode_by_rho_inf(rho_inf):
     assert model.omega[-1] * h > 100.0 and model.omega[0] * h < 0.3
     s = Stepper(model)
     assert s.advance(2.0 * sc.drive.t1 + 0.05)  # the drive is at rest from 2 t1
-    i = int(s.counters[K.I_CUR])
+    i = int(s.counters[0].cur)
     assert (
         s.resultant_rows[i, K.R_FENCE_N] == 0.0 and s.modal_forces[i].max() == 0.0
     )  # no load on the modes
@@ -170,7 +170,7 @@ def test_stepping_in_chunks_is_the_same_solve():
         times.append(single.t)
     for other in (chunked, single):
         assert other.status == "finished"
-        assert other.counters[K.I_STEPS] == whole.counters[K.I_STEPS] == len(times) - 1
+        assert other.counters[0].n_steps == whole.counters[0].n_steps == len(times) - 1
         assert other.t == whole.t
         np.testing.assert_array_equal(other.y, whole.y)
 
@@ -286,7 +286,7 @@ def test_wall_time_limit_stops_a_solve_that_steps_too_long():
     d = stepper.diagnosis
     assert stepper.status == "failed" and d.kind is Failure.WALL_TIME_LIMIT
     assert d.value == 0.3 and d.t == stepper.t and 0.0 < d.t < 0.6
-    assert stepper.busy > 0.3 and 1 <= stepper.counters[K.I_STEPS] <= 7  # ~0.05 s per step
+    assert stepper.busy > 0.3 and 1 <= stepper.counters[0].n_steps <= 7  # ~0.05 s per step
     assert str(d) == d.text == f"wall-time limit 0.3 s reached at t = {d.t:.4f} s"
     r = stepper.result()
     assert not r.success and r.diagnosis == d.text and r.sim_time == d.t

@@ -22,7 +22,7 @@ def _state_at(t: float):
     md = SortingModel(STIFF)
     cs = Stepper(md)
     cs.advance(t)
-    return md, cs, int(cs.counters[K.I_CUR])
+    return md, cs, int(cs.counters[0].cur)
 
 
 def _step(md, cs, a, h, max_iter, force, tol=1e-14):
@@ -48,7 +48,7 @@ def _step(md, cs, a, h, max_iter, force, tol=1e-14):
         np.zeros(0),
         0.0,
         0.0,
-        bool(cs.counters[K.I_ON_BELT]),
+        bool(cs.counters[0].on_belt),
         tol,
         False,
         max_iter,
@@ -166,7 +166,7 @@ def test_a_slide_off_is_located_once_before_and_once_across(monkeypatch) -> None
         P, ctl, OUT = args[0], args[8], args[12]
         slot, kind, g0 = args[-4], args[-3], args[-2]
         if kind == K.EVENT_SLIDE_OFF:
-            seen.append((g0, K.event_value(P, OUT[ctl[K.I_TRIAL]], slot, kind), trials[-1]))
+            seen.append((g0, K.event_value(P, OUT[ctl[0].trial], slot, kind), trials[-1]))
         return taken
 
     def counted(*args):

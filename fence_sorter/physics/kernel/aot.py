@@ -41,6 +41,8 @@ import numba
 import numpy as np
 from numba.np.numpy_support import as_dtype
 
+from .layout import COUNTERS, FIGURES, PARAMS, SETTINGS
+
 MODULE = "solve_aot"  # the extension's module name (its PyInit_ symbol)
 BUILD_FILE = "build.json"
 SEEN = 8  # argument pairs whose entry ``Solve.entry`` remembers
@@ -67,6 +69,21 @@ def aot_directory(cache: Path) -> Path:
     return cache.with_name("aot-" + cache.name.removeprefix("numba-"))
 
 
+# the record dtypes by name, for build.json (a structured dtype's str() does not parse back)
+RECORDS = {"PARAMS": PARAMS, "SETTINGS": SETTINGS, "COUNTERS": COUNTERS, "FIGURES": FIGURES}
+
+
+def _dtype_name(dtype: np.dtype) -> str:
+    for name, record in RECORDS.items():
+        if dtype == record:
+            return name
+    return str(dtype)
+
+
+def _dtype(name: str) -> np.dtype:
+    return RECORDS[name] if name in RECORDS else np.dtype(name)
+
+
 def _spec(numba_type) -> tuple:
     """Per field of a (named) tuple argument: (dtype, ndim) of its C-contiguous array."""
     fields = []
@@ -83,7 +100,7 @@ def _describe(sig) -> dict:
     if (str(attempts), str(target)) != ("int64", "float64"):
         raise TypeError(f"solve's scalar arguments are ({attempts}, {target})")
     return {
-        name: [[str(d), n] for d, n in _spec(t)]
+        name: [[_dtype_name(d), n] for d, n in _spec(t)]
         for name, t in (("model", model), ("state", state))
     }
 
@@ -151,8 +168,8 @@ def load(directory: Path, digest: str) -> tuple[list, str | None]:
         return [], f"the ahead-of-time solve {path} does not load: {exc}"
     entries = []
     for e in meta["entries"]:
-        model = tuple((np.dtype(d), n) for d, n in e["model"])
-        state = tuple((np.dtype(d), n) for d, n in e["state"])
+        model = tuple((_dtype(d), n) for d, n in e["model"])
+        state = tuple((_dtype(d), n) for d, n in e["state"])
         entries.append((model, state, getattr(module, e["name"])))
     return entries, None
 

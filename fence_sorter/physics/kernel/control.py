@@ -16,13 +16,7 @@ from .layout import (
     C_NRAW,
     C_S,
     C_SLACK,
-    G_ADAPTIVE,
-    G_RTOL,
     N_SLOTS,
-    P_BEFF,
-    P_KP,
-    P_LENGTH,
-    P_MASS,
     SLOT_BORDER,
     SLOT_TIP,
 )
@@ -136,7 +130,7 @@ def resolves_stick(settings, m):
     sticking at both ends of a step ends it at the stick force extrapolated from the step
     means (``steps._unring_stick``). See docs/numerics.md, "Convergence of the adaptive
     scheme with rtol"."""
-    return settings[G_ADAPTIVE] != 0.0 and m == 0 and settings[G_RTOL] < RTOL_DEFAULT
+    return settings[0].adaptive != 0.0 and m == 0 and settings[0].rtol < RTOL_DEFAULT
 
 
 @njit(cache=True, _nrt=False)
@@ -182,7 +176,7 @@ def event_value(P, out, slot, kind):
         return out[slot, C_SLACK] if out[slot, C_ACTIVE] != 0.0 else math.nan
     if kind == EVENT_SLIDE_OFF:
         s_arc = out[slot, C_S]
-        return P[P_LENGTH] - s_arc if s_arc > 0.0 else math.nan
+        return P[0].length - s_arc if s_arc > 0.0 else math.nan
     if out[slot, C_GAP] == 0.0:
         return math.nan
     return out[slot, C_D] if kind == EVENT_ONSET else out[slot, C_NRAW]
@@ -263,9 +257,9 @@ def oscillation_step(P, out, rtol):
     omega h < 0.04 stays far inside the cap: the bench scenes never meet it. inf if no slot
     qualifies."""
     best = math.inf
-    mass = P[P_MASS]
-    k = P[P_KP]
-    b = P[P_BEFF]
+    mass = P[0].mass
+    k = P[0].k_p
+    b = P[0].b_eff
     for s in range(N_SLOTS):
         if out[s, C_ACTIVE] == 0.0:
             continue

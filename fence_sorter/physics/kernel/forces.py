@@ -23,27 +23,6 @@ from .layout import (
     C_SLACK,
     C_VSX,
     C_VSY,
-    P_ALPHA_K,
-    P_BEFF,
-    P_DL,
-    P_EXT_M,
-    P_EXT_X,
-    P_EXT_Y,
-    P_FLEX,
-    P_FMAX,
-    P_INERTIA,
-    P_KP,
-    P_LENGTH,
-    P_MARGIN,
-    P_MASS,
-    P_MU2,
-    P_NEL,
-    P_PHIDOT_MIN,
-    P_T1,
-    P_TMAX,
-    P_USE_BORDER,
-    P_USE_TIP,
-    P_VMIN,
     R_ACCEL,
     R_ACTIVE_MASK,
     R_ALPHA,
@@ -66,11 +45,11 @@ from .layout import (
 @njit(cache=True, _nrt=False)
 def drive(P, t):
     """alpha_w, rate, acceleration of the sinusoidal-velocity drive (see ``drive.py``)."""
-    t1 = P[P_T1]
+    t1 = P[0].t1
     if t < 0.0 or t > 2.0 * t1:
         return 0.0, 0.0, 0.0
     w = math.pi / t1
-    half = 0.5 * P[P_ALPHA_K]
+    half = 0.5 * P[0].alpha_k
     return (
         half * (1.0 - math.cos(w * t)),
         half * w * math.sin(w * t),
@@ -82,7 +61,7 @@ def drive(P, t):
 @njit(cache=True, _nrt=False)
 def fence_shape(P, phi, eta, etadot, alpha, w, wdot, nodes):
     """Nodal deflections w = Phi eta, their rates, and the chord chain node positions (27)-(29)."""
-    n = int(P[P_NEL])
+    n = int(P[0].n_el)
     m = eta.shape[0]
     for i in range(2 * n):
         a = 0.0
@@ -92,7 +71,7 @@ def fence_shape(P, phi, eta, etadot, alpha, w, wdot, nodes):
             b += phi[i, j] * etadot[j]
         w[i] = a
         wdot[i] = b
-    dl = P[P_DL]
+    dl = P[0].dl
     cx = 0.0
     cy = 0.0
     prev = 0.0
@@ -119,8 +98,8 @@ def _hermite(w_a, th_a, w_b, th_b, d, inv_dl):
 @njit(cache=True, _nrt=False)
 def _element(P, s):
     """Element index and offset d_N of arc s (21)-(22), clamped onto the fence."""
-    n = int(P[P_NEL])
-    dl = P[P_DL]
+    n = int(P[0].n_el)
+    dl = P[0].dl
     i = int(s / dl)
     if i >= n:
         i = n - 1
@@ -141,10 +120,10 @@ def surface(P, s, alpha, rate, w, wdot, nodes):
 @njit(cache=True, _nrt=False, inline="always")
 def _surface(P, s, alpha, ca, sa, rate, w, wdot, nodes):
     """``surface`` with cos and sin of the fence angle alpha given (``evaluate`` has them)."""
-    if P[P_FLEX] == 0.0:
+    if P[0].flexible == 0.0:
         return s * ca, s * sa, ca, sa, -rate * s * sa, rate * s * ca
     i, d = _element(P, s)
-    inv_dl = 1.0 / P[P_DL]
+    inv_dl = 1.0 / P[0].dl
     if i > 0:
         w_a, th_a, v_a, vth_a = w[2 * i - 2], w[2 * i - 1], wdot[2 * i - 2], wdot[2 * i - 1]
     else:
@@ -165,7 +144,7 @@ def _modal_share(P, phi, s, alpha, fx, fy, modal):
     """Add the modal share of a force (fx, fy) on the fence at arc s, split by (20)."""
     transverse = -fx * math.sin(alpha) + fy * math.cos(alpha)
     i, d = _element(P, s)
-    frac = d / P[P_DL]
+    frac = d / P[0].dl
     m = modal.shape[0]
     for j in range(m):
         f = phi[2 * i, j] * transverse * frac
@@ -200,8 +179,8 @@ def stick_wrench(P, ax, ay, am):
     """Karnopp's stick branch of (34)-(36): cancel the applied wrench (ax, ay, am) inside the
     same elliptic limit surface (F/F_max)^2 + (T/T_max)^2 <= 1 the slip branch lies on; an
     applied wrench outside it is scaled radially onto it."""
-    f_max = P[P_FMAX]
-    t_max = P[P_TMAX]
+    f_max = P[0].f_max
+    t_max = P[0].t_max
     q = 0.0
     if f_max > 0.0:
         q += (ax * ax + ay * ay) / (f_max * f_max)
@@ -231,12 +210,12 @@ def karnopp_belt(P, ux, uy, spin, ax, ay, am):
     what the ellipse leaves beside the sliding one, so explicit and implicit (``implicit_belt``)
     friction bound the same set of wrenches.
     """
-    f_max = P[P_FMAX]
-    t_max = P[P_TMAX]
+    f_max = P[0].f_max
+    t_max = P[0].t_max
     v_o = math.hypot(ux, uy)
     norm = math.hypot(f_max * v_o, t_max * spin)
-    slide_t = v_o > P[P_VMIN]
-    slide_r = abs(spin) > P[P_PHIDOT_MIN]
+    slide_t = v_o > P[0].v_min
+    slide_r = abs(spin) > P[0].phidot_min
     if not slide_t and not slide_r:
         return stick_wrench(P, ax, ay, am)
     fx = fy = tz = 0.0
@@ -275,8 +254,8 @@ def belt_multiplier(P, u0, u1, u2, w0, w1, w2, lam, sigma0):
     iterate's multiplier: the iterates' u* differ by the iteration's residual, so the root is
     a step or two away instead of four from sigma = 0).
     """
-    fm2 = P[P_FMAX] * P[P_FMAX]
-    tm2 = P[P_TMAX] * P[P_TMAX]
+    fm2 = P[0].f_max * P[0].f_max
+    tm2 = P[0].t_max * P[0].t_max
     l0, l1, l2 = -u0 / w0, -u1 / w1, -u2 / w2
     q = 0.0
     if fm2 > 0.0:
@@ -361,16 +340,16 @@ def _add(
     on_fence,
     alpha,
 ):
-    mass = P[P_MASS]
-    n_raw = P[P_BEFF] * d_rate * d * d + P[P_KP] * d**4
+    mass = P[0].mass
+    n_raw = P[0].b_eff * d_rate * d * d + P[0].k_p * d**4
     n = n_raw if n_raw > 0.0 else 0.0
-    mu2 = P[P_MU2]
+    mu2 = P[0].mu2
     f_prev = prev[slot]
     if weight > 0.0 and not math.isnan(f_prev):
         # implicit (37): the friction that stops this contact's slip by the step end if it lies
         # within mu2 N, else mu2 N against the slip
         arm = (px - x) * ty - (py - y) * tx
-        w_eff = weight * (1.0 / mass + arm * arm / P[P_INERTIA])
+        w_eff = weight * (1.0 / mass + arm * arm / P[0].inertia)
         slip_free = slide - w_eff * f_prev
         limit = mu2 * n
         ft = -slip_free / w_eff
@@ -378,18 +357,18 @@ def _add(
         if abs(ft) > limit:
             ft = -math.copysign(limit, slip_free)
     else:
-        ft = _fence_friction(n, slide, lam_x * tx + lam_y * ty, mu2, P[P_VMIN])
+        ft = _fence_friction(n, slide, lam_x * tx + lam_y * ty, mu2, P[0].v_min)
         slack = math.nan
     fx = n * nx + ft * tx
     fy = n * ny + ft * ty
     res[R_FX] += fx
     res[R_FY] += fy
     res[R_MZ] += (px - x) * fy - (py - y) * fx
-    res[R_ENERGY_CONTACT] += 0.2 * P[P_KP] * d**5
+    res[R_ENERGY_CONTACT] += 0.2 * P[0].k_p * d**5
     if on_fence:
         res[R_FENCE_N] += n
         res[R_POWER_FENCE] += fx * vsx + fy * vsy
-        if P[P_FLEX] != 0.0:
+        if P[0].flexible != 0.0:
             _modal_share(P, phi, s_arc, alpha, -fx, -fy, modal)
     res[R_ACTIVE_MASK] += float(1 << slot)
     if d > res[R_MAX_D]:
@@ -463,19 +442,19 @@ def _evaluate(
     x, yy, vx, vy, om = y[0], y[1], y[3], y[4], y[5]
     m = modal.shape[0]
     res[R_ALPHA], res[R_RATE], res[R_ACCEL] = alpha, rate, accel
-    flex = P[P_FLEX] != 0.0
+    flex = P[0].flexible != 0.0
     if flex:
         fence_shape(P, phi, y[6 : 6 + m], y[6 + m : 6 + 2 * m], alpha, w, wdot, nodes)
-        n_el = int(P[P_NEL])
+        n_el = int(P[0].n_el)
         res[R_TIP_W] = w[2 * n_el - 2]
         mw = 0.0
         for k in range(n_el):
             if abs(w[2 * k]) > mw:
                 mw = abs(w[2 * k])
         res[R_MAX_W] = mw
-    length = P[P_LENGTH]
-    use_tip = P[P_USE_TIP] != 0.0
-    reach = res[R_MAX_W] + P[P_MARGIN]
+    length = P[0].length
+    use_tip = P[0].use_tip != 0.0
+    reach = res[R_MAX_W] + P[0].margin
     lam_x, lam_y = lam[0], lam[1]
     # corner k of the load: (x + c a_k - s b_k, y + s a_k + c b_k), recomputed where used (the
     # same arithmetic; no array allocated per evaluation)
@@ -611,7 +590,7 @@ def _evaluate(
                 True,
                 alpha,
             )
-    if P[P_USE_BORDER] != 0.0:
+    if P[0].use_border != 0.0:
         for k in range(4):
             px = x + c * corners[k, 0] - s * corners[k, 1]
             py = yy + s * corners[k, 0] + c * corners[k, 1]
@@ -650,6 +629,6 @@ def _evaluate(
     if flex:
         for j in range(m):
             modal[j] -= rigid_modal[j] * accel
-    res[R_FX] += P[P_EXT_X]
-    res[R_FY] += P[P_EXT_Y]
-    res[R_MZ] += P[P_EXT_M]
+    res[R_FX] += P[0].ext_x
+    res[R_FY] += P[0].ext_y
+    res[R_MZ] += P[0].ext_m

@@ -1,7 +1,15 @@
-"""Layout of the kernel's flat arrays: packed parameters ``P_*`` (:func:`pack`), contact slot
-columns ``C_*``, resultants ``R_*``, and the solve loop's arrays (:data:`LoopModel`,
-:data:`LoopState`): state rows ``S_*``, settings ``G_*``, counters ``I_*``, scalars ``F_*``,
-diagnoses ``DIAG_*``, recorded rows ``REC_*``."""
+"""Layout of the kernel's arrays: the named records of one event's parameters (:data:`PARAMS`,
+:func:`pack`) and solver settings (:data:`SETTINGS`) and of the loop's counters
+(:data:`COUNTERS`) and float state (:data:`FIGURES`); contact slot columns ``C_*``, resultants
+``R_*``, and the solve loop's arrays (:data:`LoopModel`, :data:`LoopState`): state rows ``S_*``,
+diagnoses ``DIAG_*``, recorded rows ``REC_*``.
+
+A record travels as an array of one element (``params[0].mass``, ``counters[0].n_steps``):
+Numba compiles a field of it to the same load or store at a fixed offset as an index into a
+flat array (the same machine code, compared with ``inspect_asm``), and the loop's arguments
+stay arrays, which the ahead-of-time entry (``aot``) exports. Numba's structref and
+named tuples were not taken: a structref is reference counted (the kernel runs without
+Numba's reference counting) and a named tuple cannot be written in place."""
 
 from __future__ import annotations
 
@@ -9,30 +17,76 @@ from collections import namedtuple
 
 import numpy as np
 
-# -- packed parameters --------------------------------------------------------------------------
-P_ALPHA_K = 0  # alpha_k [rad]
-P_T1 = 1  # t1 [s]
-P_MASS = 2  # m_p [kg]
-P_INERTIA = 3  # I_p about C_s [kg m^2]
-P_FMAX = 4  # mu1 m g [N]
-P_TMAX = 5  # pure-spin torque [N m]
-P_BEFF = 6  # b_p m_p^0.4
-P_KP = 7  # k_p [N/m^4]
-P_MU2 = 8  # fence / border friction
-P_VMIN = 9  # Karnopp threshold [m/s]
-P_PHIDOT_MIN = 10  # [rad/s]
-P_LENGTH = 11  # R_z [m]
-P_DL = 12  # element length [m] (flexible)
-P_NEL = 13  # elements (flexible)
-P_USE_BORDER = 14
-P_USE_TIP = 15
-P_FLEX = 16
-P_BELT = 17  # belt speed [m/s]
-P_EXT_X = 18  # external wrench on the load
-P_EXT_Y = 19
-P_EXT_M = 20
-P_MARGIN = 21  # cheap-reject margin beyond the deflection [m]
-N_PARAMS = 22
+
+def _record(fields) -> np.dtype:
+    """A record dtype of named fields (NumPy's ``np.record``, so an element of an array of it
+    has attribute access ``r.mass`` under NUMBA_DISABLE_JIT as under Numba). Every field is
+    8 bytes wide, so the aligned layout has no padding."""
+    return np.dtype((np.record, np.dtype(fields, align=True)))
+
+
+# -- parameters of one event (read only) ----------------------------------------------------
+PARAMS = _record(
+    [
+        ("alpha_k", "f8"),  # [rad]
+        ("t1", "f8"),  # [s]
+        ("mass", "f8"),  # m_p [kg]
+        ("inertia", "f8"),  # I_p about C_s [kg m^2]
+        ("f_max", "f8"),  # mu1 m g [N]
+        ("t_max", "f8"),  # pure-spin torque [N m]
+        ("b_eff", "f8"),  # b_p m_p^0.4
+        ("k_p", "f8"),  # [N/m^4]
+        ("mu2", "f8"),  # fence / border friction
+        ("v_min", "f8"),  # Karnopp threshold [m/s]
+        ("phidot_min", "f8"),  # [rad/s]
+        ("length", "f8"),  # R_z [m]
+        ("dl", "f8"),  # element length [m] (flexible)
+        ("n_el", "f8"),  # elements (flexible)
+        ("use_border", "f8"),  # 1.0: the border wall is a contact
+        ("use_tip", "f8"),  # 1.0: the fence tip is a contact
+        ("flexible", "f8"),  # 1.0: a flexible fence
+        ("belt", "f8"),  # belt speed [m/s]
+        ("ext_x", "f8"),  # external wrench on the load [N, N, N m]
+        ("ext_y", "f8"),
+        ("ext_m", "f8"),
+        ("margin", "f8"),  # cheap-reject margin beyond the deflection [m]
+    ]
+)
+
+
+def pack(
+    *,
+    alpha_k,
+    t1,
+    mass,
+    inertia,
+    f_max,
+    t_max,
+    b_p,
+    k_p,
+    mu2,
+    v_min,
+    phidot_min,
+    length,
+    dl,
+    n_el,
+    use_border,
+    use_tip,
+    flexible,
+    belt,
+    external,
+    margin=0.05,
+) -> np.ndarray:
+    """The parameters of one event: an array of one :data:`PARAMS` record (SI units)."""
+    # one tuple, one array (a NumPy field assignment each costs ~1 us on a cold cache; a model
+    # is built per event)
+    row = (
+        alpha_k, t1, mass, inertia, f_max, t_max, b_p * mass**0.4, k_p, mu2, v_min, phidot_min,
+        length, dl, n_el, float(use_border), float(use_tip), float(flexible), belt, *external,
+        margin,
+    )  # fmt: skip
+    return np.array([row], dtype=PARAMS)
+
 
 # -- contact slot columns -----------------------------------------------------------------------
 C_ACTIVE = 0  # 1: force acting (D > 0)
@@ -74,45 +128,6 @@ R_ITERATIONS = 13  # contact iterations the step that produced this point took
 N_RES = 14
 
 
-def pack(
-    *,
-    alpha_k,
-    t1,
-    mass,
-    inertia,
-    f_max,
-    t_max,
-    b_p,
-    k_p,
-    mu2,
-    v_min,
-    phidot_min,
-    length,
-    dl,
-    n_el,
-    use_border,
-    use_tip,
-    flexible,
-    belt,
-    external,
-    margin=0.05,
-) -> np.ndarray:
-    """The packed parameter vector ``P`` (SI units)."""
-    # filled as a list, one array at the end (a NumPy item assignment per field costs ~1 us on
-    # a cold cache; a model is built per event)
-    p = [0.0] * N_PARAMS
-    p[P_ALPHA_K], p[P_T1] = alpha_k, t1
-    p[P_MASS], p[P_INERTIA], p[P_FMAX], p[P_TMAX] = mass, inertia, f_max, t_max
-    p[P_BEFF], p[P_KP], p[P_MU2] = b_p * mass**0.4, k_p, mu2
-    p[P_VMIN], p[P_PHIDOT_MIN] = v_min, phidot_min
-    p[P_LENGTH], p[P_DL], p[P_NEL] = length, dl, n_el
-    p[P_USE_BORDER], p[P_USE_TIP], p[P_FLEX] = float(use_border), float(use_tip), float(flexible)
-    p[P_BELT] = belt
-    p[P_EXT_X], p[P_EXT_Y], p[P_EXT_M] = external
-    p[P_MARGIN] = margin
-    return np.array(p, dtype=float)
-
-
 # -- the solve loop's arrays ---------------------------------------------------------------
 # state rows of times, states, belt_wrench, contacts, resultants, modal_forces, accelerations;
 # cur and trial swap, loc and before are fixed; the generalized-alpha step's state at its
@@ -124,101 +139,107 @@ S_ALPHA = 4
 S_PREV = 5
 N_STATES = 6
 
-# the solver settings ``settings``
-G_H_NOM = 0  # dt_max (adaptive) or dt (fixed step) [s]
-G_T_END = 1
-G_DT = 2  # first adaptive step [s]
-G_MIN_DT = 3
-G_TOL = 4  # contact iteration tolerance
-G_MAX_ITER = 5
-G_ATOL = 6
-G_RTOL = 7
-G_V_REF = 8
-G_OM_REF = 9
-G_WIDTH = 10  # s [m]
-G_ADAPTIVE = 11
-G_STOP_SORTED = 12
-G_RECORD = 13
-G_BP = 14  # b_p, k_p of the stiff reference (stiff_impact_peak)
-G_KP = 15
-G_DEEP = 16
-G_SPEED_LIMIT = 17
-G_VMIN = 18
-G_PHIDOT_MIN = 19
-G_UP = 20  # 2^(1/4)
-G_DOWN = 21  # 2^(-1/4)
-G_FLUSH = 22  # observer.FLUSH_ANGLE [rad]
-G_GEN_ALPHA = 23  # 1: the generalized-alpha step (fixed step), 0: the trapezoidal one
-G_ALPHA_M = 24  # generalized-alpha (alpha_m, alpha_f, beta, gamma), in this order
-G_ALPHA_F = 25
-G_BETA = 26
-G_GAMMA = 27
-N_CFG = 28
+# the solver settings of one event (read only)
+SETTINGS = _record(
+    [
+        ("h_nom", "f8"),  # dt_max (adaptive) or dt (fixed step) [s]
+        ("t_end", "f8"),  # [s]
+        ("dt", "f8"),  # first adaptive step [s]
+        ("min_dt", "f8"),  # [s]
+        ("tol", "f8"),  # contact iteration tolerance
+        ("max_iter", "f8"),
+        ("atol", "f8"),
+        ("rtol", "f8"),
+        ("v_ref", "f8"),  # [m/s]
+        ("om_ref", "f8"),  # [rad/s]
+        ("width", "f8"),  # s [m]
+        ("adaptive", "f8"),  # 1.0: the adaptive scheme
+        ("stop_sorted", "f8"),  # 1.0: stop once sorted
+        ("record", "f8"),  # 1.0: record the series
+        ("b_p", "f8"),  # b_p, k_p of the stiff reference (stiff_impact_peak)
+        ("k_p", "f8"),
+        ("deep", "f8"),  # the divergence checks' depth [m] and speed [m/s]
+        ("speed_limit", "f8"),
+        ("v_min", "f8"),  # [m/s]
+        ("phidot_min", "f8"),  # [rad/s]
+        ("up", "f8"),  # 2^(1/4)
+        ("down", "f8"),  # 2^(-1/4)
+        ("flush", "f8"),  # observer.FLUSH_ANGLE [rad]
+        ("gen_alpha", "f8"),  # 1.0: the generalized-alpha step (fixed step), 0: trapezoidal
+        ("alpha_coefficients", "f8", (4,)),  # generalized-alpha (alpha_m, alpha_f, beta, gamma)
+    ]
+)
 
-# the integer state of the loop ``counters``
-I_CUR = 0
-I_TRIAL = 1
-I_STARTED = 2
-I_DONE = 3
-I_DIAG = 4  # DIAG_*
-I_STEPS = 5
-I_REJECTED = 6
-I_FORCED = 7
-I_EVENTS = 8
-I_NEXT_BREAK = 9
-I_CLEAN = 10
-I_ON_BELT = 11
-I_STOP = 12
-I_SORTED = 13  # the reductions (observe)
-I_TOUCHED = 14
-I_HAD_FENCE = 15
-I_FIRST = 16
-I_MASK = 17
-I_STAGE = 18
-I_LAST_MASK0 = 19
-I_LAST_MASK1 = 20
-I_N_IMPACTS = 21
-I_N_STAGES = 22
-I_N_REC = 23
-I_N_PROPS = 24  # entries of the propagator cache in use
-N_CTL = 25
+# the integer state of the loop
+COUNTERS = _record(
+    [
+        ("cur", "i8"),  # the state rows of the accepted point and of the trial step
+        ("trial", "i8"),
+        ("started", "i8"),
+        ("done", "i8"),
+        ("diag", "i8"),  # DIAG_*
+        ("n_steps", "i8"),
+        ("n_rejected", "i8"),
+        ("n_forced", "i8"),
+        ("n_events", "i8"),
+        ("next_break", "i8"),
+        ("clean", "i8"),
+        ("on_belt", "i8"),
+        ("stop", "i8"),
+        ("sorted", "i8"),  # the reductions (observe)
+        ("touched", "i8"),
+        ("had_fence", "i8"),
+        ("first", "i8"),
+        ("mask", "i8"),
+        ("stage", "i8"),
+        ("last_mask0", "i8"),
+        ("last_mask1", "i8"),
+        ("n_impacts", "i8"),
+        ("n_stages", "i8"),
+        ("n_rec", "i8"),
+        ("n_props", "i8"),  # entries of the propagator cache in use
+    ]
+)
 
-# the float state of the loop ``figures``
-F_H = 0
-F_H_CAP = 1
-F_H_PREV = 2
-F_PREV_V = 3  # 3 values
-F_PREV_A = 6  # 3 values
-F_EXIT_SPEED = 9  # the reductions (observe)
-F_IMPACT_SPEED = 10
-F_PEAK_N = 11
-F_PEAK_TIP = 12
-F_MAX_DEPTH = 13
-F_Y_MAX = 14
-F_PREV_T = 15
-F_PREV_Y = 16  # 6 values
-F_PREV_POWER = 22
-F_WORK = 23
-F_LAST_N1 = 24
-F_LAST_N2 = 25
-F_LAST_T1 = 26
-F_LAST_T2 = 27
-F_MAX_RES = 28  # energy audit (result.EnergyAudit)
-F_MIN_RES = 29
-F_FLOW = 30
-F_E0 = 31
-F_T_MAX = 32
-F_T_MIN = 33
-F_MAX_RISE = 34
-F_T_RISE0 = 35
-F_T_RISE1 = 36
-F_RUN_MIN = 37
-F_T_RUN_MIN = 38
-F_DIAG_T = 39  # where a diagnosis was made, and its value (D or speed)
-F_DIAG_V = 40
-N_FC = 41
+# the float state of the loop
+FIGURES = _record(
+    [
+        ("h", "f8"),
+        ("h_cap", "f8"),
+        ("h_prev", "f8"),
+        ("prev_v", "f8", (3,)),
+        ("prev_a", "f8", (3,)),
+        ("exit_speed", "f8"),  # the reductions (observe)
+        ("impact_speed", "f8"),
+        ("peak_n", "f8"),
+        ("peak_tip", "f8"),
+        ("max_depth", "f8"),
+        ("y_max", "f8"),
+        ("prev_t", "f8"),
+        ("prev_y", "f8", (6,)),
+        ("prev_power", "f8"),
+        ("work", "f8"),
+        ("last_n1", "f8"),
+        ("last_n2", "f8"),
+        ("last_t1", "f8"),
+        ("last_t2", "f8"),
+        ("max_res", "f8"),  # energy audit (result.EnergyAudit)
+        ("min_res", "f8"),
+        ("flow", "f8"),
+        ("e0", "f8"),
+        ("t_max", "f8"),
+        ("t_min", "f8"),
+        ("max_rise", "f8"),
+        ("t_rise0", "f8"),
+        ("t_rise1", "f8"),
+        ("run_min", "f8"),
+        ("t_run_min", "f8"),
+        ("diag_t", "f8"),  # where a diagnosis was made, and its value (D or speed)
+        ("diag_v", "f8"),
+    ]
+)
 
-# diagnoses (counters[I_DIAG])
+# diagnoses (counters.diag)
 DIAG_NONE = 0
 DIAG_NONFINITE = 1
 DIAG_DEEP = 2
@@ -246,22 +267,22 @@ N_PROP_CACHE = 256
 LoopModel = namedtuple(
     "LoopModel",
     [
-        "params",  # packed parameters P_* (layout.pack)
+        "params",  # one PARAMS record (layout.pack)
         "corners",  # the load's corners relative to C_s [m]
         "normals",  # the load's face normals
         "mode_shapes",  # modal shapes at the fence nodes (flexible; else empty)
         "rigid_modal",  # modal load of a unit drive acceleration
         "omega",  # modal angular frequencies [rad/s]
         "zeta",  # modal damping ratios
-        "settings",  # solver settings G_*
+        "settings",  # one SETTINGS record
         "breakpoints",  # drive breakpoints and the end time [s]
     ],
 )
 LoopState = namedtuple(
     "LoopState",
     [
-        "counters",  # integer state of the loop I_* (rows in use, steps, events, diagnosis)
-        "figures",  # float state of the loop F_* (step sizes, history, peaks, energy audit)
+        "counters",  # one COUNTERS record: rows in use, steps, events, diagnosis
+        "figures",  # one FIGURES record: step sizes, history, peaks, energy audit
         "times",  # t of the state rows S_* [s]
         "states",  # state vectors of the rows
         "belt_wrench",  # belt friction (F_x, F_y, M_z) of the rows

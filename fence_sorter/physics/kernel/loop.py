@@ -25,55 +25,8 @@ from .forces import evaluate, karnopp_belt, stick_wrench
 from .layout import (
     DIAG_MIN_DT,
     DIAG_NONE,
-    F_DIAG_T,
-    F_H,
-    F_H_CAP,
-    F_H_PREV,
-    F_PREV_A,
-    F_PREV_V,
-    G_ADAPTIVE,
-    G_ALPHA_M,
-    G_ATOL,
-    G_DOWN,
-    G_DT,
-    G_GAMMA,
-    G_GEN_ALPHA,
-    G_H_NOM,
-    G_MAX_ITER,
-    G_MIN_DT,
-    G_OM_REF,
-    G_PHIDOT_MIN,
-    G_RTOL,
-    G_T_END,
-    G_TOL,
-    G_UP,
-    G_V_REF,
-    G_VMIN,
-    G_WIDTH,
-    I_CLEAN,
-    I_CUR,
-    I_DIAG,
-    I_DONE,
-    I_EVENTS,
-    I_FORCED,
-    I_N_IMPACTS,
-    I_N_PROPS,
-    I_N_REC,
-    I_N_STAGES,
-    I_NEXT_BREAK,
-    I_ON_BELT,
-    I_REJECTED,
-    I_STARTED,
-    I_STEPS,
-    I_STOP,
-    I_TRIAL,
     N_COLS,
     N_SLOTS,
-    P_ALPHA_K,
-    P_BELT,
-    P_INERTIA,
-    P_MASS,
-    P_T1,
     S_ALPHA,
     S_BEFORE,
     S_LOC,
@@ -132,7 +85,7 @@ def _propagator_slot(
     emptied when full)."""
     if omega.shape[0] == 0:
         return 0
-    n = counters[I_N_PROPS]
+    n = counters[0].n_props
     for i in range(n):
         if propagator_keys[i] == h:
             return i
@@ -140,14 +93,14 @@ def _propagator_slot(
         n = 0
     modal_propagators(omega, zeta, h, propagators[n], propagator_g0[n], propagator_g1[n])
     propagator_keys[n] = h
-    counters[I_N_PROPS] = n + 1
+    counters[0].n_props = n + 1
     return n
 
 
 @njit(cache=True, _nrt=False)
 def _jump_at(params, t):
-    if abs(t - 2.0 * params[P_T1]) <= 1e-12:
-        return -0.5 * params[P_ALPHA_K] * (math.pi / params[P_T1]) ** 2
+    if abs(t - 2.0 * params[0].t1) <= 1e-12:
+        return -0.5 * params[0].alpha_k * (math.pi / params[0].t1) ** 2
     return 0.0
 
 
@@ -177,14 +130,14 @@ def _trap(
         params, corners, normals, mode_shapes, rigid_modal,
         (propagators[k], propagator_g0[k], propagator_g1[k]), h, times[a], states[a],
         resultants[a], belt_wrench[a], modal_forces[a], contacts[a], modal_forces[S_PREV], h_prev,
-        jump, on_belt, settings[G_TOL], resolves_stick(settings, omega.shape[0]),
-        int(settings[G_MAX_ITER]), force, states[b], belt_wrench[b], contacts[b], resultants[b],
+        jump, on_belt, settings[0].tol, resolves_stick(settings, omega.shape[0]),
+        int(settings[0].max_iter), force, states[b], belt_wrench[b], contacts[b], resultants[b],
         modal_forces[b], deflection, deflection_rate, nodes, friction_prev, work,
     )  # fmt: skip
     if status != STEP_REJECTED:
-        accelerations[b, 0] = (resultants[b, 0] + belt_wrench[b, 0]) / params[P_MASS]
-        accelerations[b, 1] = (resultants[b, 1] + belt_wrench[b, 1]) / params[P_MASS]
-        accelerations[b, 2] = (resultants[b, 2] + belt_wrench[b, 2]) / params[P_INERTIA]
+        accelerations[b, 0] = (resultants[b, 0] + belt_wrench[b, 0]) / params[0].mass
+        accelerations[b, 1] = (resultants[b, 1] + belt_wrench[b, 1]) / params[0].mass
+        accelerations[b, 2] = (resultants[b, 2] + belt_wrench[b, 2]) / params[0].inertia
     times[b] = times[a] + h
     return status
 
@@ -195,12 +148,12 @@ def _alpha(
     belt_wrench, contacts, resultants, modal_forces, accelerations, deflection, deflection_rate,
     nodes, friction_prev, h, a, b, on_belt, force,
 ):  # fmt: skip
-    """One generalized-alpha step from state row a into row b (``settings[G_GEN_ALPHA]``; the
+    """One generalized-alpha step from state row a into row b (``settings[0].gen_alpha``; the
     loop calls it where the other schemes call :func:`_trap`)."""
     status = generalized_alpha_step(
         params, corners, normals, mode_shapes, rigid_modal, omega, zeta,
-        settings[G_ALPHA_M : G_GAMMA + 1], h, times[a], states[a], accelerations[a],
-        belt_wrench[a], on_belt, settings[G_TOL], int(settings[G_MAX_ITER]), force, states[b],
+        settings[0].alpha_coefficients, h, times[a], states[a], accelerations[a],
+        belt_wrench[a], on_belt, settings[0].tol, int(settings[0].max_iter), force, states[b],
         accelerations[b], belt_wrench[b], contacts[b], resultants[b], modal_forces[b], deflection,
         deflection_rate, nodes, friction_prev, states[S_ALPHA],
     )  # fmt: skip
@@ -218,9 +171,9 @@ def _accelerations(
     acceleration jump at 2 t1, which the forces at the breakpoint do not contain yet)."""
     m = omega.shape[0]
     y = states[i]
-    accelerations[i, 0] = (resultants[i, 0] + belt_wrench[i, 0]) / params[P_MASS]
-    accelerations[i, 1] = (resultants[i, 1] + belt_wrench[i, 1]) / params[P_MASS]
-    accelerations[i, 2] = (resultants[i, 2] + belt_wrench[i, 2]) / params[P_INERTIA]
+    accelerations[i, 0] = (resultants[i, 0] + belt_wrench[i, 0]) / params[0].mass
+    accelerations[i, 1] = (resultants[i, 1] + belt_wrench[i, 1]) / params[0].mass
+    accelerations[i, 2] = (resultants[i, 2] + belt_wrench[i, 2]) / params[0].inertia
     for j in range(m):
         accelerations[i, 3 + j] = (
             modal_forces[i, j]
@@ -244,8 +197,8 @@ def _locate(
     tip ends one step just before the slide-off (the force there is the peak the step would
     otherwise skip) and the next just past it. The located trial is left in the trial row;
     returns the step taken."""
-    a = counters[I_CUR]
-    trial = counters[I_TRIAL]
+    a = counters[0].cur
+    trial = counters[0].trial
     onset = kind == EVENT_ONSET
     sign0 = g0 > 0.0
     lo = 0.0
@@ -253,7 +206,7 @@ def _locate(
     jump = _jump_at(params, times[a])
     best = 0.0
     have_best = False
-    tol = settings[G_TOL]
+    tol = settings[0].tol
     keep_before = kind == EVENT_SLIDE_OFF and g0 > tol
     cross = kind == EVENT_SLIDE_OFF and not keep_before
     sort = kind == EVENT_SORT
@@ -276,7 +229,7 @@ def _locate(
             h_sec = lo + (g_lo - 0.5 * tol) * (lo - lo_prev) / (g_lo_prev - g_lo)
             if lo < h_sec < hi:
                 h_loc = h_sec
-        if settings[G_GEN_ALPHA] != 0.0:
+        if settings[0].gen_alpha != 0.0:
             st = _alpha(
                 params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings, times,
                 states, belt_wrench, contacts, resultants, modal_forces, accelerations, deflection,
@@ -293,7 +246,7 @@ def _locate(
         if st == STEP_REJECTED:
             break
         if kind == EVENT_SORT:
-            g = settings[G_WIDTH] - states[S_LOC, 1]
+            g = settings[0].width - states[S_LOC, 1]
         else:
             g = event_value(params, contacts[S_LOC], slot, kind)
         if math.isnan(g):
@@ -322,7 +275,7 @@ def _locate(
                     times, states, belt_wrench, contacts, resultants, modal_forces, accelerations,
                     S_BEFORE, S_LOC,
                 )  # fmt: skip
-    counters[I_EVENTS] += 1
+    counters[0].n_events += 1
     if have_before:
         _copy_state(
             times, states, belt_wrench, contacts, resultants, modal_forces, accelerations, trial,
@@ -335,7 +288,7 @@ def _locate(
 @njit(cache=True, _nrt=False)
 def solve(model, state, max_attempts, t_target):
     """Run the solve loop on ``model`` (:data:`LoopModel`) from where ``state``
-    (:data:`LoopState`) left it: until it ends (SOLVE_DONE, the diagnosis in counters[I_DIAG]),
+    (:data:`LoopState`) left it: until it ends (SOLVE_DONE, the diagnosis in counters[0].diag),
     ``max_attempts`` step attempts (SOLVE_PAUSED; 1: at most one accepted step), an output
     buffer (impacts, stages rows; record columns, one row per recorded quantity REC_*) without a
     free entry (SOLVE_GROW) or the accepted time reaching ``t_target`` (SOLVE_REACHED). Row 0 of
@@ -350,20 +303,20 @@ def solve(model, state, max_attempts, t_target):
         accelerations, deflection, deflection_rate, nodes, friction_prev, work, propagator_keys,
         propagators, propagator_g0, propagator_g1, impacts, stages, record,
     ) = state  # fmt: skip
-    adaptive = settings[G_ADAPTIVE] != 0.0
-    h_nom = settings[G_H_NOM]
-    min_dt = settings[G_MIN_DT]
-    width = settings[G_WIDTH]
+    adaptive = settings[0].adaptive != 0.0
+    h_nom = settings[0].h_nom
+    min_dt = settings[0].min_dt
+    width = settings[0].width
     m = omega.shape[0]
     # tolerance proportionality (and on a flexible fence the contact's step and the event
     # restart: the modes' error, which Milne's estimate on the load does not see); below the
     # default rtol a stiff fence's stick is resolved (control.resolves_stick)
-    tol_scale = tolerance_scale(settings[G_RTOL])
+    tol_scale = tolerance_scale(settings[0].rtol)
     friction_events = resolves_stick(settings, m)
-    if counters[I_STARTED] == 0:
+    if counters[0].started == 0:
         # forces at t = 0, belt wrench by Karnopp, consistent accelerations
-        counters[I_STARTED] = 1
-        a = counters[I_CUR]
+        counters[0].started = 1
+        a = counters[0].cur
         # the state rows other than the initial state, and the scratch arrays, start at zero
         # (the caller may pass arrays of an earlier solve: the stepper reuses them)
         times[:] = 0.0
@@ -387,11 +340,11 @@ def solve(model, state, max_attempts, t_target):
             deflection, deflection_rate, nodes,
         )  # fmt: skip
         y, r = states[a], resultants[a]
-        bx, by, bz = karnopp_belt(params, y[3] - params[P_BELT], y[4], y[5], r[0], r[1], r[2])
+        bx, by, bz = karnopp_belt(params, y[3] - params[0].belt, y[4], y[5], r[0], r[1], r[2])
         belt_wrench[a, 0], belt_wrench[a, 1], belt_wrench[a, 2] = bx, by, bz
         if (
-            math.hypot(y[3] - params[P_BELT], y[4]) <= settings[G_VMIN]
-            and abs(y[5]) <= settings[G_PHIDOT_MIN]
+            math.hypot(y[3] - params[0].belt, y[4]) <= settings[0].v_min
+            and abs(y[5]) <= settings[0].phidot_min
         ):
             bx, by, bz = stick_wrench(params, r[0], r[1], r[2])
             belt_wrench[a, 0], belt_wrench[a, 1], belt_wrench[a, 2] = bx, by, bz
@@ -403,40 +356,40 @@ def solve(model, state, max_attempts, t_target):
             params, normals, settings, counters, figures, times, states, belt_wrench, contacts,
             resultants, impacts, stages, record, a, True,
         )  # fmt: skip
-        counters[I_STOP] = 1 if stop else 0
-        counters[I_ON_BELT] = 1 if on_belt else 0
-        figures[F_H] = h_nom if not adaptive else min(h_nom, settings[G_DT])
-        figures[F_H_CAP] = h_nom
-        figures[F_H_PREV] = 0.0
+        counters[0].stop = 1 if stop else 0
+        counters[0].on_belt = 1 if on_belt else 0
+        figures[0].h = h_nom if not adaptive else min(h_nom, settings[0].dt)
+        figures[0].h_cap = h_nom
+        figures[0].h_prev = 0.0
     attempts = 0
     while True:
-        a = counters[I_CUR]
-        b = counters[I_TRIAL]
-        if counters[I_STOP] != 0 or not times[a] < settings[G_T_END] - 1e-12:
-            counters[I_DONE] = 1
+        a = counters[0].cur
+        b = counters[0].trial
+        if counters[0].stop != 0 or not times[a] < settings[0].t_end - 1e-12:
+            counters[0].done = 1
             return SOLVE_DONE
         if times[a] >= t_target - 1e-12:
             return SOLVE_REACHED
         if attempts >= max_attempts:
             return SOLVE_PAUSED
         if (
-            counters[I_N_IMPACTS] >= impacts.shape[0]
-            or counters[I_N_STAGES] >= stages.shape[0]
-            or counters[I_N_REC] >= record.shape[1]
+            counters[0].n_impacts >= impacts.shape[0]
+            or counters[0].n_stages >= stages.shape[0]
+            or counters[0].n_rec >= record.shape[1]
         ):
             return SOLVE_GROW
         attempts += 1
-        on_belt = counters[I_ON_BELT] != 0
-        nb = counters[I_NEXT_BREAK]
+        on_belt = counters[0].on_belt != 0
+        nb = counters[0].next_break
         while breakpoints[nb] <= times[a] + 1e-12:
             nb += 1
-        counters[I_NEXT_BREAK] = nb
+        counters[0].next_break = nb
         to_break = breakpoints[nb] - times[a]
-        h_try = min(figures[F_H], to_break)
+        h_try = min(figures[0].h, to_break)
         if adaptive:
             cap = min(
                 time_to_contact(contacts[a]),
-                oscillation_step(params, contacts[a], settings[G_RTOL]),
+                oscillation_step(params, contacts[a], settings[0].rtol),
             )
             if m > 0:
                 cap = min(cap, flexible_contact_step(contacts[a], h_nom, tol_scale))
@@ -445,8 +398,8 @@ def solve(model, state, max_attempts, t_target):
         else:
             tiny = h_try <= 1e-3 * h_nom
         # the modes' force is quadratic through the previous point (adaptive)
-        h_hist = figures[F_H_PREV] if adaptive else 0.0
-        if settings[G_GEN_ALPHA] != 0.0:
+        h_hist = figures[0].h_prev if adaptive else 0.0
+        if settings[0].gen_alpha != 0.0:
             status = _alpha(
                 params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings, times,
                 states, belt_wrench, contacts, resultants, modal_forces, accelerations, deflection,
@@ -461,18 +414,18 @@ def solve(model, state, max_attempts, t_target):
                 _jump_at(params, times[a]), on_belt, tiny,
             )  # fmt: skip
         if status == STEP_REJECTED:
-            counters[I_REJECTED] += 1
-            figures[F_H] = h_try / 2.0
-            figures[F_H_CAP] = h_try * settings[G_DOWN]
-            counters[I_CLEAN] = 0
-            if figures[F_H] < min_dt:
-                counters[I_DIAG] = DIAG_MIN_DT
-                figures[F_DIAG_T] = times[a]
-                counters[I_DONE] = 1
+            counters[0].n_rejected += 1
+            figures[0].h = h_try / 2.0
+            figures[0].h_cap = h_try * settings[0].down
+            counters[0].clean = 0
+            if figures[0].h < min_dt:
+                counters[0].diag = DIAG_MIN_DT
+                figures[0].diag_t = times[a]
+                counters[0].done = 1
                 return SOLVE_DONE
             continue
         if status == STEP_FORCED:
-            counters[I_FORCED] += 1
+            counters[0].n_forced += 1
         h_taken = h_try
         slot, kind, g0, g1 = first_event(params, contacts[a], contacts[b], friction_events)
         if slot < 0 and on_belt and states[a, 1] < width <= states[b, 1]:
@@ -488,24 +441,24 @@ def solve(model, state, max_attempts, t_target):
             )  # fmt: skip
             located = True
         if adaptive:
-            h_prev = figures[F_H_PREV]
+            h_prev = figures[0].h_prev
             r = h_taken / h_prev if h_prev > 0.0 else 0.0
             err = milne_error(
-                states[a], accelerations[a], states[b], figures[F_PREV_V : F_PREV_V + 3],
-                figures[F_PREV_A : F_PREV_A + 3], r, h_taken, tol_scale * settings[G_ATOL],
-                tol_scale * settings[G_RTOL], settings[G_V_REF], settings[G_OM_REF],
+                states[a], accelerations[a], states[b], figures[0].prev_v,
+                figures[0].prev_a, r, h_taken, tol_scale * settings[0].atol,
+                tol_scale * settings[0].rtol, settings[0].v_ref, settings[0].om_ref,
             )  # fmt: skip
             order = 3.0 if r > 0.0 else 2.0
             if err > 1.0 and h_taken > 4.0 * min_dt:
-                counters[I_REJECTED] += 1
-                figures[F_H] = _snap(h_nom, h_taken * max(0.2, 0.9 * err ** (-1.0 / order)))
+                counters[0].n_rejected += 1
+                figures[0].h = _snap(h_nom, h_taken * max(0.2, 0.9 * err ** (-1.0 / order)))
                 continue
             if not located:
-                counters[I_CLEAN] += 1
-                if counters[I_CLEAN] >= 4 and figures[F_H_CAP] < h_nom:
-                    figures[F_H_CAP] = figures[F_H_CAP] * settings[G_UP]
-                    counters[I_CLEAN] = 0
-                cap = min(h_nom, figures[F_H_CAP])
+                counters[0].clean += 1
+                if counters[0].clean >= 4 and figures[0].h_cap < h_nom:
+                    figures[0].h_cap = figures[0].h_cap * settings[0].up
+                    counters[0].clean = 0
+                cap = min(h_nom, figures[0].h_cap)
                 # h_taken grow >= cap when err <= (0.9 h_taken / cap)^order (and cap <= 4
                 # h_taken); with a 1 % margin for pow's rounding that decides without the pow
                 # call (most steps: at the cap with a small error); the same step otherwise
@@ -516,48 +469,48 @@ def solve(model, state, max_attempts, t_target):
                 else:
                     grow = min(4.0, 0.9 * max(err, 1e-12) ** (-1.0 / order))
                     h_next = min(cap, h_taken * grow)
-                figures[F_H] = _snap(h_nom, h_next)
+                figures[0].h = _snap(h_nom, h_next)
             elif m > 0:
                 # the error history restarts at an event and the next step's estimate (order
                 # 2, the load's) is blind to a contact force rising from zero as t^2 while the
                 # fence's fast modes take its rate: restart no longer than the step that met
                 # the event (at an onset the approach's time_to_contact) times tol_scale
-                figures[F_H] = _snap(h_nom, h_try * tol_scale)
+                figures[0].h = _snap(h_nom, h_try * tol_scale)
         else:
             # a fixed step regrows from a rejection's halving, not from a step the drive's
             # breakpoint cut short: after the breakpoint the grid goes on at h_nom from it, so
             # the solution is continuous in the parameters that move the grid's phase (event
             # times) as the cut step shrinks to zero, without a run of doubling steps that
             # appears or vanishes with it
-            figures[F_H] = min(h_nom, 2.0 * figures[F_H])
+            figures[0].h = min(h_nom, 2.0 * figures[0].h)
         # accept
         for k in range(3):
-            figures[F_PREV_V + k] = states[a, 3 + k]
-            figures[F_PREV_A + k] = accelerations[a, k]
+            figures[0].prev_v[k] = states[a, 3 + k]
+            figures[0].prev_a[k] = accelerations[a, k]
         for j in range(m):
             modal_forces[S_PREV, j] = modal_forces[a, j]
-        figures[F_H_PREV] = h_taken
+        figures[0].h_prev = h_taken
         if located or abs(times[a] + h_taken - breakpoints[nb]) <= 1e-12:
-            figures[F_H_PREV] = 0.0
-            if settings[G_GEN_ALPHA] != 0.0:
+            figures[0].h_prev = 0.0
+            if settings[0].gen_alpha != 0.0:
                 # restart from consistent accelerations after an event or a drive breakpoint
                 jump = _jump_at(params, times[b])
                 _accelerations(
                     params, rigid_modal, omega, zeta, states, belt_wrench, resultants,
                     modal_forces, accelerations, b, jump,
                 )  # fmt: skip
-        counters[I_CUR] = b
-        counters[I_TRIAL] = a
+        counters[0].cur = b
+        counters[0].trial = a
         a = b
-        counters[I_STEPS] += 1
+        counters[0].n_steps += 1
         stop, on_belt = observe(
             params, normals, settings, counters, figures, times, states, belt_wrench, contacts,
             resultants, impacts, stages, record, a, on_belt,
         )  # fmt: skip
-        counters[I_STOP] = 1 if stop else 0
-        counters[I_ON_BELT] = 1 if on_belt else 0
+        counters[0].stop = 1 if stop else 0
+        counters[0].on_belt = 1 if on_belt else 0
         diag = diverged(params, settings, figures, times[a], states[a], resultants[a])
         if diag != DIAG_NONE:
-            counters[I_DIAG] = diag
-            counters[I_DONE] = 1
+            counters[0].diag = diag
+            counters[0].done = 1
             return SOLVE_DONE

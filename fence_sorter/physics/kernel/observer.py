@@ -32,59 +32,7 @@ from .layout import (
     DIAG_NONE,
     DIAG_NONFINITE,
     DIAG_SPEED,
-    F_DIAG_T,
-    F_DIAG_V,
-    F_E0,
-    F_EXIT_SPEED,
-    F_FLOW,
-    F_IMPACT_SPEED,
-    F_LAST_N1,
-    F_LAST_N2,
-    F_LAST_T1,
-    F_LAST_T2,
-    F_MAX_DEPTH,
-    F_MAX_RES,
-    F_MAX_RISE,
-    F_MIN_RES,
-    F_PEAK_N,
-    F_PEAK_TIP,
-    F_PREV_POWER,
-    F_PREV_T,
-    F_PREV_Y,
-    F_RUN_MIN,
-    F_T_MAX,
-    F_T_MIN,
-    F_T_RISE0,
-    F_T_RISE1,
-    F_T_RUN_MIN,
-    F_WORK,
-    F_Y_MAX,
-    G_BP,
-    G_DEEP,
-    G_FLUSH,
-    G_KP,
-    G_RECORD,
-    G_SPEED_LIMIT,
-    G_STOP_SORTED,
-    G_WIDTH,
-    I_FIRST,
-    I_HAD_FENCE,
-    I_LAST_MASK0,
-    I_LAST_MASK1,
-    I_MASK,
-    I_N_IMPACTS,
-    I_N_REC,
-    I_N_STAGES,
-    I_SORTED,
-    I_STAGE,
-    I_TOUCHED,
     N_SLOTS,
-    P_BELT,
-    P_EXT_M,
-    P_EXT_X,
-    P_EXT_Y,
-    P_INERTIA,
-    P_MASS,
     R_ACTIVE_MASK,
     R_ALPHA,
     R_ENERGY_CONTACT,
@@ -193,24 +141,24 @@ def parabola_peak(t0, n0, t1, n1, t2, n2):
 def _audit(figures, t, r):
     """Update the energy audit (``result.EnergyAudit``) with the balance r at t."""
     if not math.isfinite(r):
-        figures[F_MAX_RES] = r
-        figures[F_MIN_RES] = r
+        figures[0].max_res = r
+        figures[0].min_res = r
         return
-    if not math.isfinite(figures[F_MAX_RES]):
+    if not math.isfinite(figures[0].max_res):
         return
-    if r > figures[F_MAX_RES]:
-        figures[F_MAX_RES] = r
-        figures[F_T_MAX] = t
-    if r < figures[F_MIN_RES]:
-        figures[F_MIN_RES] = r
-        figures[F_T_MIN] = t
-    if r < figures[F_RUN_MIN]:
-        figures[F_RUN_MIN] = r
-        figures[F_T_RUN_MIN] = t
-    if r - figures[F_RUN_MIN] > figures[F_MAX_RISE]:
-        figures[F_MAX_RISE] = r - figures[F_RUN_MIN]
-        figures[F_T_RISE0] = figures[F_T_RUN_MIN]
-        figures[F_T_RISE1] = t
+    if r > figures[0].max_res:
+        figures[0].max_res = r
+        figures[0].t_max = t
+    if r < figures[0].min_res:
+        figures[0].min_res = r
+        figures[0].t_min = t
+    if r < figures[0].run_min:
+        figures[0].run_min = r
+        figures[0].t_run_min = t
+    if r - figures[0].run_min > figures[0].max_rise:
+        figures[0].max_rise = r - figures[0].run_min
+        figures[0].t_rise0 = figures[0].t_run_min
+        figures[0].t_rise1 = t
 
 
 @njit(cache=True, _nrt=False)
@@ -227,33 +175,33 @@ def observe(
     y = states[i]
     res = resultants[i]
     out = contacts[i]
-    mass = params[P_MASS]
+    mass = params[0].mass
     vx, vy, om = y[3], y[4], y[5]
-    energy = 0.5 * mass * (vx * vx + vy * vy) + 0.5 * params[P_INERTIA] * om * om
+    energy = 0.5 * mass * (vx * vx + vy * vy) + 0.5 * params[0].inertia * om * om
     energy += res[R_ENERGY_CONTACT]
-    power = res[R_POWER_FENCE] + params[P_EXT_X] * vx + params[P_EXT_Y] * vy + params[P_EXT_M] * om
+    power = res[R_POWER_FENCE] + params[0].ext_x * vx + params[0].ext_y * vy + params[0].ext_m * om
     if on_belt:
-        power += belt_wrench[i, 0] * params[P_BELT]
-    width = settings[G_WIDTH]
-    if counters[I_FIRST] != 0:
-        counters[I_FIRST] = 0
-        figures[F_E0] = energy
-        figures[F_FLOW] = abs(energy)
-        figures[F_Y_MAX] = y[1]
+        power += belt_wrench[i, 0] * params[0].belt
+    width = settings[0].width
+    if counters[0].first != 0:
+        counters[0].first = 0
+        figures[0].e0 = energy
+        figures[0].flow = abs(energy)
+        figures[0].y_max = y[1]
     else:
-        h = t - figures[F_PREV_T]
-        figures[F_WORK] += 0.5 * h * (power + figures[F_PREV_POWER])
-        figures[F_FLOW] += 0.5 * h * (abs(power) + abs(figures[F_PREV_POWER]))
-        _audit(figures, t, energy - figures[F_E0] - figures[F_WORK])
-        py1 = figures[F_PREV_Y + 1]
-        if y[1] >= width > py1 and counters[I_SORTED] == 0:
+        h = t - figures[0].prev_t
+        figures[0].work += 0.5 * h * (power + figures[0].prev_power)
+        figures[0].flow += 0.5 * h * (abs(power) + abs(figures[0].prev_power))
+        _audit(figures, t, energy - figures[0].e0 - figures[0].work)
+        py1 = figures[0].prev_y[1]
+        if y[1] >= width > py1 and counters[0].sorted == 0:
             frac = (width - py1) / (y[1] - py1)
-            figures[F_EXIT_SPEED] = figures[F_PREV_Y + 4] + frac * (vy - figures[F_PREV_Y + 4])
-            counters[I_SORTED] = 1
+            figures[0].exit_speed = figures[0].prev_y[4] + frac * (vy - figures[0].prev_y[4])
+            counters[0].sorted = 1
     mask = int(res[R_ACTIVE_MASK])
     fence_on = (mask & 0xFF) != 0
-    if fence_on and counters[I_HAD_FENCE] == 0:
-        counters[I_TOUCHED] = 1
+    if fence_on and counters[0].had_fence == 0:
+        counters[0].touched = 1
         w_n = -math.inf
         for k in range(SLOT_BORDER):
             if out[k, C_ACTIVE] != 0.0:
@@ -262,50 +210,50 @@ def observe(
                     w_n = math.nan
                 elif v > w_n:
                     w_n = v
-        if math.isnan(figures[F_IMPACT_SPEED]):
-            figures[F_IMPACT_SPEED] = w_n
-        peak = n_stiff(mass, w_n, settings[G_BP], settings[G_KP])
-        n_imp = counters[I_N_IMPACTS]
+        if math.isnan(figures[0].impact_speed):
+            figures[0].impact_speed = w_n
+        peak = n_stiff(mass, w_n, settings[0].b_p, settings[0].k_p)
+        n_imp = counters[0].n_impacts
         impacts[n_imp, 0] = t
         impacts[n_imp, 1] = w_n
         impacts[n_imp, 2] = peak
-        counters[I_N_IMPACTS] = n_imp + 1
-    counters[I_HAD_FENCE] = 1 if fence_on else 0
+        counters[0].n_impacts = n_imp + 1
+    counters[0].had_fence = 1 if fence_on else 0
     n = res[R_FENCE_N]
-    if n > figures[F_PEAK_N]:
-        figures[F_PEAK_N] = n
-    n1, n2 = figures[F_LAST_N1], figures[F_LAST_N2]
-    smooth = counters[I_LAST_MASK0] == counters[I_LAST_MASK1] and counters[I_LAST_MASK1] == mask
-    counters[I_LAST_MASK0] = counters[I_LAST_MASK1]
-    counters[I_LAST_MASK1] = mask
+    if n > figures[0].peak_n:
+        figures[0].peak_n = n
+    n1, n2 = figures[0].last_n1, figures[0].last_n2
+    smooth = counters[0].last_mask0 == counters[0].last_mask1 and counters[0].last_mask1 == mask
+    counters[0].last_mask0 = counters[0].last_mask1
+    counters[0].last_mask1 = mask
     if smooth and n2 > n1 and n2 >= n and n1 > 0.0:
-        peak = parabola_peak(figures[F_LAST_T1], n1, figures[F_LAST_T2], n2, t, n)
-        if peak > figures[F_PEAK_N]:
-            figures[F_PEAK_N] = peak
-    figures[F_LAST_N1], figures[F_LAST_N2] = n2, n
-    figures[F_LAST_T1], figures[F_LAST_T2] = figures[F_LAST_T2], t
+        peak = parabola_peak(figures[0].last_t1, n1, figures[0].last_t2, n2, t, n)
+        if peak > figures[0].peak_n:
+            figures[0].peak_n = peak
+    figures[0].last_n1, figures[0].last_n2 = n2, n
+    figures[0].last_t1, figures[0].last_t2 = figures[0].last_t2, t
     tip = abs(res[R_TIP_W])
-    if tip > figures[F_PEAK_TIP]:
-        figures[F_PEAK_TIP] = tip
-    if res[R_MAX_D] > figures[F_MAX_DEPTH]:
-        figures[F_MAX_DEPTH] = res[R_MAX_D]
-    if y[1] > figures[F_Y_MAX]:
-        figures[F_Y_MAX] = y[1]
-    sorted_ = counters[I_SORTED] != 0
-    if mask != counters[I_MASK] or (sorted_ and counters[I_STAGE] != STAGE_CODE_SORTED):
-        counters[I_MASK] = mask
+    if tip > figures[0].peak_tip:
+        figures[0].peak_tip = tip
+    if res[R_MAX_D] > figures[0].max_depth:
+        figures[0].max_depth = res[R_MAX_D]
+    if y[1] > figures[0].y_max:
+        figures[0].y_max = y[1]
+    sorted_ = counters[0].sorted != 0
+    if mask != counters[0].mask or (sorted_ and counters[0].stage != STAGE_CODE_SORTED):
+        counters[0].mask = mask
         if sorted_:
             stage = STAGE_CODE_SORTED
         else:
-            stage = classify_code(out, normals, y[2], counters[I_TOUCHED] != 0, settings[G_FLUSH])
-        if stage != counters[I_STAGE]:
-            counters[I_STAGE] = stage
-            n_stg = counters[I_N_STAGES]
+            stage = classify_code(out, normals, y[2], counters[0].touched != 0, settings[0].flush)
+        if stage != counters[0].stage:
+            counters[0].stage = stage
+            n_stg = counters[0].n_stages
             stages[n_stg, 0] = t
             stages[n_stg, 1] = stage
-            counters[I_N_STAGES] = n_stg + 1
-    if settings[G_RECORD] != 0.0:
-        n_rec = counters[I_N_REC]
+            counters[0].n_stages = n_stg + 1
+    if settings[0].record != 0.0:
+        n_rec = counters[0].n_rec
         record[REC_T, n_rec] = t
         record[REC_T_FENCE, n_rec] = t
         record[REC_T_FORCES, n_rec] = t
@@ -316,13 +264,13 @@ def observe(
         record[REC_TIP_W, n_rec] = res[R_TIP_W]
         record[REC_FENCE_N, n_rec] = res[R_FENCE_N]
         record[REC_MAX_D, n_rec] = res[R_MAX_D]
-        record[REC_STAGE, n_rec] = counters[I_STAGE]
-        counters[I_N_REC] = n_rec + 1
-    figures[F_PREV_T] = t
+        record[REC_STAGE, n_rec] = counters[0].stage
+        counters[0].n_rec = n_rec + 1
+    figures[0].prev_t = t
     for k in range(6):
-        figures[F_PREV_Y + k] = y[k]
-    figures[F_PREV_POWER] = power
-    return sorted_ and settings[G_STOP_SORTED] != 0.0, on_belt and not sorted_
+        figures[0].prev_y[k] = y[k]
+    figures[0].prev_power = power
+    return sorted_ and settings[0].stop_sorted != 0.0, on_belt and not sorted_
 
 
 @njit(cache=True, _nrt=False)
@@ -332,14 +280,14 @@ def diverged(params, settings, figures, t, y, res):
     total = 0.0
     for k in range(y.shape[0]):
         total += y[k]
-    figures[F_DIAG_T] = t
+    figures[0].diag_t = t
     if not math.isfinite(total):
         return DIAG_NONFINITE
-    if res[R_MAX_D] > settings[G_DEEP]:
-        figures[F_DIAG_V] = res[R_MAX_D]
+    if res[R_MAX_D] > settings[0].deep:
+        figures[0].diag_v = res[R_MAX_D]
         return DIAG_DEEP
     speed = math.hypot(y[3], y[4])
-    if speed > settings[G_SPEED_LIMIT]:
-        figures[F_DIAG_V] = speed
+    if speed > settings[0].speed_limit:
+        figures[0].diag_v = speed
         return DIAG_SPEED
     return DIAG_NONE

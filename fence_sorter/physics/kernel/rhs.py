@@ -8,7 +8,7 @@ import math
 from numba import njit
 
 from .forces import evaluate, karnopp_belt
-from .layout import N_SLOTS, P_BELT, P_INERTIA, P_MASS, R_FX, R_FY, R_MZ
+from .layout import N_SLOTS, R_FX, R_FY, R_MZ
 
 
 # -- right-hand side for ODE solvers (scipy.integrate baselines) --------------------------------
@@ -63,15 +63,15 @@ def rhs(
     )
     fx, fy, mz = res[R_FX], res[R_FY], res[R_MZ]
     if on_belt:
-        bx, by, bz = karnopp_belt(P, y[3] - P[P_BELT], y[4], y[5], fx, fy, mz)
+        bx, by, bz = karnopp_belt(P, y[3] - P[0].belt, y[4], y[5], fx, fy, mz)
         fx += bx
         fy += by
         mz += bz
         lam[0], lam[1], lam[2] = bx, by, bz
     dy[0], dy[1], dy[2] = y[3], y[4], y[5]
-    dy[3] = fx / P[P_MASS]
-    dy[4] = fy / P[P_MASS]
-    dy[5] = mz / P[P_INERTIA]
+    dy[3] = fx / P[0].mass
+    dy[4] = fy / P[0].mass
+    dy[5] = mz / P[0].inertia
     for j in range(m):
         e, ed = y[6 + j], y[6 + m + j]
         dy[6 + j] = ed

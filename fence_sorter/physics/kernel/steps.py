@@ -33,15 +33,6 @@ from .layout import (
     C_VSX,
     C_VSY,
     N_SLOTS,
-    P_BEFF,
-    P_BELT,
-    P_FLEX,
-    P_FMAX,
-    P_INERTIA,
-    P_KP,
-    P_MASS,
-    P_MU2,
-    P_TMAX,
     R_ACTIVE_MASK,
     R_ALPHA,
     R_FX,
@@ -107,9 +98,9 @@ def _newton_load(P, out, y1, g_new, hh, im0, im2, rate, sigma, u0, u1, u2):
     identity off the belt. This is the exact Jacobian of G (to the finite-difference check's
     1e-9), so the iteration converges quadratically.
     """
-    b = P[P_BEFF]
-    kp = P[P_KP]
-    mu2 = P[P_MU2]
+    b = P[0].b_eff
+    kp = P[0].k_p
+    mu2 = P[0].mu2
     x, y, vx, vy, om = y1[0], y1[1], y1[3], y1[4], y1[5]
     m00 = m11 = m22 = 0.0
     m01 = m02 = m10 = m12 = m20 = m21 = 0.0
@@ -176,8 +167,8 @@ def _newton_load(P, out, y1, g_new, hh, im0, im2, rate, sigma, u0, u1, u2):
         return False
     if sigma > 0.0:
         # slipping on the belt: M <- DPhi M (M here is the contact part, I + M the matrix)
-        fm2 = P[P_FMAX] * P[P_FMAX]
-        tm2 = P[P_TMAX] * P[P_TMAX]
+        fm2 = P[0].f_max * P[0].f_max
+        tm2 = P[0].t_max * P[0].t_max
         c0, c1, c2 = hh * im0 * fm2, hh * im0 * fm2, hh * im2 * tm2
         i0, i1, i2 = 1.0 / (sigma + c0), 1.0 / (sigma + c1), 1.0 / (sigma + c2)
         s3 = fm2 * (u0 * u0 * i0 * i0 * i0 + u1 * u1 * i1 * i1 * i1) + tm2 * u2 * u2 * i2**3
@@ -276,9 +267,9 @@ def trapezoidal_step(
     a_mat, g0, g1 = props
     m = modal0.shape[0]
     t1 = t + h
-    im0 = 1.0 / P[P_MASS]
-    im2 = 1.0 / P[P_INERTIA]
-    belt = P[P_BELT]
+    im0 = 1.0 / P[0].mass
+    im2 = 1.0 / P[0].inertia
+    belt = P[0].belt
     hh = 0.5 * h
     fs0, fs1, fs2 = f0[0] + lam0[0], f0[1] + lam0[1], f0[2] + lam0[2]
     vn0 = y0[3] + h * fs0 * im0
@@ -495,7 +486,7 @@ def _unring_stick(P, phi, out0, out, res, modal, x, y, h, h_prev, extrapolate):
     estimated from the step means (impulse / h, free of the ring): the mean itself, or with
     ``extrapolate`` and a previous step of h_prev > 0 that stuck at both ends too, the line
     through the two means at the step end (second order; the mean lags by h / 2)."""
-    mu2 = P[P_MU2]
+    mu2 = P[0].mu2
     for k in range(N_SLOTS):
         if out[k, C_ACTIVE] == 0.0 or out0[k, C_ACTIVE] == 0.0:
             continue
@@ -523,7 +514,7 @@ def shift_friction(P, phi, out, res, modal, x, y, k, d):
     res[R_MZ] += (out[k, C_PX] - x) * dfy - (out[k, C_PY] - y) * dfx
     if k < SLOT_BORDER:
         res[R_POWER_FENCE] += dfx * out[k, C_VSX] + dfy * out[k, C_VSY]
-        if P[P_FLEX] != 0.0:
+        if P[0].flexible != 0.0:
             _modal_share(P, phi, out[k, C_S], res[R_ALPHA], -dfx, -dfy, modal)
     out[k, C_FT] += d
 
@@ -573,9 +564,9 @@ def generalized_alpha_step(
     nd = 3 + m  # second-order DOFs: x, y, phi, eta
     t_a = t + (1.0 - af) * h
     im = np.empty(3)
-    im[0] = im[1] = 1.0 / P[P_MASS]
-    im[2] = 1.0 / P[P_INERTIA]
-    belt = P[P_BELT]
+    im[0] = im[1] = 1.0 / P[0].mass
+    im[2] = 1.0 / P[0].inertia
+    belt = P[0].belt
     # predictor: a_{n+1} = a_n
     for i in range(nd):
         acc1[i] = acc0[i]
