@@ -3,7 +3,7 @@
 For each induction rate (default 2000 to 12000 pcs/h) one ROS-free run of the line
 (:mod:`fence_sorter.line.plant`, guard on) to the drain: throughput in and out, sort rate,
 recirculation share, rejects, intrusions and conservation, with each unit's capacity bound
-W_t (1)-(2) of the stroke its planner chose most often beside them. Prints a Markdown table and
+W_t (1)-(2) of its median stroke beside them. Prints a Markdown table and
 writes it with the command and commit to ``--out`` (docs/line-bench.md by default).
 """
 
@@ -101,8 +101,8 @@ def run(args: argparse.Namespace) -> int:
         "Each row: one stream of the given rate (the stream cannot go below its min_gap, so\n"
         "`in` may stay below the rate set) run to the drain with the guard on. `out`: sorted\n"
         "parcels per hour of induction; recirculated: share of parcels that went round the\n"
-        "loop at least once; W_t: each unit's capacity (1)-(2) for the stroke its planner\n"
-        "chose most often and the median parcel length (`-`: no stroke).\n\n"
+        "loop at least once; W_t: each unit's capacity (1)-(2) for its median stroke (by\n"
+        "scraping time t_z) and the median parcel length (`-`: no stroke).\n\n"
         + "\n".join(rows)
         + "\n"
     )

@@ -108,6 +108,7 @@ class _Unit:
     failed: int = 0
     intrusions: int = 0
     busy: float = 0.0  # sum of the strokes' cycles 2 t1 [s]
+    strokes: list[tuple[float, float]] = field(default_factory=list)  # (R_s, t1) made
     peak_force: float = 0.0
     peak_force_stiff: float = 0.0
     max_impact_speed: float = 0.0
@@ -419,6 +420,7 @@ class LinePlant:
                     u.intrusions += 1
                 elif isinstance(ev, StrokeStarted):
                     u.busy += 2.0 * ev.t1
+                    u.strokes.append((ev.r_s, ev.t1))
         self.t = t_next
         self.bookings = [b for b in self.bookings if b.t_end > self.t or b.parcel_id in
                          {p.pid for p in self.parcels if p.stroke_unit is not None}]  # fmt: skip
@@ -513,13 +515,13 @@ class LinePlant:
         }
 
     def unit_capacity(self, u: _Unit) -> float:
-        """W_t (1) of the unit's most common stroke: 3600 v / Delta_c (2) [pcs/h]; NaN if
-        it chose none yet."""
-        chosen = list(u.planner.chosen.values())
-        if not chosen:
+        """W_t (1) with Delta_c (2) of the unit's median stroke (by scraping time t_z) and the
+        stream's median parcel length [pcs/h]; NaN before its first stroke."""
+        if not u.strokes:
             return math.nan
-        r_s, t1 = max(set(chosen), key=chosen.count)
-        a = float(np.median([p.spec.length_a for p in self.parcels])) if self.parcels else 0.4
+        tz = sorted(u.strokes, key=lambda st: 2.0 * st[1] + abs(st[0]) / self.v)
+        r_s, t1 = tz[len(tz) // 2]
+        a = float(np.median([p.spec.length_a for p in self.parcels]))
         return stroke_capacity(self.v, t1, r_s, a, self.spec.planner.pitch_gap)
 
 

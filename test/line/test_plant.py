@@ -86,3 +86,32 @@ def test_all_no_reads_go_round_then_to_the_reject_chute():
         assert set(u["declined"]) == set(REASONS)
     # a returning parcel waits the loop's transit time at least: the run lasts that long
     assert s["sim_time_s"] > (line.max_passes - 1) * line.transit_time
+
+
+@pytest.mark.slow
+def test_four_units_at_6000_per_hour():
+    """The shipped four-unit line at 6000 pcs/h (a short run): conservation exact, no wrong
+    destination, no parcel in a swept sector, every hand-off received by its unit, none after
+    the parcel reached the unit's fence."""
+    plant, s = run(load_line("four_units"), parcels=30, rate_pcs_h=6000.0, seed=11)
+    assert s["drained"] and s["conservation_ok"]
+    assert s["sorted_wrong_destination"] == 0
+    assert s["swept_sector_intrusions"] == 0
+    units = s["units"].values()
+    assert sum(u["handoffs_in"] for u in units) == s["handoffs"]
+    assert all(u["late_handoffs_past_axis"] == 0 for u in units)
+    # every parcel met every unit on each of its passes up to where it was sorted
+    assert s["handoffs"] >= s["inductions"]
+
+
+@pytest.mark.slow
+def test_cli_json(capsys):
+    import json
+
+    from fence_sorter.cli.main import main
+
+    code = main(["line-sim", "two_units", "--parcels", "8", "--rate", "1500", "--json"])
+    s = json.loads(capsys.readouterr().out)
+    assert code == 0
+    assert s["parcels_inducted"] == 8 and s["conservation_ok"] and s["drained"]
+    assert set(s["units"]) == {"unit_1", "unit_2"}
