@@ -143,6 +143,7 @@ class LinePlant:
         for s in specs:
             d = dests[int(self.rng.choice(len(dests), p=shares / shares.sum()))]
             self.parcels.append(_LP(s.parcel_id, s, d, s.arrival_time))
+        self.live: list[_LP] = []  # announced and not yet ended (sorted, rejected, failed)
         self.by_local: dict[int, _LP] = {}
         self.units = [self._make_unit(i, u) for i, u in enumerate(line.units)]
         self.bookings: list[Booking] = []
@@ -189,7 +190,7 @@ class LinePlant:
         return min(c[0] for c in tr.corners(t))
 
     def _live_tracks(self) -> list[Track]:
-        return [p.track for p in self.parcels if p.state in ("scheduled", "belt") and p.track]
+        return [p.track for p in self.live if p.state in ("scheduled", "belt") and p.track]
 
     # -- induction -------------------------------------------------------------------------
     def _induct(self, p: _LP, t: float) -> None:
@@ -206,13 +207,14 @@ class LinePlant:
             and self.parcels[self._next_new].arrival <= self.t + self.horizon
         ):
             p = self.parcels[self._next_new]
+            self.live.append(p)
             self._induct(p, p.arrival)
             self._next_new += 1
 
     def _merge(self) -> None:
         """Returning parcels whose loop transit is over merge into a gap at X = 0."""
         waiting = sorted(
-            (p for p in self.parcels if p.state == "loop" and p.return_time <= self.t),
+            (p for p in self.live if p.state == "loop" and p.return_time <= self.t),
             key=lambda p: p.return_time,
         )
         for p in waiting:
@@ -331,7 +333,7 @@ class LinePlant:
             self.bookings = [b for b in self.bookings if b.parcel_id != p.pid]
 
     def _hand_offs(self) -> None:
-        for p in self.parcels:
+        for p in self.live:
             if (
                 p.state == "scheduled"
                 and p.track.t_ref <= self.t
@@ -389,7 +391,7 @@ class LinePlant:
             u.max_accel = max(u.max_accel, ev.peak_normal_accel)
 
     def _leave_belt(self) -> None:
-        for p in self.parcels:
+        for p in self.live:
             if p.state != "belt" or p.stroke_unit is not None:
                 continue
             if self._rear(p.track, self.t) < self.spec.length:
@@ -405,7 +407,7 @@ class LinePlant:
 
     # -- clock -----------------------------------------------------------------------------
     def active(self) -> bool:
-        return any(p.state in ("new", "scheduled", "belt", "loop") for p in self.parcels)
+        return self._next_new < len(self.parcels) or bool(self.live)
 
     def step(self) -> None:
         self._announce()
@@ -422,9 +424,10 @@ class LinePlant:
                     u.busy += 2.0 * ev.t1
                     u.strokes.append((ev.r_s, ev.t1))
         self.t = t_next
-        self.bookings = [b for b in self.bookings if b.t_end > self.t or b.parcel_id in
-                         {p.pid for p in self.parcels if p.stroke_unit is not None}]  # fmt: skip
         self._leave_belt()
+        self.live = [p for p in self.live if p.state not in ("sorted", "rejected", "failed")]
+        running = {p.pid for p in self.live if p.stroke_unit is not None}
+        self.bookings = [b for b in self.bookings if b.t_end > self.t or b.parcel_id in running]
 
     def run(self) -> dict:
         wall0 = time.perf_counter()
