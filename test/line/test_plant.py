@@ -6,6 +6,7 @@ serving B and C; 2 passes, then the reject chute), the default stream.
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import pytest
@@ -115,3 +116,32 @@ def test_cli_json(capsys):
     assert code == 0
     assert s["parcels_inducted"] == 8 and s["conservation_ok"] and s["drained"]
     assert set(s["units"]) == {"unit_1", "unit_2"}
+
+
+@pytest.mark.parametrize("unit", [0, 1])
+@pytest.mark.parametrize("yaw", [0.3, -1.4, 2.0])
+def test_a_unit_sees_the_parcel_where_the_line_has_it(unit, yaw):
+    """The hand-off pose: the unit's ParcelSpec (front, lateral gap, yaw, C_s offsets in its
+    frame, mirrored on the left) rebuilds the parcel's footprint exactly where the line frame
+    has it, for a turned parcel (yaw beyond +-90 deg folds back with its C_s offsets)."""
+    from fence_sorter.line.routing import to_line
+    from fence_sorter.physics.params import ConveyorParams
+    from fence_sorter.physics.parcel import initial_pose, parcel_body, world_corners
+
+    plant = LinePlant(LINE, LineRunConfig(parcels=2, seed=1))
+    p = plant.parcels[0]
+    p.spec = replace(p.spec, cog_offset_x=0.04, cog_offset_y=-0.03)
+    tr = plant._track_at_induction(p, 0.0)
+    p.track = replace(tr, x=7.3, y=0.33, yaw=yaw, cog_x=0.04, cog_y=-0.03)
+    u = LINE.units[unit]
+    spec = plant._local_spec(p, u, 0.5, divert=False)
+    body = parcel_body(spec.to_parcel_params(), ConveyorParams())
+    x, y, phi = initial_pose(body, spec.scan_position_x, spec.lateral_gap, spec.yaw)
+    got = sorted(
+        to_line(u.position, u.mirrored, LINE.width, cx, cy, 0.0)[:2]
+        for cx, cy in world_corners(body, x, y, phi)
+    )
+    want = sorted(p.track.corners(0.5))
+    flat = [c for pt in got for c in pt]
+    assert flat == pytest.approx([c for pt in want for c in pt], abs=1e-9)
+    assert abs(spec.yaw) <= 0.5 * math.pi
