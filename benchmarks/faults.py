@@ -45,6 +45,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from benchmarks import insiders
+from benchmarks.runs import finish, last_json
 from fence_sorter.resources import data_path
 from fence_sorter.runner.monitor import Monitor
 from fence_sorter.runner.processes import (
@@ -375,24 +376,14 @@ def flood_trial(topic: str, workdir: Path, rate: float, seconds: float) -> Flood
         except (IndexError, ValueError, KeyError):
             sent = -1
             (workdir / "flood-error.log").write_text(flood.stdout + flood.stderr)
-    try:
-        out, _ = proc.communicate(timeout=600.0)
-    except subprocess.TimeoutExpired:
-        os.killpg(proc.pid, signal.SIGKILL)
-        out, _ = proc.communicate()
+    out = finish(proc)
     time.sleep(1.0)
     watch.poll()
     watch.done.set()
     left = watch.alive()
     watch.kill_alive()
     err.close()
-    summary = {}
-    for line in reversed(out.strip().splitlines()):
-        try:
-            summary = json.loads(line)
-            break
-        except ValueError:
-            continue
+    summary = last_json(out)
     text = err_path.read_text(errors="replace") + out
     return FloodTrial(
         topic, sent, failed, proc.returncode, summary, len(left), "Traceback" in text

@@ -24,7 +24,6 @@ import json
 import math
 import os
 import re
-import signal
 import subprocess
 import sys
 import time
@@ -32,6 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from benchmarks import REPO
+from benchmarks.runs import finish, last_json
 from fence_sorter.inputs import ParcelSpec
 
 KINDS = ("duplicates", "flood", "clock")
@@ -201,20 +201,9 @@ def insider_trial(
                 report = json.loads(done.stdout.strip().splitlines()[-1])
             except (IndexError, ValueError):
                 report = {"error": (done.stdout + done.stderr)[-2000:]}
-        try:
-            out, _ = proc.communicate(timeout=600.0)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            out, _ = proc.communicate()
-    summary: dict = {}
-    for line in reversed(out.strip().splitlines()):
-        try:
-            summary = json.loads(line)
-            break
-        except ValueError:
-            continue
+        out = finish(proc)
     text = err_path.read_text(errors="replace").strip().splitlines()
-    return InsiderTrial(kind, proc.returncode, text[-1] if text else "", report, summary)
+    return InsiderTrial(kind, proc.returncode, text[-1] if text else "", report, last_json(out))
 
 
 def refused(summary: dict, node: str, topic: str = "parcels") -> int:

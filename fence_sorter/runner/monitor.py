@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from fence_sorter.codes import OutcomeCode, code_name
 from fence_sorter.inputs import ParcelSpec
@@ -250,17 +250,4 @@ class Monitor:
 
 def physical(spec: ParcelSpec) -> ParcelSpec:
     """The spec without its times and scan position (what the stream fixes of a parcel)."""
-    return ParcelSpec(
-        parcel_id=spec.parcel_id,
-        length_a=spec.length_a,
-        width_b=spec.width_b,
-        height=spec.height,
-        mass=spec.mass,
-        cog_offset_x=spec.cog_offset_x,
-        cog_offset_y=spec.cog_offset_y,
-        lateral_gap=spec.lateral_gap,
-        yaw=spec.yaw,
-        mu_belt=spec.mu_belt,
-        mu_fence=spec.mu_fence,
-        divert=spec.divert,
-    )
+    return replace(spec, scan_time=0.0, scan_position_x=0.0, arrival_time=0.0)
