@@ -89,6 +89,8 @@ def insider_main(argv: list[str]) -> int:
             seen["sim"] = max(seen["sim"], t)
 
     node.create_subscription(Parcel, "/parcels", on_parcel, INPUT_QOS)
+    if a.kind == "clock":  # on the graph from the start, silent until the first parcel
+        pub = node.create_publisher(Clock, "/clock", QoSProfile(depth=10))
     node.create_subscription(
         Clock, "/clock", on_clock, QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
     )
@@ -103,7 +105,13 @@ def insider_main(argv: list[str]) -> int:
         return 1
     run_id = int(seen["run_id"])
     if a.kind == "clock":
-        pub = node.create_publisher(Clock, "/clock", QoSProfile(depth=10))
+        # until the run's simulator and this process have found each other: a clock no node
+        # has discovered reaches nobody and cannot be named
+        wait = time.monotonic() + 30.0
+        while time.monotonic() < wait and not any(
+            e.node_name == "simulator" for e in node.get_publishers_info_by_topic("/run_clock")
+        ):
+            executor.spin_once(timeout_sec=0.05)
         msg = Clock()
         t0 = time.monotonic()
         n = int(a.seconds * 1000)
@@ -119,9 +127,10 @@ def insider_main(argv: list[str]) -> int:
     else:
         pub = node.create_publisher(Parcel, "/parcels", INPUT_QOS)
         wait = time.monotonic() + 30.0
-        while pub.get_subscription_count() < a.subscribers and time.monotonic() < wait:
+        # its own reader of /parcels (the run id) is matched too
+        while pub.get_subscription_count() < a.subscribers + 1 and time.monotonic() < wait:
             executor.spin_once(timeout_sec=0.05)
-        report["subscribers"] = pub.get_subscription_count()
+        report["subscribers"] = pub.get_subscription_count() - 1
         if a.kind == "duplicates":
             first = int(seen["last_id"]) + 1
             ids = list(range(first, first + a.count))

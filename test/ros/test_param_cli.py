@@ -12,9 +12,9 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
+from processes import managed_process, run_domain_id, wait_until
 
 from fence_sorter.nodes.parameters import NODE_PARAMETERS
-from fence_sorter.testing import managed_process, run_domain_id, wait_until
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
