@@ -62,6 +62,8 @@ class FenceSorterNode(Node):
     #: Status text carried by the heartbeat until the node does its real work.
     STATUS: str = "not yet implemented"
     STATUS_LEVEL: bytes = DiagnosticStatus.WARN
+    #: with the run's key and sim time, take sim time from /run_clock (fence_sorter.provenance)
+    PINNED_CLOCK: bool = True
 
     def __init__(self, **kwargs: object) -> None:
         super().__init__(self.NODE_NAME, **kwargs)
@@ -87,7 +89,11 @@ class FenceSorterNode(Node):
         except ValueError as exc:
             raise ParameterException(str(exc), provenance.RUN_KEY_ENV) from None
         self.pinned_clock: PinnedClock | None = None
-        if self.run_key is not None and self.get_parameter("use_sim_time").value:
+        if (
+            self.PINNED_CLOCK
+            and self.run_key is not None
+            and self.get_parameter("use_sim_time").value
+        ):
             self.pinned_clock = PinnedClock(self, self.run_key)
 
         self._diagnostics_pub = self.create_publisher(

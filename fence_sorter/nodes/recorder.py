@@ -136,6 +136,9 @@ class RecorderNode(FenceSorterNode):
     """Bag recorder: subscribes raw (CDR passed through) and writes rosbag2 MCAP or sqlite3."""
 
     NODE_NAME = "recorder"
+    #: logs on /clock as rosbag2 does: a message's log time is the sim time published before
+    #: it on the wire (a second /clock shows in the log times, and the simulator names it)
+    PINNED_CLOCK = False
     STATUS = "recording"
     STATUS_LEVEL = DiagnosticStatus.OK
     PARAMETERS = RECORDER_PARAMETERS
