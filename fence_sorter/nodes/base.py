@@ -108,6 +108,10 @@ class FenceSorterNode(Node):
         )
         self.get_logger().info(f"{self.NODE_NAME} {__version__}: {self.STATUS}")
 
+    def parameter_values(self) -> dict:
+        """This node's own parameters (``PARAMETERS``) by name, as they are now."""
+        return {spec.name: self.get_parameter(spec.name).value for spec in self.PARAMETERS}
+
     def validate_parameters(self, parameters: Sequence[Parameter]) -> str | None:
         """Return a reason to refuse ``parameters``, or None to accept them."""
         del parameters

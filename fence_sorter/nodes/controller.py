@@ -194,7 +194,7 @@ class ControllerNode(FenceSorterNode):
 
     def _setup(self) -> None:
         self._command_class = FenceCommand
-        p = {spec.name: self.get_parameter(spec.name).value for spec in self.PARAMETERS}
+        p = self.parameter_values()
         scene = p["scene"] or DEFAULT_SCENE
         self.base = load_scene(scene).scenario
         self.config = PlannerConfig.from_mapping(p)

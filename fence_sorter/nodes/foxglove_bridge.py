@@ -43,7 +43,7 @@ class FoxgloveNode(FenceSorterNode):
 
     def __init__(self, **kwargs: object) -> None:
         super().__init__(**kwargs)
-        p = {spec.name: self.get_parameter(spec.name).value for spec in self.PARAMETERS}
+        p = self.parameter_values()
         for name in p["topics"]:
             if name not in ALL_TOPICS:
                 raise ValueError(

@@ -145,7 +145,7 @@ class RecorderNode(FenceSorterNode):
 
     def __init__(self, **kwargs: object) -> None:
         super().__init__(**kwargs)
-        p = {spec.name: self.get_parameter(spec.name).value for spec in self.PARAMETERS}
+        p = self.parameter_values()
         self.path = bag_path(str(p["output_dir"]))
         self.writer = SegmentedBagWriter(
             self.path,

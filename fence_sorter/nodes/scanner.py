@@ -114,7 +114,7 @@ class ScannerNode(FenceSorterNode):
             raise ParameterException(str(exc), "scanner") from None
 
     def _setup(self) -> None:
-        p = {spec.name: self.get_parameter(spec.name).value for spec in self.PARAMETERS}
+        p = self.parameter_values()
         base = load_scene(p["scene"] or DEFAULT_SCENE).scenario
         self.belt_speed = base.conveyor.belt_speed
         count = int(p["parcels"]) or None

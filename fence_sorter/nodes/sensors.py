@@ -67,7 +67,7 @@ class SensorsNode(FenceSorterNode):
 
     def __init__(self, **kwargs: object) -> None:
         super().__init__(**kwargs)
-        p = {spec.name: self.get_parameter(spec.name).value for spec in self.PARAMETERS}
+        p = self.parameter_values()
         self.config = load_sensors(str(p["sensors"]))  # SensorConfigError: exit 2 in main()
         scene = load_scene(str(p["scene"])).scenario  # SceneError: exit 2 in main()
         self.belt_width = scene.conveyor.width

@@ -102,7 +102,7 @@ class SimulatorNode(FenceSorterNode):
         """``loop``: the loop's process, started and waiting for its set-up, which it gets
         here (else :meth:`start` starts one)."""
         super().__init__(**kwargs)
-        p = {spec.name: self.get_parameter(spec.name).value for spec in self.PARAMETERS}
+        p = self.parameter_values()
         self.frame_id = str(p["frame_id"])
         self.limits = ConstraintProfile(w_dop=float(p["w_dop"]), a_ndop=float(p["a_ndop"]))
         self._risks: dict[int, dict] = {}  # damage risk of an outcome until its EventTrace
