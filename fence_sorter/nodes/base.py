@@ -153,14 +153,22 @@ class FenceSorterNode(Node):
         return SetParametersResult(successful=True)
 
     def create_intake_subscription(
-        self, msg_type, topic: str, callback, qos, intake, with_info: bool = False
+        self,
+        msg_type,
+        topic: str,
+        callback,
+        qos,
+        intake,
+        with_info: bool = False,
+        on_matched=None,
     ):
         """A subscription whose callback sees only what ``intake`` (a
         :class:`fence_sorter.nodes.intake.TopicIntake`) admits (the run's id, the sender's tag
         under the run's key, the rate), with the middleware's message-lost event counted in it
         where the RMW provides that event. ``with_info``: the callback takes ``(msg, info)``,
         rclpy's message info (``received_timestamp``: ns on the system clock when the
-        middleware received it)."""
+        middleware received it). ``on_matched``: called with rclpy's matched status when a
+        publisher is matched or unmatched, where the RMW reports it."""
 
         key = self.run_key
 
@@ -180,17 +188,24 @@ class FenceSorterNode(Node):
         if with_info:
             admitted = admitted_with_info
 
-        try:
-            return self.create_subscription(
-                msg_type,
-                topic,
-                admitted,
-                qos,
-                event_callbacks=SubscriptionEventCallbacks(message_lost=intake.on_message_lost),
-            )
-        except UnsupportedEventTypeError:
-            self.get_logger().warning(f"{topic}: the RMW reports no message-lost events")
-            return self.create_subscription(msg_type, topic, admitted, qos)
+        events = {"message_lost": intake.on_message_lost}
+        if on_matched is not None:
+            events["matched"] = on_matched
+        while True:
+            try:
+                return self.create_subscription(
+                    msg_type,
+                    topic,
+                    admitted,
+                    qos,
+                    event_callbacks=SubscriptionEventCallbacks(**events),
+                )
+            except UnsupportedEventTypeError:
+                kind = "matched" if "matched" in events else "message_lost"
+                self.get_logger().warning(f"{topic}: the RMW reports no {kind} events")
+                del events[kind]
+                if not events:
+                    return self.create_subscription(msg_type, topic, admitted, qos)
 
     def heartbeat_status(self) -> DiagnosticStatus:
         """Return the DiagnosticStatus this node reports on every heartbeat."""

@@ -88,6 +88,11 @@ WATCHED_SOURCES = (
     (topics.FENCE_COMMANDS, "controller"),
 )
 GRAPH_PERIOD = 0.2
+#: after a publisher of /parcels or /fence_commands is matched, the graph is looked at this
+#: often [s] for GRAPH_BURST [s]: an insider that publishes a few messages and leaves within
+#: a GRAPH_PERIOD is still named
+GRAPH_FAST_PERIOD = 0.02
+GRAPH_BURST = 1.0
 
 
 class SimulatorNode(FenceSorterNode):
@@ -154,8 +159,16 @@ class SimulatorNode(FenceSorterNode):
         self.command_intake = TopicIntake("commands", run_id)
         self.parcel_registry = ParcelRegistry()
         self.run_id = run_id
+        # publishers of the run's topics that are not the run's own nodes, from the graph
+        self.sources = SourceWatch(WATCHED_SOURCES)
+        self._graph_next = self._graph_burst_end = 0.0
         self._parcel_sub = self.create_intake_subscription(
-            Parcel, topics.PARCELS, self._on_parcel, INPUT_QOS, self.parcel_intake
+            Parcel,
+            topics.PARCELS,
+            self._on_parcel,
+            INPUT_QOS,
+            self.parcel_intake,
+            on_matched=self._on_publisher_matched,
         )
         self._command_sub = self.create_intake_subscription(
             FenceCommand,
@@ -163,6 +176,7 @@ class SimulatorNode(FenceSorterNode):
             self._on_command,
             INPUT_QOS,
             self.command_intake,
+            on_matched=self._on_publisher_matched,
         )
         self._progress_sub = self.create_subscription(
             Clock, topics.SCAN_PROGRESS, self._on_scan_progress, topic_qos(topics.SCAN_PROGRESS)
@@ -179,10 +193,10 @@ class SimulatorNode(FenceSorterNode):
             else None
         )
         self._run_clock_msg = RunClock(run_id=run_id)
-        # publishers of the run's topics that are not the run's own nodes, from the graph
-        self.sources = SourceWatch(WATCHED_SOURCES)
         self._graph_timer = self.create_timer(
-            GRAPH_PERIOD, self._watch_sources, clock=RosClock(clock_type=ClockType.STEADY_TIME)
+            GRAPH_FAST_PERIOD,
+            self._watch_sources,
+            clock=RosClock(clock_type=ClockType.STEADY_TIME),
         )
         self.pub_fence = publisher(FenceState, topics.FENCE_STATE)
         self.pub_joint = publisher(JointState, topics.JOINT_STATES)
@@ -254,9 +268,23 @@ class SimulatorNode(FenceSorterNode):
 
     def _watch_sources(self) -> None:
         """Name every publisher of a watched topic that is not its owner (a second /clock,
-        an insider on /parcels or /fence_commands), for the heartbeat."""
-        for topic, names in self.sources.poll(self, time.monotonic()).items():
+        an insider on /parcels or /fence_commands), for the heartbeat: every GRAPH_PERIOD,
+        every GRAPH_FAST_PERIOD within GRAPH_BURST of a match."""
+        now = time.monotonic()
+        if now < self._graph_next:
+            return
+        fast = now < self._graph_burst_end
+        self._graph_next = now + (GRAPH_FAST_PERIOD if fast else GRAPH_PERIOD) * 0.9
+        for topic, names in self.sources.poll(self, now).items():
             self.get_logger().error(f"{topic}: a publisher that is not the run's: {names}")
+
+    def _on_publisher_matched(self, status) -> None:
+        """A publisher of /parcels or /fence_commands came (or left): look at the graph now,
+        and often for a while, while a short-lived one is still in it."""
+        if status.current_count_change > 0:
+            self._graph_burst_end = time.monotonic() + GRAPH_BURST
+            self._graph_next = 0.0
+            self._watch_sources()
 
     def _on_command(self, msg: FenceCommand) -> None:
         self._send(("command", convert.command_from_msg(msg)))

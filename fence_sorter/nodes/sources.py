@@ -109,31 +109,45 @@ class SourceWatch:
     ``owners``: (topic, owner node name) pairs; an owner is matched in the watching node's
     namespace. A named foreign publisher is kept at once, an unnamed one once it has stayed
     unnamed for :data:`UNNAMED_GRACE` (a node of the run in the middle of its start-up is not
-    taken for an intruder). What is found stays found (``foreign``): a second /clock that
-    published for 2 s is still named at the end of the run.
+    taken for an intruder) or has left the graph before it got a name (a node of the run never
+    does). What is found stays found (``foreign``): a second /clock that published for 2 s is
+    still named at the end of the run.
     """
 
     def __init__(self, owners: tuple[tuple[str, str], ...]) -> None:
         self.owners = owners
         self.foreign: dict[str, set[str]] = {topic: set() for topic, _ in owners}
-        self._unnamed_since: dict[bytes, float] = {}
+        #: GID -> (first seen [s], topic, name) of the endpoints seen only unnamed so far
+        self._unnamed: dict[bytes, tuple[float, str, str]] = {}
 
     def poll(self, node, now: float) -> dict[str, list[str]]:
         """Look at the graph once (``now``: a steady clock [s]); the newly found, by topic."""
         ns = node.get_namespace().rstrip("/")
         new: dict[str, list[str]] = {}
+
+        def found(topic: str, name: str) -> None:
+            if name not in self.foreign[topic]:
+                self.foreign[topic].add(name)
+                new.setdefault(topic, []).append(name)
+
+        present: set[bytes] = set()
         for topic, owner in self.owners:
             for e in node.get_publishers_info_by_topic(topic):
+                gid = bytes(e.endpoint_gid)
+                present.add(gid)
                 if e.node_name == owner and e.node_namespace.rstrip("/") == ns:
+                    self._unnamed.pop(gid, None)
                     continue
                 if e.node_name == UNKNOWN_NODE:
-                    since = self._unnamed_since.setdefault(bytes(e.endpoint_gid), now)
+                    since, _, _ = self._unnamed.setdefault(gid, (now, topic, endpoint_name(e)))
                     if now - since < UNNAMED_GRACE:
                         continue
-                name = endpoint_name(e)
-                if name not in self.foreign[topic]:
-                    self.foreign[topic].add(name)
-                    new.setdefault(topic, []).append(name)
+                else:
+                    self._unnamed.pop(gid, None)
+                found(topic, endpoint_name(e))
+        for gid in [g for g in self._unnamed if g not in present]:
+            _, topic, name = self._unnamed.pop(gid)  # left the graph before it had a name
+            found(topic, name)
         return new
 
     def values(self) -> dict[str, str]:

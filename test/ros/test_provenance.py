@@ -173,3 +173,25 @@ def test_source_watch_names_intruders_not_a_node_of_the_run_starting_up() -> Non
         "/parcels": ["_NODE_NAMESPACE_UNKNOWN_/_NODE_NAME_UNKNOWN_ (gid 010f78fd04000000)"]
     }
     assert watch.values()["foreign_publishers./clock"] == "/intruder (gid 010f78fd03000000)"
+
+
+def test_source_watch_names_an_unnamed_publisher_that_left_before_its_grace() -> None:
+    from fence_sorter.nodes.sources import UNKNOWN_NODE, SourceWatch
+
+    graph, watch = Graph(), SourceWatch((("/parcels", "scanner"),))
+    graph.publishers["/parcels"] = [Endpoint("scanner", 2)]
+    short = Endpoint(UNKNOWN_NODE, 5, ns="_NODE_NAMESPACE_UNKNOWN_")  # published and left
+    graph.publishers["/parcels"].append(short)
+    assert watch.poll(graph, 0.0) == {}
+    graph.publishers["/parcels"] = [Endpoint("scanner", 2)]
+    assert watch.poll(graph, 0.1) == {
+        "/parcels": ["_NODE_NAMESPACE_UNKNOWN_/_NODE_NAME_UNKNOWN_ (gid 010f78fd05000000)"]
+    }
+    # a node of the run whose name arrives after its endpoint is never named
+    late = Endpoint(UNKNOWN_NODE, 6, ns="_NODE_NAMESPACE_UNKNOWN_")
+    graph.publishers["/parcels"] = [late]
+    assert watch.poll(graph, 1.0) == {}
+    graph.publishers["/parcels"] = [Endpoint("scanner", 6)]
+    assert watch.poll(graph, 1.1) == {}
+    graph.publishers["/parcels"] = []
+    assert watch.poll(graph, 1.2) == {}
