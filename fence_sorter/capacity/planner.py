@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field, replace
 
 from fence_sorter.capacity.constraints import (
@@ -188,6 +188,7 @@ class Plan:
     wall_time: float = 0.0
     admissible: int = 0  # candidates the timing admitted
     tried: list[StrokeEvaluation] = field(default_factory=list)
+    refused: int = 0  # feasible strokes the caller's ``accept`` refused (their times)
 
 
 class Planner:
@@ -358,8 +359,14 @@ class Planner:
         commit: bool = True,
         budget: int | None = None,
         use_hint: bool = True,
+        accept: Callable[[StrokeEvaluation, float, float], bool] | None = None,
     ) -> Plan:
         """Plan one load at sim time ``now``; with ``commit`` a feasible stroke books the fence.
+
+        ``accept(evaluation, start, end)``: the caller's own test of a feasible stroke and its
+        times (a line's swept-sector guard: another parcel in the sector then; a stroke that
+        missed this parcel before); a refused stroke is passed over for the next feasible
+        one, and counted in ``Plan.refused``.
 
         Order: with a decision table, its stroke for the load's class first (unless the class
         has a chosen stroke already); the stroke chosen for the nearest load class
@@ -390,6 +397,23 @@ class Planner:
         budget = self.config.max_evaluations if budget is None else budget
         results: dict[int, StrokeEvaluation] = {}
 
+        def times(ev: StrokeEvaluation) -> tuple[float, float]:
+            start = req.scan_time + (ev.r_s - req.scan_position_x) / self.v
+            return start, start + 2.0 * ev.t1
+
+        first: list[StrokeEvaluation] = []
+
+        def taken(ev: StrokeEvaluation | None) -> bool:
+            if ev is None or not ev.feasible:
+                return False
+            if not first:  # the class's stroke is the first feasible one, by physics alone
+                first.append(ev)
+                self.chosen[key] = (ev.r_s, ev.t1)
+            if accept is not None and not accept(ev, *times(ev)):
+                plan.refused += 1
+                return False
+            return True
+
         def probe(i: int) -> StrokeEvaluation | None:
             if i in results:
                 return results[i]
@@ -410,7 +434,7 @@ class Planner:
         linear = max(1, budget // 2)
         for i in range(min(linear, len(cands))):
             ev = probe(i)
-            if ev is not None and ev.feasible:
+            if taken(ev):
                 hi = i
                 break
         if hi is None and len(cands) > linear:
@@ -424,20 +448,19 @@ class Planner:
                 ev = probe(i)
                 if ev is None:
                     break
-                if ev.feasible:
+                if taken(ev):
                     hi = i
                     break
         if hi is not None:
             best = results[hi]
-            self.chosen[key] = (best.r_s, best.t1)
-            start = req.scan_time + (best.r_s - req.scan_position_x) / self.v
             plan.feasible = True
             plan.evaluation = best
-            plan.start_time = start
-            plan.end_time = start + 2.0 * best.t1
+            plan.start_time, plan.end_time = times(best)
             plan.reason = ""
             if commit:
                 self.busy_until = plan.end_time
+        elif plan.refused:
+            plan.reason = f"each of the {plan.refused} feasible strokes found was refused"
         else:
             plan.reason = self._infeasible_reason(plan, len(cands))
         plan.wall_time = time.perf_counter() - wall0

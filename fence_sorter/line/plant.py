@@ -8,9 +8,11 @@ crosses the unit's scan line (2 m before the fence axis): the unit routes it
 not divert rides on with the pose it left the unit with (a missed stroke's disturbed pose is
 what the next unit gets); a parcel still in a stroke is handed on when the stroke ends. At the
 belt's end an unsorted parcel enters the recirculation loop and, after the transit time, merges
-into the first gap of the induction that holds it with ``merge_gap`` on both sides (and, with
-the guard, reaches into no booked stroke's sector); after ``max_passes`` it goes to the reject
-chute. No-reads are drawn per pass at the induction scan.
+at the induction with ``merge_gap`` on both sides: the parcels on the belt must leave that gap,
+and the induction holds the stream's new parcels back to make it behind (a returning parcel
+has priority, as on loop sorters; the stream's own spacing is kept). With the guard it merges
+only where neither it nor a held parcel reaches into a booked stroke's sector. After
+``max_passes`` it goes to the reject chute. No-reads are drawn per pass at the induction scan.
 
 Each unit's simulation checks the fence's swept sector at every step of the line clock
 (``dt``) during every stroke and reports each parcel found in it once per stroke
@@ -75,7 +77,8 @@ class _LP:
     pid: int
     spec: ParcelSpec  # sizes, mass; cog_offset_y, yaw, lateral_gap in the line frame
     destination: str
-    arrival: float  # first induction [s]
+    arrival: float  # the stream's first induction [s], before any hold
+    inducted_at: float = math.nan  # its first induction [s], after the holds
     passes: int = 0  # completed passes
     no_read: bool = False  # this pass
     ever_no_read: bool = False
@@ -85,6 +88,8 @@ class _LP:
     track: Track | None = None
     next_unit: int = 0
     stroke_unit: int | None = None  # unit with a booked or running stroke for it
+    stroke: tuple[int, float, float] | None = None  # (unit, R_s, t1) of that stroke
+    missed: set[tuple[int, float, float]] = field(default_factory=set)  # strokes that missed it
     return_time: float = math.nan
     end: str = ""  # chute or reject it ended in
 
@@ -151,6 +156,7 @@ class LinePlant:
         self.horizon = self._horizon()
         self.inductions = 0
         self.merges_waited = 0.0  # summed waiting time of returning parcels at the merge [s]
+        self.hold = 0.0  # the induction's summed hold of the stream for returning parcels [s]
         self.handoffs = 0
         self.wall = 0.0
 
@@ -199,45 +205,90 @@ class LinePlant:
         p.next_unit = 0
         p.no_read = bool(self.rng.random() < self.spec.no_read_share)
         p.ever_no_read |= p.no_read
+        if math.isnan(p.inducted_at):
+            p.inducted_at = t
         self.inductions += 1
 
     def _announce(self) -> None:
         while (
             self._next_new < len(self.parcels)
-            and self.parcels[self._next_new].arrival <= self.t + self.horizon
+            and self.parcels[self._next_new].arrival + self.hold <= self.t + self.horizon
         ):
             p = self.parcels[self._next_new]
             self.live.append(p)
-            self._induct(p, p.arrival)
+            self._induct(p, p.arrival + self.hold)
             self._next_new += 1
 
     def _merge(self) -> None:
-        """Returning parcels whose loop transit is over merge into a gap at X = 0."""
+        """Returning parcels whose loop transit is over merge at X = 0 (:meth:`_merge_hold`)."""
         waiting = sorted(
             (p for p in self.live if p.state == "loop" and p.return_time <= self.t),
             key=lambda p: p.return_time,
         )
         for p in waiting:
             cand = self._track_at_induction(p, self.t)
-            lo, hi = self._rear(cand, self.t), self._front(cand, self.t)
-            gap = self.spec.merge_gap
-            ok = True
-            for tr in self._live_tracks():
-                if tr.t_ref > self.t + self.horizon:
-                    continue
-                r, f = self._rear(tr, self.t), self._front(tr, self.t)
-                if r < hi + gap and lo - gap < f:
-                    ok = False
-                    break
-            if ok and self.cfg.guard:
-                ok = not any(
-                    b.t_end > self.t and track_hits_sector(cand, b, self.width)
-                    for b in self.bookings
-                )
-            if not ok:
-                continue
+            held = self._merge_hold(cand)
+            if held is None:
+                # not yet: the induction holds the stream for one clock step, so that no new
+                # parcel takes the gap the returning one waits for
+                self._hold_stream(self.cfg.dt)
+                break
+            delay, tracks = held
+            for tr in tracks:
+                tr.t_ref += delay
+            self.hold += delay
             self.merges_waited += self.t - p.return_time
             self._induct(p, self.t)
+
+    def _holdable(self) -> list[Track]:
+        """The tracks of the stream's parcels announced but not yet at X = 0."""
+        return [
+            p.track
+            for p in self.live
+            if p.state == "scheduled" and p.passes == 0 and self._front(p.track, self.t) < 0.0
+        ]
+
+    def _hold_stream(self, delay: float) -> None:
+        """Hold the stream's parcels not yet inducted by ``delay`` [s], unless (guard) one of
+        them would then reach into a booked stroke's sector."""
+        tracks = self._holdable()
+        if self.cfg.guard:
+            live = [b for b in self.bookings if b.t_end > self.t]
+            for tr in tracks:
+                moved = replace(tr, t_ref=tr.t_ref + delay)
+                if any(track_hits_sector(moved, b, self.width) for b in live):
+                    return
+        for tr in tracks:
+            tr.t_ref += delay
+        self.hold += delay
+
+    def _merge_hold(self, cand: Track) -> tuple[float, list[Track]] | None:
+        """How long the induction must hold the stream's parcels not yet at X = 0 (and which)
+        so that ``cand``, with its front at X = 0 now, has ``merge_gap`` to every parcel; None
+        if a parcel already on the belt is too close, or (guard) the merged or a held parcel
+        would reach into a booked stroke's sector."""
+        t, gap = self.t, self.spec.merge_gap
+        lo, hi = self._rear(cand, t), self._front(cand, t)
+        held = self._holdable()
+        ids = {tr.parcel_id for tr in held}
+        for p in self.live:
+            tr = p.track
+            if tr is None or p.state not in ("scheduled", "belt") or p.pid in ids:
+                continue
+            if self._rear(tr, t) < hi + gap and lo - gap < self._front(tr, t):
+                return None
+        behind = max((self._front(tr, t) for tr in held), default=-math.inf)
+        delay = max(0.0, (behind - (lo - gap)) / self.v) if held else 0.0
+        if not self.cfg.guard:
+            return delay, held
+        live = [b for b in self.bookings if b.t_end > t]
+        if any(track_hits_sector(cand, b, self.width) for b in live):
+            return None
+        for tr in held:
+            moved = replace(tr, t_ref=tr.t_ref + delay)
+            if any(track_hits_sector(moved, b, self.width) for b in live):
+                return None
+        return delay, held
 
     # -- hand-offs -------------------------------------------------------------------------
     def _local_spec(self, p: _LP, u: UnitSpec, t: float, divert: bool) -> ParcelSpec:
@@ -279,25 +330,41 @@ class LinePlant:
             return Decision(False, CHUTE_FULL), None
         req = LoadRequest(spec.parcel_id, spec.to_parcel_params(), spec.scan_time,
                           spec.scan_position_x)  # fmt: skip
-        plan = u.planner.plan(req, self.t, commit=False)
+        alpha_k = self.spec.planner.alpha_k
+        others = [tr for tr in self._live_tracks() if tr.parcel_id != p.pid]
+        refusals: list[Decision] = []
+
+        def booking(start: float, end: float) -> Booking:
+            return Booking(
+                u.index, p.pid, start, end, alpha_k,
+                u.line.config.length, us.position, us.mirrored,
+            )  # fmt: skip
+
+        def clear(ev, start: float, end: float) -> bool:
+            """A feasible stroke the unit may make: not one that missed this parcel on an
+            earlier pass, and (guard) none another parcel would be struck by; the planner
+            passes a refused one over for its next feasible one."""
+            if (u.index, ev.r_s, ev.t1) in p.missed:
+                return False
+            if not self.cfg.guard:
+                return True
+            d = guard(booking(start, end), p.track, others, self.bookings, self.width)
+            if not d.accepted:
+                refusals.append(d)
+            return d.accepted
+
+        plan = u.planner.plan(req, self.t, commit=False, accept=clear)
         if not plan.feasible:
+            if refusals:
+                return refusals[0], None
             code = FENCE_BUSY if "fence busy" in plan.reason else NO_FEASIBLE_STROKE
             return Decision(False, code, plan.reason), None
         ev = plan.evaluation
-        alpha_k = self.spec.planner.alpha_k
-        booking = Booking(
-            u.index, p.pid, plan.start_time, plan.end_time, alpha_k,
-            u.line.config.length, us.position, us.mirrored,
-        )  # fmt: skip
-        if self.cfg.guard:
-            others = [tr for tr in self._live_tracks() if tr.parcel_id != p.pid]
-            d = guard(booking, p.track, others, self.bookings, self.width)
-            if not d.accepted:
-                return d, None
+        self.bookings.append(booking(plan.start_time, plan.end_time))
         u.planner.busy_until = plan.end_time
-        self.bookings.append(booking)
         p.track.free_after = plan.start_time
         p.track.free_until = plan.end_time + SETTLE_SLACK
+        p.stroke = (u.index, ev.r_s, ev.t1)
         cmd = StrokeCommand(spec.parcel_id, StartMode.AT_RS, ev.r_s, 0.0, ev.t1, alpha_k)
         return Decision(True), cmd
 
@@ -370,7 +437,10 @@ class LinePlant:
             p.track = None
             u.failed += 1
         else:
-            u.missed += ev.code is OutcomeCode.MISSED
+            if ev.code is OutcomeCode.MISSED:
+                u.missed += 1
+                if p.stroke is not None:  # not that stroke again on a later pass
+                    p.missed.add(p.stroke)
             lp = u.line.parcels.get(ev.parcel_id)
             if lp is not None:  # rides on with the pose its stroke left it in
                 x, y, yaw = to_line(u.spec.position, u.spec.mirrored, self.width,
@@ -455,6 +525,11 @@ class LinePlant:
         span = (ps[-1].arrival - ps[0].arrival) if n > 1 else 0.0
         window = span + (span / (n - 1) if n > 1 else 0.0)
         rate = (lambda k: 3600.0 * k / window) if window > 0 else (lambda k: math.nan)
+        # the stream as inducted, after the holds for returning parcels
+        firsts = sorted(p.inducted_at for p in ps if not math.isnan(p.inducted_at))
+        span_in = (firsts[-1] - firsts[0]) if len(firsts) > 1 else 0.0
+        window_in = span_in + (span_in / (len(firsts) - 1) if len(firsts) > 1 else 0.0)
+        rate_in = (lambda k: 3600.0 * k / window_in) if window_in > 0 else (lambda k: math.nan)
         prof = self.spec.planner.profile
         units = {}
         for u in self.units:
@@ -504,9 +579,10 @@ class LinePlant:
             "swept_sector_intrusions": sum(u.intrusions for u in self.units),
             "handoffs": self.handoffs,
             "declined": {r: sum(u.declined[r] for u in self.units) for r in REASONS},
-            "throughput_in_pcs_h": rate(n),
-            "throughput_out_pcs_h": rate(count["sorted"]),
+            "throughput_in_pcs_h": rate_in(len(firsts)),
+            "throughput_out_pcs_h": rate_in(count["sorted"]),
             "merge_wait_mean_s": self.merges_waited / max(self.inductions - n, 1),
+            "induction_hold_s": self.hold,
             "still_on_line": on_line,
             "conservation_ok": n
             == count["sorted"] + count["rejected"] + count["failed"] + on_line,

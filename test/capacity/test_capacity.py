@@ -143,6 +143,40 @@ def test_planner_cache_makes_a_repeated_class_free(base) -> None:
     assert (a.evaluation.r_s, a.evaluation.t1) == (b.evaluation.r_s, b.evaluation.t1)
 
 
+def test_planner_passes_a_refused_stroke_over_for_the_next_feasible_one(base) -> None:
+    """``accept`` refuses a feasible stroke (a line's guard: a parcel in its sector): the plan
+    is the next feasible candidate, with its own times; refusing every one declines the load
+    and says so; the class keeps its stroke by physics (the first feasible one)."""
+    p = ParcelParams(0.4, 0.3, 0.3, 5.0, 0.0, 0.0, 0.1, 0.0)
+    free = Planner(base, PlannerConfig(max_evaluations=40))
+    first = free.plan(LoadRequest(1, p, 0.0, -3.0), now=0.0, commit=False)
+    assert first.feasible and first.refused == 0
+    seen: list[tuple[float, float, float, float]] = []
+
+    def not_the_first(ev, start: float, end: float) -> bool:
+        seen.append((ev.r_s, ev.t1, start, end))
+        return (ev.r_s, ev.t1) != (first.evaluation.r_s, first.evaluation.t1)
+
+    planner = Planner(base, PlannerConfig(max_evaluations=40))
+    plan = planner.plan(LoadRequest(1, p, 0.0, -3.0), now=0.0, commit=False, accept=not_the_first)
+    assert plan.feasible and plan.refused == 1, plan.reason
+    ev = plan.evaluation
+    assert ev.feasible and (ev.r_s, ev.t1) != (first.evaluation.r_s, first.evaluation.t1)
+    # the times handed to accept are the stroke's: front at R_s, then 2 t1
+    r_s, t1, start, end = seen[0]
+    assert start == pytest.approx((r_s + 3.0) / planner.v) and end == pytest.approx(start + 2 * t1)
+    assert plan.start_time == pytest.approx((ev.r_s + 3.0) / planner.v)
+    assert plan.end_time == pytest.approx(plan.start_time + 2.0 * ev.t1)
+    assert planner.chosen[planner.quantise(LoadRequest(1, p, 0.0, -3.0))[0]] == (
+        first.evaluation.r_s,
+        first.evaluation.t1,
+    )
+    none = Planner(base, PlannerConfig(max_evaluations=6))
+    refused = none.plan(LoadRequest(1, p, 0.0, -3.0), now=0.0, accept=lambda ev, s, e: False)
+    assert not refused.feasible and refused.refused >= 1
+    assert "refused" in refused.reason and none.busy_until == -math.inf
+
+
 def test_lower_friction_gives_no_lower_capacity(base) -> None:
     """Paper, Fig. 4: smaller mu1, mu2 -> higher (here: not lower) capacity."""
     cfg = PlannerConfig(max_evaluations=400)  # linear over all candidates: the true first
