@@ -107,7 +107,10 @@ def test_loop_process_sorts_like_the_line_in_process_and_stops_cleanly():
     cycles = g.value(Gauges.CYCLES)
     assert cycles > 100 and g.value(Gauges.MISSES) <= cycles
     lateness, work = g.histogram(0), g.histogram(1)
-    assert lateness.n == work.n == cycles  # one sample of each per paced cycle
+    # one sample of each per cycle run; cycles also counts the deadlines a starved loop
+    # skipped, and those are misses
+    assert lateness.n == work.n
+    assert cycles - g.value(Gauges.MISSES) <= lateness.n <= cycles
     p99 = lateness.percentile(99.0)
     assert math.isfinite(p99) and lateness.max >= p99 - lateness.BIN
     assert lp.proc.returncode == 0
