@@ -79,6 +79,8 @@ class _LP:
     destination: str
     arrival: float  # the stream's first induction [s], before any hold
     inducted_at: float = math.nan  # its first induction [s], after the holds
+    sorted_at: float = math.nan  # when its stroke's outcome said sorted [s]
+    inducted_last: float = math.nan  # its latest induction [s]
     passes: int = 0  # completed passes
     no_read: bool = False  # this pass
     ever_no_read: bool = False
@@ -207,6 +209,7 @@ class LinePlant:
         p.ever_no_read |= p.no_read
         if math.isnan(p.inducted_at):
             p.inducted_at = t
+        p.inducted_last = t
         self.inductions += 1
 
     def _announce(self) -> None:
@@ -215,8 +218,18 @@ class LinePlant:
             and self.parcels[self._next_new].arrival + self.hold <= self.t + self.horizon
         ):
             p = self.parcels[self._next_new]
+            at = p.arrival + self.hold
+            if self.spec.min_gap > 0.0:  # a gapping induction holds it behind the one ahead
+                gap = min(
+                    (self._rear(q.track, at) for q in self.live if q.track is not None
+                     and q.state in ("scheduled", "belt")),
+                    default=math.inf,
+                )  # fmt: skip
+                if gap < self.spec.min_gap:
+                    self.hold += (self.spec.min_gap - gap) / self.v
+                    at = p.arrival + self.hold
             self.live.append(p)
-            self._induct(p, p.arrival + self.hold)
+            self._induct(p, at)
             self._next_new += 1
 
     def _merge(self) -> None:
@@ -428,6 +441,7 @@ class LinePlant:
         self.bookings = [b for b in self.bookings if b.parcel_id != p.pid]
         if ev.code is OutcomeCode.SORTED:
             p.state = "sorted"
+            p.sorted_at = self.t
             p.end = p.destination if p.destination in u.spec.destinations else f"wrong:{u.index}"
             p.track = None
             u.sorted += 1
@@ -525,11 +539,23 @@ class LinePlant:
         span = (ps[-1].arrival - ps[0].arrival) if n > 1 else 0.0
         window = span + (span / (n - 1) if n > 1 else 0.0)
         rate = (lambda k: 3600.0 * k / window) if window > 0 else (lambda k: math.nan)
-        # the stream as inducted, after the holds for returning parcels
-        firsts = sorted(p.inducted_at for p in ps if not math.isnan(p.inducted_at))
-        span_in = (firsts[-1] - firsts[0]) if len(firsts) > 1 else 0.0
-        window_in = span_in + (span_in / (len(firsts) - 1) if len(firsts) > 1 else 0.0)
-        rate_in = (lambda k: 3600.0 * k / window_in) if window_in > 0 else (lambda k: math.nan)
+        # throughput in: parcels per hour over the span of their first inductions (after the
+        # holds for returning parcels), widened by one mean pitch; out: sorts per hour while
+        # the induction ran, that window shifted by the median induction-to-sort time of the
+        # sorted parcels (a finite stream's recirculated tail, sorted
+        # after the induction stopped, is left out: in steady state it is sorted in the
+        # window as well); the induction-to-sort time is the sorting pass's
+        firsts = [p.inducted_at for p in ps if not math.isnan(p.inducted_at)]
+        throughput_in = _per_hour(firsts)
+        delays = sorted(p.sorted_at - p.inducted_last for p in ps if p.state == "sorted")
+        if delays and len(firsts) > 1 and throughput_in > 0:
+            lag = delays[len(delays) // 2]
+            window = len(firsts) * 3600.0 / throughput_in
+            w0 = min(firsts) + lag
+            out = sum(w0 <= p.sorted_at < w0 + window for p in ps if p.state == "sorted")
+            throughput_out = 3600.0 * out / window
+        else:
+            throughput_out = math.nan
         prof = self.spec.planner.profile
         units = {}
         for u in self.units:
@@ -579,8 +605,8 @@ class LinePlant:
             "swept_sector_intrusions": sum(u.intrusions for u in self.units),
             "handoffs": self.handoffs,
             "declined": {r: sum(u.declined[r] for u in self.units) for r in REASONS},
-            "throughput_in_pcs_h": rate_in(len(firsts)),
-            "throughput_out_pcs_h": rate_in(count["sorted"]),
+            "throughput_in_pcs_h": throughput_in,
+            "throughput_out_pcs_h": throughput_out,
             "merge_wait_mean_s": self.merges_waited / max(self.inductions - n, 1),
             "induction_hold_s": self.hold,
             "still_on_line": on_line,
@@ -602,6 +628,15 @@ class LinePlant:
         r_s, t1 = tz[len(tz) // 2]
         a = float(np.median([p.spec.length_a for p in self.parcels]))
         return stroke_capacity(self.v, t1, r_s, a, self.spec.planner.pitch_gap)
+
+
+def _per_hour(times: list[float]) -> float:
+    """Events per hour over the span of ``times`` widened by one mean interval (NaN if < 2)."""
+    if len(times) < 2:
+        return math.nan
+    span = max(times) - min(times)
+    window = span * len(times) / (len(times) - 1)
+    return 3600.0 * len(times) / window if window > 0 else math.nan
 
 
 def run_line(line: LineSpec, cfg: LineRunConfig = LineRunConfig(), warm: bool = True) -> dict:

@@ -41,7 +41,7 @@ SIDES = ("right", "left")
 
 TOP_KEYS = ("name", "description", "conveyor", "induction", "planner", "units", "recirculation")
 CONVEYOR_KEYS = ("width", "speed", "length")
-INDUCTION_KEYS = ("stream", "no_read_share", "destinations", "merge_gap")
+INDUCTION_KEYS = ("stream", "no_read_share", "destinations", "merge_gap", "min_gap")
 UNIT_KEYS = ("name", "position", "side", "scene", "overrides", "destinations", "chute_capacity")
 RECIRC_KEYS = ("transit_time", "max_passes", "reject_chute")
 PLANNER_KEYS = (*PlannerConfig.FLOAT_KEYS, "max_evaluations", "active_constraints")
@@ -92,6 +92,9 @@ class LineSpec:
     transit_time: float  # recirculation loop, line end to the induction [s]
     max_passes: int  # a parcel not sorted after this many passes goes to the reject chute
     reject_chute: str
+    #: a gapping induction: a new parcel is held until its front is this far behind the rear of
+    #: the parcel ahead [m] (0: the stream as drawn)
+    min_gap: float = 0.0
 
     def serving(self, destination: str) -> list[UnitSpec]:
         return [u for u in self.units if destination in u.destinations]
@@ -177,7 +180,8 @@ def _induction(src: str, data: Any, width: float, speed: float):
     if abs(total - 1.0) > 1e-6:
         raise _err(src, f"induction.destinations: the shares must sum to 1, got {total:.6g}")
     merge_gap = _number(src, "induction.merge_gap", d.get("merge_gap", 0.3), 0.0, 10.0, "m")
-    return stream, no_read, shares, merge_gap
+    min_gap = _number(src, "induction.min_gap", d.get("min_gap", 0.0), 0.0, 10.0, "m")
+    return stream, no_read, shares, merge_gap, min_gap
 
 
 def _planner(src: str, data: Any) -> PlannerConfig:
@@ -241,7 +245,9 @@ def load_line(path_or_name: str | Path) -> LineSpec:
     if "length" not in conv:
         raise _err(src, "conveyor.length is required (belt length from the induction, m)")
     length = _number(src, "conveyor.length", conv["length"], 0.0, 1e4, "m", lo_open=True)
-    stream, no_read, shares, merge_gap = _induction(src, raw.get("induction"), width, speed)
+    stream, no_read, shares, merge_gap, min_gap = _induction(
+        src, raw.get("induction"), width, speed
+    )
     planner = _planner(src, raw.get("planner"))
     units_raw = raw.get("units")
     if not isinstance(units_raw, list) or not units_raw:
@@ -294,5 +300,5 @@ def load_line(path_or_name: str | Path) -> LineSpec:
         raise _err(src, f"recirculation.reject_chute {reject!r} must not be a destination")
     return LineSpec(
         name, description, path.resolve(), width, speed, length, stream, no_read, shares,
-        merge_gap, planner, tuple(units), transit, passes, reject,
+        merge_gap, planner, tuple(units), transit, passes, reject, min_gap,
     )  # fmt: skip

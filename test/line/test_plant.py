@@ -191,3 +191,32 @@ def test_below_the_knee_every_readable_parcel_is_sorted():
     assert s["drained"] and s["conservation_ok"] and s["swept_sector_intrusions"] == 0
     unread = sum(p.state == "rejected" and p.ever_no_read for p in plant.parcels)
     assert s["sorted"] >= 0.98 * (s["parcels_inducted"] - unread), s
+
+
+@pytest.mark.slow
+def test_a_gapping_induction_meters_a_dense_stream_to_its_gap():
+    """two_units with min_gap 1.5 m at 6000 pcs/h (a pitch shorter than that gap): every new
+    parcel reaches the induction with its front at least 1.5 m behind every parcel's rear, in
+    the stream's order, and the rate in is what the gap allows, not what was offered."""
+    line = replace(LINE, min_gap=1.5)
+    plant = LinePlant(line, LineRunConfig(parcels=20, rate_pcs_h=6000.0, seed=4))
+    gaps: list[float] = []
+    induct = plant._induct
+
+    def recorded(p, t):
+        if p.passes == 0:
+            others = [q.track for q in plant.live if q is not p and q.track is not None
+                      and q.state in ("scheduled", "belt")]  # fmt: skip
+            # every parcel past the induction line (its front at X > 0) is ahead of this one
+            gaps.extend(plant._rear(tr, t) for tr in others if plant._front(tr, t) > 0.0)
+        induct(p, t)
+
+    plant._induct = recorded
+    s = plant.run()
+    check_books(plant, s)
+    assert gaps and min(gaps) >= 1.5 - 1e-9
+    firsts = [p.inducted_at for p in plant.parcels]
+    assert firsts == sorted(firsts)
+    longest = max(p.spec.length_a for p in plant.parcels)  # pitch <= longest parcel + gap
+    assert s["throughput_in_pcs_h"] < 6000.0 * 0.9
+    assert s["throughput_in_pcs_h"] >= 3600.0 * LINE.speed / (longest + 1.5) * 0.5

@@ -107,6 +107,11 @@ def test_bad_values(tmp_path):
     )
     _bad(
         tmp_path,
+        lambda r: r["induction"].update(min_gap=-0.5),
+        "induction.min_gap must be in [0, 10]",
+    )
+    _bad(
+        tmp_path,
         lambda r: r["recirculation"].update(max_passes=0),
         "recirculation.max_passes must be an integer in [1, 15]",
     )
