@@ -34,17 +34,17 @@ test: bootstrap
 # every generated report of docs/, each with the arguments its committed version was made with
 # (hours of CPU, niced); versus is left out: it compares with a commit the reader names
 reports: bootstrap
-	$(ENV) && nice -n 10 fence-sorter accuracy --out docs/accuracy --repeats 3 --max-wall 30 \
+	$(ENV) && nice -n 10 fence-sorter accuracy --out docs/reports/accuracy --repeats 3 --max-wall 30 \
 		&& nice -n 10 fence-sorter stability \
-		&& nice -n 10 fence-sorter optimize --sweep all --no-resume --out docs/paper \
+		&& nice -n 10 fence-sorter optimize --sweep all --no-resume --out docs/reports/paper \
 		&& nice -n 10 fence-sorter optimize --sweep fig7-fixed-rz,fig10-fixed-rz,decision-table \
-			--no-resume --out docs/paper \
+			--no-resume --out docs/reports/paper \
 		&& nice -n 10 python -m benchmarks bench \
 		&& nice -n 10 python -m benchmarks bench-suite \
 		&& nice -n 10 python -m benchmarks faults \
 		&& nice -n 10 python -m benchmarks calibrate-bench --seeds 200 --parcels 8 \
 			--fresh-noise 105,106,112,117 --draws 100 --timing-parcels 50 \
-			--json docs/calibration.json --doc docs/calibration.md \
+			--json docs/reports/calibration.json --doc docs/reports/calibration.md \
 		&& nice -n 10 python -m benchmarks.startup --rounds 5 --runs 3 --load 4
 
 clean:

@@ -14,7 +14,7 @@ from fence_sorter.cli import main as fence_sorter_cli
 CAMPAIGNS = {
     "bench": "speed and memory of the default configuration against SciPy baselines",
     "bench-suite": "node suite benchmark: pacing, lost messages, controller latency, unpaced RTF",
-    "faults": "fault-injection campaign of the node suite (writes docs/reliability.md)",
+    "faults": "fault-injection campaign of the node suite (writes docs/reports/reliability.md)",
     "calibrate-bench": "calibration benchmark: interval coverage, identifiability, wall time",
 }
 BENCHMARKS = fence_sorter_cli.CommandLine(

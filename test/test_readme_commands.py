@@ -19,7 +19,7 @@ from processes import run_cli
 
 REPO = Path(__file__).resolve().parents[1]
 #: the documents whose commands are run here: the front door and the user guide
-DOCUMENTS = ("README.md", "docs/guide.md")
+DOCUMENTS = ("README.md", "docs/guide/guide.md")
 
 HERE = "test/test_readme_commands.py::test_readme_command_runs"
 REPORTS_MADE = "test/test_readme_commands.py::test_make_reports_writes_every_generated_report"
@@ -110,7 +110,7 @@ COVERED: dict[str, str] = {
     "fence-sorter run --parcels 4 --bag /tmp/b": (
         "test/ros/test_recording.py::test_run_bag_has_every_topic_and_consistent_counts"
     ),
-    "fence-sorter optimize --sweep fig6 --out docs/paper": (
+    "fence-sorter optimize --sweep fig6 --out docs/reports/paper": (
         "test/cli/test_data_cli_bad_input.py::test_plots_only_redraws_from_the_saved_results"
     ),
 }
@@ -370,14 +370,14 @@ def test_make_targets_run_the_documented_commands() -> None:
 
 #: every generated report of docs/ -> the command of `make reports` that writes it
 REPORTS = {
-    "docs/accuracy/README.md": "fence-sorter accuracy --out docs/accuracy",
-    "docs/stability/README.md": "fence-sorter stability",
-    "docs/paper/fig8.csv": "fence-sorter optimize --sweep all --no-resume --out docs/paper",
-    "docs/paper/decision-table.csv": "decision-table",
-    "docs/benchmarks.md": "python -m benchmarks bench",
-    "docs/reliability.md": "python -m benchmarks faults",
-    "docs/calibration.md": "python -m benchmarks calibrate-bench",
-    "docs/startup/README.md": "python -m benchmarks.startup",
+    "docs/reports/accuracy/README.md": "fence-sorter accuracy --out docs/reports/accuracy",
+    "docs/reports/stability/README.md": "fence-sorter stability",
+    "docs/reports/paper/fig8.csv": "fence-sorter optimize --sweep all --no-resume --out docs/reports/paper",
+    "docs/reports/paper/decision-table.csv": "decision-table",
+    "docs/reports/benchmarks.md": "python -m benchmarks bench",
+    "docs/reports/reliability.md": "python -m benchmarks faults",
+    "docs/reports/calibration.md": "python -m benchmarks calibrate-bench",
+    "docs/reports/startup/README.md": "python -m benchmarks.startup",
 }
 
 
@@ -395,4 +395,4 @@ def test_make_reports_writes_every_generated_report() -> None:
         assert (REPO / report).is_file(), report
         assert command in run, f"make reports does not write {report} ({command})"
     assert "python -m benchmarks bench-suite" in run
-    assert "--doc docs/calibration.md" in run and "scripts/env.sh" in run
+    assert "--doc docs/reports/calibration.md" in run and "scripts/env.sh" in run

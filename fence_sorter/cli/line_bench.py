@@ -4,7 +4,7 @@ For each induction rate (default 2000 to 12000 pcs/h) one ROS-free run of the li
 (:mod:`fence_sorter.line.plant`, guard on) to the drain: throughput in and out, sort rate,
 recirculation share, rejects, intrusions and conservation, with each unit's capacity bound
 W_t (1)-(2) of its median stroke beside them. Prints a Markdown table and
-writes it with the command and commit to ``--out`` (docs/line-bench.md by default).
+writes it with the command and commit to ``--out`` (docs/reports/line-bench.md by default).
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ def register(parser: argparse.ArgumentParser) -> None:
         help="induction rates [pcs/h]",
     )  # fmt: skip
     parser.add_argument("--seed", type=int, default=None)
-    parser.add_argument("--out", default="docs/line-bench.md", metavar="FILE")
+    parser.add_argument("--out", default="docs/reports/line-bench.md", metavar="FILE")
     parser.set_defaults(func=run)
 
 

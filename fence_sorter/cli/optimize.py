@@ -72,7 +72,7 @@ def register(p: argparse.ArgumentParser) -> None:
     p.description = (
         "Maximise the sorting capacity W_t (1) over X = [R_s, v, t1, R_z] within the ranges "
         "(3)-(6) subject to the selected constraints (7)-(12), evaluated on the twin "
-        "(docs/optimize.md). Prints the optimum X, W_t [pcs/h], Delta_c, the active "
+        "(docs/guide/optimize.md). Prints the optimum X, W_t [pcs/h], Delta_c, the active "
         "constraints and every margin; 'feasible: false' with the constraint no point met."
     )
     p.add_argument("--case", choices=("arbitrary", "positioned"), help="section 4.1 or 4.2")
@@ -140,7 +140,7 @@ def register(p: argparse.ArgumentParser) -> None:
         "--grid",
         action="store_true",
         help="instead of the optimiser, the exact best point of a regular grid (the yardstick "
-        "of docs/optimize.md)",
+        "of docs/design/optimize.md)",
     )
     p.add_argument(
         "--grid-steps",
@@ -151,7 +151,7 @@ def register(p: argparse.ArgumentParser) -> None:
     )
     # sweeps of Figs. 3-10 (fence_sorter.optimize.sweep)
     p.add_argument("--sweep", default=None, metavar="NAME", help="a figure sweep, e.g. fig6")
-    p.add_argument("--out", default="docs/paper", help="sweep output directory (%(default)s)")
+    p.add_argument("--out", default="docs/reports/paper", help="sweep output directory (%(default)s)")
     p.add_argument(
         "--resume",
         action=argparse.BooleanOptionalAction,

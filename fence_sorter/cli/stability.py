@@ -2,7 +2,7 @@
 
 Runs the cases of :mod:`fence_sorter.verification.stability` (all, the fast subset with
 ``--quick``, or the ones named with ``--cases``), prints one line per case and writes
-``README.md``, ``results.json`` and ``summary.png`` into ``--out`` (default docs/stability).
+``README.md``, ``results.json`` and ``summary.png`` into ``--out`` (default docs/reports/stability).
 
 Exit codes: 0 every case met its expectation, 1 some did not (they are named), 2 bad arguments
 (an unknown case name: one line ``fence-sorter: error: ...`` naming the allowed names).
@@ -34,9 +34,9 @@ def register(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--out",
-        default="docs/stability",
+        default="docs/reports/stability",
         metavar="DIR",
-        help="directory for README.md, results.json and summary.png (default docs/stability)",
+        help="directory for README.md, results.json and summary.png (default docs/reports/stability)",
     )
     which = parser.add_mutually_exclusive_group()
     which.add_argument(
@@ -96,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
     wall = time.perf_counter() - t0
 
     argv = ["fence-sorter", "stability"]
-    if args.out != "docs/stability":
+    if args.out != "docs/reports/stability":
         argv += ["--out", args.out]
     if args.quick:
         argv.append("--quick")

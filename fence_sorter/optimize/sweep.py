@@ -5,7 +5,7 @@ a point's result is appended to ``<out>/<run>.csv`` as one row and flushed, keye
 the point's inputs, so an interrupted sweep continues where it stopped (points already in the
 CSV are skipped). Points go through a ``concurrent.futures`` executor, one serial optimisation
 per point (on 2 cores, parallel over points beats parallel inside one optimisation: see
-docs/paper/README.md). Then ``<out>/<name>.png`` in the style of the paper's figure.
+docs/reports/paper/README.md). Then ``<out>/<name>.png`` in the style of the paper's figure.
 
 ``fence-sorter optimize --sweep NAME`` calls :func:`main`; NAME is one of :data:`SWEEPS`
 (``fig3`` ... ``fig10``, ``decision-table``), several separated by commas, or ``all``.
@@ -391,7 +391,7 @@ def replot(names: Sequence[str], out: Path) -> int:
 def main(args) -> int:
     """``fence-sorter optimize --sweep NAME``: run (or resume) the sweeps, write CSV + PNG.
 
-    Uses ``args.sweep``, ``args.out`` (docs/paper), ``args.resume`` (True), ``args.workers``,
+    Uses ``args.sweep``, ``args.out`` (docs/reports/paper), ``args.resume`` (True), ``args.workers``,
     ``args.scheduler`` and, when present, ``args.table`` (config/decision_table.yaml),
     ``args.max_points``, ``args.plots_only`` (True: :func:`replot` alone). Exit 0 done, 1 a
     point failed, 2 bad input, 130 interrupted.
@@ -401,7 +401,7 @@ def main(args) -> int:
     except KeyError as exc:
         print(f"fence-sorter: error: --sweep: {exc.args[0]}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    out = Path(getattr(args, "out", None) or "docs/paper")
+    out = Path(getattr(args, "out", None) or "docs/reports/paper")
     if getattr(args, "plots_only", False):
         return replot(names, out)
     resume = bool(getattr(args, "resume", True))

@@ -1,4 +1,4 @@
-"""bench-suite writes only its own section of docs/benchmarks.md; lost-message arithmetic; bad
+"""bench-suite writes only its own section of docs/reports/benchmarks.md; lost-message arithmetic; bad
 options are exit 2 naming them."""
 
 from __future__ import annotations

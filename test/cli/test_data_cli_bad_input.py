@@ -27,7 +27,7 @@ def test_plots_only_redraws_from_the_saved_results(tmp_path):
     import shutil
     from pathlib import Path
 
-    docs = Path(__file__).resolve().parents[2] / "docs"
+    docs = Path(__file__).resolve().parents[2] / "docs" / "reports"
     shutil.copy(docs / "paper" / "fig8.csv", tmp_path / "fig8.csv")
     res = run_cli("optimize", "--sweep", "fig9", "--plots-only", "--out", str(tmp_path))
     assert res.returncode == 0, res.stderr

@@ -409,7 +409,7 @@ def test_infeasible_points_are_drawn_apart_from_every_value(tmp_path, monkeypatc
 
     monkeypatch.setattr(Figure, "savefig", keep)
     sweep = sd.get_sweep("decision-table")
-    csv = Path(__file__).resolve().parents[2] / "docs" / "paper" / "decision-table.csv"
+    csv = Path(__file__).resolve().parents[2] / "docs" / "reports" / "paper" / "decision-table.csv"
     rows = sw._order(sweep, sr.read_rows(csv))
     infeasible = sum(not r["feasible"] for r in rows)
     assert infeasible > 0
