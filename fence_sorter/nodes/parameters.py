@@ -453,7 +453,7 @@ PLANNER_PARAMETERS: tuple[ParamSpec, ...] = (
         "decision_table",
         "",
         "Starting strokes per load class, tried first (config/decision_table.yaml, made by "
-        "fence-sorter optimize --sweep decision-table); empty: none",
+        "python -m benchmarks paper-sweep decision-table); empty: none",
         False,
     ),
     ParamSpec(

@@ -1,22 +1,24 @@
-"""``fence-sorter line-bench``: the saturation curve of a line (sort rate against induction).
+"""``python -m benchmarks line-bench``: the saturation curve of a line (sort rate against
+induction).
 
 For each induction rate (default 2000 to 12000 pcs/h) one ROS-free run of the line
 (:mod:`fence_sorter.line.plant`, guard on) to the drain: throughput in and out, sort rate,
 recirculation share, rejects, intrusions and conservation, with each unit's capacity bound
 W_t (1)-(2) of its median stroke beside them. Prints a Markdown table and
-writes it with the command and commit to ``--out`` (docs/reports/line-bench.md by default).
+writes it with the command and commit to ``--out`` (docs/reports/line-bench.md by default;
+``--out ''`` writes nothing).
 """
 
 from __future__ import annotations
 
 import argparse
 import math
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 from fence_sorter.physics.params import ParameterError
+from fence_sorter.verification.machine import git_revision
 
 
 def register(parser: argparse.ArgumentParser) -> None:
@@ -32,20 +34,8 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.set_defaults(func=run)
 
 
-def git_commit() -> str:
-    """The checkout's short commit, or "" outside a git checkout."""
-    try:
-        out = subprocess.run(
-            ["git", "-C", str(Path(__file__).resolve().parent), "rev-parse", "--short", "HEAD"],
-            capture_output=True, text=True, timeout=10, check=False,
-        )  # fmt: skip
-    except OSError:
-        return ""
-    return out.stdout.strip()
-
-
 def _error(msg: str) -> int:
-    print(f"fence-sorter: error: {msg}", file=sys.stderr)
+    print(f"benchmarks: error: {msg}", file=sys.stderr)
     return 2
 
 
@@ -95,8 +85,9 @@ def run(args: argparse.Namespace) -> int:
     when = time.strftime("%Y-%m-%d", time.gmtime())
     text = (
         f"# Line saturation curve ({line.name})\n\n"
-        f"`fence-sorter line-bench {args.line} --parcels {args.parcels} --rates {args.rates}` "
-        f"at commit {git_commit() or 'unknown'}, {when}, on this 2-core machine under load "
+        f"`python -m benchmarks line-bench {args.line} --parcels {args.parcels} "
+        f"--rates {args.rates}` "
+        f"at commit {git_revision()}, {when}, on this 2-core machine under load "
         "(sim/wall is the speed of the whole ROS-free line, planning included).\n\n"
         "Each row: one stream of the given rate (the stream cannot go below its min_gap, so\n"
         "`in` may stay below the rate set) run to the drain with the guard on. `out`: sorted\n"

@@ -14,8 +14,8 @@ import os
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
+from benchmarks.paper.points import INPUT_COLUMNS
 from fence_sorter.optimize import solve
-from fence_sorter.optimize.points import INPUT_COLUMNS
 from fence_sorter.optimize.problem import OptimizeSpec
 
 # -- CSV schema ---------------------------------------------------------------------------------

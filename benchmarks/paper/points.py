@@ -1,5 +1,5 @@
 """One point of a sweep: the inputs of one optimisation (one optimum (1)), with the paper's
-section 3 values as defaults; the CSV columns of :mod:`fence_sorter.optimize.sweep` start with
+section 3 values as defaults; the CSV columns of :mod:`benchmarks.paper.sweep` start with
 them."""
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """The controller's decision table as a sweep: starting strokes (R_s, t1) per load class.
 
-``fence-sorter optimize --sweep decision-table`` optimises W_t (1) over (R_s, t1) with the belt
+``python -m benchmarks paper-sweep decision-table`` optimises W_t (1) over (R_s, t1) with the belt
 speed v and the fence length R_z held at the controller's scene values and alpha_k, the
 constraint profile and the ranges of R_s (3) and t1 (5) taken from config/controller.yaml, for
 each load class: placement (``positioned``: at the fence-side border, section 4.2;
@@ -18,9 +18,9 @@ from pathlib import Path
 
 import yaml
 
+from benchmarks.paper.points import point
 from fence_sorter.capacity.decision_table import PLACEMENTS
 from fence_sorter.capacity.planner import LoadRequest, Planner, PlannerConfig
-from fence_sorter.optimize.points import point
 from fence_sorter.physics.params import ParameterError
 from fence_sorter.scene import load_scene
 from fence_sorter.stream import load_stream
@@ -156,7 +156,7 @@ def compare_planner(
     return out
 
 
-if __name__ == "__main__":  # python -m fence_sorter.optimize.decision
+if __name__ == "__main__":  # python -m benchmarks.paper.decision
     for name, figures in compare_planner().items():
         print(name, " ".join(f"{k}={v:.4g}" for k, v in figures.items()))
 

@@ -8,18 +8,21 @@ from __future__ import annotations
 
 import argparse
 import math
+import shutil
 from concurrent.futures import Executor, Future, ThreadPoolExecutor
 from dataclasses import replace
+from pathlib import Path
 
 import pytest
 
+from benchmarks import cli as cli_main
+from benchmarks.paper import sweep as sw
+from benchmarks.paper import sweep_defs as sd
+from benchmarks.paper import sweep_rows as sr
+from benchmarks.paper.points import point
 from fence_sorter.capacity import LoadRequest, Planner, PlannerConfig
 from fence_sorter.capacity.decision_table import DecisionTable, build_table, write_table
 from fence_sorter.capacity.formulas import pitch
-from fence_sorter.optimize import sweep as sw
-from fence_sorter.optimize import sweep_defs as sd
-from fence_sorter.optimize import sweep_rows as sr
-from fence_sorter.optimize.points import point
 from fence_sorter.physics.params import ParameterError
 from fence_sorter.scene import load_scene
 
@@ -430,3 +433,20 @@ def test_infeasible_points_are_drawn_apart_from_every_value(tmp_path, monkeypatc
         assert finite and max(finite) < band and min(finite) >= lo
     title = fig.texts[0].get_text() if fig.texts else fig._suptitle.get_text()
     assert "controller: controller" not in title and title.startswith("Decision table")
+
+
+@pytest.mark.slow
+def test_plots_only_redraws_from_the_saved_results(tmp_path, capsys):
+    """`python -m benchmarks paper-sweep NAME --plots-only --out DIR`: the figure from the
+    committed CSV, nothing solved; a missing CSV is exit 2 naming it."""
+    paper = Path(__file__).resolve().parents[2] / "docs" / "reports" / "paper"
+    shutil.copy(paper / "fig8.csv", tmp_path / "fig8.csv")
+    argv = ["paper-sweep", "fig9", "--plots-only", "--out", str(tmp_path)]
+    assert cli_main.main(argv) == 0
+    assert (tmp_path / "fig9.png").stat().st_size > 10_000
+    assert not (tmp_path / "fig8.png").exists()  # only what was asked for
+    assert cli_main.main(["paper-sweep", "fig6", "--plots-only", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "fig6.csv" in err[0]
+    assert cli_main.main(["paper-sweep", "fig99", "--out", str(tmp_path)]) == 2
+    assert "fig99" in capsys.readouterr().err

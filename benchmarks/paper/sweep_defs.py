@@ -7,9 +7,9 @@ import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
-from fence_sorter.optimize.decision import decision_points
-from fence_sorter.optimize.points import point
-from fence_sorter.optimize.sweep_rows import solve_point
+from benchmarks.paper.decision import decision_points
+from benchmarks.paper.points import point
+from benchmarks.paper.sweep_rows import solve_point
 
 G = 9.81
 
@@ -267,9 +267,9 @@ def _defs() -> dict[str, SweepDef]:
     return {d.name: d for d in defs}
 
 
-#: the paper's figures (``--sweep all``)
+#: the paper's figures (``paper-sweep all``)
 PAPER_SWEEPS: tuple[str, ...] = tuple(f"fig{i}" for i in range(3, 11))
-#: names accepted by --sweep: the paper's figures, two variants with the fence length fixed,
+#: names accepted by paper-sweep: the paper's figures, two variants with the fence length fixed,
 #: and the controller's starting candidates
 SWEEPS: tuple[str, ...] = (*PAPER_SWEEPS, "fig7-fixed-rz", "fig10-fixed-rz", "decision-table")
 

@@ -7,10 +7,10 @@ CSV are skipped). Points go through a ``concurrent.futures`` executor, one seria
 per point (on 2 cores, parallel over points beats parallel inside one optimisation: see
 docs/reports/paper/README.md). Then ``<out>/<name>.png`` in the style of the paper's figure.
 
-``fence-sorter optimize --sweep NAME`` calls :func:`main`; NAME is one of :data:`SWEEPS`
+``python -m benchmarks paper-sweep NAME`` calls :func:`main`; NAME is one of :data:`SWEEPS`
 (``fig3`` ... ``fig10``, ``decision-table``), several separated by commas, or ``all``.
-``decision-table`` also writes the controller's starting candidates (config/decision_table.yaml,
-:mod:`fence_sorter.optimize.decision`).
+``decision-table`` also writes the controller's starting candidates (``--table``,
+config/decision_table.yaml; :mod:`benchmarks.paper.decision`).
 """
 
 from __future__ import annotations
@@ -25,11 +25,11 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from benchmarks.paper.points import INPUT_COLUMNS
+from benchmarks.paper.sweep_defs import PAPER_SWEEPS, SWEEPS, SweepDef, get_sweep
+from benchmarks.paper.sweep_rows import RowWriter, point_key, read_rows, solve_point
 from fence_sorter.capacity.decision_table import build_table, write_table
 from fence_sorter.optimize.executor import evaluation_pool
-from fence_sorter.optimize.points import INPUT_COLUMNS
-from fence_sorter.optimize.sweep_defs import PAPER_SWEEPS, SWEEPS, SweepDef, get_sweep
-from fence_sorter.optimize.sweep_rows import RowWriter, point_key, read_rows, solve_point
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -132,7 +132,7 @@ def run_sweeps(
                 failed.append(
                     f"{run} point {key}: {type(fut.exception()).__name__}: {fut.exception()}"
                 )
-                print(f"fence-sorter: {failed[-1]}", file=sys.stderr)
+                print(f"benchmarks: {failed[-1]}", file=sys.stderr)
                 continue
             write(fut)
     finally:
@@ -376,22 +376,23 @@ def finish(sweep: SweepDef, out: Path, table_path: Path) -> list[str]:
 
 
 def replot(names: Sequence[str], out: Path) -> int:
-    """``fence-sorter optimize --sweep NAME --plots-only``: the figures from the CSVs in
+    """``python -m benchmarks paper-sweep NAME --plots-only``: the figures from the CSVs in
     ``out`` (no solve, no table written). Exit 0, or 2 for a missing CSV."""
     for name in names:
         sw = get_sweep(name)
         csv_path = out / f"{sw.run}.csv"
         if not csv_path.is_file():
-            print(f"fence-sorter: error: --out: no {csv_path} to plot {name}", file=sys.stderr)
+            print(f"benchmarks: error: --out: no {csv_path} to plot {name}", file=sys.stderr)
             return EXIT_BAD_INPUT
         print(plot_sweep(sw, _order(sw, read_rows(csv_path)), out / f"{sw.name}.png"))
     return EXIT_OK
 
 
 def main(args) -> int:
-    """``fence-sorter optimize --sweep NAME``: run (or resume) the sweeps, write CSV + PNG.
+    """``python -m benchmarks paper-sweep NAME``: run (or resume) the sweeps, write CSV + PNG.
 
-    Uses ``args.sweep``, ``args.out`` (docs/reports/paper), ``args.resume`` (True), ``args.workers``,
+    Uses ``args.sweep``, ``args.out`` (docs/reports/paper), ``args.resume`` (True),
+    ``args.workers``,
     ``args.scheduler`` and, when present, ``args.table`` (config/decision_table.yaml),
     ``args.max_points``, ``args.plots_only`` (True: :func:`replot` alone). Exit 0 done, 1 a
     point failed, 2 bad input, 130 interrupted.
@@ -399,7 +400,7 @@ def main(args) -> int:
     try:
         names = parse_names(str(args.sweep))
     except KeyError as exc:
-        print(f"fence-sorter: error: --sweep: {exc.args[0]}", file=sys.stderr)
+        print(f"benchmarks: error: NAME: {exc.args[0]}", file=sys.stderr)
         return EXIT_BAD_INPUT
     out = Path(getattr(args, "out", None) or "docs/reports/paper")
     if getattr(args, "plots_only", False):
@@ -410,7 +411,7 @@ def main(args) -> int:
     try:
         sweeps = [get_sweep(n) for n in names]
     except Exception as exc:  # e.g. the decision table's config cannot be read
-        print(f"fence-sorter: error: {exc}", file=sys.stderr)
+        print(f"benchmarks: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     repair = bool(getattr(args, "repair", True))
     changed: set[str] = set()
@@ -431,12 +432,12 @@ def main(args) -> int:
                     )
     except KeyboardInterrupt:
         print(
-            "fence-sorter: interrupted; finished points are in the CSV, rerun to resume",
+            "benchmarks: interrupted; finished points are in the CSV, rerun to resume",
             file=sys.stderr,
         )
         return EXIT_INTERRUPTED
     except Exception as exc:
-        print(f"fence-sorter: sweep failed: {type(exc).__name__}: {exc}", file=sys.stderr)
+        print(f"benchmarks: sweep failed: {type(exc).__name__}: {exc}", file=sys.stderr)
         status = EXIT_FAILED
     for sweep in [get_sweep(n) for n in names]:
         for line in finish(sweep, out, table_path):
