@@ -13,7 +13,8 @@ checkout (``source scripts/env.sh`` first):
 - ``python -m benchmarks calibrate-bench``: interval coverage, identifiability and wall time of
   the calibration -> docs/reports/calibration.md (:mod:`benchmarks.calibrate_bench`);
 - ``python -m benchmarks.startup``: a process's start-up, part by part -> docs/reports/startup/;
-- ``python -m benchmarks.versus BASE``: the solve's speed against commit BASE -> docs/reports/versus.md;
+- ``python -m benchmarks.versus BASE``: the solve's speed against commit BASE ->
+  docs/reports/versus.md;
 - ``python -m benchmarks.convergence``: the convergence table of docs/design/numerics.md;
 - ``python -m benchmarks.simulator_bench``: the simulator node's pacing in one process;
 - ``python -m benchmarks.rerun_bench [BAG]``: the cost of Rerun logging per frame.

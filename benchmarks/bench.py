@@ -1623,5 +1623,8 @@ def render_markdown(rep: BenchReport) -> str:
         )
     add("")
 
-    add("What these figures mean: [docs/design/verification.md](../design/verification.md#benchmarks).")
+    add(
+        "What these figures mean: "
+        "[docs/design/verification.md](../design/verification.md#benchmarks)."
+    )
     return "\n".join(L).rstrip() + "\n"

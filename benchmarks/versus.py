@@ -172,7 +172,8 @@ def render(data: dict) -> str:
         f"`{base}`, {data['rounds']} alternating fresh processes per tree and scene, "
         f"{data['calls']} timed calls each after {data['warm_up']} untimed ones; load average "
         f"(1, 5, 15 min) {data['load_before']} before, {data['load_after']} after. How it is "
-        "measured: [verification.md](../design/verification.md#solve-speed-against-a-base-commit).",
+        "measured: "
+        "[verification.md](../design/verification.md#solve-speed-against-a-base-commit).",
         "",
     ]
     if "prepared" in data:

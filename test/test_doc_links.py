@@ -28,7 +28,7 @@ def relative_links(text: str) -> list[str]:
 def test_the_link_reader_finds_relative_links_only():
     text = (
         "See [a](design/a.md#x), ![b](img/b.png), [c](https://x.org/c.md), [d](#local),\n"
-        "`[e](not/a/link.md)`\n```\n[f](in/code.md)\n```\n[g](../g/ \"title\")"
+        '`[e](not/a/link.md)`\n```\n[f](in/code.md)\n```\n[g](../g/ "title")'
     )
     assert relative_links(text) == ["design/a.md", "img/b.png", "../g/"]
 

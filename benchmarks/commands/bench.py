@@ -4,8 +4,8 @@ Runs :mod:`benchmarks.bench` (per scene: the default configuration against a
 converged reference and the fastest SciPy baseline at the same error, stiff-fence event times,
 peak memory, the model each scene builds against the full model, the kernel with and without
 the JIT), prints the report and writes it as JSON (default ``docs/reports/benchmarks.json``) and as
-markdown rendered from that JSON (default ``docs/reports/benchmarks.md``); ``--from-json`` renders the
-markdown again from an earlier run's JSON without measuring anything.
+markdown rendered from that JSON (default ``docs/reports/benchmarks.md``); ``--from-json`` renders
+the markdown again from an earlier run's JSON without measuring anything.
 
 Exit codes: 0 the bench ran (targets that fail are reported in the tables, not as an exit
 code), 2 bad arguments (one line ``benchmarks: error: ...``; an unknown scene names the

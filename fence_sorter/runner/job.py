@@ -66,8 +66,8 @@ NO_PARCEL_TIMEOUT = 60.0
 RESTARTABLE = ("controller",)
 MAX_CONTROLLER_RESTARTS = 3
 #: the highest rate of the simulator's state in a run with sensors [Hz of sim time]: a sensor
-#: sampling faster interpolates between states (docs/guide/calibration.md); the sensors node and the
-#: recorder keep up with it on a loaded 2-CPU machine at rtf 1, not with 1 kHz
+#: sampling faster interpolates between states (docs/guide/calibration.md); the sensors node and
+#: the recorder keep up with it on a loaded 2-CPU machine at rtf 1, not with 1 kHz
 MAX_STATE_RATE = 250.0
 #: the upper end of the simulator's publish_rate parameter [Hz of wall time when paced]
 MAX_PUBLISH_RATE = next(

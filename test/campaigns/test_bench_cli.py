@@ -130,8 +130,8 @@ def test_bad_repeats_exit_2() -> None:
 
 
 def test_bench_keeps_the_node_suite_section_of_the_file(tmp_path):
-    """``python -m benchmarks bench`` regenerates docs/reports/benchmarks.md but must carry over the
-    section ``python -m benchmarks bench-suite`` writes between its markers."""
+    """``python -m benchmarks bench`` regenerates docs/reports/benchmarks.md but must carry over
+    the section ``python -m benchmarks bench-suite`` writes between its markers."""
     from benchmarks.commands.bench import _suite_section
 
     out = tmp_path / "benchmarks.md"
@@ -143,9 +143,9 @@ def test_bench_keeps_the_node_suite_section_of_the_file(tmp_path):
 
 
 def test_a_rung_that_meets_the_error_by_cancellation_is_not_chosen() -> None:
-    """DOP853 on arbitrary_stiff (docs/design/numerics.md): rtol 1e-2 lands within 2.5e-4 of our reference
-    by a cancellation of errors, rtol 1e-3 and 1e-4 are off by ~1e-2; rtol 1e-5 and 1e-6 hold.
-    The loosest *sustained* rung is chosen; a rung whose next one did not run stands."""
+    """DOP853 on arbitrary_stiff (docs/design/numerics.md): rtol 1e-2 lands within 2.5e-4 of our
+    reference by a cancellation of errors, rtol 1e-3 and 1e-4 are off by ~1e-2; rtol 1e-5 and
+    1e-6 hold. The loosest *sustained* rung is chosen; a rung whose next one did not run stands."""
     from types import SimpleNamespace
 
     ok = SimpleNamespace(success=True)

@@ -15,7 +15,8 @@ from fence_sorter.verification import stability_cases as C
 from fence_sorter.verification import stability_report as R
 
 # Fast cases that currently violate an invariant with the default solver: bugs reported to the
-# physics/integrator owners (see docs/reports/stability/README.md). Not strict: a fix turns them green.
+# physics/integrator owners (see docs/reports/stability/README.md). Not strict: a fix turns them
+# green.
 KNOWN_ISSUES: dict[str, str] = {}
 
 

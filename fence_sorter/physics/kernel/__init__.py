@@ -21,8 +21,8 @@ is importable from the package. Everything works on NumPy arrays so that Numba c
 
 Why compiled: the pure-Python stepper ran impact_flexible at 2.4x real time; the accuracy and
 speed targets (75x real time) need the force evaluation in the 1-10 us range, which only a
-compiled kernel reaches (docs/reports/benchmarks.md measures the same code with and without the JIT).
-Setting NUMBA_DISABLE_JIT=1 runs exactly this code as plain Python.
+compiled kernel reaches (docs/reports/benchmarks.md measures the same code with and without the
+JIT). Setting NUMBA_DISABLE_JIT=1 runs exactly this code as plain Python.
 
 Compiled without Numba's reference counting (``_nrt=False``, as Numba compiles its own hot
 functions): every array here is allocated by the caller, and with NRT each call of a kernel
