@@ -1,4 +1,4 @@
-"""The campaigns that regenerate this repository's reports (docs/), beside the package.
+"""The campaigns that regenerate this repository's reports (docs/reports/), beside the package.
 
 Not installed: they measure the twin of this checkout and write into it. Run them from the
 checkout (``source scripts/env.sh`` first):
@@ -12,6 +12,9 @@ checkout (``source scripts/env.sh`` first):
   (:mod:`benchmarks.faults`);
 - ``python -m benchmarks calibrate-bench``: interval coverage, identifiability and wall time of
   the calibration -> docs/reports/calibration.md (:mod:`benchmarks.calibrate_bench`);
+- ``python -m benchmarks line-bench``: a line's saturation curve -> docs/reports/line-bench.md;
+- ``python -m benchmarks paper-sweep NAME``: the optimisation sweeps of the paper's Figs. 3-10
+  and the controller's decision table -> docs/reports/paper/ (:mod:`benchmarks.paper`);
 - ``python -m benchmarks.startup``: a process's start-up, part by part -> docs/reports/startup/;
 - ``python -m benchmarks.versus BASE``: the solve's speed against commit BASE ->
   docs/reports/versus.md;
