@@ -31,21 +31,26 @@ format: bootstrap
 test: bootstrap
 	$(ENV) && ruff check $(LINT_PATHS) && ruff format --check $(LINT_PATHS) && pytest -q test/
 
-# every generated report of docs/, each with the arguments its committed version was made with
-# (hours of CPU, niced); versus is left out: it compares with a commit the reader names
+# every generated report of docs/reports/, each with the arguments its committed version was
+# made with and its output named (the package writes nowhere by default but the current
+# directory); hours of CPU, niced; versus is left out: it compares with a commit the reader names
 reports: bootstrap
-	$(ENV) && nice -n 10 fence-sorter accuracy --out docs/accuracy --repeats 3 --max-wall 30 \
-		&& nice -n 10 fence-sorter stability \
-		&& nice -n 10 fence-sorter optimize --sweep all --no-resume --out docs/paper \
-		&& nice -n 10 fence-sorter optimize --sweep fig7-fixed-rz,fig10-fixed-rz,decision-table \
-			--no-resume --out docs/paper \
-		&& nice -n 10 python -m benchmarks bench \
-		&& nice -n 10 python -m benchmarks bench-suite \
-		&& nice -n 10 python -m benchmarks faults \
+	$(ENV) && nice -n 10 fence-sorter accuracy --out docs/reports/accuracy --repeats 3 --max-wall 30 \
+		&& nice -n 10 fence-sorter stability --out docs/reports/stability \
+		&& nice -n 10 python -m benchmarks paper-sweep all --no-resume --out docs/reports/paper \
+		&& nice -n 10 python -m benchmarks paper-sweep fig7-fixed-rz,fig10-fixed-rz,decision-table \
+			--no-resume --out docs/reports/paper --table config/decision_table.yaml \
+		&& nice -n 10 python -m benchmarks bench --out docs/reports/benchmarks.md \
+			--json docs/reports/benchmarks.json \
+		&& nice -n 10 python -m benchmarks bench-suite --out docs/reports/benchmarks.md \
+		&& nice -n 10 python -m benchmarks faults --out docs/reports/reliability.md \
 		&& nice -n 10 python -m benchmarks calibrate-bench --seeds 200 --parcels 8 \
 			--fresh-noise 105,106,112,117 --draws 100 --timing-parcels 50 \
-			--json docs/calibration.json --doc docs/calibration.md \
-		&& nice -n 10 python -m benchmarks.startup --rounds 5 --runs 3 --load 4
+			--json docs/reports/calibration.json --doc docs/reports/calibration.md \
+		&& nice -n 10 python -m benchmarks line-bench four_units --parcels 100 \
+			--rates 2000,4000,6000,8000,10000,12000 --out docs/reports/line-bench.md \
+		&& nice -n 10 python -m benchmarks.startup --rounds 5 --runs 3 --load 4 \
+			--out docs/reports/startup
 
 clean:
 	rm -rf .build

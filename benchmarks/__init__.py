@@ -1,20 +1,24 @@
-"""The campaigns that regenerate this repository's reports (docs/), beside the package.
+"""The campaigns that regenerate this repository's reports (docs/reports/), beside the package.
 
 Not installed: they measure the twin of this checkout and write into it. Run them from the
 checkout (``source scripts/env.sh`` first):
 
 - ``python -m benchmarks bench``: speed and memory of the default configuration against SciPy
-  baselines -> docs/benchmarks.md (:mod:`benchmarks.bench`);
+  baselines -> docs/reports/benchmarks.md (:mod:`benchmarks.bench`);
 - ``python -m benchmarks bench-suite``: the node suite's pacing, lost messages, controller
-  latency and unpaced real-time factor -> its section of docs/benchmarks.md
+  latency and unpaced real-time factor -> its section of docs/reports/benchmarks.md
   (:mod:`benchmarks.bench_suite`, with the host stall probe :mod:`benchmarks.stall_probe`);
-- ``python -m benchmarks faults``: the fault-injection campaign -> docs/reliability.md
+- ``python -m benchmarks faults``: the fault-injection campaign -> docs/reports/reliability.md
   (:mod:`benchmarks.faults`);
 - ``python -m benchmarks calibrate-bench``: interval coverage, identifiability and wall time of
-  the calibration -> docs/calibration.md (:mod:`benchmarks.calibrate_bench`);
-- ``python -m benchmarks.startup``: a process's start-up, part by part -> docs/startup/;
-- ``python -m benchmarks.versus BASE``: the solve's speed against commit BASE -> docs/versus.md;
-- ``python -m benchmarks.convergence``: the convergence table of docs/numerics.md;
+  the calibration -> docs/reports/calibration.md (:mod:`benchmarks.calibrate_bench`);
+- ``python -m benchmarks line-bench``: a line's saturation curve -> docs/reports/line-bench.md;
+- ``python -m benchmarks paper-sweep NAME``: the optimisation sweeps of the paper's Figs. 3-10
+  and the controller's decision table -> docs/reports/paper/ (:mod:`benchmarks.paper`);
+- ``python -m benchmarks.startup``: a process's start-up, part by part -> docs/reports/startup/;
+- ``python -m benchmarks.versus BASE``: the solve's speed against commit BASE ->
+  docs/reports/versus.md;
+- ``python -m benchmarks.convergence``: the convergence table of docs/design/numerics.md;
 - ``python -m benchmarks.simulator_bench``: the simulator node's pacing in one process;
 - ``python -m benchmarks.rerun_bench [BAG]``: the cost of Rerun logging per frame.
 

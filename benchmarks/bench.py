@@ -38,7 +38,7 @@ memory of one event). Per scene:
   Numba cache (compilation).
 
 Functions return plain dataclasses; :func:`render_markdown` turns a :class:`BenchReport` into
-``docs/benchmarks.md``.
+``docs/reports/benchmarks.md``.
 """
 
 from __future__ import annotations
@@ -1217,7 +1217,7 @@ def render_markdown(rep: BenchReport) -> str:
     add("")
     add(
         "How the figures are measured and how to read them: "
-        "[verification.md](verification.md#benchmarks)."
+        "[verification.md](../design/verification.md#benchmarks)."
     )
     add("")
 
@@ -1623,5 +1623,8 @@ def render_markdown(rep: BenchReport) -> str:
         )
     add("")
 
-    add("What these figures mean: [docs/verification.md](verification.md#benchmarks).")
+    add(
+        "What these figures mean: "
+        "[docs/design/verification.md](../design/verification.md#benchmarks)."
+    )
     return "\n".join(L).rstrip() + "\n"

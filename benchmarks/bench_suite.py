@@ -7,8 +7,8 @@ controller's parcel -> command latency p99, and whether every command arrived be
 parcel's front reached R_s. Unpaced (rtf 0): sim time over wall time between the simulator's
 heartbeats around the stream (first scan to last outcome), with all topics published.
 
-:func:`write_section` replaces only the part of docs/benchmarks.md between the suite markers
-(the rest of that file is `python -m benchmarks bench`'s).
+:func:`write_section` replaces only the part of docs/reports/benchmarks.md between the suite
+markers (the rest of that file is `python -m benchmarks bench`'s).
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@
   the contact damping b_p is flagged, not estimated.
 - **timing**: one bag of ``timing_parcels`` parcels, five parameters, wall time.
 
-:func:`render` fills the generated section of docs/calibration.md.
+:func:`render` fills the generated section of docs/reports/calibration.md.
 """
 
 from __future__ import annotations

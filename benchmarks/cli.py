@@ -14,8 +14,10 @@ from fence_sorter.cli import main as fence_sorter_cli
 CAMPAIGNS = {
     "bench": "speed and memory of the default configuration against SciPy baselines",
     "bench-suite": "node suite benchmark: pacing, lost messages, controller latency, unpaced RTF",
-    "faults": "fault-injection campaign of the node suite (writes docs/reliability.md)",
+    "faults": "fault-injection campaign of the node suite (writes docs/reports/reliability.md)",
     "calibrate-bench": "calibration benchmark: interval coverage, identifiability, wall time",
+    "paper-sweep": "the optimisation sweeps of the paper's Figs. 3-10 and the decision table",
+    "line-bench": "saturation curve of a line: sort rate and throughput against induction rate",
 }
 BENCHMARKS = fence_sorter_cli.CommandLine(
     "python -m benchmarks",

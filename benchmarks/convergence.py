@@ -2,8 +2,8 @@
 
 Each bench scene is solved by its default method (``adaptive``) with ``solver.rtol`` replaced
 (atol = 1e-2 rtol, as ``accuracy.configure`` sets it) and its peak contact force compared with
-the one of docs/accuracy/reference/<scene>.npz (``fence-sorter accuracy`` writes them). Run
-``python -m benchmarks.convergence`` for the markdown table of docs/numerics.md
+the one of docs/reports/accuracy/reference/<scene>.npz (``fence-sorter accuracy`` writes them). Run
+``python -m benchmarks.convergence`` for the markdown table of docs/design/numerics.md
 ("Convergence of the adaptive scheme with rtol"); test/campaigns/test_convergence.py asserts it.
 """
 
@@ -25,7 +25,7 @@ from fence_sorter.physics.stepper import collector_off
 from fence_sorter.scene import load_scene
 from fence_sorter.verification.accuracy import ATOL_PER_RTOL, SCENES
 
-REFERENCE_DIR = REPO / "docs" / "accuracy" / "reference"
+REFERENCE_DIR = REPO / "docs" / "reports" / "accuracy" / "reference"
 RTOLS = (1e-4, 1e-5, 1e-6, 1e-7)
 GAIN = 100.0  # the error at the tightest rtol at least this much below the loosest's
 MONOTONE = 2.0  # ... and no error more than this above the one of the looser rtol before it
@@ -58,7 +58,7 @@ def solve_at(scene: str, rtol: float, repeats: int = 1, ref_peak: float | None =
     sc = replace(sc, solver=sv, record=())
     walls = []
     for _ in range(max(1, repeats)):
-        with collector_off():  # docs/numerics.md's timing protocol
+        with collector_off():  # docs/design/numerics.md's timing protocol
             t0 = time.perf_counter()
             result = simulate(sc)
             walls.append(time.perf_counter() - t0)

@@ -1,5 +1,5 @@
 """The fault-injection campaign of the node suite: the faults of issue 16, injected again and
-counted, written to docs/reliability.md (``python -m benchmarks faults``).
+counted, written to docs/reports/reliability.md (``python -m benchmarks faults``).
 
 Cases:
 

@@ -11,8 +11,8 @@ first real parcel and then, in a process of its own:
 - **clock**: publishes /clock jumping ``jump`` s ahead of the run's sim time at 1 kHz for
   ``seconds`` s.
 
-What the suite must do (docs/security.md, docs/reliability.md): refuse every forgery as
-``foreign_source`` (it has no tag under the run's key), sort every real divert parcel as
+What the suite must do (docs/design/security.md, docs/reports/reliability.md): refuse every
+forgery as ``foreign_source`` (it has no tag under the run's key), sort every real divert parcel as
 planned, keep forgeries out of the figures, name them (and a foreign /clock publisher) in the
 summary and exit 4, never 0.
 """
@@ -271,7 +271,7 @@ def section(workdir: Path, progress=print) -> dict:
 
 
 def insiders_md(sec: dict, meta_lines: list[str]) -> list[str]:
-    """docs/reliability.md's section (``meta_lines``: the command, commit and machine)."""
+    """docs/reports/reliability.md's section (``meta_lines``: the command, commit and machine)."""
     lines = [
         "## Insiders (the run's own id on the run's own domain)",
         "",

@@ -15,8 +15,8 @@ kernel's autogroup scheduling shares the CPUs between them), each with the secon
 runner's start to each node's process having built its node (its first log line: interpreter,
 imports, rclpy, parameters) and to its first heartbeat. Medians over the rounds, printed and
 written as ``startup.json`` and ``README.md`` (rendered from the JSON) into ``--out`` (default
-docs/startup/), with the command, the revision and the load average. The kernel must have been
-compiled first (scripts/bootstrap.sh does).
+docs/reports/startup/), with the command, the revision and the load average. The kernel must have
+been compiled first (scripts/bootstrap.sh does).
 """
 
 from __future__ import annotations
@@ -200,7 +200,7 @@ def render(data: dict) -> str:
         "# Start-up of a process",
         "",
         f"Written by `{data['command']}` at {data['revision']} from `startup.json`; do not edit "
-        'by hand. What the parts are and why: docs/numerics.md, "Start-up of a process".',
+        'by hand. What the parts are and why: docs/design/numerics.md, "Start-up of a process".',
         "",
         f"Median of {data['rounds']} fresh interpreters per scene, in ms. Machine: {m['cpu']}, "
         f"{m['cores']}; load average {data['load_average']} at the start.",
@@ -263,7 +263,9 @@ def main(argv=None) -> int:
     ap.add_argument(
         "--load", type=int, default=0, help="the runs again beside N busy processes (0: not)"
     )
-    ap.add_argument("--out", default=str(REPO / "docs" / "startup"), help="'' writes nothing")
+    ap.add_argument(
+        "--out", default=str(REPO / "docs" / "reports" / "startup"), help="'' writes nothing"
+    )
     args = ap.parse_args(argv)
     if args.rounds < 1:
         ap.error(f"--rounds must be >= 1, got {args.rounds}")

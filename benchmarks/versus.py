@@ -7,7 +7,7 @@ libraries, ``PYTHONPATH`` and the working directory pointing at each tree, each 
 compiled-kernel cache (its ``__pycache__``). Each process compiles or loads its kernel and warms up
 before the timed calls, with the garbage collector off. Per scene: the median wall time of every
 timed call of each tree and their ratio (this tree / BASE: below 1 is faster). The figures go to
-``docs/versus.json`` and are rendered to ``docs/versus.md``.
+``docs/reports/versus.json`` and are rendered to ``docs/reports/versus.md``.
 
 Exit codes: 0 measured, 2 bad arguments (one line naming the argument), 1 a child failed.
 """
@@ -36,8 +36,8 @@ CALLS = 20  # timed calls per process
 WARM_UP = 3  # untimed calls per process before the timed ones
 #: the warm-up module of a tree: this tree's, then the one of trees older than it
 WARMUP_MODULES = ("fence_sorter.warmup", "fence_sorter.physics.warmup")
-OUT_JSON = "docs/versus.json"
-OUT_MD = "docs/versus.md"
+OUT_JSON = "docs/reports/versus.json"
+OUT_MD = "docs/reports/versus.md"
 
 #: run in a fresh process of one tree (cwd and PYTHONPATH the tree): the tree's own
 #: fence_sorter, WARM_UP untimed calls, then CALLS timed ones with the collector off
@@ -172,7 +172,8 @@ def render(data: dict) -> str:
         f"`{base}`, {data['rounds']} alternating fresh processes per tree and scene, "
         f"{data['calls']} timed calls each after {data['warm_up']} untimed ones; load average "
         f"(1, 5, 15 min) {data['load_before']} before, {data['load_after']} after. How it is "
-        "measured: [verification.md](verification.md#solve-speed-against-a-base-commit).",
+        "measured: "
+        "[verification.md](../design/verification.md#solve-speed-against-a-base-commit).",
         "",
     ]
     if "prepared" in data:

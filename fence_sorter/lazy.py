@@ -3,7 +3,8 @@
 For packages whose ``__init__`` would otherwise import heavy modules (the physics and Numba) that
 most importers of one light submodule never use: every node imports ``capacity.constraints`` and
 ``line.types``, ``fence-sorter optimize --help`` imports ``optimize.problem``. The one place of
-that concept (``capacity``, ``line``, ``optimize``); docs/imports.md says which imports are lazy.
+that concept (``capacity``, ``line``, ``optimize``); docs/design/imports.md says which imports are
+lazy.
 """
 
 from __future__ import annotations

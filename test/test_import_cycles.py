@@ -21,7 +21,7 @@ PACKAGE = Path(fence_sorter.__file__).parent
 
 
 #: Dependencies loaded only where used, from ``python -X importtime -c "import M"`` (best of 3,
-#: cumulative, docs/imports.md): Numba's compiler and the kernel (~0.4-1.6 s), SciPy's
+#: cumulative, docs/design/imports.md): Numba's compiler and the kernel (~0.4-1.6 s), SciPy's
 #: submodules (0.6-1 s), rclpy (0.25 s) and the ROS message and ament packages (present only in
 #: a ROS environment), Rerun (0.5 s), Dask's scheduler (1.6 s), Matplotlib (0.7-1.3 s), rosbags
 #: and mcap (40-70 ms, only for bag files), foxglove-sdk (0.1-0.2 s, only to serve Foxglove).

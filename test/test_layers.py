@@ -1,4 +1,4 @@
-"""The package's layers (docs/architecture.md): no module imports a layer above its own.
+"""The package's layers (docs/design/architecture.md): no module imports a layer above its own.
 
 A unit is a subpackage of fence_sorter (``physics``, ``nodes``, ...) or a module at its top
 (``scene``, ``codes``, ...). :data:`LAYERS` orders the units bottom to top; a unit may import
@@ -16,7 +16,7 @@ from pathlib import Path
 
 from test_import_cycles import PACKAGE, cycles, import_targets, module_names
 
-#: (layer, its units), bottom to top: the order of docs/architecture.md's "Layers" block
+#: (layer, its units), bottom to top: the order of docs/design/architecture.md's "Layers" block
 LAYERS: tuple[tuple[str, frozenset[str]], ...] = (
     (
         "base",
@@ -44,7 +44,7 @@ ROS_LAYERS = frozenset({"nodes", "runner", "cli"})
 #: rclpy and the ROS message and interface packages (rosbags reads bags without ROS)
 ROS_PACKAGES = re.compile(r"^(rclpy|rcl_interfaces|[a-z0-9_]+_msgs)(\.|$)")
 
-ARCHITECTURE = Path(__file__).resolve().parents[1] / "docs" / "architecture.md"
+ARCHITECTURE = Path(__file__).resolve().parents[1] / "docs" / "design" / "architecture.md"
 #: what stands beside the package in the checkout, never imported by it: the campaigns and the
 #: tests' helpers (not installed)
 OUTSIDE = re.compile(r"^(benchmarks|test|processes|conftest)(\.|$)")
@@ -161,7 +161,7 @@ def test_ros_is_imported_only_from_the_nodes_up():
 
 
 def test_the_architecture_page_names_the_layers_in_this_order():
-    """docs/architecture.md's block under "Layers" lists each layer's units, top first."""
+    """docs/design/architecture.md's block under "Layers" lists each layer's units, top first."""
     text = ARCHITECTURE.read_text()
     block = text.split("## Layers", 1)[1].split("```", 2)[1]
     rows = [line.split() for line in block.strip().splitlines()]

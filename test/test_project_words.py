@@ -85,7 +85,7 @@ def offending_lines(text: str) -> list[tuple[int, str, str]]:
     [
         "measured in session 8 by H1",
         "at session start (ef900a9) the bench gave 0.49 ms",
-        "6x in docs/benchmarks.md before this session",
+        "6x in docs/reports/benchmarks.md before this session",
         "the machine shared with a helper's benchmarks",
         "the lead's run on a quiet machine decides",
         "counted by `/tmp/s8/h3_count.py`",

@@ -3,9 +3,9 @@
 Runs :mod:`benchmarks.bench` (per scene: the default configuration against a
 converged reference and the fastest SciPy baseline at the same error, stiff-fence event times,
 peak memory, the model each scene builds against the full model, the kernel with and without
-the JIT), prints the report and writes it as JSON (default ``docs/benchmarks.json``) and as
-markdown rendered from that JSON (default ``docs/benchmarks.md``); ``--from-json`` renders the
-markdown again from an earlier run's JSON without measuring anything.
+the JIT), prints the report and writes it as JSON (default ``docs/reports/benchmarks.json``) and as
+markdown rendered from that JSON (default ``docs/reports/benchmarks.md``); ``--from-json`` renders
+the markdown again from an earlier run's JSON without measuring anything.
 
 Exit codes: 0 the bench ran (targets that fail are reported in the tables, not as an exit
 code), 2 bad arguments (one line ``benchmarks: error: ...``; an unknown scene names the
@@ -26,7 +26,7 @@ from benchmarks.bench_suite import BEGIN, END
 
 EXIT_OK = 0
 EXIT_BAD_ARGS = 2
-DEFAULT_OUT = "docs/benchmarks.md"
+DEFAULT_OUT = "docs/reports/benchmarks.md"
 
 
 def register(parser: argparse.ArgumentParser) -> None:

@@ -2,7 +2,7 @@
 
 Runs :mod:`benchmarks.bench_suite` (a paced run at rtf 1.0 for 60 s at
 2400 pcs/h, then an unpaced run), prints the section and writes it between the suite markers
-of the output file (default ``docs/benchmarks.md``; the rest of the file is left as it is).
+of the output file (default ``docs/reports/benchmarks.md``; the rest of the file is left as it is).
 
 Exit codes: 0 the bench ran (missed targets are reported in the table), 1 a run failed,
 2 bad arguments.
@@ -20,7 +20,7 @@ from fence_sorter.cli.run import add_param_option
 from fence_sorter.runner.job import BadInput
 from fence_sorter.verification.machine import git_revision, machine_info
 
-DEFAULT_OUT = "docs/benchmarks.md"
+DEFAULT_OUT = "docs/reports/benchmarks.md"
 
 
 def register(parser: argparse.ArgumentParser) -> None:

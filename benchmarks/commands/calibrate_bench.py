@@ -1,4 +1,5 @@
-"""``python -m benchmarks calibrate-bench``: the calibration's figures into docs/calibration.md.
+"""``python -m benchmarks calibrate-bench``: the calibration's figures into
+docs/reports/calibration.md.
 
 Interval coverage over seeds (camera60, impact_flexible), the coverage over fresh noise for
 given seeds' parcels, the b_p flag from 25 Hz poses and the wall time of a 50-parcel,
@@ -40,7 +41,9 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--workers", type=int, default=None, help="processes (default: CPUs)")
     add_scheduler_argument(parser)
     parser.add_argument(
-        "--doc", metavar="FILE", help="fill the generated section of FILE (docs/calibration.md)"
+        "--doc",
+        metavar="FILE",
+        help="fill the generated section of FILE (docs/reports/calibration.md)",
     )
     parser.add_argument("--json", metavar="FILE", help="write the figures as JSON")
     parser.add_argument(

@@ -1,5 +1,5 @@
 """``python -m benchmarks faults``: the fault-injection campaign of the node suite ->
-docs/reliability.md.
+docs/reports/reliability.md.
 
 Repeated Ctrl-C, floods on /parcels and /fence_commands, insiders with the run's own id
 (forged duplicates, a flood, a second /clock), hostile and malformed messages, bad files,
@@ -26,7 +26,7 @@ def register(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--out",
-        default="docs/reliability.md",
+        default="docs/reports/reliability.md",
         help="report (markdown; its data beside it as .json: a run of some --cases replaces "
         "only their sections)",
     )

@@ -1,6 +1,6 @@
 """Fit the twin's physics to a measured bag: robust nonlinear least squares over replays.
 
-Steps (docs/calibration.md):
+Steps (docs/design/calibration.md):
 
 1. **Align.** Each stroke's start, alpha_k and t1 come from the drive encoder
    (:func:`~fence_sorter.calibration.bag.fit_stroke`); the camera frame is placed in the sorter

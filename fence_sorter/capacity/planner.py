@@ -2,7 +2,7 @@
 
 Candidates (R_s, t1) from the ranges (3) and (5) are ordered once by W_t (1) (t_z ascending,
 then the gentler stroke first); a configured decision table (optima of the sweep
-``decision-table``, fence_sorter.optimize.decision) puts the stroke of the load's class first.
+``decision-table``, benchmarks.paper.decision) puts the stroke of the load's class first.
 For a load, the candidates its timing admits (the load front must still be upstream of R_s
 when the command is out, the fence must be free) are tried in W_t order for half the
 evaluation budget, then on an even spread over the rest (feasibility is not monotone along the

@@ -22,7 +22,7 @@ from fence_sorter.scene import available_scenes
 EXIT_OK = 0
 EXIT_BAD_ARGS = 2
 EXIT_FAILED = 3
-DEFAULT_OUT = "docs/accuracy"
+DEFAULT_OUT = "accuracy"
 
 
 def error(message: str, code: int = EXIT_BAD_ARGS) -> int:

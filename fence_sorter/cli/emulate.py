@@ -2,7 +2,7 @@
 
 Parcels of a stream run through the twin of SCENE (the truth, ``--set`` to change it) one stroke
 each, seen by the emulated sensors of FILE (rate, noise, dropouts, latency, camera frame offset;
-docs/calibration.md), written without ROS to a bag carrying the measured topics. Seeded: the
+docs/guide/calibration.md), written without ROS to a bag carrying the measured topics. Seeded: the
 same command writes the same bag. Exit codes: 0 written, 2 bad input, 3 a replay failed.
 """
 

@@ -33,7 +33,6 @@ SUBCOMMANDS: dict[str, str] = {
     "stability": "stability campaign over stiff and extreme cases (invariants and verdicts)",
     "run": "run the node suite on a parcel stream and print a summary",
     "line-sim": "simulate a line of fence units without ROS (routing, recirculation, summary)",
-    "line-bench": "saturation curve of a line: sort rate and throughput against induction rate",
     "replay": "republish a recorded bag over DDS with its original timing (scaled)",
     "analyze": "analyse a recorded bag: per-parcel table, capacity, plots, check vs live outcomes",
     "bag": "bag tools standing in for `ros2 bag` (info)",

@@ -1,8 +1,8 @@
 """``fence-sorter optimize``: the capacity optimum W_t (1) over X = [R_s, v, t1, R_z].
 
 Exit codes: 0 an answer (an optimum, or ``"feasible": false`` with the constraint no point met),
-2 bad arguments (one line naming the option and its allowed range). ``--sweep NAME`` hands over
-to :mod:`fence_sorter.optimize.sweep` (the data behind Figs. 3-10).
+2 bad arguments (one line naming the option and its allowed range). The sweeps behind the
+paper's Figs. 3-10 run beside the package: ``python -m benchmarks paper-sweep``.
 """
 
 from __future__ import annotations
@@ -72,7 +72,7 @@ def register(p: argparse.ArgumentParser) -> None:
     p.description = (
         "Maximise the sorting capacity W_t (1) over X = [R_s, v, t1, R_z] within the ranges "
         "(3)-(6) subject to the selected constraints (7)-(12), evaluated on the twin "
-        "(docs/optimize.md). Prints the optimum X, W_t [pcs/h], Delta_c, the active "
+        "(docs/guide/optimize.md). Prints the optimum X, W_t [pcs/h], Delta_c, the active "
         "constraints and every margin; 'feasible: false' with the constraint no point met."
     )
     p.add_argument("--case", choices=("arbitrary", "positioned"), help="section 4.1 or 4.2")
@@ -140,7 +140,7 @@ def register(p: argparse.ArgumentParser) -> None:
         "--grid",
         action="store_true",
         help="instead of the optimiser, the exact best point of a regular grid (the yardstick "
-        "of docs/optimize.md)",
+        "of docs/design/optimize.md)",
     )
     p.add_argument(
         "--grid-steps",
@@ -148,40 +148,6 @@ def register(p: argparse.ArgumentParser) -> None:
         default=None,
         metavar="NAME=STEP,...",
         help="grid steps (default R_s=0.05,v=0.1,t1=0.05,R_z=0.025)",
-    )
-    # sweeps of Figs. 3-10 (fence_sorter.optimize.sweep)
-    p.add_argument("--sweep", default=None, metavar="NAME", help="a figure sweep, e.g. fig6")
-    p.add_argument("--out", default="docs/paper", help="sweep output directory (%(default)s)")
-    p.add_argument(
-        "--resume",
-        action=argparse.BooleanOptionalAction,
-        default=True,
-        help="continue a sweep from its saved results (default: yes)",
-    )
-    p.add_argument(
-        "--repair",
-        action=argparse.BooleanOptionalAction,
-        default=True,
-        help="after a sweep, re-solve each looser problem whose optimum lies below a tighter "
-        "neighbour's, starting from the tighter optima (default: yes)",
-    )
-    p.add_argument(
-        "--max-points",
-        type=int,
-        default=None,
-        metavar="N",
-        help="stop a sweep after N new points (resume later)",
-    )
-    p.add_argument(
-        "--plots-only",
-        action="store_true",
-        help="with --sweep: redraw the sweeps' figures from their CSVs in --out, solve nothing",
-    )
-    p.add_argument(
-        "--table",
-        default=None,
-        metavar="PATH",
-        help="decision table written by --sweep decision-table (config/decision_table.yaml)",
     )
     p.set_defaults(func=run)
 
@@ -283,12 +249,6 @@ def summary(d: dict) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.sweep is not None:
-        if args.max_points is not None and args.max_points < 1:
-            return error(f"--max-points must be in [1, inf), got {args.max_points}")
-        from fence_sorter.optimize import sweep  # lazy: loads the kernel (Numba), SciPy
-
-        return int(sweep.main(args) or 0)
     # lazy: loads the kernel (Numba), SciPy
     from fence_sorter.optimize.executor import evaluation_pool
     from fence_sorter.optimize.solve import grid_search, optimize

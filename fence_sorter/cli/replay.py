@@ -35,7 +35,7 @@ def register(parser: argparse.ArgumentParser) -> None:
         "--foxglove",
         metavar="[HOST:]PORT",
         help="serve the bag to the Foxglove app over the Foxglove WebSocket protocol at "
-        "ws://HOST:PORT while it is replayed (HOST default 127.0.0.1; docs/foxglove.md)",
+        "ws://HOST:PORT while it is replayed (HOST default 127.0.0.1; docs/guide/foxglove.md)",
     )
     parser.set_defaults(func=run)
 

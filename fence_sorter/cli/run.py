@@ -43,13 +43,13 @@ def register(parser: argparse.ArgumentParser) -> None:
         metavar="FILE",
         help="sensors file or name under config/sensors/ (e.g. camera60): the sensors node "
         "publishes the measured topics from the twin's state; with --bag a calibration bag "
-        "(the truth in its metadata; docs/calibration.md)",
+        "(the truth in its metadata; docs/guide/calibration.md)",
     )
     parser.add_argument(
         "--foxglove",
         metavar="[HOST:]PORT",
         help="serve every topic of the run to the Foxglove app over the Foxglove WebSocket "
-        "protocol at ws://HOST:PORT (HOST default 127.0.0.1; docs/foxglove.md)",
+        "protocol at ws://HOST:PORT (HOST default 127.0.0.1; docs/guide/foxglove.md)",
     )
     parser.add_argument(
         "--stream", default="default", help="stream config (YAML) or CSV manifest, or a name"

@@ -2,7 +2,8 @@
 
 Runs the cases of :mod:`fence_sorter.verification.stability` (all, the fast subset with
 ``--quick``, or the ones named with ``--cases``), prints one line per case and writes
-``README.md``, ``results.json`` and ``summary.png`` into ``--out`` (default docs/stability).
+``README.md``, ``results.json`` and ``summary.png`` into ``--out`` (default ``stability`` in the
+current directory).
 
 Exit codes: 0 every case met its expectation, 1 some did not (they are named), 2 bad arguments
 (an unknown case name: one line ``fence-sorter: error: ...`` naming the allowed names).
@@ -15,7 +16,6 @@ import shlex
 import sys
 import time
 from datetime import UTC, datetime
-from pathlib import Path
 
 from fence_sorter.verification import stability_cases as C
 from fence_sorter.verification.machine import git_revision, machine_info
@@ -23,7 +23,7 @@ from fence_sorter.verification.machine import git_revision, machine_info
 EXIT_OK = 0
 EXIT_UNMET = 1
 EXIT_BAD_ARGS = 2
-REPO = Path(__file__).resolve().parents[2]
+DEFAULT_OUT = "stability"
 
 
 def register(parser: argparse.ArgumentParser) -> None:
@@ -34,9 +34,9 @@ def register(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--out",
-        default="docs/stability",
+        default=DEFAULT_OUT,
         metavar="DIR",
-        help="directory for README.md, results.json and summary.png (default docs/stability)",
+        help="directory for README.md, results.json and summary.png (default: %(default)s)",
     )
     which = parser.add_mutually_exclusive_group()
     which.add_argument(
@@ -96,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
     wall = time.perf_counter() - t0
 
     argv = ["fence-sorter", "stability"]
-    if args.out != "docs/stability":
+    if args.out != DEFAULT_OUT:
         argv += ["--out", args.out]
     if args.quick:
         argv.append("--quick")
@@ -105,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
     meta = {
         "command": shlex.join(argv),
         "date": datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC"),
-        "commit": git_revision(REPO),
+        "commit": git_revision(),
         "machine": machine_info(),
         "warm_up_s": warm,
         "wall_time_s": wall,

@@ -3,7 +3,7 @@
 For each selected parcel (``--last N``: the bag's last N, as ``calibrate --holdout N`` left
 out; ``--parcels``: by id; default all) the twin of the scene replays the parcel and its stroke;
 sorted or not, exit speed, y_max and peak acceleration are estimated the same way from the
-measured and the predicted camera track and compared (docs/calibration.md). ``--out DIR``
+measured and the predicted camera track and compared (docs/guide/calibration.md). ``--out DIR``
 writes validation.json and validation.png. Exit codes: 0 compared, 2 bad input, 3 a replay
 failed.
 """

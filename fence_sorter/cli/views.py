@@ -29,7 +29,7 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "rrd", nargs="?", help="the .rrd (default: the checkout's bags/example_4_parcels.rrd)"
     )
-    parser.add_argument("--out", metavar="DIR", default="docs/views", help="(default docs/views)")
+    parser.add_argument("--out", metavar="DIR", default="views", help="(default: %(default)s)")
     parser.add_argument(
         "--mid",
         type=float,

@@ -428,7 +428,7 @@ class SortingLine:
         config.validate()
         # the line steps solves as its clock moves: a stroke's solve is not cut off by the
         # solver's wall-clock limit (the pacer reports a slow one), so lift it to its maximum
-        # (see docs/simulator.md)
+        # (see docs/design/simulator.md)
         solver = replace(config.solver, stop_when_sorted=False, max_wall_time=3600.0)
         self.fem = build_fence(config.fence) if config.fence is not None else None
         if self.fem is not None:

@@ -4,7 +4,7 @@ ROS and no other Python thread beside it.
 Why a process: Python threads share one interpreter lock with no priorities. In the
 simulator node's process, rclpy's executor, the publisher thread and the log calls took that
 lock from the loop for up to ~2 ms at a time (an rclpy ``publish()`` does not release it); the
-cycle traces showed this as the main cause of deadline misses (docs/simulator.md). Here the
+cycle traces showed this as the main cause of deadline misses (docs/design/simulator.md). Here the
 loop is the process's only thread. It reads parcels and commands from one pipe at the start of
 every cycle (non-blocking) and writes what the node publishes (snapshots, events, log lines,
 counters) to another, never waiting for the reader in a paced run.

@@ -453,7 +453,7 @@ PLANNER_PARAMETERS: tuple[ParamSpec, ...] = (
         "decision_table",
         "",
         "Starting strokes per load class, tried first (config/decision_table.yaml, made by "
-        "fence-sorter optimize --sweep decision-table); empty: none",
+        "python -m benchmarks paper-sweep decision-table); empty: none",
         False,
     ),
     ParamSpec(
@@ -609,7 +609,7 @@ FOXGLOVE_PARAMETERS: tuple[ParamSpec, ...] = (
         "host",
         "127.0.0.1",
         "Address the Foxglove WebSocket server binds (an IP address or localhost); "
-        "127.0.0.1: this machine only (docs/security.md)",
+        "127.0.0.1: this machine only (docs/design/security.md)",
         read_only=True,
     ),
     ParamSpec(

@@ -8,11 +8,11 @@ outcomes at once and snapshots every publish period over a pipe. This node's pro
 executor in the main thread, one publisher thread) forwards the subscriptions to the loop and
 publishes what it sends: /clock, states, markers, outcomes, diagnostics. Python threads share
 one interpreter lock, so publishing in the loop's own process took the lock from the loop for
-milliseconds at a time (docs/simulator.md). ``real_time_factor`` 0 runs unpaced (each cycle
+milliseconds at a time (docs/design/simulator.md). ``real_time_factor`` 0 runs unpaced (each cycle
 advances one publish period as fast as the publisher keeps up). A cycle that wakes late
 advances the sim by the missed periods in one go, up to ``max_catch_up`` of sim time; beyond
 that sim time slips (counted). Lateness (wake - deadline) of every paced cycle feeds the
-percentiles on /diagnostics. See docs/simulator.md.
+percentiles on /diagnostics. See docs/design/simulator.md.
 """
 
 from __future__ import annotations

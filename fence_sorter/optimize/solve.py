@@ -606,7 +606,7 @@ def grid_search(
     points are visited in descending W_t order (in batches, on ``executor``) and the search
     stops after the batch holding the first feasible point; every point not simulated has a
     W_t no higher. Returns {"best": evaluation or None, "grid_points", "evaluations",
-    "points", "wall_time", "steps"}. The yardstick of the optimiser (docs/optimize.md)."""
+    "points", "wall_time", "steps"}. The yardstick of the optimiser (docs/design/optimize.md)."""
     spec.validate()
     t0 = time.perf_counter()
     axes = grid_axes(spec, steps)

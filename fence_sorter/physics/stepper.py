@@ -1,7 +1,7 @@
 """Stepping one sorting event through the solve loop, as scipy's ``OdeSolver`` steps an ODE:
 :class:`Stepper`.
 
-Our schemes (``solver.method``; docs/accuracy/ measures each):
+Our schemes (``solver.method``; docs/reports/accuracy/ measures each):
 
 - ``trapezoidal`` (fixed step ``solver.dt``): load by the trapezoidal rule, implicit in the
   contact forces and belt friction; fence modes propagated exactly (Van Loan) for a modal force

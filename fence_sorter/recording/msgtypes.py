@@ -22,6 +22,8 @@ from typing import TYPE_CHECKING
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
+from fence_sorter.resources import checkout_root
+
 if TYPE_CHECKING:
     from rosbags.interfaces.typing import Typesdict
 
@@ -29,8 +31,6 @@ MSG_PACKAGE = "fence_sorter_msgs"
 MSG_DIR_ENV = "FENCE_SORTER_MSG_DIR"
 #: The ROS distribution whose standard message definitions the type store starts from.
 TYPESTORE_STORE = Stores.ROS2_KILTED
-
-_REPO_MSG_DIR = Path(__file__).resolve().parents[2] / "msg_defs" / "msg"
 
 
 class MsgDefsError(RuntimeError):
@@ -56,7 +56,9 @@ def candidate_msg_dirs() -> list[Path]:
     override = os.environ.get(MSG_DIR_ENV)
     if override:
         candidates.append(Path(override))
-    candidates.append(_REPO_MSG_DIR)
+    root = checkout_root()
+    if root is not None:
+        candidates.append(root / "msg_defs" / "msg")
     prefixes = [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
     prefixes.append(sys.prefix)
     for prefix in prefixes:

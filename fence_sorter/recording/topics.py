@@ -26,7 +26,7 @@ SORT_EVENTS = "/sort_events"
 JOINT_STATES = "/joint_states"
 MARKERS = "/markers"
 DIAGNOSTICS = "/diagnostics"
-#: measured topics a real sorter can record (docs/calibration.md): drive encoder (>= 200 Hz),
+#: measured topics a real sorter can record (docs/guide/calibration.md): drive encoder (>= 200 Hz),
 #: overhead camera poses of the parcels (25-120 Hz), fence root bending moment (>= 1 kHz)
 DRIVE_ENCODER = "/sensors/drive_encoder"
 CAMERA_POSES = "/sensors/camera/parcel_poses"
@@ -124,7 +124,7 @@ NODE_SUBSCRIPTIONS: dict[str, tuple[str, ...]] = {
     "sensors": (FENCE_STATE, LOAD_STATES, PARCELS),
     "foxglove": tuple(SUITE_TOPICS),
 }
-#: the measured topics a real sorter's sensors publish (docs/calibration.md), published in a
+#: the measured topics a real sorter's sensors publish (docs/guide/calibration.md), published in a
 #: run by the sensors node (``fence-sorter run --sensors``) and recorded with the suite's
 #: topics then: reliable, so a calibration bag holds every sample the sensors took
 MEASURED_QOS = QosSpec(reliable=True, depth=EVENT_DEPTH)

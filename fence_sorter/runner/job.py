@@ -66,8 +66,8 @@ NO_PARCEL_TIMEOUT = 60.0
 RESTARTABLE = ("controller",)
 MAX_CONTROLLER_RESTARTS = 3
 #: the highest rate of the simulator's state in a run with sensors [Hz of sim time]: a sensor
-#: sampling faster interpolates between states (docs/calibration.md); the sensors node and the
-#: recorder keep up with it on a loaded 2-CPU machine at rtf 1, not with 1 kHz
+#: sampling faster interpolates between states (docs/guide/calibration.md); the sensors node and
+#: the recorder keep up with it on a loaded 2-CPU machine at rtf 1, not with 1 kHz
 MAX_STATE_RATE = 250.0
 #: the upper end of the simulator's publish_rate parameter [Hz of wall time when paced]
 MAX_PUBLISH_RATE = next(
@@ -407,7 +407,7 @@ def _run(
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = env["ROS_AUTOMATIC_DISCOVERY_RANGE"]
     set_profile(os.environ, str(FASTDDS_PROFILE))
     # paced with the loop pinned: every other process of the run keeps off the loop's CPU, so
-    # its work does not evict the loop's caches while the loop sleeps (docs/simulator.md)
+    # its work does not evict the loop's caches while the loop sleeps (docs/design/simulator.md)
     allowed = set(os.sched_getaffinity(0))
     pinned, set_here = loop_cpu(plan, opts.rtf, allowed)
     others = allowed - {pinned}

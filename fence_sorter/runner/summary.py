@@ -17,7 +17,7 @@ EXIT_FOREIGN = 4
 #: run's stream) gave its id different specs; the first one was sorted
 EXIT_DISPUTED = 6
 #: exit status: the recorder could not write the bag (a full disk, any write error): the run
-#: went on unrecorded from the time the summary names (docs/recording.md)
+#: went on unrecorded from the time the summary names (docs/guide/recording.md)
 EXIT_RECORDING = 5
 #: the diagnostics counters of messages a node dropped or refused (where, and why): intake
 #: refusals (foreign run or source, rate), middleware losses, duplicates and conflicts of a

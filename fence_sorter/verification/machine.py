@@ -9,7 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[2]
+#: where ``git`` looks for the revision: the package's own folder, inside a checkout's tree when
+#: run from one; an installed copy is in none and reports "unknown"
+PACKAGE_DIR = Path(__file__).resolve().parent
 
 
 def _first_field(path: str, prefix: str) -> str | None:
@@ -65,7 +67,7 @@ def _git(root: Path | str, *args: str) -> str:
     ).stdout.strip()
 
 
-def git_revision(root: Path | str = REPO) -> str:
+def git_revision(root: Path | str = PACKAGE_DIR) -> str:
     """Short HEAD, marked when tracked files differ from it."""
     try:
         rev = _git(root, "rev-parse", "--short", "HEAD")

@@ -3,7 +3,7 @@
 Each command (``fence-sorter accuracy``, ``stability``, ``bench``) writes its figures as JSON
 and renders its markdown from that JSON alone, so the committed markdown can be rebuilt from
 the committed data (and a test checks that its tables are). Interpretation of the figures is
-written for readers in docs/verification.md, not generated.
+written for readers in docs/design/verification.md, not generated.
 """
 
 from __future__ import annotations

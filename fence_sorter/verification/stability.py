@@ -30,7 +30,8 @@ Invariants of a successful solve, each recorded as (name, passed, value, limit):
   grace); the solver itself stops a longer solve with a wall-time diagnosis, so no case can hang.
 
 The campaign runs from ``fence-sorter stability`` (``fence_sorter/cli/stability.py``), which
-writes ``README.md``, ``results.json`` and ``summary.png`` into ``docs/stability/``.
+writes ``README.md``, ``results.json`` and ``summary.png`` into ``--out`` (this repository's
+report: docs/reports/stability/).
 """
 
 from __future__ import annotations

@@ -15,7 +15,7 @@ beyond it. foxglove-sdk 0.30 reports only the first overflow of each client (its
 "outbox for client ADDR full", no count); :class:`LiveServer` counts those reports per client
 (``slow_clients``), and counts exactly what it can see itself: messages handed to the server
 while a client was subscribed (``forwarded``) and those sent again to late joiners
-(``resent``). docs/foxglove.md says what that does and does not measure.
+(``resent``). docs/guide/foxglove.md says what that does and does not measure.
 """
 
 from __future__ import annotations

@@ -52,7 +52,7 @@ def test_register_adds_the_bench_subcommand() -> None:
     args = parser.parse_args(["--quick", "--out", "x.md", "--scenes", "impact_flexible"])
     assert args.func is bench_cli.run
     assert args.quick and args.out == "x.md" and args.scenes == ["impact_flexible"]
-    assert parser.parse_args([]).out == "docs/benchmarks.md"
+    assert parser.parse_args([]).out == "docs/reports/benchmarks.md"
 
 
 @pytest.mark.slow
@@ -130,8 +130,8 @@ def test_bad_repeats_exit_2() -> None:
 
 
 def test_bench_keeps_the_node_suite_section_of_the_file(tmp_path):
-    """``python -m benchmarks bench`` regenerates docs/benchmarks.md but must carry over the
-    section ``python -m benchmarks bench-suite`` writes between its markers."""
+    """``python -m benchmarks bench`` regenerates docs/reports/benchmarks.md but must carry over
+    the section ``python -m benchmarks bench-suite`` writes between its markers."""
     from benchmarks.commands.bench import _suite_section
 
     out = tmp_path / "benchmarks.md"
@@ -143,9 +143,9 @@ def test_bench_keeps_the_node_suite_section_of_the_file(tmp_path):
 
 
 def test_a_rung_that_meets_the_error_by_cancellation_is_not_chosen() -> None:
-    """DOP853 on arbitrary_stiff (docs/numerics.md): rtol 1e-2 lands within 2.5e-4 of our reference
-    by a cancellation of errors, rtol 1e-3 and 1e-4 are off by ~1e-2; rtol 1e-5 and 1e-6 hold.
-    The loosest *sustained* rung is chosen; a rung whose next one did not run stands."""
+    """DOP853 on arbitrary_stiff (docs/design/numerics.md): rtol 1e-2 lands within 2.5e-4 of our
+    reference by a cancellation of errors, rtol 1e-3 and 1e-4 are off by ~1e-2; rtol 1e-5 and
+    1e-6 hold. The loosest *sustained* rung is chosen; a rung whose next one did not run stands."""
     from types import SimpleNamespace
 
     ok = SimpleNamespace(success=True)
@@ -177,7 +177,7 @@ LADDER = (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7)
 
 @pytest.mark.slow
 def test_the_fastest_candidate_is_confirmed_at_the_next_rung() -> None:
-    """positioned_stiff (docs/accuracy): LSODA meets 3.2e-4 at rtol 1e-3 (8.3e-6)
+    """positioned_stiff (docs/reports/accuracy): LSODA meets 3.2e-4 at rtol 1e-3 (8.3e-6)
     but not at 1e-4 (8.2e-4); rtol 1e-5 and tighter hold. RK45 holds from 1e-2 on but is
     slower. The search must run LSODA's 1e-4 rung, go on to 1e-5, confirm it at 1e-6, and the
     choice is LSODA rtol 1e-5, with or without a SciPy reference."""

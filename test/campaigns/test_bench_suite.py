@@ -1,5 +1,5 @@
-"""bench-suite writes only its own section of docs/benchmarks.md; lost-message arithmetic; bad
-options are exit 2 naming them."""
+"""bench-suite writes only its own section of docs/reports/benchmarks.md; lost-message
+arithmetic; bad options are exit 2 naming them."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """How ``python -m benchmarks bench`` times a run (``bench.timed_run``): the garbage collector is
 off during the timed call and back in its previous state after it (also when the call raises), and
 no collection runs inside the call; the same function times our runs and the SciPy baselines. No
-timing assertions (speed targets live in docs/benchmarks.md)."""
+timing assertions (speed targets live in docs/reports/benchmarks.md)."""
 
 from __future__ import annotations
 

@@ -1,10 +1,10 @@
 """The adaptive scheme converges with rtol: a user who tightens the tolerance gets a more
-accurate peak force at a cost that grows smoothly (docs/numerics.md, "Convergence of the
+accurate peak force at a cost that grows smoothly (docs/design/numerics.md, "Convergence of the
 adaptive scheme with rtol").
 
 Each scene's default (``adaptive``) is solved at rtol 1e-4 ... 1e-7 (atol = 1e-2 rtol) and its
-peak contact force compared with the committed reference (docs/accuracy/reference/*.npz, the
-trapezoidal scheme at dt = 3.9 us, converged to ~1e-9): the error at rtol 1e-7 is at least 100x
+peak contact force compared with the committed reference (docs/reports/accuracy/reference/*.npz,
+the trapezoidal scheme at dt = 3.9 us, converged to ~1e-9): the error at rtol 1e-7 is at least 100x
 below the one at 1e-4 and never more than 2x above the one at the looser rtol before it, and the
 steps grow with every decade of rtol by less than COST_GROWTH (4x). On a stiff fence that needs
 the fence friction's stick resolved below the default rtol (``control.resolves_stick``): without

@@ -12,7 +12,7 @@ from benchmarks import bench, faults, startup, versus
 from fence_sorter.verification import accuracy, stability_report
 from fence_sorter.verification.report import fmt, table, tables
 
-DOCS = Path(__file__).resolve().parents[2] / "docs"
+DOCS = Path(__file__).resolve().parents[2] / "docs" / "reports"
 
 
 def test_table_helpers() -> None:
@@ -59,7 +59,7 @@ def test_stability_readme_tables_are_those_of_its_results_json() -> None:
 
 DATA = Path(__file__).resolve().parent / "data"
 
-#: the tables docs/benchmarks.md gets from data/bench_small.json, written out by hand
+#: the tables docs/reports/benchmarks.md gets from data/bench_small.json, written out by hand
 BENCH_SMALL_TABLES = [
     [
         "|  |  |",
@@ -170,7 +170,8 @@ def without_suite_section(markdown: str) -> str:
 
 
 @pytest.mark.skipif(
-    not (DOCS / "benchmarks.json").is_file(), reason="docs/benchmarks.json not committed yet"
+    not (DOCS / "benchmarks.json").is_file(),
+    reason="docs/reports/benchmarks.json not committed yet",
 )
 def test_benchmarks_md_tables_are_those_of_benchmarks_json() -> None:
     data = json.loads((DOCS / "benchmarks.json").read_text(encoding="utf-8"))
@@ -188,7 +189,9 @@ def test_reliability_md_is_its_json_rendered() -> None:
     assert committed == rendered
 
 
-@pytest.mark.skipif(not (DOCS / "versus.json").is_file(), reason="docs/versus.json not written")
+@pytest.mark.skipif(
+    not (DOCS / "versus.json").is_file(), reason="docs/reports/versus.json not written"
+)
 def test_versus_md_is_its_json_rendered() -> None:
     data = json.loads((DOCS / "versus.json").read_text(encoding="utf-8"))
     assert (DOCS / "versus.md").read_text(encoding="utf-8") == versus.render(data)
@@ -202,11 +205,12 @@ def test_startup_readme_is_its_json_rendered() -> None:
 
 
 @pytest.mark.skipif(
-    not (DOCS / "calibration.json").is_file(), reason="docs/calibration.json not written"
+    not (DOCS / "calibration.json").is_file(), reason="docs/reports/calibration.json not written"
 )
 def test_calibration_md_figures_are_its_json_rendered() -> None:
-    """docs/calibration.md's generated section (coverage, per-block counts, per-seed z, fresh
-    noise) has the tables ``calibrate-bench --from-json docs/calibration.json`` renders."""
+    """docs/reports/calibration.md's generated section (coverage, per-block counts, per-seed z,
+    fresh noise) has the tables ``calibrate-bench --from-json docs/reports/calibration.json``
+    renders."""
     from benchmarks import calibrate_bench as calibration_bench
 
     data = json.loads((DOCS / "calibration.json").read_text(encoding="utf-8"))

@@ -6,8 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from benchmarks import versus
-from fence_sorter.verification.machine import REPO
+from benchmarks import REPO, versus
 from fence_sorter.verification.report import tables
 
 

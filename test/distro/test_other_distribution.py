@@ -3,11 +3,11 @@ CLI tests on it.
 
 The suite runs on Jazzy (LTS) by default and on Kilted with ``FENCE_SORTER_ROS_DISTRO=kilted``
 (scripts/bootstrap.sh: its own pinned wheel set, venv ``.venv-kilted`` and build directory
-``.build/kilted``; docs/install.md). ``make test`` runs everything on the distribution of its
+``.build/kilted``; docs/guide/install.md). ``make test`` runs everything on the distribution of its
 venv and, through this test, the set-up and ``pytest test/ros test/cli`` on the other one in
 a child process, so CI (which runs ``make test`` alone) covers both. A failure shows the
 child's output. ``pytest -m "not distro"`` leaves it out. The colcon install test runs on the
-default distribution only (docs/install.md: what the other leg costs).
+default distribution only (docs/guide/install.md: what the other leg costs).
 """
 
 from __future__ import annotations

@@ -4,8 +4,8 @@ The baselines integrate ``kernel.rhs`` (explicit Karnopp friction), a slightly d
 the model than our steppers solve (implicit friction; the belt's stick region is the elliptic
 limit surface there, force and torque clipped separately in the explicit Karnopp branch). Both
 converge, to answers about 0.3 % apart in peak contact force on positioned_stiff and 0.15 % on
-the flexible scenes (docs/accuracy/README.md), so agreement is asserted to 1 % in peak force and
-more tightly where the two forms agree (impact speed, exit speed, sorting).
+the flexible scenes (docs/reports/accuracy/README.md), so agreement is asserted to 1 % in peak
+force and more tightly where the two forms agree (impact speed, exit speed, sorting).
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Stability campaign (``fence_sorter.verification.stability``): the fast subset meets its
 expectations with the default solver, a deliberately diverging setting is caught with a named
 diagnosis, and the case list covers every item of the issue. The full campaign runs from
-``fence-sorter stability`` (docs/stability/)."""
+``fence-sorter stability`` (docs/reports/stability/)."""
 
 from __future__ import annotations
 
@@ -15,7 +15,8 @@ from fence_sorter.verification import stability_cases as C
 from fence_sorter.verification import stability_report as R
 
 # Fast cases that currently violate an invariant with the default solver: bugs reported to the
-# physics/integrator owners (see docs/stability/README.md). Not strict: a fix turns them green.
+# physics/integrator owners (see docs/reports/stability/README.md). Not strict: a fix turns them
+# green.
 KNOWN_ISSUES: dict[str, str] = {}
 
 

@@ -268,7 +268,7 @@ def test_the_bag_carries_the_truth_and_calibrate_fits_it(run):
     (est,) = res["estimates"]
     assert est["verdict"] == "identified"
     # within 5 %; the 95 % interval holds the truth on about 95 % of run bags
-    # (docs/calibration.md, run bags), so on this one bag it is not asserted
+    # (docs/guide/calibration.md, run bags), so on this one bag it is not asserted
     assert est["value"] == pytest.approx(truth["values"]["mu_fence"], rel=0.05), est
     lo, hi = est["ci95"]
     assert lo < est["value"] < hi and hi / lo < 1.2, est

@@ -21,8 +21,8 @@ is importable from the package. Everything works on NumPy arrays so that Numba c
 
 Why compiled: the pure-Python stepper ran impact_flexible at 2.4x real time; the accuracy and
 speed targets (75x real time) need the force evaluation in the 1-10 us range, which only a
-compiled kernel reaches (docs/benchmarks.md measures the same code with and without the JIT).
-Setting NUMBA_DISABLE_JIT=1 runs exactly this code as plain Python.
+compiled kernel reaches (docs/reports/benchmarks.md measures the same code with and without the
+JIT). Setting NUMBA_DISABLE_JIT=1 runs exactly this code as plain Python.
 
 Compiled without Numba's reference counting (``_nrt=False``, as Numba compiles its own hot
 functions): every array here is allocated by the caller, and with NRT each call of a kernel
@@ -36,7 +36,7 @@ The small functions of the contact iteration (``_add``, ``_surface``, ``_fence_f
 their callers by Numba (``inline="always"``): a call passes every array as ~7-9 machine words,
 and the profile showed the callers pushing ~150 words per ``_evaluate`` call and dozens per
 ``_add`` (same arithmetic, bitwise the same results; compiled loop 5-12 % faster,
-docs/numerics.md).
+docs/design/numerics.md).
 
 The time-stepping schemes built on it (trapezoidal, generalized-alpha) are the ``*_step``
 functions of ``steps``. :func:`solve` is the one control loop of every scheme (events, step

@@ -3,7 +3,7 @@
 The first call of a Numba dispatcher in a process costs ~0.3-1 s even when its machine code
 is cached: ~80 % is Numba's one-time set-up of its typing and target registries
 (``BaseContext.refresh``), the rest loading and linking the cached object code
-(docs/numerics.md, "Start-up of a process"). An extension module built by ``numba.pycc``
+(docs/design/numerics.md, "Start-up of a process"). An extension module built by ``numba.pycc``
 from the same source loads in a few milliseconds and calls no dispatcher.
 
 :func:`build` (``python -m fence_sorter.warmup``, which scripts/bootstrap.sh runs once

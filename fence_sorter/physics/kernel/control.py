@@ -128,7 +128,7 @@ def resolves_stick(settings, m):
     ``solver.tolerance`` [m/s] (its |dq| + h |dv| test alone leaves a velocity error up to
     tol / h and a force error ~ m tol / h^2 at the short steps around a switch), and a contact
     sticking at both ends of a step ends it at the stick force extrapolated from the step
-    means (``steps._unring_stick``). See docs/numerics.md, "Convergence of the adaptive
+    means (``steps._unring_stick``). See docs/design/numerics.md, "Convergence of the adaptive
     scheme with rtol"."""
     return settings[0].adaptive != 0.0 and m == 0 and settings[0].rtol < RTOL_DEFAULT
 
