@@ -89,11 +89,13 @@ def run(args: argparse.Namespace) -> int:
         f"--rates {args.rates}` "
         f"at commit {git_revision()}, {when}, on this 2-core machine under load "
         "(sim/wall is the speed of the whole ROS-free line, planning included).\n\n"
-        "Each row: one stream of the given rate (the stream cannot go below its min_gap, so\n"
-        "`in` may stay below the rate set) run to the drain with the guard on. `out`: sorted\n"
-        "parcels per hour of induction; recirculated: share of parcels that went round the\n"
-        "loop at least once; W_t: each unit's capacity (1)-(2) for its median stroke (by\n"
-        "scraping time t_z) and the median parcel length (`-`: no stroke).\n\n"
+        "Each row: one stream of the given rate run to the drain with the guard on. `in`:\n"
+        "first inductions per hour, after the induction held new parcels for returning ones\n"
+        "and (induction.min_gap) to the line's gap, so it stays below the rate set once the\n"
+        "line is saturated; `out`: sorts per hour while the induction ran (that window\n"
+        "shifted by the median induction-to-sort time); recirculated: share of parcels that\n"
+        "went round the loop at least once; W_t: each unit's capacity (1)-(2) for its median\n"
+        "stroke (by scraping time t_z) and the median parcel length (`-`: no stroke).\n\n"
         + "\n".join(rows)
         + "\n"
     )
