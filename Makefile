@@ -48,7 +48,7 @@ reports: bootstrap
 			--fresh-noise 105,106,112,117 --draws 100 --timing-parcels 50 \
 			--json docs/reports/calibration.json --doc docs/reports/calibration.md \
 		&& nice -n 10 python -m benchmarks line-bench four_units --parcels 100 \
-			--rates 2000,4000,6000,8000,10000,12000 --out docs/reports/line-bench.md \
+			--rates 2000,3000,4000,6000,8000,12000 --out docs/reports/line-bench.md \
 		&& nice -n 10 python -m benchmarks.startup --rounds 5 --runs 3 --load 4 \
 			--out docs/reports/startup
 

@@ -26,7 +26,7 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("line", nargs="?", default="four_units", metavar="LINE")
     parser.add_argument("--parcels", type=int, default=200, metavar="N", help="per rate")
     parser.add_argument(
-        "--rates", default="2000,4000,6000,8000,10000,12000", metavar="R1,R2,...",
+        "--rates", default="2000,3000,4000,6000,8000,12000", metavar="R1,R2,...",
         help="induction rates [pcs/h]",
     )  # fmt: skip
     parser.add_argument("--seed", type=int, default=None)
