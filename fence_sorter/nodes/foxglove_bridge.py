@@ -5,9 +5,11 @@ with, forwarded unchanged on ``ros2msg``/``cdr`` channels of a foxglove-sdk serv
 (:class:`fence_sorter.visualisation.foxglove_live.LiveServer`): /tf, /tf_static,
 /robot_description, /joint_states and /markers give Foxglove's 3D panel the sorter, the other
 topics its plots and tables. /clock is the server's time. The server binds ``host`` (default
-127.0.0.1, this machine only: docs/design/security.md) and ``port``; clients, forwarded messages
-and slow clients (their outbox overflowed, foxglove-sdk dropping the oldest messages) are on
-/diagnostics. ``fence-sorter run --foxglove [HOST:]PORT`` starts it in a process of its own.
+127.0.0.1, this machine only: docs/design/security.md) and ``port``; clients, forwarded messages,
+the messages handed over for each client and the slow clients foxglove-sdk reports (their
+outbox overflowed, the oldest messages dropped; how many, the SDK does not tell:
+docs/guide/foxglove.md) are on /diagnostics. ``fence-sorter run --foxglove [HOST:]PORT``
+starts it in a process of its own.
 """
 
 from __future__ import annotations

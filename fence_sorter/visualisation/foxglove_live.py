@@ -11,11 +11,14 @@ when it subscribes (as a transient-local subscription would get it), so the app'
 gets the robot description, the static frames and the markers whenever it connects.
 
 Slow clients: the server holds ``backlog`` outgoing messages per client and drops the oldest
-beyond it. foxglove-sdk 0.30 reports only the first overflow of each client (its log record
-"outbox for client ADDR full", no count); :class:`LiveServer` counts those reports per client
-(``slow_clients``), and counts exactly what it can see itself: messages handed to the server
-while a client was subscribed (``forwarded``) and those sent again to late joiners
-(``resent``). docs/guide/foxglove.md says what that does and does not measure.
+beyond it. foxglove-sdk 0.30 counts those drops nowhere it shows: its only sign is a log record
+"outbox for client ADDR full", at most one every 30 s for the whole process, without a count
+(``send_lossy`` in its Rust source). :class:`LiveServer` counts those reports (``slow_clients``,
+a lower bound of the clients that lost messages) and counts exactly what it sees itself: the
+messages handed to the server for each subscribed client (``handed``, per client id: what the
+client receives when nothing is dropped, so handed minus received is what the server dropped
+for it), in all (``forwarded``) and sent again to late joiners (``resent``).
+docs/guide/foxglove.md says what that does and does not measure.
 """
 
 from __future__ import annotations
@@ -36,7 +39,7 @@ from fence_sorter.visualisation.foxglove_address import DEFAULT_HOST
 DEFAULT_BACKLOG = 1024
 #: topics whose last message a new subscriber gets at once
 LATCHED = (ROBOT_DESCRIPTION, TF_STATIC, MARKERS)
-#: the SDK's logger that reports a client's full outbox (first overflow per client)
+#: the SDK's logger that reports a full client outbox (one record per 30 s per process)
 SDK_DROP_LOGGER = "foxglove.websocket.connected_client.send_lossy"
 _OUTBOX_FULL = re.compile(r"outbox for client (\S+) full")
 
@@ -125,6 +128,7 @@ class LiveServer:
         self.offered: Counter = Counter()  # topic -> every message given to log()
         self.resent: Counter = Counter()  # topic -> latched messages sent to a late joiner
         self.slow_clients: Counter = Counter()  # client address -> overflows reported
+        self.handed: Counter = Counter()  # client id -> messages handed over for it
         self._last: dict[str, tuple[bytes, int]] = {}
         self._channels: dict[str, foxglove.Channel] = {}
         _forward_sdk_logs()
@@ -173,6 +177,10 @@ class LiveServer:
         if channel.has_sinks():
             channel.log(data, log_time=t_ns)
             self.forwarded[topic] += 1
+            with self._lock:
+                for client_id, stats in self.clients.items():
+                    if topic in stats.subscriptions:
+                        self.handed[client_id] += 1
 
     def broadcast_time(self, t_ns: int) -> None:
         """The server's time [ns] (sim time): the app's current time for TF and plots."""
@@ -186,6 +194,8 @@ class LiveServer:
         if last is not None:
             self._channels[topic].log(last[0], log_time=last[1], sink_id=client_id)
             self.resent[topic] += 1
+            with self._lock:
+                self.handed[client_id] += 1
 
     def on_unsubscribe(self, client_id: int, topic: str) -> None:
         with self._lock:
@@ -208,6 +218,7 @@ class LiveServer:
         with self._lock:
             clients = len(self.clients)
             subscriptions = sum(len(c.subscriptions) for c in self.clients.values())
+            handed = " ".join(f"{c}:{n}" for c, n in sorted(self.handed.items()))
         values = {
             "address": f"{self.host}:{self.port}",
             "clients": str(clients),
@@ -216,8 +227,10 @@ class LiveServer:
             "offered": str(sum(self.offered.values())),
             "forwarded": str(sum(self.forwarded.values())),
             "resent_to_late_joiners": str(sum(self.resent.values())),
-            # clients whose outbox overflowed (the SDK drops the oldest messages then and
-            # reports the first overflow of each client, without a count)
+            # per client id (connected or gone): messages handed to the server for it
+            "handed_per_client": handed,
+            # clients whose outbox overflowed as the SDK reports them (the oldest messages
+            # dropped; at most one report per 30 s for the whole process, without a count)
             "slow_clients": str(len(self.slow_clients)),
             "slow_client_addresses": " ".join(sorted(self.slow_clients)),
         }

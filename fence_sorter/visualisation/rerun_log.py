@@ -10,11 +10,12 @@ bag (:func:`log_bag`, ``fence-sorter rrd``). Entity paths:
   (static), ``world/fence``, ``world/parcels``, ``world/contact_forces``;
 - ``top/...``: the same in 2D for the top view (parcels as their rotated footprints), in view
   coordinates ``(x, -y)`` (a 2D view draws y downwards; so y0, towards the chute, points up);
-- ``plots/contact/<id>/N`` and ``.../N_stiff`` [N], ``plots/fence/tip_deflection`` [m],
+- ``plots/contact/<id>/N`` and ``.../N_stiff`` [kN], ``plots/fence/tip_deflection`` (the
+  tip's yield -w [cm], positive under load),
   ``plots/fence/alpha_w`` [rad], ``plots/speed/<id>`` [m/s] at the publish rate;
 - per sorting event at the solver's resolution (:meth:`RerunLogger.log_event`):
-  ``plots/contact/<id>/N_steps``, ``.../N_stiff_course`` [N],
-  ``plots/fence/tip_deflection/steps/<id>`` [m]; ``damage/w_n``, ``damage/a_N``, ``damage/N``
+  ``plots/contact/<id>/N_steps``, ``.../N_stiff_course`` [kN],
+  ``plots/fence/tip_deflection/steps/<id>`` [cm]; ``damage/w_n``, ``damage/a_N``, ``damage/N``
   (``value`` and ``limit``): each parcel's impact against the limits at its outcome time.
 
 Frame "sorter" (REP-103, z up): x0 along the belt, y0 across it towards the chute. The default
@@ -44,8 +45,19 @@ FORCE_SCALE = 1.0 / 1000.0  # contact arrow length per newton [m/N]
 DIVERT_COLOR = (230, 150, 50)
 PASS_COLOR = (150, 150, 150)
 SORTED_COLOR = (60, 180, 75)
-#: the speed plot's axis runs from 0 to this (the parcels' speeds stay below) [m/s]
+#: the speed plot's axis runs to this (the parcels' speeds stay below) [m/s]
 SPEED_AXIS_MAX = 3.0
+#: the plots show forces in kN and the fence tip's yield -w in cm (value / unit): with the
+#: fixed y ranges below every time series plot's tick labels are single digits (the ticks are
+#: at whole numbers), so the plot areas start at one x (the viewer sizes a y axis to its
+#: widest label) and one instant is at one x position on every plot; each range reaches a
+#: little below 0, so the label 0 clears the time axis's labels
+FORCE_PLOT_UNIT = 1000.0  # [N]
+DEFLECTION_PLOT_UNIT = -0.01  # [m]: -w in cm, positive where the tip yields under load
+CONTACT_AXIS = (-0.25, 3.0)  # [kN]
+DEFLECTION_AXIS = (-0.5, 2.5)  # [cm]
+ALPHA_AXIS = (-0.2, 2.0)  # [rad]
+SPEED_AXIS = (-0.25, SPEED_AXIS_MAX)  # [m/s]
 #: damage-risk colours of the top view: the margin (1 - value / limit, the smaller of w_n's
 #: and a_N's) from MARGIN_COLORS[0] at MARGIN_RANGE[0] (over the limit) to [2] at [1]
 MARGIN_COLORS = ((220, 40, 40), (240, 200, 40), (60, 180, 75))
@@ -59,6 +71,7 @@ ALPHA_COLOR = (200, 50, 50)
 #: labels of parcels and damage marks: dark, so the text reads on any background
 LABEL_COLOR = (25, 25, 25)
 RISK = "risk"  # root of the damage-risk chart (one column per parcel, value / limit upwards)
+RISK_TICKS = (0.0, 0.5, 1.0)  # the chart's y scale: value / limit
 #: the top view's damage marks: a grid below the belt, this many per row, rows this far apart
 RISK_MARKS_PER_ROW = 4
 RISK_ROW = 0.16  # [m]
@@ -156,7 +169,9 @@ def blueprint(scene: SceneGeometry | None = None, paused: bool = False):
     tip deflection, alpha_w, speeds) with the damage-risk plots in a tab behind them.
 
     Every plot shows the whole timeline (the same time range in all of them, not each its own
-    data's), so one instant is at one x position in every plot. No plot has a legend: each
+    data's) and the time series a fixed y range whose tick labels are single digits: the
+    viewer sizes a y axis to its widest tick label, so their plot areas start at one x and one
+    instant is at one x position on every time series plot. No plot has a legend: each
     title says what its colours mean (a legend of per-parcel series covers the data).
     ``paused``: a recording that is complete opens paused (a live one follows its data)."""
     import rerun.blueprint as rrb  # lazy: Rerun (0.5 s), only to log
@@ -194,27 +209,28 @@ def blueprint(scene: SceneGeometry | None = None, paused: bool = False):
         ),
         rrb.Tabs(
             rrb.Vertical(
-                plot("contact force [N]: N blue, N_stiff orange", "plots/contact"),
+                plot("contact force [kN]: N blue, N_stiff orange", "plots/contact", CONTACT_AXIS),
                 plot(
-                    "fence tip deflection [m]: solver steps blue, sampled grey",
+                    "fence tip yield -w [cm]: solver steps blue, sampled grey",
                     "plots/fence/tip_deflection",
+                    DEFLECTION_AXIS,
                 ),
-                plot("drive angle alpha_w [rad]", "plots/fence/alpha_w"),
+                plot("drive angle alpha_w [rad]", "plots/fence/alpha_w", ALPHA_AXIS),
                 plot(
                     "parcel speed [m/s]: to divert orange, to pass grey",
                     "plots/speed",
-                    (0.0, SPEED_AXIS_MAX),
+                    SPEED_AXIS,
                 ),
                 name="time series",
             ),
             rrb.Vertical(
                 rrb.Spatial2DView(
-                    name="per parcel: w_n / w_dop blue, a_N / a_Ndop orange, limit red",
+                    name="per parcel, value / limit: w_n blue, a_N orange, limit red",
                     origin=RISK,
                 ),
                 plot("impact speed w_n [m/s]: o parcels, x w_dop", "damage/w_n"),
                 plot("peak acceleration a_N [m/s^2]: o parcels, x a_Ndop", "damage/a_N"),
-                plot("peak force N [N]: o parcels, x a_Ndop m_p", "damage/N"),
+                plot("peak force N [kN]: o parcels, x a_Ndop m_p", "damage/N"),
                 row_shares=[2, 1, 1, 1],
                 name="damage risk",
             ),
@@ -391,7 +407,15 @@ class RerunLogger:
             rec.log(
                 "world/chute",
                 rr.Boxes3D(centers=[(cx, cy, -0.05)], sizes=[(sx, sy, 0.02)],
-                           colors=[(50, 100, 200, 150)], fill_mode="solid", labels=["chute"]),
+                           colors=[(50, 100, 200, 150)], fill_mode="solid"),
+                static=True,
+            )  # fmt: skip
+            # its label dark (a label takes its entity's colour: the chute's translucent blue
+            # reads pale), at the chute's far edge, off the belt and the parcels
+            rec.log(
+                "world/chute_label",
+                rr.Points3D([(cx, cy + 0.5 * sy, 0.0)], colors=[LABEL_COLOR], radii=0.005,
+                            labels=["chute"]),
                 static=True,
             )  # fmt: skip
         if sc.scan_line_x is not None:
@@ -406,7 +430,7 @@ class RerunLogger:
         self._log_static_styles()
         rec.log(
             "plots/fence/tip_deflection",
-            rr.SeriesLines(names="tip deflection, sampled [m]", colors=[SAMPLED_COLOR]),
+            rr.SeriesLines(names="tip yield -w, sampled [cm]", colors=[SAMPLED_COLOR]),
             static=True,
         )
         rec.log(
@@ -487,7 +511,9 @@ class RerunLogger:
             b.fence_t.append(t)
             b.fence3d.append(np.column_stack((node_x, node_y, np.full(node_x.size, FENCE_Z))))
             b.fence2d.append(np.column_stack((node_x, -node_y)))
-            self._scalar("plots/fence/tip_deflection", t, float(fence.tip_deflection))
+            self._scalar(
+                "plots/fence/tip_deflection", t, float(fence.tip_deflection) / DEFLECTION_PLOT_UNIT
+            )
             self._scalar("plots/fence/alpha_w", t, float(fence.alpha))
         b.t.append(t)
         b.parcels.append(len(parcels))
@@ -526,8 +552,8 @@ class RerunLogger:
                     static=True,
                 )
             if 1 <= p.stage <= 4:  # forces only while the fence works on it (E1 .. E4)
-                self._scalar(f"plots/contact/{pid}/N", t, float(p.n))
-                self._scalar(f"plots/contact/{pid}/N_stiff", t, float(p.n_stiff))
+                self._scalar(f"plots/contact/{pid}/N", t, float(p.n) / FORCE_PLOT_UNIT)
+                self._scalar(f"plots/contact/{pid}/N_stiff", t, float(p.n_stiff) / FORCE_PLOT_UNIT)
             self._scalar(f"plots/speed/{pid}", t, math.hypot(p.vx, p.vy))
         if parcels:
             b.footprints.append(_footprints(parcels))
@@ -555,12 +581,12 @@ class RerunLogger:
         at the outcome time and the parcel's colour in the views."""
         rr, rec, pid = self.rr, self.rec, ev.parcel_id
         series = (
-            (f"plots/contact/{pid}/N_steps", f"N {pid} (solver steps)", N_COLOR, ev.t,
-             ev.normal_force),
-            (f"plots/contact/{pid}/N_stiff_course", f"N_stiff {pid} (stiff obstacle)",
-             N_STIFF_COLOR, ev.stiff_t, ev.stiff_force),
-            (f"plots/fence/tip_deflection/steps/{pid}", f"tip deflection, stroke {pid} [m]",
-             STEPS_COLOR, ev.t, ev.tip_deflection),
+            (f"plots/contact/{pid}/N_steps", f"N {pid} (solver steps) [kN]", N_COLOR, ev.t,
+             np.asarray(ev.normal_force, dtype=float) / FORCE_PLOT_UNIT),
+            (f"plots/contact/{pid}/N_stiff_course", f"N_stiff {pid} (stiff obstacle) [kN]",
+             N_STIFF_COLOR, ev.stiff_t, np.asarray(ev.stiff_force, dtype=float) / FORCE_PLOT_UNIT),
+            (f"plots/fence/tip_deflection/steps/{pid}", f"tip yield -w, stroke {pid} [cm]",
+             STEPS_COLOR, ev.t, np.asarray(ev.tip_deflection, dtype=float) / DEFLECTION_PLOT_UNIT),
         )  # fmt: skip
         for entity, name, colour, t, values in series:
             rec.log(entity, rr.SeriesLines(names=name, colors=[colour]), static=True)
@@ -591,8 +617,8 @@ class RerunLogger:
             ("damage/w_n/limit", "w_dop", risk["w_dop"]),
             ("damage/a_N/value", "a_N", (1.0 - risk["accel_margin"]) * risk["a_ndop"]),
             ("damage/a_N/limit", "a_Ndop", risk["a_ndop"]),
-            ("damage/N/value", "peak N", peak_n),
-            ("damage/N/limit", "a_Ndop m_p", risk["a_ndop"] * ev.mass),
+            ("damage/N/value", "peak N [kN]", peak_n / FORCE_PLOT_UNIT),
+            ("damage/N/limit", "a_Ndop m_p [kN]", risk["a_ndop"] * ev.mass / FORCE_PLOT_UNIT),
         )
         rec.set_time(TIMELINE, duration=float(ev.t_outcome))
         for entity, name, value in points:
@@ -647,15 +673,23 @@ class RerunLogger:
             rr.Points2D(np.column_stack((cols, np.full(cols.size, 0.12))), radii=0.001,
                         colors=[LABEL_COLOR], labels=[f"parcel {pid}" for pid, _ in marks]),
         )  # fmt: skip
-        # the limit (red), 0 (grey) and a pale frame that keeps the labels in the picture
+        # the limit (red), 0 (grey), 0.5 (pale) and a pale frame that keeps the labels in the
+        # picture; the y scale: the ratios 0, 0.5 and 1 written left of the lines
         right = max(len(marks) - 0.4, 3.6)
         rec.log(
             f"{RISK}/scale",
             rr.LineStrips2D(
                 [[(-0.6, -1.0), (right, -1.0)], [(-0.6, 0.0), (right, 0.0)],
-                 [(-0.6, -1.3), (right, -1.3), (right, 0.3), (-0.6, 0.3), (-0.6, -1.3)]],
-                colors=[MARGIN_COLORS[0], SAMPLED_COLOR, (225, 225, 225)], radii=0.01,
+                 [(-0.6, -0.5), (right, -0.5)],
+                 [(-0.9, -1.3), (right, -1.3), (right, 0.3), (-0.9, 0.3), (-0.9, -1.3)]],
+                colors=[MARGIN_COLORS[0], SAMPLED_COLOR, (225, 225, 225), (225, 225, 225)],
+                radii=0.01,
             ),
+        )  # fmt: skip
+        rec.log(
+            f"{RISK}/scale_labels",
+            rr.Points2D([(-0.75, -v) for v in RISK_TICKS], colors=[LABEL_COLOR], radii=0.001,
+                        labels=[f"{v:g}" for v in RISK_TICKS]),
         )  # fmt: skip
 
     def close(self) -> None:

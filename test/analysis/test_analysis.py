@@ -20,6 +20,7 @@ from processes import run_cli
 from fence_sorter.analysis import analyze_bag
 from fence_sorter.analysis.run import Series, check_row, crossing
 from fence_sorter.recording.bagread import read_bag
+from fence_sorter.visualisation import rerun_log as rl
 
 REPO = Path(__file__).resolve().parents[2]
 EXAMPLE = REPO / "bags" / "example_4_parcels"
@@ -346,10 +347,9 @@ def test_rrd_from_the_example_bag(example, tmp_path):
     kinds = sorted(kind for kind, _, _ in views.values())
     assert kinds == ["2D", "2D", "3D"] + ["TimeSeries"] * 7, views
     # alpha_w and the tip deflection on plots of their own, with units; every plot shows the
-    # whole timeline (one range for all: one instant at one x position), no legend; the speed
-    # axis from 0
+    # whole timeline (one range for all: one instant at one x position), no legend
     by_origin = {v[1]: n for n, v in views.items()}
-    assert "[m]" in by_origin["plots/fence/tip_deflection"]
+    assert "[cm]" in by_origin["plots/fence/tip_deflection"]
     assert by_origin["plots/fence/alpha_w"] == "drive angle alpha_w [rad]"
     axes = blueprint_axes(out)
     plots = sorted(n for n, v in views.items() if v[0] == "TimeSeries")
@@ -357,7 +357,15 @@ def test_rrd_from_the_example_bag(example, tmp_path):
     assert set(axes["time_link"].values()) == {1}  # LinkAxis.Independent: its own view_range
     assert all(r == {"start": None, "end": None} for r in axes["x_range"].values())  # infinite
     assert axes["legend"] == dict.fromkeys(plots, False)
-    assert axes["y_range"] == {by_origin["plots/speed"]: [0.0, 3.0]}
+    # fixed y ranges with single-digit tick labels on every time series plot (one plot area)
+    assert axes["y_range"] == {
+        by_origin["plots/contact"]: list(rl.CONTACT_AXIS),
+        by_origin["plots/fence/tip_deflection"]: list(rl.DEFLECTION_AXIS),
+        by_origin["plots/fence/alpha_w"]: list(rl.ALPHA_AXIS),
+        by_origin["plots/speed"]: list(rl.SPEED_AXIS),
+    }
+    for lo, hi in axes["y_range"].values():  # whole-number ticks from 0 to at most 9
+        assert -1.0 < lo < 0.0 and 2.0 <= hi < 10.0, (lo, hi)
     kind, origin, bounds = views["top view"]
     assert (kind, origin) == ("2D", "top")
     # framed on the bag's scene: belt x -3 .. 3 m, chute up to y0 = 1.3 m (view y = -1.3)
@@ -446,7 +454,6 @@ def test_damage_marks_and_the_3d_eye_frame_the_scene():
     on another, the first rows inside the view's bounds; the 3D eye looks at the middle of
     belt and chute from the fence side, from above, farther than the belt is long (the
     browser test's 3D screenshot shows the whole belt)."""
-    from fence_sorter.visualisation import rerun_log as rl
 
     scene = rl.SceneGeometry(0.7, (-3.0, 3.0), (0.5, 1.0, 1.6, 0.6), -3.0)
     n = rl.RISK_MARKS_PER_ROW * rl.RISK_ROWS_FRAMED

@@ -18,6 +18,7 @@ from processes import run_cli
 from fence_sorter.analysis import analyze_bag
 from fence_sorter.analysis.events import EVENT_PEAK_RTOL, SortEventData
 from fence_sorter.recording.bagread import read_bag
+from fence_sorter.visualisation import rerun_log as rl
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -170,7 +171,10 @@ def test_live_rerun_and_the_bag_show_the_same_event_curves(run20, tmp_path):
         ):
             assert len(live[entity]) == n == len(from_bag[entity]), entity
             assert live[entity] == from_bag[entity], entity
-        assert_same_in_time_order(from_bag[f"/plots/contact/{pid}/N_steps"], ev.normal_force)
+        assert_same_in_time_order(  # plotted in kN
+            from_bag[f"/plots/contact/{pid}/N_steps"],
+            np.asarray(ev.normal_force, dtype=float) / rl.FORCE_PLOT_UNIT,
+        )
     damage = scalar_series(base / "live.rrd", "/damage/")
     assert len(damage["/damage/w_n/value"]) == len(events)
     assert {v for _, v in damage["/damage/w_n/limit"]} == {W_DOP}

@@ -64,6 +64,23 @@ def colour_pixels(png: Path, colour: tuple[int, int, int], box, tol: int = 12) -
     return int((np.abs(img - np.asarray(colour)).max(axis=-1) <= tol).sum())
 
 
+#: the damage-risk chart's y-scale labels, and the 3D view's chute label (x0, y0, x1, y1)
+RISK_SCALE = (770, 130, 800, 300)
+CHUTE_LABEL_3D = (380, 360, 530, 400)
+#: the time cursor's colour in the plots (egui's line, 2 px wide)
+CURSOR = (93, 92, 92)
+
+
+def cursor_x(png: Path, box, tol: int = 12) -> float | None:
+    """x [px] of the time cursor in the plot ``box`` = (x0, y0, x1, y1): the mean of the
+    columns in which at least half the rows are the cursor's colour (None: no cursor)."""
+    x0, y0, x1, y1 = box
+    img = np.asarray(Image.open(png).convert("RGB")).astype(int)[y0:y1, x0:x1]
+    on = (np.abs(img - np.asarray(CURSOR)).max(axis=-1) <= tol).sum(axis=0)
+    cols = np.nonzero(on >= 0.5 * (y1 - y0))[0]
+    return float(x0 + cols.mean()) if cols.size else None
+
+
 def fence_sorter(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run(
         [sys.executable, "-m", "fence_sorter.cli.main", *args],
@@ -100,20 +117,28 @@ def test_example_recording_renders_in_the_web_viewer(tmp_path):
         seen("damage", colour, LEFT, 8)
     # every plot of the time-series tab draws its series in the colours its title names
     contact, tip, alpha, speed = PLOTS
-    # (thin lines: a few pixels each; at 1280 x 800 the example draws 20 N, 51 N_stiff, 9
-    # solver-step and 755 sampled tip-deflection, 103 alpha_w and 135 speed pixels)
-    seen("default", rl.N_COLOR, contact, 10)
-    seen("default", rl.N_STIFF_COLOR, contact, 20)
+    # (thin lines: a few pixels each; at 1280 x 800 the example draws 16 N, 26 N_stiff, 10
+    # solver-step and 437 sampled tip-deflection, 49 alpha_w and 64 speed pixels)
+    seen("default", rl.N_COLOR, contact, 8)
+    seen("default", rl.N_STIFF_COLOR, contact, 13)
     seen("default", rl.STEPS_COLOR, tip, 4)
     seen("default", rl.SAMPLED_COLOR, tip, 200)
-    seen("default", rl.ALPHA_COLOR, alpha, 50)
-    seen("default", rl.DIVERT_COLOR, speed, 50)
+    seen("default", rl.ALPHA_COLOR, alpha, 25)
+    seen("default", rl.DIVERT_COLOR, speed, 32)
+    # one instant, one x: the time cursor at the same x position on every time series plot
+    # (within 2 px), at the first instant (the plot areas' left edges) and mid-run
+    for name in ("default", "mid"):
+        xs = [cursor_x(png[name], box) for box in PLOTS]
+        assert None not in xs, f"{name}: no time cursor found in a plot: {xs}"
+        assert max(xs) - min(xs) <= 2.0, f"{name}: time cursor at x = {xs} px"
     # mid-run: the fence deflected into the belt and a parcel on it
     seen("mid", (230, 80, 30), LEFT, 200)
     # the damage-risk tab: the chart's w_n / w_dop and a_N / a_Ndop marks and its limit line
     seen("damage", rl.N_COLOR, RIGHT, 30)
     seen("damage", rl.N_STIFF_COLOR, RIGHT, 30)
     seen("damage", rl.MARGIN_COLORS[0], RIGHT, 100)
+    # its y scale: the ratios 0, 0.5 and 1 in dark text left of the chart (40 pixels here)
+    assert colour_pixels(png["damage"], rl.LABEL_COLOR, RISK_SCALE, tol=30) >= 20
     # the end: the damage marks under the belt, each in its parcel's margin colour
     for colour in colours.values():
         seen("end", colour, LEFT, 8)
@@ -121,3 +146,6 @@ def test_example_recording_renders_in_the_web_viewer(tmp_path):
     seen("3d", (70, 70, 70), LEFT, 5000)
     seen("3d", (121, 140, 203), LEFT, 1000)
     seen("3d", (255, 60, 60), LEFT, 15)
+    # the chute's label in dark text (34 pixels here; a label in the chute's translucent blue
+    # has none)
+    assert colour_pixels(png["3d"], rl.LABEL_COLOR, CHUTE_LABEL_3D, tol=30) >= 15

@@ -1,11 +1,15 @@
 """The Foxglove WebSocket server (foxglove-sdk) of fence_sorter against Foxglove's own npm client
 (@foxglove/ws-protocol, decoding with @foxglove/rosmsg2-serialization), ROS-free: CDR bytes made
 by rosbags' type store go out unchanged on ros2msg/cdr channels and the npm client decodes the
-same values; a late joiner gets the latched robot description; a client that stops reading is
-counted as slow; bad addresses are refused with the option and the allowed values."""
+same values; a late joiner gets the latched robot description; a client that reads gets every
+message handed over for it; one that stops reading is counted as slow and loses the oldest
+messages, as many as were handed over for it and did not arrive; bad addresses are refused with
+the option and the allowed values."""
 
 from __future__ import annotations
 
+import os
+import signal
 from pathlib import Path
 
 import pytest
@@ -105,30 +109,59 @@ def test_npm_client_decodes_what_rosbags_serialised(server: LiveServer, tmp_path
     stats = server.stats()
     assert stats["forwarded.sort_outcomes"] == "40" and stats["resent_to_late_joiners"] == "1"
     assert stats["slow_clients"] == "0"
+    # a client that reads: every message handed over for it arrived (41: the resent latched one)
+    ((client_id, handed),) = server.handed.items()
+    assert handed == len(got) == 41 and stats["handed_per_client"] == f"{client_id}:41"
+
+
+BACKLOG = 16
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("server", [16], indirect=True)
+@pytest.mark.parametrize("server", [BACKLOG], indirect=True)
 @needs_client
-def test_a_client_that_stops_reading_is_counted_slow(server: LiveServer, tmp_path: Path) -> None:
+def test_a_client_that_stops_reading_loses_the_oldest_messages(
+    server: LiveServer, tmp_path: Path
+) -> None:
+    """A client that stops reading while 3000 messages of 100 kB go its way: the SDK reports
+    it slow, and once it reads again it gets what the socket's buffers held and then the newest
+    BACKLOG (the outbox), in order; the server counted every message handed over for it, so handed
+    minus received is what was dropped (the SDK itself counts that nowhere it shows)."""
     ts = server.typestore
     server.add_topic("/big", STRING)
     client = Client(
-        f"ws://127.0.0.1:{server.port}", tmp_path / "out.jsonl", ["/big"], timeout=30, stall=True
+        f"ws://127.0.0.1:{server.port}", tmp_path / "out.jsonl", ["/big"], timeout=60, stall=True
     )
+    n = 3000
+
+    def big(k: int) -> bytes:
+        return ts.serialize_cdr(ts.types[STRING](data=f"{k:05d}" + "x" * 100_000), STRING)
+
+    def arrived() -> list[int]:
+        return [int(m["message"]["data"][:5]) for m in client.messages()]
+
     try:
         wait_until(lambda: client.said("stalled") and server.has_clients(), 30, "a stalled client")
-        data = ts.serialize_cdr(ts.types[STRING](data="x" * 100_000), STRING)
-        # 16 held per client, the socket's buffers hold a few MB: 300 MB cannot fit
-        for k in range(3000):
-            server.log("/big", data, k)
+        # BACKLOG held per client, the socket's buffers hold a few MB: 300 MB cannot fit
+        for k in range(n):
+            server.log("/big", big(k), k)
         wait_until(lambda: server.stats()["slow_clients"] == "1", 30, "the slow client counted")
+        os.kill(client.proc.pid, signal.SIGUSR2)
+        # the last one in: each message before it arrived or was dropped (one queue, in order)
+        wait_until(lambda: n - 1 in arrived(), 60, "the last message at the client")
     finally:
         stop_process(client.proc)
+    got = arrived()
     stats = server.stats()
-    # more than its outbox holds went its way (the SDK may disconnect it once its control
-    # queue fills too, and then forwards no more)
-    assert stats["offered"] == "3000" and int(stats["forwarded.big"]) > 16
+    assert stats["offered"] == str(n) == stats["forwarded.big"]
+    ((client_id, handed),) = server.handed.items()
+    assert stats["handed_per_client"] == f"{client_id}:{handed}" and handed == n
+    assert client.said("resumed")
+    assert got == sorted(got) and len(set(got)) == len(got)  # in order, none twice
+    # the oldest were dropped: the newest BACKLOG (the outbox) came last, as a block
+    assert got[-BACKLOG:] == list(range(n - BACKLOG, n))
+    dropped = handed - len(got)
+    assert dropped > n // 2, f"{len(got)} of {handed} arrived"
     assert stats["slow_client_addresses"].startswith("127.0.0.1:")
 
 

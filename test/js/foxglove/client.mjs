@@ -8,7 +8,8 @@
 // It retries the connection until the server is up (within TIMEOUT_S), prints
 // "subscribed TOPIC" for each subscription and "closed N" when the server goes away (the end
 // of the run), then exits 0. --stall: once subscribed to every topic, stop reading the socket
-// (prints "stalled"): a slow client whose outbox on the server fills up. The server speaks the subprotocol "foxglove.sdk.v1";
+// (prints "stalled"): a slow client whose outbox on the server fills up; SIGUSR2 makes it read
+// again (prints "resumed"), so what the server did not drop arrives. The server speaks the subprotocol "foxglove.sdk.v1";
 // FoxgloveClient.SUPPORTED_SUBPROTOCOL still names the older "foxglove.websocket.v1", so the
 // socket is opened here with the new name and handed to FoxgloveClient.
 import { createWriteStream } from "node:fs";
@@ -39,6 +40,16 @@ function plain(_key, value) {
   if (ArrayBuffer.isView(value)) return Array.from(value, (v) => (typeof v === "bigint" ? v.toString() : v));
   return value;
 }
+
+let stalledSocket = null;
+let keepAlive = null; // a paused socket does not keep Node's event loop alive: a timer does
+process.on("SIGUSR2", () => {
+  if (stalledSocket === null) return;
+  stalledSocket.resume();
+  stalledSocket = null;
+  clearInterval(keepAlive);
+  console.log("resumed");
+});
 
 function connect() {
   const ws = new WebSocket(url, [SUBPROTOCOL]);
@@ -74,6 +85,8 @@ function connect() {
     }
     if (stall && readers.size === topics.length) {
       ws._socket.pause(); // nothing more is read: the server's outbox for this client fills
+      stalledSocket = ws._socket;
+      keepAlive = setInterval(() => {}, 1000);
       console.log("stalled");
     }
   });
