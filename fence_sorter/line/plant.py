@@ -513,14 +513,18 @@ class LinePlant:
         running = {p.pid for p in self.live if p.stroke_unit is not None}
         self.bookings = [b for b in self.bookings if b.t_end > self.t or b.parcel_id in running]
 
+    def limit(self) -> float:
+        """Sim time the run stops at, drained or not: ``cfg.max_time``, else a bound on the
+        drain after the last parcel's arrival (moved on by the induction's holds)."""
+        if self.cfg.max_time is not None:
+            return self.cfg.max_time
+        last = self.parcels[-1].arrival if self.parcels else 0.0
+        loop = self.spec.length / self.v + self.spec.transit_time + 60.0
+        return last + self.hold + self.spec.max_passes * loop + 60.0
+
     def run(self) -> dict:
         wall0 = time.perf_counter()
-        limit = self.cfg.max_time
-        if limit is None:
-            last = self.parcels[-1].arrival if self.parcels else 0.0
-            loop = self.spec.length / self.v + self.spec.transit_time + 60.0
-            limit = last + self.spec.max_passes * loop + 60.0
-        while self.active() and self.t < limit:
+        while self.active() and self.t < self.limit():
             self.step()
         self.wall = time.perf_counter() - wall0
         return self.summary()
