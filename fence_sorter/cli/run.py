@@ -72,6 +72,17 @@ def register(parser: argparse.ArgumentParser) -> None:
         help="ROS domain of the run, 0-232 (default: ROS_DOMAIN_ID if set, else a free one "
         "of 201-232); refused if another participant on this host uses it",
     )
+    parser.add_argument(
+        "--interface",
+        metavar="ADDRESS",
+        help="talk to other hosts: UDP on this host's IPv4 ADDRESS only (with --peers; default: "
+        "this host alone, shared memory and loopback)",
+    )
+    parser.add_argument(
+        "--peers",
+        metavar="A[,B...]",
+        help="the other hosts' IPv4 addresses, found by unicast discovery (with --interface)",
+    )
     add_param_option(
         parser, "node parameter override, e.g. controller:max_evaluations=5 (repeatable)"
     )
@@ -103,6 +114,8 @@ def run(args: argparse.Namespace) -> int:
         keep_logs=args.keep_logs,
         sensors=args.sensors,
         foxglove=args.foxglove,
+        interface=args.interface,
+        peers=args.peers,
     )
     say = (lambda s: print(s, file=sys.stderr)) if args.json else print
     # from here to the exit SIGINT/SIGTERM are flags the job checks (no traceback, no

@@ -46,6 +46,12 @@ from fence_sorter.runner.processes import (
     wait_until,
 )
 from fence_sorter.runner.summary import recording_failure, summarise, verdict
+from fence_sorter.runner.transport import (
+    HostsTransport,
+    TransportError,
+    hosts_transport,
+    write_profile,
+)
 from fence_sorter.scene import DEFAULT_SCENE, load_scene, resolve_scene
 from fence_sorter.stream import DEFAULT_STREAM, load_stream, resolve_stream
 from fence_sorter.visualisation.foxglove_address import AddressError, parse_address
@@ -101,6 +107,8 @@ class RunOptions:
     keep_logs: bool = False  # keep the node logs of a clean run too
     sensors: str | None = None  # sensors file or name: the sensors node runs (and is recorded)
     foxglove: str | None = None  # [HOST:]PORT: the Foxglove node serves the run there
+    interface: str | None = None  # IPv4 address: the run talks to other hosts on it
+    peers: str | None = None  # comma-separated IPv4 addresses of the other hosts
 
 
 @dataclass
@@ -132,6 +140,7 @@ class RunPlan:
     truth: dict | None = None  # what a calibration bag of the run is made from (its metadata)
     state_rate: float = 0.0  # the state's rate the sensors need [Hz of sim time]; 0: default
     foxglove: tuple[str, int] | None = None  # host and port of the Foxglove node
+    transport: HostsTransport | None = None  # the other hosts' transport (None: this host)
     #: the run's identity on the wire (drawn per run; messages with another are foreign)
     run_id: int = field(default_factory=lambda: 1 + secrets.randbelow(2**63 - 1))
     #: the run's key (hex; fence_sorter.provenance): its nodes' tags on what they send, handed
@@ -197,6 +206,14 @@ def prepare(opts: RunOptions) -> RunPlan:
             foxglove = parse_address(opts.foxglove)
         except AddressError as exc:
             raise BadInput(str(exc)) from None
+    transport = None
+    if (opts.interface is None) != (opts.peers is None):
+        raise BadInput("--interface and --peers go together (this host's address, the others')")
+    if opts.interface is not None:
+        try:
+            transport = hosts_transport(opts.interface, opts.peers)
+        except TransportError as exc:
+            raise BadInput(str(exc)) from None
     sim_duration = START_DELAY + stream[-1].arrival_time + (LINE_END_X - SCAN_LINE_X) / v + 5.0
     try:
         domain = choose_domain(opts.domain)
@@ -217,6 +234,7 @@ def prepare(opts: RunOptions) -> RunPlan:
         state_rate=state_rate,
         stream={s.parcel_id: s for s in stream},
         foxglove=foxglove,
+        transport=transport,
     )
 
 
@@ -401,11 +419,14 @@ def _run(
     domain = plan.domain
     log_dir = Path(opts.log_dir or tempfile.mkdtemp(prefix=LOG_DIR_PREFIX))
     log_dir.mkdir(parents=True, exist_ok=True)
-    env = node_env(domain, log_dir / "ros", {RUN_KEY_ENV: plan.run_key})
+    profile = FASTDDS_PROFILE
+    if plan.transport is not None:
+        profile = write_profile(plan.transport, log_dir)
+    env = node_env(domain, log_dir / "ros", {RUN_KEY_ENV: plan.run_key}, profile)
     clean_shm()  # what killed runs (of any program) left in /dev/shm
     # this process's participant (the monitor) on the nodes' transports
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = env["ROS_AUTOMATIC_DISCOVERY_RANGE"]
-    set_profile(os.environ, str(FASTDDS_PROFILE))
+    set_profile(os.environ, str(profile))
     # paced with the loop pinned: every other process of the run keeps off the loop's CPU, so
     # its work does not evict the loop's caches while the loop sleeps (docs/design/simulator.md)
     allowed = set(os.sched_getaffinity(0))

@@ -117,18 +117,21 @@ def run_domain_id(pid: int | None = None) -> int:
 
 
 def node_env(
-    domain_id: int, log_dir: Path, extra: Mapping[str, str] | None = None
+    domain_id: int,
+    log_dir: Path,
+    extra: Mapping[str, str] | None = None,
+    profile: Path = FASTDDS_PROFILE,
 ) -> dict[str, str]:
-    """os.environ plus isolation: own domain, transports on this host only (FASTDDS_PROFILE:
-    shared memory and loopback UDP, under the variable the installed Fast DDS reads), rcl logs
-    in ``log_dir``."""
+    """os.environ plus isolation: own domain, the run's transports (``profile``, under the
+    variable the installed Fast DDS reads: FASTDDS_PROFILE, shared memory and loopback UDP,
+    or a run across hosts' from fence_sorter.runner.transport), rcl logs in ``log_dir``."""
     env = dict(os.environ)
     env["ROS_DOMAIN_ID"] = str(domain_id)
     # rmw_fastrtps's LOCALHOST range adds a UDP transport of its own, with sockets on every
     # interface (0.0.0.0 and the host's address in `ss -lnuap`); with the profile's transports
     # alone (SUBNET: the rmw adds none) discovery and data stay on this host all the same
     env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "SUBNET"
-    set_profile(env, str(FASTDDS_PROFILE))
+    set_profile(env, str(profile))
     env["ROS_LOG_DIR"] = str(log_dir)
     env["PYTHONUNBUFFERED"] = "1"
     env.pop("RMW_IMPLEMENTATION", None)
