@@ -36,7 +36,8 @@ RUNGS = {
         ("cyrk:Radau", 1e-2),
         ("cyrk:LSODA", 1e-5),
     ),
-    "arbitrary_stiff": (("cyrk:Tsit5", 1e-3), ("cyrk:DOP853", 1e-2), ("cyrk:BDF", 1e-4)),
+    # cyrk:DOP853 rtol 1e-2 reaches 2.5e-4 here by a cancellation of errors (1.1e-2 at 1e-3)
+    "arbitrary_stiff": (("cyrk:Tsit5", 1e-3), ("cyrk:BDF", 1e-4)),
     "impact_flexible": (("cyrk:BDF", 1e-5), ("cyrk:LSODA", 1e-5), ("cyrk:Radau", 1e-5)),
     "slide_flexible": (("cyrk:LSODA", 1e-3), ("cyrk:Radau", 1e-2), ("cyrk:BDF", 1e-5)),
 }
