@@ -24,6 +24,7 @@ from numba import njit
 
 from benchmarks import bench as B
 from fence_sorter.physics import kernel as K
+from fence_sorter.physics.params import CYRK_METHODS
 from fence_sorter.scene import load_scene
 from fence_sorter.verification.machine import git_revision, load_average
 
@@ -151,6 +152,13 @@ def main(argv: Sequence[str] | None = None) -> int:
             rungs.append((method, float(rtol)))
         except ValueError:
             print(f"benchmarks.peers: error: --rung {item!r} is not method:rtol", file=sys.stderr)
+            return 2
+        if method not in CYRK_METHODS:
+            print(
+                f"benchmarks.peers: error: --rung method {method!r} is not one of "
+                f"{', '.join(CYRK_METHODS)}",
+                file=sys.stderr,
+            )
             return 2
     print(f"commit {git_revision()}, load {load_average()}, {args.rounds} alternating rounds")
     print()
