@@ -20,6 +20,9 @@ memory of one event). Per scene:
   before a call walks every live object and leaves the CPU caches cold (positioned_stiff: median
   0.66 ms timed that way, 0.49 ms warm; LSODA at rtol 1e-3 on it 4.78 and 4.01 ms), while an
   optimisation inner loop runs events back to back, warm.
+- **Compiled peers** (``cyrk:LSODA ... Tsit5``, ``physics.peers``): CyRK's C++ solvers on the
+  same compiled right-hand side, no Python per right-hand side; the same ladder search, choice
+  and interleaved timing as the SciPy baselines below, reported first (the honest ratio).
 - **SciPy baselines** (``scipy:RK45 ... LSODA``): for each method, a ladder of ``rtol`` values
   (``atol = rtol * ATOL_FACTOR``), loosest first, each run capped by ``solver.max_wall_time``;
   the loosest rung whose peak-force error is at most the default's ("the same error"; if no
@@ -63,7 +66,7 @@ from datetime import UTC, datetime
 
 from benchmarks import REPO
 from fence_sorter.jsonsafe import json_safe
-from fence_sorter.physics.params import SCIPY_METHODS, FenceParams
+from fence_sorter.physics.params import CYRK_METHODS, SCIPY_METHODS, FenceParams
 from fence_sorter.physics.scenario import RECORDABLE
 from fence_sorter.scene import load_scene
 from fence_sorter.verification.machine import git_revision, load_average, machine_info
@@ -77,6 +80,7 @@ EVENT_SCENES = ("positioned_stiff", "arbitrary_stiff")
 TARGET_ERROR = 1e-3  # relative peak-force error of the default configuration
 TARGET_RTF = 75.0  # real-time factor of the default configuration (flexible scenes)
 TARGET_SPEEDUP = 20.0  # default vs the fastest SciPy method at the same error
+TARGET_PEER_SPEEDUP = 3.0  # default vs the fastest compiled peer (CyRK) at the same error
 TARGET_EVENT_S = 5e-3  # one stiff-fence event (optimisation inner loop)
 
 REFERENCE_DT = 1.5625e-5  # [s] our trapezoidal reference; checked at REFERENCE_DT / 2
@@ -86,6 +90,8 @@ REFERENCE_TOLERANCE = 1e-12
 REFERENCE_MAX_ITERATIONS = 30
 SCIPY_REFERENCE = ("scipy:LSODA", 1e-10)  # checked at rtol / 10
 QUICK_SCIPY_METHODS = ("scipy:LSODA", "scipy:BDF")
+PEER_METHODS = CYRK_METHODS  # compiled peers: CyRK's C++ solvers on the same kernel.rhs
+QUICK_PEER_METHODS = ("cyrk:LSODA",)
 RTOL_LADDER = (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9)
 QUICK_RTOL_LADDER = (1e-3, 1e-5, 1e-7)
 ATOL_FACTOR = 1e-2  # atol = rtol * ATOL_FACTOR for every SciPy run
@@ -804,6 +810,7 @@ class SceneBench:
     parts: PartsResult
     memory: MemoryResult
     belt: BeltProbe | None = None  # when the two references disagree beyond their convergence
+    peers: BaselineResult | None = None  # the compiled peers' ladder (None: not run)
 
 
 @dataclass
@@ -833,6 +840,32 @@ class BenchReport:
     targets: list[TargetCheck] = field(default_factory=list)
 
 
+def _comparisons(runs, methods, error) -> tuple[list[Comparison], dict]:
+    """Per metric, the :class:`Comparison` of a family's methods and their chosen rungs; and
+    the chosen rungs by (method, rtol) (one rung can serve both metrics: timed once, shared)."""
+    comps = []
+    for metric in ("ref", "self"):
+        thr, relaxed, picks = choose(runs, methods, metric, error)
+        comps.append(Comparison(metric, thr, relaxed, picks, math.nan))
+    by_run: dict[tuple[str, float], list[Choice]] = {}
+    for comp in comps:
+        for c in comp.choices:
+            if c.run is not None:
+                by_run.setdefault((c.method, c.run.rtol), []).append(c)
+    # a rung whose search run took over RETIME_FACTOR x the fastest candidate's cannot be the
+    # fastest: its single search run stands, it is not timed again
+    fastest = min((cs[0].run.wall for cs in by_run.values()), default=math.nan)
+    retime = {}
+    for key, cs in by_run.items():
+        if cs[0].run.wall <= RETIME_FACTOR * fastest:
+            retime[key] = cs
+        else:
+            for c in cs:
+                c.walls = [cs[0].run.wall]
+                c.note = f"single search run, over {RETIME_FACTOR:g}x the fastest: not re-timed"
+    return comps, retime
+
+
 def bench_scene(
     name: str,
     repeats: int,
@@ -840,6 +873,7 @@ def bench_scene(
     ladder: Sequence[float],
     cap: float,
     log: Log = _quiet,
+    peer_methods: Sequence[str] = (),
 ) -> SceneBench:
     sc = load_scene(name).scenario
     sv = sc.solver
@@ -869,6 +903,13 @@ def bench_scene(
         belt = belt_probe(name, cap)
         log(f"  without belt friction they differ by {belt.gap:.1e}")
 
+    # the compiled peers first (the honest comparison), then SciPy; the same ladder search
+    peer_runs, peer_comps, retime = [], [], {}
+    if peer_methods:
+        log(f"[{name}] compiled-peer ladder: {', '.join(peer_methods)}")
+        timed_run(with_solver(sc, method=peer_methods[0], max_wall_time=cap))  # compiles
+        peer_runs = ladder_search(sc, peer_methods, ladder, ours.peak, sref.peak, error, cap, log)
+        peer_comps, retime = _comparisons(peer_runs, peer_methods, error)
     log(f"[{name}] SciPy ladder: {', '.join(methods)}; rtol {ladder[0]:g} .. {ladder[-1]:g}")
     runs = ladder_search(
         sc,
@@ -880,32 +921,13 @@ def bench_scene(
         cap,
         log,
     )
-    comps = []
-    for metric in ("ref", "self"):
-        thr, relaxed, picks = choose(runs, methods, metric, error)
-        comps.append(Comparison(metric, thr, relaxed, picks, math.nan))
-    # the chosen rungs (one method's rung can serve both metrics: timed once, shared)
-    by_run: dict[tuple[str, float], list[Choice]] = {}
-    for comp in comps:
-        for c in comp.choices:
-            if c.run is not None:
-                by_run.setdefault((c.method, c.run.rtol), []).append(c)
-    # a rung whose search run took over RETIME_FACTOR x the fastest candidate's cannot be the
-    # fastest: its single search run stands, it is not timed again
-    fastest = min((cs[0].run.wall for cs in by_run.values()), default=math.nan)
-    retime = {}
-    for key, cs in by_run.items():
-        if cs[0].run.wall <= RETIME_FACTOR * fastest:
-            retime[key] = cs
-        else:
-            for c in cs:
-                c.walls = [cs[0].run.wall]
-                c.note = f"single search run, over {RETIME_FACTOR:g}x the fastest: not re-timed"
+    comps, scipy_retime = _comparisons(runs, methods, error)
+    retime.update(scipy_retime)
 
     log(
         f"[{name}] timing: {repeats} calls of the default interleaved with "
-        f"{BASELINE_REPEATS} of each chosen SciPy rung within {RETIME_FACTOR:g}x of the "
-        f"fastest ({len(retime)} of {len(by_run)})"
+        f"{BASELINE_REPEATS} of each chosen rung within {RETIME_FACTOR:g}x of its family's "
+        f"fastest ({len(retime)})"
     )
     walls, cpus = [], []
     collect()
@@ -936,7 +958,7 @@ def bench_scene(
         error=error,
         exit_speed_diff=abs(first.exit_speed - ours.exit_speed),
     )
-    for comp in comps:
+    for comp in comps + peer_comps:
         comp.default_wall = default.wall
     log(
         f"  default: {default.wall * 1e3:.2f} ms median, {default.rtf:.1f}x real time, "
@@ -974,6 +996,7 @@ def bench_scene(
         parts=parts,
         memory=memory,
         belt=belt,
+        peers=BaselineResult(name, peer_runs, *peer_comps, cap) if peer_comps else None,
     )
 
 
@@ -989,6 +1012,60 @@ def _sustained_note(b: BaselineResult, comp: Comparison) -> str:
             "reached the threshold by a cancellation of errors)"
         )
     return ""
+
+
+def _speedup_checks(sb: SceneBench, b: BaselineResult, family: str, limit: float):
+    """The speed-up targets of the default against a family's fastest method at the same
+    error, against the SciPy reference and against ours."""
+    out = []
+    d = sb.default
+    for comp in (b.by_self, b.by_ref):
+        which = "SciPy's own converged answer" if comp.metric == "self" else "our reference"
+        target = f"speed-up vs fastest {family} at the same error ({comp.metric})"
+        b_ = comp.best
+        digits = 1 if math.isfinite(comp.ratio) and comp.ratio < 10 else 0
+        if comp.metric == "self" and not math.isfinite(sb.scipy_ref.peak):
+            out.append(
+                TargetCheck(
+                    target,
+                    sb.scene,
+                    "no SciPy reference",
+                    f">= {limit:g}x",
+                    "N/A",
+                    f"the SciPy reference run ({sb.scipy_ref.label}) did not finish: "
+                    f"{sb.scipy_ref.diagnosis}",
+                )
+            )
+            continue
+        thr = f"error <= {comp.threshold:.1e} vs {which}"
+        if comp.relaxed:
+            thr += " (relaxed to the 1e-3 target: no method reached the default's error)"
+        if b_ is None:
+            lb = b.fastest_any()
+            note = f"no {family} method on the ladder reached it"
+            if lb is not None:
+                note += (
+                    f"; the fastest finished {family} run at any error ({lb.method} rtol "
+                    f"{lb.rtol:g}, error {lb.err_ref:.1e} vs our reference) took "
+                    f"{lb.wall / d.wall:.0f}x the default's time"
+                )
+            out.append(
+                TargetCheck(
+                    target, sb.scene, "none reached", f">= {limit:g}x", "N/A", f"{thr}: {note}"
+                )
+            )
+            continue
+        out.append(
+            TargetCheck(
+                target,
+                sb.scene,
+                f"{comp.ratio:.{digits}f}x ({b_.method} rtol {b_.run.rtol:g})",
+                f">= {limit:g}x",
+                "PASS" if comp.ratio >= limit else "FAIL",
+                thr + _sustained_note(b, comp),
+            )
+        )
+    return out
 
 
 def evaluate_targets(scenes: Sequence[SceneBench]) -> list[TargetCheck]:
@@ -1016,55 +1093,9 @@ def evaluate_targets(scenes: Sequence[SceneBench]) -> list[TargetCheck]:
                     f"simulated; on CPU time {d.rtf_cpu:.1f}x",
                 )
             )
-        for comp in (sb.baselines.by_self, sb.baselines.by_ref):
-            which = "SciPy's own converged answer" if comp.metric == "self" else "our reference"
-            b = comp.best
-            if comp.metric == "self" and not math.isfinite(sb.scipy_ref.peak):
-                out.append(
-                    TargetCheck(
-                        "speed-up vs fastest SciPy at the same error (self)",
-                        sb.scene,
-                        "no SciPy reference",
-                        f">= {TARGET_SPEEDUP:g}x",
-                        "N/A",
-                        f"the SciPy reference run ({sb.scipy_ref.label}) did not finish: "
-                        f"{sb.scipy_ref.diagnosis}",
-                    )
-                )
-                continue
-            thr = f"error <= {comp.threshold:.1e} vs {which}"
-            if comp.relaxed:
-                thr += " (relaxed to the 1e-3 target: no method reached the default's error)"
-            if b is None:
-                lb = sb.baselines.fastest_any()
-                note = "no SciPy method on the ladder reached it"
-                if lb is not None:
-                    note += (
-                        f"; the fastest finished SciPy run at any error ({lb.method} rtol "
-                        f"{lb.rtol:g}, error {lb.err_ref:.1e} vs our reference) took "
-                        f"{lb.wall / d.wall:.0f}x the default's time"
-                    )
-                out.append(
-                    TargetCheck(
-                        f"speed-up vs fastest SciPy at the same error ({comp.metric})",
-                        sb.scene,
-                        "none reached",
-                        f">= {TARGET_SPEEDUP:g}x",
-                        "N/A",
-                        f"{thr}: {note}",
-                    )
-                )
-                continue
-            out.append(
-                TargetCheck(
-                    f"speed-up vs fastest SciPy at the same error ({comp.metric})",
-                    sb.scene,
-                    f"{comp.ratio:.0f}x ({b.method} rtol {b.run.rtol:g})",
-                    f">= {TARGET_SPEEDUP:g}x",
-                    "PASS" if comp.ratio >= TARGET_SPEEDUP else "FAIL",
-                    thr + _sustained_note(sb.baselines, comp),
-                )
-            )
+        if sb.peers is not None:
+            out += _speedup_checks(sb, sb.peers, "compiled peer", TARGET_PEER_SPEEDUP)
+        out += _speedup_checks(sb, sb.baselines, "SciPy", TARGET_SPEEDUP)
         if sb.scene in EVENT_SCENES:
             out.append(
                 TargetCheck(
@@ -1088,6 +1119,7 @@ def run_bench(
     quick: bool = False,
     command: str = "python -m benchmarks bench",
     log: Log = _quiet,
+    peer_methods: Sequence[str] = PEER_METHODS,
 ) -> BenchReport:
     """Benchmark ``scenes``; see the module docstring for what is measured and how."""
     t0 = time.perf_counter()
@@ -1095,7 +1127,7 @@ def run_bench(
     load_before = load_average()
     results = []
     for name in scenes:
-        results.append(bench_scene(name, repeats, methods, ladder, cap, log))
+        results.append(bench_scene(name, repeats, methods, ladder, cap, log, peer_methods))
     jit = jit_comparison(
         max(2, repeats if quick else JIT_REPEATS),
         1 if quick else NOJIT_REPEATS,
@@ -1114,6 +1146,7 @@ def run_bench(
             "scenes": list(scenes),
             "repeats": repeats,
             "scipy_methods": list(methods),
+            "peer_methods": list(peer_methods),
             "rtol_ladder": list(ladder),
             "scipy_cap_s": cap,
             "quick": quick,
@@ -1137,15 +1170,18 @@ def report_dict(report: BenchReport) -> dict:
         sd["ours"]["check_change"] = sb.ours.check_change
         sd["scipy_ref"]["check_change"] = sb.scipy_ref.check_change
         sd["scipy_ref"]["distance_to_ours"] = rel_error(sb.scipy_ref.peak, sb.ours.peak)
-        for key in ("by_ref", "by_self"):
-            comp = getattr(sb.baselines, key)
-            best = comp.best
-            sd["baselines"][key]["best"] = (
-                None
-                if best is None
-                else {"method": best.method, "rtol": best.run.rtol, "wall": best.wall}
-            )
-            sd["baselines"][key]["ratio"] = comp.ratio
+        for family in ("baselines", "peers"):
+            if getattr(sb, family) is None:
+                continue
+            for key in ("by_ref", "by_self"):
+                comp = getattr(getattr(sb, family), key)
+                best = comp.best
+                sd[family][key]["best"] = (
+                    None
+                    if best is None
+                    else {"method": best.method, "rtol": best.run.rtol, "wall": best.wall}
+                )
+                sd[family][key]["ratio"] = comp.ratio
         for vd, v in zip(sd["parts"]["variants"], sb.parts.variants, strict=True):
             vd["wall"] = v.wall
     d["jit"].update(
@@ -1191,6 +1227,86 @@ def _e(x: float) -> str:
 
 def _mib(kib: float) -> str:
     return f"{kib / 1024:.0f}"
+
+
+def _family_table(sc: Sequence[SceneBench], family: str) -> list[str]:
+    """The table of a family's (``baselines``: SciPy, ``peers``: compiled) chosen rungs."""
+    L: list[str] = []
+    add = L.append
+    digits = 1 if family == "peers" else 0  # the compiled peers' ratios are a few x
+    rows = []
+    for s in sc:
+        b = getattr(s, family)
+        if b is None:
+            continue
+        for comp in (b.by_self, b.by_ref):
+            which = "SciPy ref." if comp.metric == "self" else "our ref."
+            thr = f"<= {comp.threshold:.1e}" + (" (1e-3 target)" if comp.relaxed else "")
+            if comp.metric == "self" and not math.isfinite(s.scipy_ref.peak):
+                why = f"no SciPy reference ({s.scipy_ref.label} did not finish)"
+                rows.append((s.scene, which, "n/a", "all", why, "", "", "", "", ""))
+                continue
+            for c in comp.choices:
+                if c.run is None:
+                    best_err = min(
+                        (
+                            (r.err_self if comp.metric == "self" else r.err_ref)
+                            for r in b.runs
+                            if r.method == c.method and r.ok
+                        ),
+                        default=math.nan,
+                    )
+                    capped = any(r.capped for r in b.runs if r.method == c.method)
+                    why = "did not reach"
+                    if capped:
+                        why += f" (capped at {b.cap:g} s)"
+                    if math.isfinite(best_err):
+                        why += f"; best error {best_err:.1e}"
+                    rows.append((s.scene, which, thr, c.method, why, "", "", "", "", ""))
+                    continue
+                r = c.run
+                err = r.err_self if comp.metric == "self" else r.err_ref
+                best = comp.best is c
+                nxt = b.next_rung(r)
+                if nxt is None:
+                    nxt_err = "not run"
+                else:
+                    e2 = nxt.err_self if comp.metric == "self" else nxt.err_ref
+                    nxt_err = _e(e2) if nxt.ok else "failed"
+                    if nxt.ok and math.isfinite(e2) and e2 > comp.threshold:
+                        nxt_err += " (not sustained)"
+                rows.append(
+                    (
+                        s.scene,
+                        which,
+                        thr,
+                        f"**{c.method}**" if best else c.method,
+                        f"rtol {r.rtol:g}",
+                        _e(err),
+                        nxt_err,
+                        f"{r.outcome.steps}",
+                        _ms(c.wall),
+                        f"{c.wall / s.default.wall:.{digits}f}x"
+                        + (f" ({c.note})" if c.note else ""),
+                    )
+                )
+    L += table(
+        (
+            "scene",
+            "error vs",
+            "same error",
+            "method",
+            "loosest rung reaching it",
+            "its error",
+            "error at the next tighter rung",
+            "steps",
+            "wall median [ms]",
+            "wall / default's",
+        ),
+        rows,
+    )
+    add("")
+    return L
 
 
 def render_markdown(rep: BenchReport) -> str:
@@ -1316,6 +1432,17 @@ def render_markdown(rep: BenchReport) -> str:
         rows,
     )
     add("")
+    if any(s.peers is not None for s in sc):
+        add("## Compiled peers at the same error")
+        add("")
+        add(
+            "CyRK's C++ solvers (`cyrk:*`, fence_sorter/physics/peers.py) on the same compiled "
+            "right-hand side, every accepted step observed by the loop's reductions, restarts "
+            "at t1 and 2 t1 and at the belt-edge crossing (found from the accepted steps); the "
+            "same rtol ladder and search as the SciPy baselines below."
+        )
+        add("")
+        L += _family_table(sc, "peers")
     add("## SciPy baselines at the same error")
     add("")
     add(
@@ -1324,80 +1451,12 @@ def render_markdown(rep: BenchReport) -> str:
         f"{rep.options['scipy_cap_s']:g} s of wall time."
     )
     add("")
-    rows = []
-    for s in sc:
-        b = s.baselines
-        for comp in (b.by_self, b.by_ref):
-            which = "SciPy ref." if comp.metric == "self" else "our ref."
-            thr = f"<= {comp.threshold:.1e}" + (" (1e-3 target)" if comp.relaxed else "")
-            if comp.metric == "self" and not math.isfinite(s.scipy_ref.peak):
-                why = f"no SciPy reference ({s.scipy_ref.label} did not finish)"
-                rows.append((s.scene, which, "n/a", "all", why, "", "", "", "", ""))
-                continue
-            for c in comp.choices:
-                if c.run is None:
-                    best_err = min(
-                        (
-                            (r.err_self if comp.metric == "self" else r.err_ref)
-                            for r in b.runs
-                            if r.method == c.method and r.ok
-                        ),
-                        default=math.nan,
-                    )
-                    capped = any(r.capped for r in b.runs if r.method == c.method)
-                    why = "did not reach"
-                    if capped:
-                        why += f" (capped at {b.cap:g} s)"
-                    if math.isfinite(best_err):
-                        why += f"; best error {best_err:.1e}"
-                    rows.append((s.scene, which, thr, c.method, why, "", "", "", "", ""))
-                    continue
-                r = c.run
-                err = r.err_self if comp.metric == "self" else r.err_ref
-                best = comp.best is c
-                nxt = b.next_rung(r)
-                if nxt is None:
-                    nxt_err = "not run"
-                else:
-                    e2 = nxt.err_self if comp.metric == "self" else nxt.err_ref
-                    nxt_err = _e(e2) if nxt.ok else "failed"
-                    if nxt.ok and math.isfinite(e2) and e2 > comp.threshold:
-                        nxt_err += " (not sustained)"
-                rows.append(
-                    (
-                        s.scene,
-                        which,
-                        thr,
-                        f"**{c.method}**" if best else c.method,
-                        f"rtol {r.rtol:g}",
-                        _e(err),
-                        nxt_err,
-                        f"{r.outcome.steps}",
-                        _ms(c.wall),
-                        f"{c.wall / s.default.wall:.0f}x" + (f" ({c.note})" if c.note else ""),
-                    )
-                )
-    L += table(
-        (
-            "scene",
-            "error vs",
-            "same error",
-            "method",
-            "loosest rung reaching it",
-            "its error",
-            "error at the next tighter rung",
-            "steps",
-            "wall median [ms]",
-            "wall / default's",
-        ),
-        rows,
-    )
-    add("")
+    L += _family_table(sc, "baselines")
     add("Every ladder run (one run each; the wall time of a single run):")
     add("")
     rows = []
     for s in sc:
-        for r in s.baselines.runs:
+        for r in (*(s.peers.runs if s.peers is not None else ()), *s.baselines.runs):
             state = "capped" if r.capped else ("ok" if r.outcome.success else "failed")
             if r.capped:
                 state += f" at t = {r.outcome.sim_time:.3f} s"

@@ -12,7 +12,7 @@ from fence_sorter.cli import main as fence_sorter_cli
 
 #: campaign -> its one-line help, in the order of ``--help``
 CAMPAIGNS = {
-    "bench": "speed and memory of the default configuration against SciPy baselines",
+    "bench": "speed and memory of the default against compiled peers and SciPy baselines",
     "bench-suite": "node suite benchmark: pacing, lost messages, controller latency, unpaced RTF",
     "faults": "fault-injection campaign of the node suite (writes docs/reports/reliability.md)",
     "calibrate-bench": "calibration benchmark: interval coverage, identifiability, wall time",

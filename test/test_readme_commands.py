@@ -81,6 +81,8 @@ COVERED: dict[str, str] = {
     "--set solver.dt=2.5e-4": HERE,
     "fence-sorter simulate impact_flexible --set solver.method=scipy:Radau "
     "--set solver.rtol=1e-6": HERE,
+    "fence-sorter simulate impact_flexible --set solver.method=cyrk:LSODA "
+    "--set solver.rtol=1e-6": HERE,
     "fence-sorter accuracy": ACCURACY,
     "fence-sorter stability": "test/cli/test_stability_cli.py::test_quick_writes_the_report",
     "python -m benchmarks bench": HERE,
@@ -218,6 +220,18 @@ RUN_HERE: dict[str, tuple[list[str], str]] = {
             "impact_flexible",
             "--set",
             "solver.method=scipy:Radau",
+            "--set",
+            "solver.rtol=1e-6",
+        ],
+        "sorted",
+    ),
+    "fence-sorter simulate impact_flexible --set solver.method=cyrk:LSODA "
+    "--set solver.rtol=1e-6": (
+        [
+            "simulate",
+            "impact_flexible",
+            "--set",
+            "solver.method=cyrk:LSODA",
             "--set",
             "solver.rtol=1e-6",
         ],

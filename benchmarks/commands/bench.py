@@ -144,6 +144,7 @@ def run(args: argparse.Namespace) -> int:
     if not 0.1 <= cap <= 3600.0:
         return _error(f"--scipy-cap must be in [0.1, 3600] s, got {cap:g}")
     methods = B.QUICK_SCIPY_METHODS if args.quick else B.SCIPY_METHODS
+    peer_methods = B.QUICK_PEER_METHODS if args.quick else B.PEER_METHODS
     ladder = B.QUICK_RTOL_LADDER if args.quick else B.RTOL_LADDER
 
     argv = ["python", "-m", "benchmarks", "bench"]
@@ -170,6 +171,7 @@ def run(args: argparse.Namespace) -> int:
         quick=args.quick,
         command=shlex.join(argv),
         log=log,
+        peer_methods=peer_methods,
     )
     out = Path(args.out)
     path = Path(args.json) if args.json else out.with_suffix(".json")

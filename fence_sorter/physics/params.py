@@ -148,14 +148,16 @@ class SolverParams:
 
     ``method``: ``adaptive`` (default; error-controlled trapezoidal), ``trapezoidal`` or
     ``generalized_alpha`` (fixed step ``dt``), or a SciPy baseline ``scipy:RK45``,
-    ``scipy:DOP853``, ``scipy:Radau``, ``scipy:BDF``, ``scipy:LSODA`` (``rtol``/``atol``).
+    ``scipy:DOP853``, ``scipy:Radau``, ``scipy:BDF``, ``scipy:LSODA`` (``rtol``/``atol``), or a
+    compiled peer (CyRK) ``cyrk:LSODA``, ``cyrk:BDF``, ``cyrk:Radau``, ``cyrk:RK45``,
+    ``cyrk:DOP853``, ``cyrk:Tsit5`` (``rtol``/``atol``).
     """
 
     method: str = "adaptive"
     dt: float = 5e-4  # [s] fixed step (trapezoidal, generalized_alpha); first step (adaptive)
     dt_max: float = 5e-3  # [s] largest adaptive step
-    rtol: float = 1e-4  # relative local-error tolerance (adaptive, scipy:*)
-    atol: float = 1e-6  # absolute local-error tolerance [m, m/s, rad] (adaptive, scipy:*)
+    rtol: float = 1e-4  # relative local-error tolerance (adaptive, scipy:*, cyrk:*)
+    atol: float = 1e-6  # absolute local-error tolerance [m, m/s, rad] (adaptive, scipy:*, cyrk:*)
     rho_inf: float = 0.8  # generalized_alpha spectral radius at h -> infinity (1: no damping)
     max_iterations: int = 12
     tolerance: float = 1e-9  # fixed-point tolerance on positions [m] and velocities [m/s]
@@ -185,7 +187,9 @@ class SolverParams:
 
 OUR_METHODS = ("adaptive", "trapezoidal", "generalized_alpha")
 SCIPY_METHODS = ("scipy:RK45", "scipy:DOP853", "scipy:Radau", "scipy:BDF", "scipy:LSODA")
-SOLVER_METHODS = OUR_METHODS + SCIPY_METHODS
+# compiled peers: CyRK's C++ solvers on the same compiled right-hand side (``peers``)
+CYRK_METHODS = ("cyrk:LSODA", "cyrk:BDF", "cyrk:Radau", "cyrk:RK45", "cyrk:DOP853", "cyrk:Tsit5")
+SOLVER_METHODS = OUR_METHODS + SCIPY_METHODS + CYRK_METHODS
 
 
 def field_names(cls) -> tuple[str, ...]:

@@ -28,14 +28,20 @@ __all__ = [
 
 
 def solve_stepper(model: SortingModel) -> SolveStepper:
-    """The stepper of ``model.sc.solver.method``: our schemes' :class:`~.stepper.Stepper`, or a
-    SciPy baseline's :class:`~.baselines.ScipyStepper`; both step alike (``SolveStepper``)."""
+    """The stepper of ``model.sc.solver.method``: our schemes' :class:`~.stepper.Stepper`, a
+    SciPy baseline's :class:`~.baselines.ScipyStepper` or a compiled peer's
+    :class:`~.peers.CyrkStepper`; all step alike (``SolveStepper``)."""
     if model.sc.solver.method.startswith("scipy:"):
         # scipy.integrate and scipy.optimize take ~0.7 s to import (python -X importtime);
         # only the baselines need them
         from .baselines import ScipyStepper  # lazy: loads SciPy
 
         return ScipyStepper(model)
+    if model.sc.solver.method.startswith("cyrk:"):
+        # CyRK is a benchmark dependency; the peer's module compiles its diffeq on first use
+        from .peers import CyrkStepper  # lazy: loads CyRK
+
+        return CyrkStepper(model)
     return Stepper(model)
 
 

@@ -684,10 +684,11 @@ class Stepper:
 
 class SolveStepper(Protocol):
     """What steps one sorting event, whichever scheme integrates it: :class:`Stepper` (our
-    schemes in the compiled loop) and ``baselines.ScipyStepper`` (a SciPy ``OdeSolver`` on
-    ``kernel.rhs``, its accepted points reduced by the loop's own observer). Both end their
-    steps on :func:`segments` and report through :meth:`Stepper.result`; ``simulate`` and the
-    soft-real-time line step any of them (``simulate.solve_stepper``)."""
+    schemes in the compiled loop), ``baselines.ScipyStepper`` (a SciPy ``OdeSolver`` on
+    ``kernel.rhs``, its accepted points reduced by the loop's own observer) and
+    ``peers.CyrkStepper`` (a CyRK C++ solver on the same ``kernel.rhs``, reduced alike). All
+    end their steps on :func:`segments` and report through :meth:`Stepper.result`; ``simulate``
+    and the soft-real-time line step any of them (``simulate.solve_stepper``)."""
 
     model: SortingModel
     t_end: float

@@ -87,6 +87,15 @@ def test_quick_writes_the_report(tmp_path: Path) -> None:
     assert {r["method"] for r in runs} == set(B.QUICK_SCIPY_METHODS)
     assert {r["rtol"] for r in runs} <= set(B.QUICK_RTOL_LADDER)
     assert s["scipy_ref"]["check_change"] < 1e-4
+    # the compiled peers ran the same search, reported first among the speed-up targets
+    peer_runs = s["peers"]["runs"]
+    assert {r["method"] for r in peer_runs} == set(B.QUICK_PEER_METHODS)
+    assert {r["rtol"] for r in peer_runs} <= set(B.QUICK_RTOL_LADDER)
+    assert all(r["outcome"]["success"] for r in peer_runs)
+    speedups = [t["target"] for t in data["targets"] if t["target"].startswith("speed-up")]
+    assert speedups[0].startswith("speed-up vs fastest compiled peer"), speedups
+    assert "## Compiled peers at the same error" in md
+    assert md.index("## Compiled peers") < md.index("## SciPy baselines")
     for key in ("by_ref", "by_self"):
         comp = s["baselines"][key]
         assert comp["threshold"] in (d["error"], B.TARGET_ERROR)
