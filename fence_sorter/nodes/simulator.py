@@ -100,7 +100,6 @@ class SimulatorNode(FenceSorterNode):
 
     NODE_NAME = "simulator"
     STATUS = "running"
-    STATUS_LEVEL = DiagnosticStatus.OK
     PARAMETERS = SIMULATOR_PARAMETERS
 
     def __init__(self, loop: LineProcess | None = None, **kwargs: object) -> None:
