@@ -14,7 +14,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from benchmarks.faults_processes import ProcessWatch, fence_sorter_cmd
+from benchmarks.faults_processes import start_watched
 from benchmarks.runs import finish, last_json
 
 #: a run id no run of the suite draws in practice: the flooding "other run"
@@ -140,16 +140,9 @@ def flood_trial(topic: str, workdir: Path, rate: float, seconds: float) -> Flood
     """A 20-parcel run with a flood on ``topic`` 3 s after its nodes are up."""
     err_path = workdir / f"flood-{topic.strip('/')}.log"
     err = open(err_path, "w+")  # noqa: SIM115 (read while the run writes it)
-    proc = subprocess.Popen(
-        fence_sorter_cmd("run", "--parcels", "20", "--json"),
-        stdout=subprocess.PIPE,
-        stderr=err,
-        text=True,
-        start_new_session=True,
-        cwd=workdir,
+    proc, watch = start_watched(
+        ("run", "--parcels", "20", "--json"), workdir, subprocess.PIPE, err, text=True
     )
-    watch = ProcessWatch(proc.pid)
-    watch.start()
     domain = None
     end = time.monotonic() + 300.0
     while time.monotonic() < end and proc.poll() is None:

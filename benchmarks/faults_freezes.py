@@ -13,7 +13,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchmarks.faults_processes import ProcessWatch, fence_sorter_cmd
+from benchmarks.faults_processes import ProcessWatch, start_watched
 
 # -- freezes and a full disk -------------------------------------------------------------------
 #: the freeze cases: what is stopped (SIGSTOP, then SIGCONT) or filled up
@@ -76,16 +76,7 @@ def freeze_trial(case: str, workdir: Path, stop_s: float = 3.0, parcels: int = 1
     err_path = workdir / f"freeze-{time.time_ns()}.log"
     try:
         with open(err_path, "w") as err:
-            proc = subprocess.Popen(
-                fence_sorter_cmd(*argv),
-                stdout=subprocess.PIPE,
-                stderr=err,
-                text=True,
-                start_new_session=True,
-                cwd=workdir,
-            )
-            watch = ProcessWatch(proc.pid)
-            watch.start()
+            proc, watch = start_watched(argv, workdir, subprocess.PIPE, err, text=True)
             end = time.monotonic() + 300.0
             while time.monotonic() < end and proc.poll() is None:
                 if "; running" in err_path.read_text(errors="replace"):

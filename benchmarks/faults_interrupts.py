@@ -12,7 +12,7 @@ from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
-from benchmarks.faults_processes import ProcessWatch, fence_sorter_cmd
+from benchmarks.faults_processes import start_watched
 
 
 # -- interrupts ------------------------------------------------------------------------------
@@ -54,15 +54,9 @@ def interrupt_trial(rng: random.Random, workdir: Path, parcels: int = 20) -> Int
     """One run interrupted by 2-5 SIGINTs (see the module docstring)."""
     log = workdir / f"interrupt-{time.time_ns()}.log"
     with open(log, "w") as out:
-        proc = subprocess.Popen(
-            fence_sorter_cmd("run", "--parcels", str(parcels)),
-            stdout=out,
-            stderr=subprocess.STDOUT,
-            start_new_session=True,
-            cwd=workdir,
+        proc, watch = start_watched(
+            ("run", "--parcels", str(parcels)), workdir, out, subprocess.STDOUT
         )
-    watch = ProcessWatch(proc.pid)
-    watch.start()
     first = rng.uniform(0.0, 30.0)
     n = rng.randint(2, 5)
     t0 = time.monotonic()

@@ -5,12 +5,13 @@ from __future__ import annotations
 
 import os
 import signal
+import subprocess
 import sys
 import threading
+from collections.abc import Sequence
 from pathlib import Path
 
 
-# -- processes -------------------------------------------------------------------------------
 def _ppid_starttime(pid: int) -> tuple[int, int] | None:
     try:
         with open(f"/proc/{pid}/stat", encoding="ascii", errors="replace") as f:
@@ -73,3 +74,21 @@ class ProcessWatch(threading.Thread):
 
 def fence_sorter_cmd(*args: str) -> list[str]:
     return [sys.executable, "-m", "fence_sorter.cli.main", *args]
+
+
+def start_watched(
+    args: Sequence[str], workdir: Path, stdout, stderr, text: bool = False
+) -> tuple[subprocess.Popen, ProcessWatch]:
+    """``fence-sorter ARGS`` started in ``workdir`` in a session of its own (as from a
+    terminal), and the watch of its descendants, running."""
+    proc = subprocess.Popen(
+        fence_sorter_cmd(*args),
+        stdout=stdout,
+        stderr=stderr,
+        text=text,
+        start_new_session=True,
+        cwd=workdir,
+    )
+    watch = ProcessWatch(proc.pid)
+    watch.start()
+    return proc, watch
