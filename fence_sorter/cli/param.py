@@ -27,7 +27,7 @@ import time
 
 import yaml
 
-from fence_sorter.cli.ros_session import DomainSession, domain_options
+from fence_sorter.cli.ros_session import DomainSession, domain_options, run_in_session
 from fence_sorter.jsonsafe import json_safe
 from fence_sorter.nodes.parameters import NODE_PARAMETERS, ParamOverrideError, parse_override
 
@@ -163,24 +163,10 @@ class _Session(DomainSession):
 
 
 def _run(args: argparse.Namespace, name: str, body) -> int:
-    if args.domain is not None and not 0 <= args.domain <= 232:
-        print(
-            f"fence-sorter param: --domain must be in 0..232, got {args.domain}", file=sys.stderr
-        )
-        return 2
-    if args.timeout <= 0:
-        print(f"fence-sorter param: --timeout must be > 0 s, got {args.timeout}", file=sys.stderr)
-        return 2
-    session = _Session(args.domain, args.node, args.timeout)
-    try:
-        return body(session)
-    except ParamError as exc:
-        print(f"fence-sorter param {name}: {exc}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        return 130
-    finally:
-        session.close()
+    def session() -> _Session:
+        return _Session(args.domain, args.node, args.timeout)
+
+    return run_in_session(args, "param", name, ParamError, session, body)
 
 
 def run_list(args: argparse.Namespace) -> int:

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
+from collections.abc import Callable
 
 
 def domain_options(timeout_help: str) -> argparse.ArgumentParser:
@@ -25,6 +27,41 @@ def domain_options(timeout_help: str) -> argparse.ArgumentParser:
         help=f"seconds to wait for {timeout_help} (default 10)",
     )
     return common
+
+
+def run_in_session(
+    args: argparse.Namespace,
+    command: str,
+    name: str,
+    errors: type[Exception],
+    open_session: Callable[[], DomainSession],
+    body: Callable,
+) -> int:
+    """Check ``--domain`` and ``--timeout`` (exit 2), open a session with ``open_session()``
+    and return ``body(session)``'s exit status; an ``errors`` exception prints as
+    ``fence-sorter COMMAND NAME: <it>`` (exit 1), Ctrl-C exits 130; the session is closed in
+    any case."""
+    if args.domain is not None and not 0 <= args.domain <= 232:
+        print(
+            f"fence-sorter {command}: --domain must be in 0..232, got {args.domain}",
+            file=sys.stderr,
+        )
+        return 2
+    if args.timeout <= 0:
+        print(
+            f"fence-sorter {command}: --timeout must be > 0 s, got {args.timeout}", file=sys.stderr
+        )
+        return 2
+    session = open_session()
+    try:
+        return body(session)
+    except errors as exc:
+        print(f"fence-sorter {command} {name}: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        return 130
+    finally:
+        session.close()
 
 
 class DomainSession:

@@ -25,7 +25,7 @@ import time
 
 import yaml
 
-from fence_sorter.cli.ros_session import DomainSession, domain_options
+from fence_sorter.cli.ros_session import DomainSession, domain_options, run_in_session
 from fence_sorter.jsonsafe import json_safe
 from fence_sorter.stamps import time_to_sec
 
@@ -127,31 +127,11 @@ class _Session(DomainSession):
         return self.node.create_subscription(cls, topic, callback, qos)
 
 
-def _session(args: argparse.Namespace, name: str) -> _Session | None:
-    if args.domain is not None and not 0 <= args.domain <= 232:
-        print(
-            f"fence-sorter topic: --domain must be in 0..232, got {args.domain}", file=sys.stderr
-        )
-        return None
-    if args.timeout <= 0:
-        print(f"fence-sorter topic: --timeout must be > 0 s, got {args.timeout}", file=sys.stderr)
-        return None
-    return _Session(args.domain, name)
-
-
 def _run(args: argparse.Namespace, name: str, body) -> int:
-    session = _session(args, name)
-    if session is None:
-        return 2
-    try:
-        return body(session)
-    except TopicError as exc:
-        print(f"fence-sorter topic {name}: {exc}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        return 130
-    finally:
-        session.close()
+    def session() -> _Session:
+        return _Session(args.domain, name)
+
+    return run_in_session(args, "topic", name, TopicError, session, body)
 
 
 def run_list(args: argparse.Namespace) -> int:
