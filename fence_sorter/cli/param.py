@@ -28,6 +28,7 @@ import time
 import yaml
 
 from fence_sorter.cli.ros_session import DomainSession, domain_options, run_in_session
+from fence_sorter.cli.subcommands import add_subcommands
 from fence_sorter.jsonsafe import json_safe
 from fence_sorter.nodes.parameters import NODE_PARAMETERS, ParamOverrideError, parse_override
 
@@ -51,9 +52,7 @@ class ParamError(RuntimeError):
 
 
 def register(parser: argparse.ArgumentParser) -> None:
-    parser.description = __doc__.splitlines()[0]
-    parser.set_defaults(func=lambda args: _usage(parser))
-    commands = parser.add_subparsers(dest="param_command", metavar="COMMAND")
+    commands = add_subcommands(parser, __doc__.splitlines()[0], "param_command")
     common = domain_options("the node's parameter services and their answer")
     p_list = commands.add_parser(
         "list",
@@ -80,11 +79,6 @@ def register(parser: argparse.ArgumentParser) -> None:
     p_set.add_argument("name")
     p_set.add_argument("value")
     p_set.set_defaults(func=run_set)
-
-
-def _usage(parser: argparse.ArgumentParser) -> int:
-    parser.print_help(sys.stderr)
-    return 2
 
 
 def node_path(node: str) -> str:

@@ -26,6 +26,7 @@ import time
 import yaml
 
 from fence_sorter.cli.ros_session import DomainSession, domain_options, run_in_session
+from fence_sorter.cli.subcommands import add_subcommands
 from fence_sorter.jsonsafe import json_safe
 from fence_sorter.stamps import time_to_sec
 
@@ -34,9 +35,7 @@ SETTLE = 0.5
 
 
 def register(parser: argparse.ArgumentParser) -> None:
-    parser.description = __doc__.splitlines()[0]
-    parser.set_defaults(func=lambda args: _usage(parser))
-    commands = parser.add_subparsers(dest="topic_command", metavar="COMMAND")
+    commands = add_subcommands(parser, __doc__.splitlines()[0], "topic_command")
     common = domain_options("the topic and its messages")
     p_list = commands.add_parser(
         "list",
@@ -68,11 +67,6 @@ def register(parser: argparse.ArgumentParser) -> None:
     )
     p_hz.add_argument("--json", action="store_true", help="print the figures as JSON")
     p_hz.set_defaults(func=run_hz)
-
-
-def _usage(parser: argparse.ArgumentParser) -> int:
-    parser.print_help(sys.stderr)
-    return 2
 
 
 class TopicError(RuntimeError):
