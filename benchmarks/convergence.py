@@ -23,7 +23,7 @@ from fence_sorter.physics.params import ParameterError, SolverParams
 from fence_sorter.physics.simulate import simulate
 from fence_sorter.physics.stepper import collector_off
 from fence_sorter.scene import load_scene
-from fence_sorter.verification.accuracy import ATOL_PER_RTOL, SCENES
+from fence_sorter.verification.accuracy_runs import ATOL_PER_RTOL, SCENES
 
 REFERENCE_DIR = REPO / "docs" / "reports" / "accuracy" / "reference"
 RTOLS = (1e-4, 1e-5, 1e-6, 1e-7)

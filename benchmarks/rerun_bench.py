@@ -15,12 +15,9 @@ import time
 from pathlib import Path
 
 from benchmarks import REPO
-from fence_sorter.visualisation.rerun_log import (
-    RerunLogger,
-    bag_frames,
-    open_recording,
-    scene_from_bag,
-)
+from fence_sorter.visualisation.frames import bag_frames, scene_from_bag
+from fence_sorter.visualisation.rerun_layout import open_recording
+from fence_sorter.visualisation.rerun_log import RerunLogger
 
 
 def bench(bag: Path, repeat: int, runs: int, scene_every: list[int]) -> list[str]:

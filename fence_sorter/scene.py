@@ -33,7 +33,7 @@ from fence_sorter.physics.params import (
 )
 from fence_sorter.physics.scenario import RECORDABLE, Scenario
 from fence_sorter.resources import ResourceNotFound, data_path, find_data
-from fence_sorter.textinput import TextInputError, load_yaml, read_text
+from fence_sorter.textinput import TextInputError, keyed_mapping, load_yaml, read_text
 
 __all__ = [
     "DEFAULT_SCENE",
@@ -213,17 +213,11 @@ def _coerce(src: str, key: str, value: Any, kind: str) -> Any:
 
 def _check_keys(src: str, prefix: str, data: Any, allowed: Mapping[str, str]) -> dict:
     """``data`` must be a mapping with keys from ``allowed``; return the coerced values."""
-    if data is None:
-        return {}
-    if not isinstance(data, dict):
-        raise _err(src, f"{prefix} must be a mapping, got {type(data).__name__} {data!r}")
-    out = {}
-    for k, v in data.items():
-        dotted = f"{prefix}.{k}"
-        if k not in allowed:
-            raise _err(src, f"{dotted} is not a known key; allowed keys: {_allowed(allowed)}")
-        out[k] = _coerce(src, dotted, v, allowed[k])
-    return out
+    try:
+        data = keyed_mapping(data, prefix, allowed)
+    except TextInputError as exc:
+        raise _err(src, str(exc)) from None
+    return {k: _coerce(src, f"{prefix}.{k}", v, allowed[k]) for k, v in data.items()}
 
 
 def _wrap(src: str, fn, *args, **kwargs):

@@ -4,6 +4,7 @@ is not UTF-8 or a YAML document nested deeper than the parser can follow is a on
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +27,21 @@ def read_text(path: Path) -> str:
         raise TextInputError(
             f"not UTF-8 text (byte 0x{data[exc.start]:02x} at offset {exc.start})"
         ) from None
+
+
+def keyed_mapping(data: Any, key: str, allowed: Collection[str]) -> dict:
+    """``data`` as a mapping (None: an empty one) whose keys are all in ``allowed``; else a
+    TextInputError naming ``key`` (``key.k`` for an unknown key k) and the allowed keys."""
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise TextInputError(f"{key} must be a mapping, got {type(data).__name__} {data!r}")
+    for k in data:
+        if k not in allowed:
+            raise TextInputError(
+                f"{key}.{k} is not a known key; allowed keys: {', '.join(allowed)}"
+            )
+    return data
 
 
 def load_yaml(text: str) -> Any:

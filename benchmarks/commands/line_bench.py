@@ -2,7 +2,7 @@
 induction).
 
 For each induction rate (default 2000 to 12000 pcs/h) one ROS-free run of the line
-(:mod:`fence_sorter.line.plant`, guard on) to the drain: throughput in and out, sort rate,
+(:mod:`fence_sorter.line.multi_unit`, guard on) to the drain: throughput in and out, sort rate,
 recirculation share, rejects, intrusions and conservation, with each unit's capacity bound
 W_t (1)-(2) of its median stroke beside them. Prints a Markdown table and
 writes it with the command and commit to ``--out`` (docs/reports/line-bench.md by default;
@@ -49,8 +49,8 @@ def run(args: argparse.Namespace) -> int:
     if not 1 <= args.parcels <= 10**6:
         return _error(f"--parcels must be in [1, 1000000], got {args.parcels}")
     # lazy: the line's physics loads Numba and the compiled kernel
-    from fence_sorter.line.plant import LinePlant, LineRunConfig
-    from fence_sorter.line.units import load_line
+    from fence_sorter.line.line_file import load_line
+    from fence_sorter.line.multi_unit import LinePlant, LineRunConfig
 
     try:
         line = load_line(args.line)

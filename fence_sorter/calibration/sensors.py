@@ -31,6 +31,7 @@ import yaml
 from fence_sorter.physics.dense import hermite
 from fence_sorter.physics.params import ParameterError
 from fence_sorter.resources import find_data
+from fence_sorter.textinput import TextInputError, keyed_mapping
 
 
 class SensorConfigError(ParameterError):
@@ -153,14 +154,10 @@ def load_sensors(path_or_name: str | Path) -> SensorConfig:
         data = raw.get(sec)
         if data is None:
             continue
-        if not isinstance(data, dict):
-            raise SensorConfigError(f"sensors {src}: {sec} must be a mapping")
-        for k in data:
-            if k not in keys:
-                raise SensorConfigError(
-                    f"sensors {src}: {sec}.{k} is not a known key; allowed: {', '.join(keys)}"
-                )
-        sections[sec] = data
+        try:
+            sections[sec] = keyed_mapping(data, sec, keys)
+        except TextInputError as exc:
+            raise SensorConfigError(f"sensors {src}: {exc}") from None
     enc = sections.get("encoder", {})
     encoder = EncoderSpec(
         **{k: _number(src, f"encoder.{k}", v) for k, v in enc.items()},

@@ -12,11 +12,13 @@ import argparse
 import json
 import sys
 
+from fence_sorter.cli.subcommands import add_subcommands
+
 
 def register(parser: argparse.ArgumentParser) -> None:
-    parser.description = "Stand-ins for `ros2 bag` subcommands, without rosbag2."
-    parser.set_defaults(func=lambda args: _usage(parser))
-    commands = parser.add_subparsers(dest="bag_command", metavar="COMMAND")
+    commands = add_subcommands(
+        parser, "Stand-ins for `ros2 bag` subcommands, without rosbag2.", "bag_command"
+    )
     info = commands.add_parser(
         "info",
         help="what `ros2 bag info` shows, plus the health of each segment",
@@ -25,11 +27,6 @@ def register(parser: argparse.ArgumentParser) -> None:
     info.add_argument("bag", help="bag directory (or one .mcap/.db3 file)")
     info.add_argument("--json", action="store_true", help="print it as one JSON object")
     info.set_defaults(func=run_info)
-
-
-def _usage(parser: argparse.ArgumentParser) -> int:
-    parser.print_help(sys.stderr)
-    return 2
 
 
 def run_info(args: argparse.Namespace) -> int:

@@ -1,7 +1,7 @@
 """``fence-sorter line-sim LINE``: a line of fence units simulated without ROS.
 
 Loads a line file (``config/lines/``), draws the induction stream, runs the line to the drain
-(:mod:`fence_sorter.line.plant`) and prints the line summary (``--json``: one JSON object).
+(:mod:`fence_sorter.line.multi_unit`) and prints the line summary (``--json``: one JSON object).
 Exit codes: 0 a drained run with conservation exact, 0 wrong destinations and, with the guard,
 0 swept-sector intrusions; 1 otherwise; 2 a bad line file or option (one line naming it).
 """
@@ -52,8 +52,8 @@ def run(args: argparse.Namespace) -> int:
     if args.rate is not None and not 1.0 <= args.rate <= 1e5:
         return _error(f"--rate must be in [1, 100000] pcs/h, got {args.rate}")
     # lazy: the line's physics loads Numba and the compiled kernel
-    from fence_sorter.line.plant import LineRunConfig, run_line
-    from fence_sorter.line.units import load_line
+    from fence_sorter.line.line_file import load_line
+    from fence_sorter.line.multi_unit import LineRunConfig, run_line
 
     try:
         line = load_line(args.line)

@@ -27,6 +27,8 @@ import time
 
 import yaml
 
+from fence_sorter.cli.ros_session import DomainSession, domain_options, run_in_session
+from fence_sorter.cli.subcommands import add_subcommands
 from fence_sorter.jsonsafe import json_safe
 from fence_sorter.nodes.parameters import NODE_PARAMETERS, ParamOverrideError, parse_override
 
@@ -50,22 +52,8 @@ class ParamError(RuntimeError):
 
 
 def register(parser: argparse.ArgumentParser) -> None:
-    parser.description = __doc__.splitlines()[0]
-    parser.set_defaults(func=lambda args: _usage(parser))
-    commands = parser.add_subparsers(dest="param_command", metavar="COMMAND")
-    common = argparse.ArgumentParser(add_help=False)
-    common.add_argument(
-        "--domain",
-        type=int,
-        default=None,
-        help="ROS domain id to join (0-232; default: ROS_DOMAIN_ID or 0)",
-    )
-    common.add_argument(
-        "--timeout",
-        type=float,
-        default=10.0,
-        help="seconds to wait for the node's parameter services and their answer (default 10)",
-    )
+    commands = add_subcommands(parser, __doc__.splitlines()[0], "param_command")
+    common = domain_options("the node's parameter services and their answer")
     p_list = commands.add_parser(
         "list",
         parents=[common],
@@ -93,39 +81,18 @@ def register(parser: argparse.ArgumentParser) -> None:
     p_set.set_defaults(func=run_set)
 
 
-def _usage(parser: argparse.ArgumentParser) -> int:
-    parser.print_help(sys.stderr)
-    return 2
-
-
 def node_path(node: str) -> str:
     """``controller`` -> ``/controller`` (the fully qualified name the services hang under)."""
     return node if node.startswith("/") else f"/{node}"
 
 
-class _Session:
-    """An rclpy context and node on the chosen domain, with clients of one node's services."""
+class _Session(DomainSession):
+    """A session on the chosen domain, with clients of one node's services."""
 
     def __init__(self, domain: int | None, target: str, timeout: float) -> None:
-        import rclpy  # lazy: rclpy (0.25 s), only where ROS runs
-        from rclpy.executors import SingleThreadedExecutor
-        from rclpy.signals import SignalHandlerOptions
-
-        os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-        self.rclpy = rclpy
+        super().__init__(domain, f"fence_sorter_param_{os.getpid()}")
         self.target = node_path(target)
         self.timeout = timeout
-        self.context = rclpy.Context()
-        kwargs = {"domain_id": domain} if domain is not None else {}
-        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO, **kwargs)
-        self.node = rclpy.create_node(f"fence_sorter_param_{os.getpid()}", context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-
-    def close(self) -> None:
-        self.executor.shutdown()
-        self.node.destroy_node()
-        self.rclpy.try_shutdown(context=self.context)
 
     def call(self, service: str, srv_type, request):
         """``request`` to ``<node>/<service>``; its response, or ParamError after --timeout."""
@@ -190,24 +157,10 @@ class _Session:
 
 
 def _run(args: argparse.Namespace, name: str, body) -> int:
-    if args.domain is not None and not 0 <= args.domain <= 232:
-        print(
-            f"fence-sorter param: --domain must be in 0..232, got {args.domain}", file=sys.stderr
-        )
-        return 2
-    if args.timeout <= 0:
-        print(f"fence-sorter param: --timeout must be > 0 s, got {args.timeout}", file=sys.stderr)
-        return 2
-    session = _Session(args.domain, args.node, args.timeout)
-    try:
-        return body(session)
-    except ParamError as exc:
-        print(f"fence-sorter param {name}: {exc}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        return 130
-    finally:
-        session.close()
+    def session() -> _Session:
+        return _Session(args.domain, args.node, args.timeout)
+
+    return run_in_session(args, "param", name, ParamError, session, body)
 
 
 def run_list(args: argparse.Namespace) -> int:

@@ -10,7 +10,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from fence_sorter.visualisation.rerun_log import log_bag, open_recording, scene_from_bag
+from fence_sorter.visualisation.frames import scene_from_bag
+from fence_sorter.visualisation.rerun_layout import open_recording
+from fence_sorter.visualisation.rerun_log import log_bag
 
 
 def register(parser: argparse.ArgumentParser) -> None:

@@ -25,6 +25,8 @@ import time
 
 import yaml
 
+from fence_sorter.cli.ros_session import DomainSession, domain_options, run_in_session
+from fence_sorter.cli.subcommands import add_subcommands
 from fence_sorter.jsonsafe import json_safe
 from fence_sorter.stamps import time_to_sec
 
@@ -33,22 +35,8 @@ SETTLE = 0.5
 
 
 def register(parser: argparse.ArgumentParser) -> None:
-    parser.description = __doc__.splitlines()[0]
-    parser.set_defaults(func=lambda args: _usage(parser))
-    commands = parser.add_subparsers(dest="topic_command", metavar="COMMAND")
-    common = argparse.ArgumentParser(add_help=False)
-    common.add_argument(
-        "--domain",
-        type=int,
-        default=None,
-        help="ROS domain id to join (0-232; default: ROS_DOMAIN_ID or 0)",
-    )
-    common.add_argument(
-        "--timeout",
-        type=float,
-        default=10.0,
-        help="seconds to wait for the topic and its messages (default 10)",
-    )
+    commands = add_subcommands(parser, __doc__.splitlines()[0], "topic_command")
+    common = domain_options("the topic and its messages")
     p_list = commands.add_parser(
         "list",
         parents=[common],
@@ -81,43 +69,15 @@ def register(parser: argparse.ArgumentParser) -> None:
     p_hz.set_defaults(func=run_hz)
 
 
-def _usage(parser: argparse.ArgumentParser) -> int:
-    parser.print_help(sys.stderr)
-    return 2
-
-
 class TopicError(RuntimeError):
     """The topic is not on the graph or its type cannot be loaded (exit 1)."""
 
 
-class _Session:
-    """An rclpy context and node on the chosen domain."""
+class _Session(DomainSession):
+    """A session on the chosen domain that reads the graph's topics."""
 
     def __init__(self, domain: int | None, name: str) -> None:
-        import rclpy  # lazy: rclpy (0.25 s), only where ROS runs
-        from rclpy.signals import SignalHandlerOptions
-
-        os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-        self.rclpy = rclpy
-        self.context = rclpy.Context()
-        kwargs = {"domain_id": domain} if domain is not None else {}
-        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO, **kwargs)
-        self.node = rclpy.create_node(
-            f"fence_sorter_topic_{name}_{os.getpid()}", context=self.context
-        )
-        # lazy: rclpy (0.25 s), only where ROS runs
-        from rclpy.executors import SingleThreadedExecutor
-
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-
-    def spin(self, seconds: float) -> None:
-        self.executor.spin_once(timeout_sec=seconds)
-
-    def close(self) -> None:
-        self.executor.shutdown()
-        self.node.destroy_node()
-        self.rclpy.try_shutdown(context=self.context)
+        super().__init__(domain, f"fence_sorter_topic_{name}_{os.getpid()}")
 
     def topics(self) -> dict[str, list[str]]:
         return dict(self.node.get_topic_names_and_types())
@@ -161,31 +121,11 @@ class _Session:
         return self.node.create_subscription(cls, topic, callback, qos)
 
 
-def _session(args: argparse.Namespace, name: str) -> _Session | None:
-    if args.domain is not None and not 0 <= args.domain <= 232:
-        print(
-            f"fence-sorter topic: --domain must be in 0..232, got {args.domain}", file=sys.stderr
-        )
-        return None
-    if args.timeout <= 0:
-        print(f"fence-sorter topic: --timeout must be > 0 s, got {args.timeout}", file=sys.stderr)
-        return None
-    return _Session(args.domain, name)
-
-
 def _run(args: argparse.Namespace, name: str, body) -> int:
-    session = _session(args, name)
-    if session is None:
-        return 2
-    try:
-        return body(session)
-    except TopicError as exc:
-        print(f"fence-sorter topic {name}: {exc}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        return 130
-    finally:
-        session.close()
+    def session() -> _Session:
+        return _Session(args.domain, name)
+
+    return run_in_session(args, "topic", name, TopicError, session, body)
 
 
 def run_list(args: argparse.Namespace) -> int:

@@ -7,13 +7,13 @@ swept sector (radius R_z about the axis, angles 0 to alpha_k, frame of the unit)
 the stroke [t_start, t_start + 2 t1], predicted from the belt kinematics: a parcel riding the
 belt translates at v, so the region it covers over an interval is the convex hull of its
 footprint at both ends, and that hull is tested against the sector
-(:func:`fence_sorter.line.line.in_swept_sector`). A parcel with a stroke of its own ahead may
+(:func:`fence_sorter.line.sector.in_swept_sector`). A parcel with a stroke of its own ahead may
 leave the belt's kinematics from that stroke's start on; from then it is predicted as a band
 across the whole belt over the length its footprint can reach. A stroke whose own parcel, if it
 is not sorted, would reach into the sector of another unit's booked stroke is declined too.
 
 Frames: "line" (X along the belt from the induction scan line, Y from the right border) and
-each unit's local frame O x0 y0 (:mod:`fence_sorter.line.units`).
+each unit's local frame O x0 y0 (:mod:`fence_sorter.line.line_file`).
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from fence_sorter.line.line import OVERLAP_TOL, in_swept_sector
+from fence_sorter.line.sector import OVERLAP_TOL, in_swept_sector
 
 __all__ = [
     "REASONS",

@@ -53,7 +53,7 @@ import numpy as np
 from fence_sorter.inputs import InputError, ParcelSpec, StrokeCommand
 
 from .frames import HEADER, FrameBuffer, Inbox, Outbox, frame, read_exact
-from .line import LineConfig, SortingLine
+from .one_fence import LineConfig, SortingLine
 from .pacing import CycleTrace, LatenessHistogram, Pacer
 
 #: sim time a command for a not-yet-known parcel waits for its parcel message [s]

@@ -59,9 +59,9 @@ class FenceSorterNode(Node):
 
     NODE_NAME: str = "fence_sorter"
     PARAMETERS: tuple[ParamSpec, ...] = ()
-    #: Status text carried by the heartbeat until the node does its real work.
-    STATUS: str = "not yet implemented"
-    STATUS_LEVEL: bytes = DiagnosticStatus.WARN
+    #: status text and level carried by the heartbeat while the node does its work
+    STATUS: str = "running"
+    STATUS_LEVEL: bytes = DiagnosticStatus.OK
     #: with the run's key and sim time, take sim time from /run_clock (fence_sorter.provenance)
     PINNED_CLOCK: bool = True
 

@@ -144,7 +144,6 @@ class ControllerNode(FenceSorterNode):
 
     NODE_NAME = "controller"
     STATUS = "planning fence strokes"
-    STATUS_LEVEL = DiagnosticStatus.OK
     PARAMETERS = CONTROLLER_PARAMETERS
 
     def validate_parameters(self, parameters: Sequence[Parameter]) -> str | None:

@@ -40,7 +40,6 @@ class FoxgloveNode(FenceSorterNode):
 
     NODE_NAME = "foxglove"
     STATUS = "serving"
-    STATUS_LEVEL = DiagnosticStatus.OK
     PARAMETERS = FOXGLOVE_PARAMETERS
 
     def __init__(self, **kwargs: object) -> None:

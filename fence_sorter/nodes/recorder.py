@@ -140,7 +140,6 @@ class RecorderNode(FenceSorterNode):
     #: it on the wire (a second /clock shows in the log times, and the simulator names it)
     PINNED_CLOCK = False
     STATUS = "recording"
-    STATUS_LEVEL = DiagnosticStatus.OK
     PARAMETERS = RECORDER_PARAMETERS
 
     def __init__(self, **kwargs: object) -> None:

@@ -103,7 +103,6 @@ class ScannerNode(FenceSorterNode):
 
     NODE_NAME = "scanner"
     STATUS = "scanning"
-    STATUS_LEVEL = DiagnosticStatus.OK
     PARAMETERS = SCANNER_PARAMETERS
 
     def __init__(self) -> None:

@@ -62,7 +62,6 @@ class SensorsNode(FenceSorterNode):
 
     NODE_NAME = "sensors"
     STATUS = "measuring"
-    STATUS_LEVEL = DiagnosticStatus.OK
     PARAMETERS = SENSORS_PARAMETERS
 
     def __init__(self, **kwargs: object) -> None:

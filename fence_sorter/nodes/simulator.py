@@ -64,8 +64,8 @@ from fence_sorter.nodes.tf_publisher import TfPublisher
 from fence_sorter.recording import topics
 from fence_sorter.scene import DEFAULT_SCENE, load_scene
 from fence_sorter.stamps import time_to_sec
+from fence_sorter.visualisation.frames import SceneGeometry
 from fence_sorter.visualisation.rerun_live import RerunProcess
-from fence_sorter.visualisation.rerun_log import SceneGeometry
 from fence_sorter_msgs.msg import (
     FenceCommand,
     FenceState,
@@ -100,7 +100,6 @@ class SimulatorNode(FenceSorterNode):
 
     NODE_NAME = "simulator"
     STATUS = "running"
-    STATUS_LEVEL = DiagnosticStatus.OK
     PARAMETERS = SIMULATOR_PARAMETERS
 
     def __init__(self, loop: LineProcess | None = None, **kwargs: object) -> None:

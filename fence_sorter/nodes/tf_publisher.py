@@ -18,7 +18,7 @@ from geometry_msgs.msg import TransformStamped
 from std_msgs.msg import String
 from tf2_msgs.msg import TFMessage
 
-from fence_sorter.line.line import LineConfig
+from fence_sorter.line.one_fence import LineConfig
 from fence_sorter.line.types import FenceSnapshot, LineSnapshot, ParcelSnapshot
 from fence_sorter.nodes.convert import FRAME_ID
 from fence_sorter.nodes.convert import _stamp as stamp_header  # the stamps of /load_states

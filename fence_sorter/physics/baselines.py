@@ -37,8 +37,9 @@ import scipy.integrate
 from scipy.optimize import brentq
 
 from . import kernel as K
+from .observed import ObservedStepper
 from .params import SCIPY_METHODS
-from .stepper import Diagnosis, Failure, Stepper, diagnosis_text, segments
+from .stepper import Failure, Stepper, diagnosis_text
 
 
 def solver_class(method: str):
@@ -114,7 +115,7 @@ def _edge_crossing(dense, t0: float, t1: float, width: float) -> tuple[float, np
     return t, np.array(dense(t), dtype=np.float64)
 
 
-class ScipyStepper:
+class ScipyStepper(ObservedStepper):
     """One sorting event integrated by a SciPy ``OdeSolver``, stepped as :class:`Stepper` steps
     our schemes (``stepper.SolveStepper``): :meth:`step` is one accepted SciPy step, observed by
     the solve loop's reductions (a :class:`Stepper` that integrates nothing, :attr:`reduce`),
@@ -122,62 +123,12 @@ class ScipyStepper:
     :attr:`impacts` and :meth:`result`. End time and breakpoints are ``stepper.segments``."""
 
     def __init__(self, model, clock: Callable[[], float] = time.perf_counter):
-        self.wall0 = clock()
-        self.clock = clock
-        self.model = model
-        sc = model.sc
-        self.cls = solver_class(sc.solver.method)
-        self.t_end, self.breakpoints = segments(sc)
+        super().__init__(model, clock)
+        self.cls = solver_class(model.sc.solver.method)
         self.fun = RightHandSide(model)
-        # the reductions and divergence checks of the solve loop, fed SciPy's accepted points
-        self.reduce = Stepper(model, clock)
         self.solver = None  # the OdeSolver of the current segment (None: start one)
-        self.steps = 0
-        self.status = "running"
-        self.diagnosis: Diagnosis | None = None
-        self._k_break = 0
-        self._t = 0.0
-        y = model.initial_state()
-        self._stop, self.on_belt = self.fun.observe(self.reduce, 0.0, y, True)
-        self._y = np.array(y, dtype=np.float64)
+        self._stop, self.on_belt = self.fun.observe(self.reduce, 0.0, self._y, True)
         self._check_end()
-
-    # -- the stepper interface ---------------------------------------------------------------
-
-    @property
-    def t(self) -> float:
-        return self._t
-
-    @property
-    def y(self) -> np.ndarray:
-        return self._y
-
-    @property
-    def running(self) -> bool:
-        return self.status == "running"
-
-    @property
-    def resultants(self) -> np.ndarray:
-        return self.reduce.resultants
-
-    @property
-    def contacts(self) -> np.ndarray:
-        return self.reduce.contacts
-
-    @property
-    def stage(self):
-        return self.reduce.stage
-
-    @property
-    def sorted(self) -> bool:
-        return self.reduce.sorted
-
-    @property
-    def impacts(self) -> list[tuple[float, float, float]]:
-        return self.reduce.impacts
-
-    def start(self) -> None:
-        """Nothing to do: the initial point is reduced on construction."""
 
     def step(self) -> str | None:
         """One accepted step of the SciPy solver (ended at the belt edge when C_s crosses it),
@@ -241,41 +192,6 @@ class ScipyStepper:
             self.solver = None  # the load left the belt: restart without belt friction
         self._check_end()
         return None
-
-    def advance(self, t_target: float = math.inf) -> bool:
-        """Step until the accepted time reaches ``t_target`` (or the end); False once the
-        solve has ended."""
-        while self.status == "running":
-            if self._t >= t_target:
-                return True
-            self.step()
-        return False
-
-    def result(
-        self, *, steps: int | None = None, diagnosis: str | None = None, wall: float | None = None
-    ):
-        """The :class:`SimulationResult` from the loop's reductions of the accepted points."""
-        if diagnosis is None and self.diagnosis is not None:
-            diagnosis = self.diagnosis.text
-        return self.reduce.result(
-            steps=self.steps if steps is None else steps,
-            diagnosis=diagnosis,
-            wall=self.clock() - self.wall0 if wall is None else wall,
-        )
-
-    def release(self) -> None:
-        """Hand the reductions' arrays back for the next solve (after :meth:`result`)."""
-        self.reduce.release()
-
-    # -- internals -----------------------------------------------------------------------------
-
-    def _check_end(self) -> None:
-        if self.status == "running" and (self._stop or not self._t < self.t_end - 1e-12):
-            self.status = "finished"
-
-    def _fail(self, kind: Failure, t: float, value: float, text: str) -> None:
-        self.diagnosis = Diagnosis(kind, t, value, text)
-        self.status = "failed"
 
 
 __all__ = ["RightHandSide", "ScipyStepper", "solver_class"]

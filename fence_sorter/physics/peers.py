@@ -44,8 +44,9 @@ from numba import carray, njit, types
 from numba.extending import intrinsic
 
 from . import kernel as K
+from .observed import ObservedStepper
 from .params import CYRK_METHODS
-from .stepper import Diagnosis, Failure, Stepper, diagnosis_text, segments
+from .stepper import Failure, diagnosis_text
 
 CYRK_SUCCESS = (1, 2)  # CyRK's statuses of a finished solve (integrated, event terminated)
 NO_RESULT = -1000  # our status of a solve that returned no result
@@ -306,7 +307,7 @@ def solve_function():
     return _SOLVE
 
 
-class CyrkStepper:
+class CyrkStepper(ObservedStepper):
     """One sorting event integrated by a CyRK solver, stepped as ``stepper.Stepper`` steps our
     schemes (``stepper.SolveStepper``): :meth:`step` is one accepted step (a segment is solved
     when its first point is asked for), observed by the solve loop's reductions (a
@@ -314,14 +315,10 @@ class CyrkStepper:
     segment's points in one compiled call. End time and breakpoints are ``stepper.segments``."""
 
     def __init__(self, model, clock: Callable[[], float] = time.perf_counter):
-        self.wall0 = clock()
-        self.clock = clock
-        self.model = model
-        sc = model.sc
-        self.name = solver_name(sc.solver.method)
+        super().__init__(model, clock)
+        self.name = solver_name(model.sc.solver.method)
         self._solve, method_int, self._message = solve_function()
         self._method = int(method_int(self.name))
-        self.t_end, self.breakpoints = segments(sc)
         md = model
         n_el = md.n_el
         self.scratch = (
@@ -341,65 +338,18 @@ class CyrkStepper:
         for k, a in enumerate(self.arrays + self.scratch):
             shape = (*a.shape, 0, 0)
             self.args[3 + 3 * k : 6 + 3 * k] = (a.ctypes.data, shape[0], shape[1])
-        self.reduce = Stepper(model, clock)
         self.dprev = np.zeros(md.n_state)
         self.dy = np.zeros(md.n_state)
         self.point = np.zeros(md.n_state)
-        self.steps = 0
-        self.status = "running"
-        self.diagnosis: Diagnosis | None = None
-        self._k_break = 0
         self._seg: tuple[np.ndarray, np.ndarray] | None = None  # the current segment's points
         self._k = 1
         self._after = -math.inf
-        self._t = 0.0
-        y = np.array(model.initial_state(), dtype=np.float64)
-        self._y = y
-        self.on_belt = True
         # the initial point, reduced as the baselines reduce it
-        ts, ys = np.zeros(2), np.stack([y, y])
-        self._obs_stop = False
-        self._observe(ts, ys, 1, 1)
+        y = self._y
+        self._observe(np.zeros(2), np.stack([y, y]), 1, 1)
         self.steps = 0
         self._after = -math.inf
         self._seg = None
-
-    # -- the stepper interface ---------------------------------------------------------------
-
-    @property
-    def t(self) -> float:
-        return self._t
-
-    @property
-    def y(self) -> np.ndarray:
-        return self._y
-
-    @property
-    def running(self) -> bool:
-        return self.status == "running"
-
-    @property
-    def resultants(self) -> np.ndarray:
-        return self.reduce.resultants
-
-    @property
-    def contacts(self) -> np.ndarray:
-        return self.reduce.contacts
-
-    @property
-    def stage(self):
-        return self.reduce.stage
-
-    @property
-    def sorted(self) -> bool:
-        return self.reduce.sorted
-
-    @property
-    def impacts(self) -> list[tuple[float, float, float]]:
-        return self.reduce.impacts
-
-    def start(self) -> None:
-        """Nothing to do: the initial point is reduced on construction."""
 
     def step(self) -> str | None:
         """One accepted step, reduced; None, or the diagnosis text when the solve failed.
@@ -417,22 +367,6 @@ class CyrkStepper:
                 return True
             self._advance_points(1 if math.isfinite(t_target) else -1)
         return False
-
-    def result(
-        self, *, steps: int | None = None, diagnosis: str | None = None, wall: float | None = None
-    ):
-        """The :class:`SimulationResult` from the loop's reductions of the accepted points."""
-        if diagnosis is None and self.diagnosis is not None:
-            diagnosis = self.diagnosis.text
-        return self.reduce.result(
-            steps=self.steps if steps is None else steps,
-            diagnosis=diagnosis,
-            wall=self.clock() - self.wall0 if wall is None else wall,
-        )
-
-    def release(self) -> None:
-        """Hand the reductions' arrays back for the next solve (after :meth:`result`)."""
-        self.reduce.release()
 
     # -- internals -----------------------------------------------------------------------------
 
@@ -504,7 +438,7 @@ class CyrkStepper:
         self.steps += observed
         self._k = k_next
         self.on_belt = bool(on_belt)
-        self._obs_stop = status == OBS_STOP
+        self._stop = status == OBS_STOP
         if observed:
             i = int(r.counters["cur"][0])
             self._t = float(r.times[i])
@@ -524,14 +458,6 @@ class CyrkStepper:
             self._after = self._t  # the next segment starts on a drive breakpoint
             self._seg = None
         self._check_end()
-
-    def _check_end(self) -> None:
-        if self.status == "running" and (self._obs_stop or not self._t < self.t_end - 1e-12):
-            self.status = "finished"
-
-    def _fail(self, kind: Failure, t: float, value: float, text: str) -> None:
-        self.diagnosis = Diagnosis(kind, t, value, text)
-        self.status = "failed"
 
 
 __all__ = ["CyrkStepper", "rhs_cfunc", "solver_name", "observe_points"]

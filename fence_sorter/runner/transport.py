@@ -4,9 +4,9 @@ A run on one host keeps to shared memory and loopback UDP (``config/fastdds_loca
 With ``--interface ADDRESS --peers A[,B...]`` it talks to the other hosts of a line instead:
 shared memory within this host (Fast DDS uses it only between participants of one host), and
 UDPv4 on the one interface that holds ADDRESS; discovery by unicast to ADDRESS and the peers'
-addresses (Fast DDS's initial peers), so no multicast is needed on the link. Every socket of the run is
-bound to ADDRESS (docs/design/security.md). The profile is written into the run's log
-directory and handed to every process of the run, as the localhost one is.
+addresses (Fast DDS's initial peers), so no multicast is needed on the link. Every socket of
+the run is bound to ADDRESS (docs/design/security.md). The profile is written into the run's
+log directory and handed to every process of the run, as the localhost one is.
 """
 
 from __future__ import annotations

@@ -30,14 +30,9 @@ from pathlib import Path
 
 import numpy as np
 
-from fence_sorter.visualisation.rerun_log import (
-    TIMELINE,
-    FenceFrame,
-    ParcelFrame,
-    RerunLogger,
-    SceneGeometry,
-    open_recording,
-)
+from fence_sorter.visualisation.frames import FenceFrame, ParcelFrame, SceneGeometry
+from fence_sorter.visualisation.rerun_layout import TIMELINE, open_recording
+from fence_sorter.visualisation.rerun_log import RerunLogger
 
 KIND_FRAME, KIND_EVENT, KIND_SORT_EVENT = 1, 2, 3
 _HEAD = struct.Struct("<IB")  # payload length, kind

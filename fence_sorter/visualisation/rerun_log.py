@@ -2,9 +2,10 @@
 real deflection, parcels as one Boxes3D batch labelled with their ids, contact force arrows, and
 time series (N, N_stiff, tip deflection, alpha_w, parcel speeds) on the ``sim_time`` timeline.
 
-The logger is driven by plain frames (:class:`FenceFrame`, :class:`ParcelFrame`), made from the
-line's snapshots (:func:`frames_from_snapshot`, used live by the simulator) or from a recorded
-bag (:func:`log_bag`, ``fence-sorter rrd``). Entity paths:
+The logger is driven by plain frames (:class:`FenceFrame`, :class:`ParcelFrame`, in
+``visualisation/frames.py``), made from the line's snapshots (:func:`frames_from_snapshot`, used
+live by the simulator) or from a recorded bag (:func:`log_bag`, ``fence-sorter rrd``); the
+recording stream and its layout are ``visualisation/rerun_layout.py``'s. Entity paths:
 
 - ``world/conveyor/belt``, ``world/conveyor/borders``, ``world/chute``, ``world/scan_line``
   (static), ``world/fence``, ``world/parcels``, ``world/contact_forces``;
@@ -27,37 +28,49 @@ margin once their outcome is known (from the start in a bag's recording).
 from __future__ import annotations
 
 import math
-import os
-from collections.abc import Iterable
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 from fence_sorter.recording import topics
 from fence_sorter.stamps import time_to_sec
+from fence_sorter.visualisation.frames import (
+    FenceFrame,
+    ParcelFrame,
+    SceneGeometry,
+    bag_frames,
+    frames_from_snapshot,
+    scene_from_bag,
+)
+from fence_sorter.visualisation.rerun_layout import (
+    ALPHA_AXIS,
+    APP_ID,
+    CONTACT_AXIS,
+    DEFLECTION_AXIS,
+    DEFLECTION_PLOT_UNIT,
+    FORCE_PLOT_UNIT,
+    RISK,
+    RISK_MARKS_PER_ROW,
+    RISK_ROW,
+    RISK_ROWS_FRAMED,
+    SPEED_AXIS,
+    SPEED_AXIS_MAX,
+    TIMELINE,
+    TOP,
+    _rr,
+    blueprint,
+    camera_position,
+    camera_target,
+    open_recording,
+    risk_mark_position,
+    top_view_bounds,
+)
 
-APP_ID = "fence_sorter"
-TIMELINE = "sim_time"
-TOP = "top"  # root of the 2D top-view entities
 FENCE_Z = 0.05  # height the fence polyline is drawn at [m]
 FORCE_SCALE = 1.0 / 1000.0  # contact arrow length per newton [m/N]
 DIVERT_COLOR = (230, 150, 50)
 PASS_COLOR = (150, 150, 150)
 SORTED_COLOR = (60, 180, 75)
-#: the speed plot's axis runs to this (the parcels' speeds stay below) [m/s]
-SPEED_AXIS_MAX = 3.0
-#: the plots show forces in kN and the fence tip's yield -w in cm (value / unit): with the
-#: fixed y ranges below every time series plot's tick labels are single digits (the ticks are
-#: at whole numbers), so the plot areas start at one x (the viewer sizes a y axis to its
-#: widest label) and one instant is at one x position on every plot; each range reaches a
-#: little below 0, so the label 0 clears the time axis's labels
-FORCE_PLOT_UNIT = 1000.0  # [N]
-DEFLECTION_PLOT_UNIT = -0.01  # [m]: -w in cm, positive where the tip yields under load
-CONTACT_AXIS = (-0.25, 3.0)  # [kN]
-DEFLECTION_AXIS = (-0.5, 2.5)  # [cm]
-ALPHA_AXIS = (-0.2, 2.0)  # [rad]
-SPEED_AXIS = (-0.25, SPEED_AXIS_MAX)  # [m/s]
 #: damage-risk colours of the top view: the margin (1 - value / limit, the smaller of w_n's
 #: and a_N's) from MARGIN_COLORS[0] at MARGIN_RANGE[0] (over the limit) to [2] at [1]
 MARGIN_COLORS = ((220, 40, 40), (240, 200, 40), (60, 180, 75))
@@ -70,203 +83,7 @@ SAMPLED_COLOR = (120, 120, 120)
 ALPHA_COLOR = (200, 50, 50)
 #: labels of parcels and damage marks: dark, so the text reads on any background
 LABEL_COLOR = (25, 25, 25)
-RISK = "risk"  # root of the damage-risk chart (one column per parcel, value / limit upwards)
 RISK_TICKS = (0.0, 0.5, 1.0)  # the chart's y scale: value / limit
-#: the top view's damage marks: a grid below the belt, this many per row, rows this far apart
-RISK_MARKS_PER_ROW = 4
-RISK_ROW = 0.16  # [m]
-RISK_ROWS_FRAMED = 4  # rows the top view's bounds leave room for
-
-
-@dataclass(frozen=True)
-class SceneGeometry:
-    """What does not move: belt width s and x range, chute box, scan line [m]."""
-
-    belt_width: float
-    belt_x: tuple[float, float] = (-3.0, 3.0)
-    chute: tuple[float, float, float, float] | None = None  # centre x, y, size x, y
-    scan_line_x: float | None = None
-
-
-@dataclass(frozen=True)
-class FenceFrame:
-    alpha: float  # alpha_w [rad]
-    node_x: np.ndarray  # [m]
-    node_y: np.ndarray
-    tip_deflection: float  # [m]
-
-
-@dataclass(frozen=True)
-class ParcelFrame:
-    parcel_id: int
-    x: float  # C_s [m]
-    y: float
-    yaw: float  # [rad]
-    vx: float  # [m/s]
-    vy: float
-    center_x: float  # centre of the box (not C_s) [m]
-    center_y: float
-    length_a: float
-    width_b: float
-    height: float
-    n: float = 0.0  # contact normal force N [N]
-    n_stiff: float = 0.0  # N_stiff [N]
-    contact_x: float = math.nan  # contact point [m]
-    contact_y: float = math.nan
-    divert: bool = False
-    stage: int = 0
-
-
-def _rr():
-    os.environ.setdefault("RERUN_ANALYTICS_ENABLED", "false")  # no outside network here
-    import rerun as rr  # lazy: Rerun (0.5 s), only to log
-
-    return rr
-
-
-def top_view_bounds(scene: SceneGeometry, margin: float = 0.3) -> tuple[tuple, tuple]:
-    """(x range, y range) of the top view [m, view coordinates]: belt, chute and scan line."""
-    x0, x1 = scene.belt_x
-    y_max = scene.belt_width
-    if scene.chute is not None:
-        cx, cy, sx, sy = scene.chute
-        x0, x1 = min(x0, cx - 0.5 * sx), max(x1, cx + 0.5 * sx)
-        y_max = max(y_max, cy + 0.5 * sy)
-    if scene.scan_line_x is not None:
-        x0, x1 = min(x0, scene.scan_line_x), max(x1, scene.scan_line_x)
-    below = RISK_ROW * (RISK_ROWS_FRAMED + 1)  # the damage marks' grid under the belt
-    return (x0 - margin, x1 + margin), (-y_max - margin, below + margin)
-
-
-def risk_mark_position(scene: SceneGeometry, k: int) -> tuple[float, float]:
-    """Top-view position (view coordinates) of the k-th damage mark (k = 0, 1, ...): a grid
-    under the belt (the side away from the chute), RISK_MARKS_PER_ROW marks a row, so the
-    labels never pile up where the parcels leave the belt."""
-    x0, x1 = scene.belt_x
-    col, row = k % RISK_MARKS_PER_ROW, k // RISK_MARKS_PER_ROW
-    step = (x1 - x0) / RISK_MARKS_PER_ROW
-    return (x0 + 0.05 * step + col * step, RISK_ROW * (row + 1))
-
-
-def camera_target(scene: SceneGeometry) -> tuple[float, float, float]:
-    """Centre of belt, chute and scan line in the frame sorter [m]: where the 3D eye looks."""
-    (x0, x1), (vy0, vy1) = top_view_bounds(scene, margin=0.0)
-    return (0.5 * (x0 + x1), -0.5 * (vy0 + min(vy1, 0.0)), 0.0)
-
-
-def camera_position(scene: SceneGeometry) -> tuple[float, float, float]:
-    """The 3D eye: from the fence side (y < 0) and above, far enough that the whole belt
-    (scan line to end) and the chute are in the picture [m]."""
-    (x0, x1), _ = top_view_bounds(scene, margin=0.0)
-    cx, cy, _ = camera_target(scene)
-    reach = 1.2 * (x1 - x0)  # about 1.15 reach away: the belt spans 3/4 of a 60 degree view
-    return (cx, cy - 0.6 * reach, 0.75 * reach)
-
-
-def blueprint(scene: SceneGeometry | None = None, paused: bool = False):
-    """Default layout: the top view (2D, framed on the belt and chute when ``scene`` is given)
-    on the left with the 3D scene in a tab behind it; on the right the time series (forces,
-    tip deflection, alpha_w, speeds) with the damage-risk plots in a tab behind them.
-
-    Every plot shows the whole timeline (the same time range in all of them, not each its own
-    data's) and the time series a fixed y range whose tick labels are single digits: the
-    viewer sizes a y axis to its widest tick label, so their plot areas start at one x and one
-    instant is at one x position on every time series plot. No plot has a legend: each
-    title says what its colours mean (a legend of per-parcel series covers the data).
-    ``paused``: a recording that is complete opens paused (a live one follows its data)."""
-    import rerun.blueprint as rrb  # lazy: Rerun (0.5 s), only to log
-
-    bounds = None
-    if scene is not None:
-        x_range, y_range = top_view_bounds(scene)
-        bounds = rrb.VisualBounds2D(x_range=x_range, y_range=y_range)
-    whole = rrb.TimeRange(
-        start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.infinite()
-    )
-
-    def plot(name: str, origin: str, y_range: tuple[float, float] | None = None):
-        return rrb.TimeSeriesView(
-            name=name,
-            origin=origin,
-            axis_x=rrb.TimeAxis(link="Independent", view_range=whole),
-            axis_y=rrb.ScalarAxis(range=y_range) if y_range else None,
-            plot_legend=rrb.PlotLegend(visible=False),
-        )
-
-    layout = rrb.Horizontal(
-        rrb.Tabs(
-            rrb.Spatial2DView(name="top view", origin=TOP, visual_bounds=bounds),
-            rrb.Spatial3DView(
-                name="sorter 3D",
-                origin="world",
-                eye_controls=rrb.EyeControls3D(
-                    position=camera_position(scene), look_target=camera_target(scene)
-                )
-                if scene is not None
-                else None,
-            ),
-            active_tab=0,
-        ),
-        rrb.Tabs(
-            rrb.Vertical(
-                plot("contact force [kN]: N blue, N_stiff orange", "plots/contact", CONTACT_AXIS),
-                plot(
-                    "fence tip yield -w [cm]: solver steps blue, sampled grey",
-                    "plots/fence/tip_deflection",
-                    DEFLECTION_AXIS,
-                ),
-                plot("drive angle alpha_w [rad]", "plots/fence/alpha_w", ALPHA_AXIS),
-                plot(
-                    "parcel speed [m/s]: to divert orange, to pass grey",
-                    "plots/speed",
-                    SPEED_AXIS,
-                ),
-                name="time series",
-            ),
-            rrb.Vertical(
-                rrb.Spatial2DView(
-                    name="per parcel, value / limit: w_n blue, a_N orange, limit red",
-                    origin=RISK,
-                ),
-                plot("impact speed w_n [m/s]: o parcels, x w_dop", "damage/w_n"),
-                plot("peak acceleration a_N [m/s^2]: o parcels, x a_Ndop", "damage/a_N"),
-                plot("peak force N [kN]: o parcels, x a_Ndop m_p", "damage/N"),
-                row_shares=[2, 1, 1, 1],
-                name="damage risk",
-            ),
-            active_tab=0,
-        ),
-        column_shares=[3, 2],
-    )
-    parts = [layout]
-    if paused:
-        parts.append(rrb.TimePanel(timeline=TIMELINE, play_state="paused", state="collapsed"))
-    return rrb.Blueprint(*parts, collapse_panels=True)
-
-
-def open_recording(
-    path: Path | str | None = None,
-    spawn: bool = False,
-    url: str | None = None,
-    recording_id=None,
-    scene: SceneGeometry | None = None,
-):
-    """A RecordingStream saving to ``path`` (.rrd), and/or streaming to a viewer: a spawned one
-    (``spawn``) or one listening at ``url`` (gRPC, e.g. rerun+http://127.0.0.1:9876/proxy),
-    with :func:`blueprint` (``scene`` frames the top view) as the default layout; without
-    ``url`` (no live viewer follows it) the recording opens paused."""
-    rr = _rr()
-    rec = rr.RecordingStream(APP_ID, recording_id=recording_id)
-    if spawn:
-        rec.spawn(connect=False)
-    sinks = []
-    if path is not None:
-        sinks.append(rr.FileSink(str(path)))
-    if spawn or url:
-        sinks.append(rr.GrpcSink(url) if url else rr.GrpcSink())
-    if sinks:
-        rec.set_sinks(*sinks, default_blueprint=blueprint(scene, paused=url is None))
-    return rec
 
 
 class RerunLogger:
@@ -761,88 +578,6 @@ def _fence_normal(fence: FenceFrame, x: float, y: float, cx: float, cy: float):
     return n
 
 
-# -- frames from the line's snapshots ------------------------------------------------------------
-def frames_from_snapshot(snap) -> tuple[FenceFrame, list[ParcelFrame]]:
-    """FenceFrame and ParcelFrames of a :class:`fence_sorter.line.LineSnapshot`."""
-    f = snap.fence
-    fence = FenceFrame(float(f.drive_angle), f.node_x, f.node_y, float(f.tip_deflection))
-    parcels = []
-    for p in snap.parcels:
-        n = max(len(p.corners), 1)
-        cx = sum(c[0] for c in p.corners) / n if p.corners else p.x
-        cy = sum(c[1] for c in p.corners) / n if p.corners else p.y
-        parcels.append(
-            ParcelFrame(
-                int(p.parcel_id), p.x, p.y, p.yaw, p.vx, p.vy, cx, cy, p.length_a, p.width_b,
-                p.height, p.contact_normal_force, p.contact_normal_force_stiff,
-                p.contact_point[0], p.contact_point[1], bool(p.divert), int(p.stage),
-            )
-        )  # fmt: skip
-    return fence, parcels
-
-
-# -- frames from a recorded bag ------------------------------------------------------------------
-def scene_from_bag(contents) -> SceneGeometry:
-    """Belt, chute (from /markers) and scan line (from /parcels) as the bag shows them."""
-    from fence_sorter.analysis.run import DEFAULT_BELT_WIDTH  # lazy: loads rosbags
-
-    width, belt_x, chute = DEFAULT_BELT_WIDTH, (-3.0, 3.0), None
-    for m in contents.by_topic(topics.MARKERS):
-        for mk in m.msg.markers:
-            if mk.ns == "belt":
-                width = float(mk.scale.y)
-                belt_x = (mk.pose.position.x - 0.5 * mk.scale.x,
-                          mk.pose.position.x + 0.5 * mk.scale.x)  # fmt: skip
-            elif mk.ns == "chute":
-                chute = (mk.pose.position.x, mk.pose.position.y, mk.scale.x, mk.scale.y)
-        break
-    scans = [m.msg.scan_position_x for m in contents.by_topic(topics.PARCELS)]
-    scan_x = float(np.median(scans)) if scans else None
-    return SceneGeometry(width, belt_x, chute, scan_x)
-
-
-def bag_frames(contents) -> Iterable[tuple[float, FenceFrame | None, list[ParcelFrame]]]:
-    """(t, fence, parcels) per published snapshot of a recorded run, in sim-time order."""
-    specs = {m.msg.parcel_id: m.msg for m in contents.by_topic(topics.PARCELS)}
-    loads: dict[float, list] = {}
-    for m in contents.by_topic(topics.LOAD_STATES):
-        loads.setdefault(round(time_to_sec(m.msg.header.stamp), 9), []).append(m.msg)
-    fences = {
-        round(time_to_sec(m.msg.header.stamp), 9): m.msg
-        for m in contents.by_topic(topics.FENCE_STATE)
-    }
-    for t in sorted(set(loads) | set(fences)):
-        fm = fences.get(t)
-        fence = (
-            FenceFrame(fm.drive_angle, np.asarray(fm.node_x), np.asarray(fm.node_y),
-                       fm.tip_deflection)
-            if fm is not None
-            else None
-        )  # fmt: skip
-        parcels = []
-        for s in loads.get(t, []):
-            spec = specs.get(s.parcel_id)
-            a = spec.length_a if spec else 0.4
-            b = spec.width_b if spec else 0.3
-            h = spec.height if spec else 0.3
-            xp = spec.cog_offset_x if spec else 0.0
-            yp = spec.cog_offset_y if spec else 0.0
-            q = s.pose.orientation
-            yaw = 2.0 * math.atan2(q.z, q.w)
-            c, sn = math.cos(yaw), math.sin(yaw)
-            x, y = s.pose.position.x, s.pose.position.y
-            parcels.append(
-                ParcelFrame(
-                    int(s.parcel_id), x, y, yaw, s.twist.linear.x, s.twist.linear.y,
-                    x - c * xp + sn * yp, y - sn * xp - c * yp, a, b, h,
-                    s.contact_normal_force, s.contact_normal_force_stiff,
-                    s.contact_point.x, s.contact_point.y,
-                    bool(spec.divert) if spec else False, int(s.stage),
-                )
-            )  # fmt: skip
-        yield t, fence, parcels
-
-
 def log_bag(contents, rec) -> RerunLogger:
     """Log a recorded run (read with :func:`fence_sorter.recording.bagread.read_bag`)."""
     from fence_sorter.analysis.events import SortEventData, risk_of  # lazy: loads rosbags
@@ -870,3 +605,51 @@ def log_bag(contents, rec) -> RerunLogger:
     for t, fence, parcels in bag_frames(contents):
         logger.log_frame(t, fence, parcels)
     return logger
+
+
+#: the logger and, for its callers, the frames and layout it draws with
+__all__ = [
+    "ALPHA_AXIS",
+    "ALPHA_COLOR",
+    "APP_ID",
+    "CONTACT_AXIS",
+    "DEFLECTION_AXIS",
+    "DEFLECTION_PLOT_UNIT",
+    "DIVERT_COLOR",
+    "FENCE_Z",
+    "FORCE_PLOT_UNIT",
+    "FORCE_SCALE",
+    "FenceFrame",
+    "LABEL_COLOR",
+    "MARGIN_COLORS",
+    "MARGIN_RANGE",
+    "N_COLOR",
+    "N_STIFF_COLOR",
+    "PASS_COLOR",
+    "ParcelFrame",
+    "RISK",
+    "RISK_MARKS_PER_ROW",
+    "RISK_ROW",
+    "RISK_ROWS_FRAMED",
+    "RISK_TICKS",
+    "RerunLogger",
+    "SAMPLED_COLOR",
+    "SORTED_COLOR",
+    "SPEED_AXIS",
+    "SPEED_AXIS_MAX",
+    "STEPS_COLOR",
+    "SceneGeometry",
+    "TIMELINE",
+    "TOP",
+    "bag_frames",
+    "blueprint",
+    "camera_position",
+    "camera_target",
+    "frames_from_snapshot",
+    "log_bag",
+    "margin_color",
+    "open_recording",
+    "risk_mark_position",
+    "scene_from_bag",
+    "top_view_bounds",
+]

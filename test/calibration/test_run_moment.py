@@ -19,7 +19,7 @@ from fence_sorter.calibration.replay import ParcelEvent, replay, root_moment_fac
 from fence_sorter.calibration.sensors import SensorStream, load_sensors
 from fence_sorter.codes import StartMode
 from fence_sorter.inputs import ParcelSpec, StrokeCommand
-from fence_sorter.line.line import LineConfig, SortingLine
+from fence_sorter.line.one_fence import LineConfig, SortingLine
 from fence_sorter.physics.drive import drive_state
 from fence_sorter.physics.params import DriveParams
 from fence_sorter.runner.job import MAX_STATE_RATE

@@ -85,7 +85,7 @@ def test_node_beats_and_exits_cleanly(
             executor.spin_once(timeout_sec=0.1)
             mine = [s for msg in received for s in msg.status if s.name == f"fence_sorter/{name}"]
         assert len(mine) >= HEARTBEATS, f"{name}: no heartbeat on /diagnostics"
-        assert mine[0].message  # a status text ("running", "not yet implemented", ...)
+        assert mine[0].message  # a status text ("running", "scanning", ...)
         assert {v.key: v.value for v in mine[0].values}["node"] == f"/{name}"
 
         proc.send_signal(NODES[name])

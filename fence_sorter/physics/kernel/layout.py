@@ -304,3 +304,7 @@ LoopState = namedtuple(
         "record",  # recorded series REC_*, a column per accepted point
     ],
 )
+
+
+#: the names of the layout, re-exported by the package (``from .layout import *``)
+__all__ = [n for n in tuple(globals()) if n.isupper() or n in ("LoopModel", "LoopState", "pack")]

@@ -28,7 +28,7 @@ from fence_sorter.physics.scenario import Scenario
 from fence_sorter.resources import ResourceNotFound, data_path, find_data
 from fence_sorter.scene import LoadedScene, SceneError, load_scene
 from fence_sorter.stream.model import StreamConfig, StreamError, resolve_stream
-from fence_sorter.textinput import TextInputError, load_yaml, read_text
+from fence_sorter.textinput import TextInputError, keyed_mapping, load_yaml, read_text
 
 __all__ = ["LineError", "LineSpec", "UnitSpec", "load_line", "UNIT_LEAD", "UNIT_TAIL"]
 
@@ -106,14 +106,10 @@ def _err(src: str, msg: str) -> LineError:
 
 
 def _mapping(src: str, key: str, data: Any, allowed: tuple[str, ...]) -> dict:
-    if data is None:
-        data = {}
-    if not isinstance(data, dict):
-        raise _err(src, f"{key} must be a mapping, got {type(data).__name__} {data!r}")
-    for k in data:
-        if k not in allowed:
-            raise _err(src, f"{key}.{k} is not a known key; allowed keys: {', '.join(allowed)}")
-    return data
+    try:
+        return keyed_mapping(data, key, allowed)
+    except TextInputError as exc:
+        raise _err(src, str(exc)) from None
 
 
 def _number(src: str, key: str, value: Any, lo: float, hi: float, unit: str, lo_open=False):

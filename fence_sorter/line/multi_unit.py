@@ -1,6 +1,6 @@
 """A line of fence units run without ROS: induction, units, recirculation, the line summary.
 
-Every unit is a :class:`~fence_sorter.line.line.SortingLine` in its own frame (its strokes are
+Every unit is a :class:`~fence_sorter.line.one_fence.SortingLine` in its own frame (its strokes are
 the single-unit line's sorting events, stepped as sim time passes) with its own planner
 (:class:`~fence_sorter.capacity.planner.Planner`). A parcel is handed to a unit when its front
 crosses the unit's scan line (2 m before the fence axis): the unit routes it
@@ -31,7 +31,8 @@ from fence_sorter.capacity.formulas import stroke_capacity
 from fence_sorter.capacity.planner import LoadRequest, Planner
 from fence_sorter.codes import OutcomeCode, StartMode
 from fence_sorter.inputs import ParcelSpec, StrokeCommand
-from fence_sorter.line.line import LineConfig, SortingLine
+from fence_sorter.line.line_file import UNIT_LEAD, LineSpec, UnitSpec
+from fence_sorter.line.one_fence import LineConfig, SortingLine
 from fence_sorter.line.routing import (
     CHUTE_FULL,
     FENCE_BUSY,
@@ -50,7 +51,6 @@ from fence_sorter.line.routing import (
     track_hits_sector,
 )
 from fence_sorter.line.types import Outcome, OverlapWarning, StrokeStarted
-from fence_sorter.line.units import UNIT_LEAD, LineSpec, UnitSpec
 from fence_sorter.stream.model import generate
 
 __all__ = ["LinePlant", "LineRunConfig", "run_line"]

@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 from fence_sorter.cli.main import main
-from fence_sorter.line.units import UNIT_LEAD, UNIT_TAIL, LineError, load_line
+from fence_sorter.line.line_file import UNIT_LEAD, UNIT_TAIL, LineError, load_line
 from fence_sorter.resources import data_path
 
 FOUR = data_path("config", "lines", "four_units.yaml")

@@ -1,4 +1,5 @@
-"""The sorting line: many parcels on the belt, one rotary fence, strokes integrated in step.
+"""The one-fence sorting line: many parcels on the belt, one rotary fence, strokes integrated
+in step (a line of several fence units is :mod:`fence_sorter.line.multi_unit`).
 
 Parcels ride the belt kinematically (front x_f(t) = scan_position_x + v (t - scan_time), frame
 sorter, C_s from :func:`fence_sorter.physics.parcel.initial_pose`) until their stroke starts.
@@ -20,8 +21,6 @@ during another parcel's stroke is reported as :class:`OverlapWarning`.
 
 from __future__ import annotations
 
-import bisect
-import functools
 import math
 import time
 from dataclasses import dataclass, replace
@@ -37,8 +36,6 @@ from fence_sorter.inputs import (
     validate_command,
     validate_parcel,
 )
-from fence_sorter.physics import kernel as K
-from fence_sorter.physics.dense import hermite
 from fence_sorter.physics.drive import drive_state
 from fence_sorter.physics.fence import (
     FenceParams,
@@ -53,20 +50,17 @@ from fence_sorter.physics.params import (
     DriveParams,
     SolverParams,
 )
-from fence_sorter.physics.parcel import ParcelBody, initial_pose, parcel_body, world_corners
+from fence_sorter.physics.parcel import parcel_body, world_corners
 from fence_sorter.physics.simulate import (
     Scenario,
     SimulationResult,
-    SortingModel,
-    solve_stepper,
 )
-from fence_sorter.physics.stepper import SolveStepper
 
+from .sector import in_swept_sector
+from .stroke import HELD, LineParcel, Stroke
 from .types import (
     NAN,
-    TRACE_COLUMNS,
     CommandResult,
-    EventTrace,
     FenceSnapshot,
     LineEvent,
     LineSnapshot,
@@ -84,8 +78,6 @@ STIFF_NODES = 11
 #: the largest step of a flexible fence's solve on the line, omega_2 h [rad] (below 0.2 the
 #: trapezoid's period error of the first two modes, (omega h)^2 / 12, stays within 1/300)
 RING_STEP = 0.2
-#: a parcel corner this far inside the swept sector counts as overlapping [m]
-OVERLAP_TOL = 1e-3
 
 
 @dataclass(frozen=True)
@@ -166,256 +158,6 @@ class LineCapture(NamedTuple):
     parcels: list[tuple]
 
 
-#: index of the first extra of a :class:`_Tap` point that is held between points, not
-#: interpolated (the stage, then the current impact's N_stiff)
-HELD = 8
-
-
-class _Tap:
-    """The accepted points of a stroke's solve a snapshot at the line time may need.
-
-    The solve may run ahead of the line clock (:meth:`SortingLine.prefetch`), so the points
-    from the last one at or before the line time onwards are kept (:meth:`trim` drops older
-    ones) and :meth:`at` interpolates between the two around the time asked for.
-    """
-
-    __slots__ = ("ts", "points", "t_sorted", "width", "trace", "n_sorted")
-
-    def __init__(self, width: float):
-        self.ts: list[float] = []
-        self.points: list[tuple[np.ndarray, np.ndarray]] = []
-        # every accepted point, never trimmed: the event's SortEvent (columns TRACE_COLUMNS)
-        self.trace: list[tuple] = []
-        self.n_sorted: int | None = None  # trace points up to the crossing of y0 = s
-        self.t_sorted: float | None = None  # C_s crossing y0 = s (interpolated) [s]
-        self.width = width
-
-    @property
-    def cur(self):
-        """The last accepted point (t, y, extra), or None before the first."""
-        if not self.ts:
-            return None
-        return (self.ts[-1], *self.points[-1])
-
-    def add(self, stepper: SolveStepper) -> bool:
-        """Keep the stepper's last accepted point; True if C_s crossed y0 = s at it."""
-        t, y = stepper.t, stepper.y.copy()
-        res, slots = stepper.resultants, stepper.contacts
-        active = np.flatnonzero(slots[: K.SLOT_BORDER, K.C_ACTIVE])
-        if len(active):
-            k = active[np.argmax(slots[active, K.C_N])]
-            px, py, ddot = slots[k, K.C_PX], slots[k, K.C_PY], slots[k, K.C_DDOT]
-        else:
-            px = py = math.nan
-            ddot = 0.0
-        impacts = stepper.impacts
-        extra = np.array(
-            [
-                res[K.R_ALPHA],
-                res[K.R_RATE],
-                res[K.R_ACCEL],
-                res[K.R_FENCE_N],
-                res[K.R_MAX_D],
-                ddot,
-                px,
-                py,
-                # held, not interpolated (:meth:`at`): the stage and the current impact's
-                # N_stiff at this point, as the solve's reductions had them there
-                stepper.stage.value,
-                impacts[-1][2] if impacts else 0.0,
-            ]
-        )
-        prev = (self.ts[-1], self.points[-1][0]) if self.ts else None
-        self.ts.append(t)
-        self.points.append((y, extra))
-        self.trace.append((
-            t, extra[HELD], res[K.R_ACTIVE_MASK], res[K.R_FENCE_N], res[K.R_MAX_D], ddot,
-            res[K.R_TIP_W], res[K.R_ALPHA], y[0], y[1], y[2], y[3], y[4], y[5],
-        ))  # fmt: skip
-        if stepper.sorted and self.t_sorted is None:
-            t0, y0 = (prev[0], prev[1][1]) if prev is not None else (t, 0.0)
-            y1 = y[1]
-            frac = (self.width - y0) / (y1 - y0) if y1 > y0 else 1.0
-            self.t_sorted = t0 + min(max(frac, 0.0), 1.0) * (t - t0)
-            self.n_sorted = len(self.trace)
-            return True
-        return False
-
-    def trim(self, t: float) -> None:
-        """Forget the points before the last one at or before local time ``t``."""
-        i = bisect.bisect_right(self.ts, t) - 1
-        if i > 0:
-            del self.ts[:i]
-            del self.points[:i]
-
-    def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """State vector and extras at local time ``t`` (clamped): every position of the state
-        (C_s, yaw, the modal coordinates) by cubic Hermite interpolation with its rate (a
-        fence ringing at tens of Hz between adaptive steps of up to dt_max is followed to
-        O(h^4)), the rates and the extras linearly."""
-        ts, pts = self.ts, self.points
-        i = bisect.bisect_right(ts, t)
-        if i >= len(ts):
-            return pts[-1]
-        if i == 0:
-            return pts[0]
-        t0, t1 = ts[i - 1], ts[i]
-        (y0, e0), (y1, e1) = pts[i - 1], pts[i]
-        if t1 <= t0:
-            return y1, e1
-        w = (t - t0) / (t1 - t0)
-        e = e0 + w * (e1 - e0)
-        e[HELD:] = e0[HELD:]  # stage and N_stiff: the point at or before t
-        y = y0 + w * (y1 - y0)
-        pos, rate = _position_rate_index(len(y0))
-        y[pos] = hermite(t, t0, t1, y0[pos], y1[pos], y0[rate], y1[rate])
-        return y, e
-
-
-@functools.lru_cache(maxsize=8)
-def _position_rate_index(n_state: int) -> tuple[np.ndarray, np.ndarray]:
-    """Indices of the positions of a state [x, y, phi, vx, vy, phidot, eta, etadot] and of
-    their rates."""
-    n = (n_state - 6) // 2
-    pos = np.r_[0:3, 6 : 6 + n]
-    return pos, pos + np.r_[[3] * 3, [n] * n].astype(int)
-
-
-class _Stroke:
-    """One running sorting event: its Scenario, model and stepper (``solve_stepper``: our
-    schemes' ``Stepper`` or a SciPy baseline's, one interface), stepped one
-    accepted point at a time as the line time passes."""
-
-    def __init__(self, parcel: _Parcel, t_start: float, sc: Scenario):
-        self.parcel = parcel
-        self.t_start = t_start
-        self.sc = sc
-        self.model = SortingModel(sc)
-        self.stepper = solve_stepper(self.model)
-        self.tap = _Tap(sc.conveyor.width)
-        # the figures of a SORTED outcome: the solve's reductions at the point where C_s
-        # crossed y0 = s, as simulate() reports them, however far the solve runs on since
-        self.sorted_result: SimulationResult | None = None
-        self.finished = False  # the solve has ended (maybe ahead of the line time)
-        self.step_cost = 0.0  # wall time of the costliest recent step (prefetch) [s]
-        self.alive = True  # the solve covers the line time (False once past its end)
-        self.failed: str | None = None
-        self.stepper.start()
-        self._take()  # the initial point (t = 0)
-        self._next()  # and the first step
-        if self.finished:
-            self.advance(0.0)
-        self.failure_reported = False
-        self.steps = 1
-        self.warned: set[int] = set()
-
-    @property
-    def t_cycle(self) -> float:
-        return 2.0 * self.sc.drive.t1
-
-    def _take(self) -> None:
-        if self.tap.add(self.stepper):
-            self.sorted_result = self.result()
-
-    def _next(self) -> None:
-        """One step of the solve; its point is kept unless the solve failed there (a diverged
-        point is never data: no snapshot interpolates towards it)."""
-        if self.stepper.step() is None:
-            self._take()
-        self.finished = not self.stepper.running
-
-    def advance(self, t_local: float) -> None:
-        """Step the solve to cover local time ``t_local`` (it may already be ahead); the stroke
-        stops being ``alive`` once ``t_local`` reaches the end of a finished solve."""
-        if not self.alive:
-            return
-        stepper = self.stepper
-        while not self.finished and stepper.t < t_local - 1e-12:
-            self._next()
-        if self.finished and t_local >= stepper.t - 1e-12:
-            self.alive = False
-            self.failed = None if stepper.diagnosis is None else stepper.diagnosis.text
-        self.tap.trim(t_local)
-
-    def prefetch(self, t_local: float, wall_deadline: float, clock) -> None:
-        """Step the solve ahead towards local time ``t_local`` while the costliest recent step
-        still fits before ``wall_deadline`` on ``clock()``."""
-        now = clock()
-        # go on only while the costliest recent step still fits before the deadline (the
-        # estimate decays 1 % per step and per prefetch, so one slow step does not stop the
-        # stepping ahead for good)
-        self.step_cost *= 0.99
-        while (
-            not self.finished
-            and self.stepper.t < t_local - 1e-12
-            and now + self.step_cost < wall_deadline
-        ):
-            self._next()
-            then, now = now, clock()
-            self.step_cost = max(now - then, 0.99 * self.step_cost)
-
-    def trace(self, t: float) -> EventTrace:
-        """The event at every accepted step up to its parcel's outcome at line time ``t`` (a
-        sorted parcel: the steps its outcome's figures come from)."""
-        tap = self.tap
-        n = tap.n_sorted if tap.n_sorted is not None else len(tap.trace)
-        steps = np.array(tap.trace[:n], dtype=float).reshape(-1, len(TRACE_COLUMNS))
-        t_end = steps[-1, 0] if len(steps) else 0.0
-        impacts = [imp for imp in self.stepper.impacts if imp[0] <= t_end]
-        contact = self.sc.contact
-        return EventTrace(
-            self.parcel.spec.parcel_id, t, self.t_start, self.model.mass, contact.b_p,
-            contact.k_p, steps, np.array(impacts, dtype=float).reshape(-1, 3),
-        )  # fmt: skip
-
-    def close(self) -> None:
-        self.alive = False
-        self.finished = True
-
-    def result(self) -> SimulationResult:
-        """The solve's reductions so far (the figures :func:`simulate` reports)."""
-        return self.stepper.result(wall=0.0)
-
-
-class _Parcel:
-    """A parcel on the line: kinematic ride (pose at t_ref, velocity (v, 0, 0)) or a stroke."""
-
-    def __init__(self, spec: ParcelSpec, body: ParcelBody, v: float):
-        self.spec = spec
-        self.body = body
-        self.v = v
-        self.x, self.y, self.yaw = initial_pose(
-            body, spec.scan_position_x, spec.lateral_gap, spec.yaw
-        )
-        self.t_ref = spec.scan_time
-        self.stroke: _Stroke | None = None
-        self.command: StrokeCommand | None = None
-        self.t_start = math.nan
-        self.rejected: str | None = None  # why the last command was refused (fence busy, ...)
-        self.late: str | None = None
-        self.outcome: Outcome | None = None
-        self.passed = False  # stroke done, not sorted: riding on
-        self.t_enter = math.nan  # front crossing x0 = 0 (entering the working space)
-        # rear corner's x relative to C_s while riding (the yaw does not change on the belt)
-        self.rear_offset = min(c[0] for c in world_corners(body, 0.0, 0.0, spec.yaw))
-        self.r_s = math.nan  # R_s of the planned stroke [m]
-        self.prepared: _Stroke | None = None  # the planned stroke, built ahead (prefetch)
-
-    def front_at(self, t: float) -> float:
-        """Kinematic front position (scan formula) at time t."""
-        return self.spec.scan_position_x + self.v * (t - self.spec.scan_time)
-
-    def time_front_at(self, x: float) -> float:
-        return self.spec.scan_time + (x - self.spec.scan_position_x) / self.v
-
-    def rear_end_time(self, x_end: float) -> float:
-        """When the rear (lowest corner x) of the riding parcel passes ``x_end``."""
-        return self.t_ref + (x_end - self.x - self.rear_offset) / self.v
-
-    def pose(self, t: float) -> tuple[float, float, float]:
-        return self.x + self.v * (t - self.t_ref), self.y, self.yaw
-
-
 class SortingLine:
     """The line model under the simulator node: plain methods, sim time in seconds.
 
@@ -441,9 +183,9 @@ class SortingLine:
         self.config = replace(config, solver=solver)
         self.t = float(t0)
         self.v = config.conveyor.belt_speed
-        self.parcels: dict[int, _Parcel] = {}
+        self.parcels: dict[int, LineParcel] = {}
         self.done_ids: set[int] = set()  # parcels that had their outcome (ids stay taken)
-        self.strokes: list[_Stroke] = []
+        self.strokes: list[Stroke] = []
         self._build_cost = 0.0  # wall time of the costliest recent stroke build [s] (prefetch)
         self.events: list[LineEvent] = []
         self._rest_s = (
@@ -471,7 +213,7 @@ class SortingLine:
         )
         conv = self._conveyor(spec)
         body = parcel_body(spec.to_parcel_params(), conv)
-        p = _Parcel(spec, body, self.v)
+        p = LineParcel(spec, body, self.v)
         p.t_enter = p.time_front_at(0.0)
         self.parcels[spec.parcel_id] = p
 
@@ -601,7 +343,7 @@ class SortingLine:
             if p.prepared is None:
                 if now + self._build_cost >= wall_deadline:
                     return
-                p.prepared = _Stroke(p, p.t_start, self._stroke_scenario(p))
+                p.prepared = Stroke(p, p.t_start, self._stroke_scenario(p))
                 # the costliest recent build (decays 1 % per build): only built where it fits
                 self._build_cost = max(clock() - now, 0.99 * self._build_cost)
             p.prepared.prefetch(math.inf, wall_deadline, clock)
@@ -623,7 +365,7 @@ class SortingLine:
                     best = min(best, (p.time_front_at(lo), pid))
         return best
 
-    def _next_event(self) -> tuple[float, int, _Parcel | None]:
+    def _next_event(self) -> tuple[float, int, LineParcel | None]:
         """Earliest of: a planned stroke start (0), a point of no return (1), a line end (2)."""
         best = (math.inf, 3, None)
         hi = self.config.r_s_range[1]
@@ -645,7 +387,7 @@ class SortingLine:
             s.advance(t - s.t_start)
             self._settle(s, t)
 
-    def _settle(self, s: _Stroke, t: float) -> None:
+    def _settle(self, s: Stroke, t: float) -> None:
         """Outcome and bookkeeping of a stroke after it advanced to line time ``t``.
 
         Sorted: outcome at once, the parcel leaves the belt, the solve runs on for the fence
@@ -689,7 +431,7 @@ class SortingLine:
             if p.stroke is s:
                 p.stroke = None  # no parcel <-> stroke cycle left for the GC
 
-    def _stroke_scenario(self, p: _Parcel) -> Scenario:
+    def _stroke_scenario(self, p: LineParcel) -> Scenario:
         cmd = p.command
         return Scenario(
             conveyor=self._conveyor(p.spec),
@@ -703,11 +445,11 @@ class SortingLine:
             fence_modes=self.config.fence_modes,
         )
 
-    def _start_stroke(self, p: _Parcel) -> None:
+    def _start_stroke(self, p: LineParcel) -> None:
         cmd = p.command
         stroke, p.prepared = p.prepared, None
         if stroke is None:
-            stroke = _Stroke(p, self.t, self._stroke_scenario(p))
+            stroke = Stroke(p, self.t, self._stroke_scenario(p))
         # the solve runs in local time: a stroke built ahead (prefetch) starts now all the same
         stroke.t_start = self.t
         p.stroke = stroke
@@ -715,7 +457,7 @@ class SortingLine:
         self.events.append(StrokeStarted(self.t, p.spec.parcel_id, p.r_s, cmd.t1, cmd.alpha_k))
         self._settle(p.stroke, self.t)
 
-    def _no_return(self, p: _Parcel) -> None:
+    def _no_return(self, p: LineParcel) -> None:
         hi = self.config.r_s_range[1]
         if p.rejected:
             self._finish(p, OutcomeCode.REJECTED, self.t, f"command rejected: {p.rejected}")
@@ -730,7 +472,7 @@ class SortingLine:
             )
         p.passed = True
 
-    def _leave(self, p: _Parcel) -> None:
+    def _leave(self, p: LineParcel) -> None:
         if p.outcome is None:
             self._finish(
                 p, OutcomeCode.NOT_DIVERTED, self.t, "not to be diverted: passed the line end"
@@ -739,7 +481,7 @@ class SortingLine:
 
     def _finish(
         self,
-        p: _Parcel,
+        p: LineParcel,
         code: OutcomeCode,
         t: float,
         reason: str,
@@ -784,7 +526,7 @@ class SortingLine:
                     s.warned.add(pid)
                     self.events.append(OverlapWarning(self.t, own, pid))
 
-    def _corners(self, p: _Parcel) -> list[tuple[float, float]]:
+    def _corners(self, p: LineParcel) -> list[tuple[float, float]]:
         """World corners of a parcel now (from its solve while it has one)."""
         s = p.stroke
         if s is not None and s.alive and s.tap.cur is not None:
@@ -849,7 +591,7 @@ class SortingLine:
         parcels = [ParcelSnapshot(p[0], Stage(p[1]), *p[2:]) for p in cap.parcels]
         return LineSnapshot(cap.t, self._render_fence(cap.fence), parcels)
 
-    def _fence_stroke(self) -> _Stroke | None:
+    def _fence_stroke(self) -> Stroke | None:
         """The stroke the fence's state comes from: the last one started, during its cycle
         and, while its solve runs on (to 2 t1 + settle_time), through the ring-down after it."""
         owner = None
@@ -880,7 +622,7 @@ class SortingLine:
         )
 
     # -- internals ----------------------------------------------------------------------------
-    def _planned(self) -> list[_Parcel]:
+    def _planned(self) -> list[LineParcel]:
         return [p for p in self.parcels.values() if p.command is not None] + [
             s.parcel for s in self.strokes if s.parcel.spec.parcel_id not in self.parcels
         ]
@@ -907,51 +649,3 @@ class SortingLine:
     @property
     def parcels_on_line(self) -> int:
         return len(self.parcels)
-
-
-def in_swept_sector(
-    corners: list[tuple[float, float]], length: float, alpha_k: float, tol: float = OVERLAP_TOL
-) -> bool:
-    """True if the convex polygon ``corners`` reaches into the sector the fence sweeps
-    (radius R_z about the axis, angles 0 to alpha_k) deeper than ``tol``."""
-
-    def inside_sector(x: float, y: float) -> bool:
-        r = math.hypot(x, y)
-        if r >= length - tol or r < tol:
-            return False
-        ang = math.atan2(y, x)
-        return tol / r < ang < alpha_k - tol / r
-
-    xs = [c[0] for c in corners]
-    ys = [c[1] for c in corners]
-    y_top = length * (math.sin(alpha_k) if alpha_k < 0.5 * math.pi else 1.0)
-    x_low = length * min(math.cos(alpha_k), 0.0)
-    if min(xs) > length or max(xs) < x_low or min(ys) > y_top or max(ys) < tol:
-        return False  # bounding boxes apart
-    if any(inside_sector(x, y) for x, y in corners):
-        return True
-    # sector sample points (radii and arc, slightly inside) inside the polygon
-    pts = []
-    for k in range(1, 17):
-        r = (length - 2 * tol) * k / 16
-        pts.append((r * math.cos(2 * tol / r), r * math.sin(2 * tol / r)))
-        pts.append((r * math.cos(alpha_k - 2 * tol / r), r * math.sin(alpha_k - 2 * tol / r)))
-        a = alpha_k * k / 17
-        pts.append(((length - 2 * tol) * math.cos(a), (length - 2 * tol) * math.sin(a)))
-    return any(_in_convex(corners, x, y) for x, y in pts)
-
-
-def _in_convex(poly: list[tuple[float, float]], x: float, y: float) -> bool:
-    sign = 0.0
-    n = len(poly)
-    for i in range(n):
-        x0, y0 = poly[i]
-        x1, y1 = poly[(i + 1) % n]
-        cross = (x1 - x0) * (y - y0) - (y1 - y0) * (x - x0)
-        if cross == 0.0:
-            continue
-        if sign == 0.0:
-            sign = cross
-        elif (cross > 0) != (sign > 0):
-            return False
-    return True

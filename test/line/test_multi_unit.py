@@ -11,9 +11,9 @@ from dataclasses import replace
 
 import pytest
 
-from fence_sorter.line.plant import LinePlant, LineRunConfig
+from fence_sorter.line.line_file import load_line
+from fence_sorter.line.multi_unit import LinePlant, LineRunConfig
 from fence_sorter.line.routing import NO_READ, REASONS
-from fence_sorter.line.units import load_line
 
 LINE = load_line("two_units")
 
