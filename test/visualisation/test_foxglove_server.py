@@ -245,6 +245,36 @@ def test_bad_requests_are_refused_and_counted_and_the_server_runs_on(server: Liv
     assert frame[13:] == cdr
 
 
+def test_a_removed_topic_is_unadvertised_and_its_queue_entries_counted(
+    server: LiveServer,
+) -> None:
+    """remove_topic: the subscribed client gets an unadvertise of the channel; per client the
+    counts still add up (handed = sent + dropped + discarded + queued) and the topic can no
+    longer be logged."""
+    ts = server.typestore
+    server.add_topic("/robot_description", STRING)
+    cdr = ts.serialize_cdr(ts.types[STRING](data="<robot/>"), STRING)
+    with connect(f"ws://127.0.0.1:{server.port}", subprotocols=["foxglove.sdk.v1"]) as ws:
+        ws.recv(timeout=30)  # serverInfo
+        (channel,) = json.loads(ws.recv(timeout=30))["channels"]
+        ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": 3, "channelId": 1}]}))
+        wait_until(server.has_clients, 30, "the subscription")
+        for k in range(5):
+            server.log("/robot_description", cdr, k)
+        server.remove_topic("/robot_description")
+        frames = []
+        while not frames or not isinstance(frames[-1], str):  # data, then the unadvertise
+            frames.append(ws.recv(timeout=30))
+    assert json.loads(frames[-1]) == {"op": "unadvertise", "channelIds": [channel["id"]]}
+    assert all(struct.unpack_from("<BI", f) == (1, 3) for f in frames[:-1])
+    ((snapshot),) = server.server.snapshot().values()
+    counts = snapshot["counts"]["/robot_description"]
+    assert counts.handed == 5 == counts.sent + counts.dropped + counts.discarded
+    assert counts.sent == len(frames) - 1 and counts.dropped == 0
+    with pytest.raises(KeyError, match="/robot_description"):
+        server.log("/robot_description", cdr, 6)
+
+
 def test_a_client_without_a_foxglove_subprotocol_is_refused(server: LiveServer) -> None:
     with pytest.raises(websockets.InvalidStatus, match="400"):
         connect(f"ws://127.0.0.1:{server.port}", subprotocols=["chat"], open_timeout=30)
