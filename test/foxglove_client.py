@@ -85,10 +85,12 @@ class Client:
 
 
 def read_messages(out: Path) -> list[dict]:
-    """The client's decoded messages: {topic, log_time, schema, message} per line."""
+    """The client's decoded messages: {topic, log_time, schema, message} per line; a last line
+    still being written (no newline yet) is left for the next read."""
     if not out.is_file():
         return []
-    return [json.loads(line) for line in out.read_text().splitlines() if line.strip()]
+    complete = out.read_text().split("\n")[:-1]
+    return [json.loads(line) for line in complete if line.strip()]
 
 
 def free_port(host: str = "127.0.0.1") -> int:

@@ -58,6 +58,17 @@ def _outcome(ts, k: int):
     )
 
 
+def _settled(server: LiveServer) -> None:
+    """Wait until each client's queue is empty and no send is under way (a message can reach
+    the client before the server's send returns and counts it as sent)."""
+    wait_until(
+        lambda: all(
+            c["queued"] == 0 and not c["in_flight"] for c in server.server.snapshot().values()
+        ),
+        30, "every queue sent",
+    )  # fmt: skip
+
+
 @pytest.fixture
 def server(request):
     """A server on a free port of 127.0.0.1 (backlog: the indirect parameter, else 1024)."""
@@ -92,6 +103,7 @@ def test_npm_client_decodes_what_rosbags_serialised(server: LiveServer, tmp_path
         wait_until(lambda: len(client.messages()) >= 41, 30, "41 messages at the npm client")
     finally:
         stop_process(client.proc)
+    _settled(server)
     got = client.messages()
     outcomes = [m for m in got if m["topic"] == "/sort_outcomes"]
     described = [m for m in got if m["topic"] == "/robot_description"]
@@ -181,6 +193,7 @@ def test_a_client_that_stops_reading_loses_the_oldest_messages_counted_exactly(
         os.kill(client.proc.pid, signal.SIGUSR2)
         # the last one in: each message before it arrived or was dropped (one queue, in order)
         wait_until(lambda: n - 1 in arrived(), 60, "the last message at the client")
+        _settled(server)
     finally:
         stop_process(client.proc)
     got = arrived()
