@@ -150,6 +150,7 @@ class WsServer:
             compression=None,  # payloads go as they are (the SDK does not deflate either)
             ping_interval=None,  # a client that pauses its reading stays connected
             max_size=2**20,  # client requests are small JSON
+            close_timeout=2.0,  # a stalled client cannot hold the node's stop for long
             server_header=None,
         )
 
@@ -234,6 +235,7 @@ class WsServer:
         client.queue.clear()
         client.control.clear()
         client.subscriptions.clear()
+        client.connection = None
 
     # -- client requests ----------------------------------------------------------------------
     def _request(self, client: Client, message: str | bytes) -> None:
@@ -254,7 +256,7 @@ class WsServer:
         try:
             request = json.loads(message)
             op = request["op"]
-        except (ValueError, TypeError, KeyError):
+        except (ValueError, TypeError, KeyError, RecursionError):
             return "a request must be a JSON object with a field op"
         if op == "subscribe":
             return self._subscribe(client, request.get("subscriptions"), accepted)
@@ -269,7 +271,8 @@ class WsServer:
         errors = []
         for sub in subs:
             sub_id = sub.get("id") if isinstance(sub, dict) else None
-            channel = by_id.get(sub.get("channelId")) if isinstance(sub, dict) else None
+            channel_id = sub.get("channelId") if isinstance(sub, dict) else None
+            channel = by_id.get(channel_id) if isinstance(channel_id, int) else None
             if not isinstance(sub_id, int) or not 0 <= sub_id <= MAX_SUBSCRIPTION_ID:
                 errors.append(f"subscribe: id must be an integer in [0, {MAX_SUBSCRIPTION_ID}]")
             elif channel is None:
@@ -426,6 +429,8 @@ class WsServer:
         finally:
             self._loop.call_soon_threadsafe(self._loop.stop)
             self._thread.join(15.0)
+            if not self._thread.is_alive():
+                self._loop.close()
 
     async def _stop(self, flush_s: float) -> None:
         deadline = self._loop.time() + flush_s

@@ -228,8 +228,8 @@ def _status(ws) -> dict:
 
 def test_bad_requests_are_refused_and_counted_and_the_server_runs_on(server: LiveServer) -> None:
     """A plain websockets client: JSON that is not a request, an op the server does not offer,
-    a subscription to no channel, binary data: four status errors naming what is wrong,
-    ``refused_requests`` 4; then a good subscription gets its message (header as the spec
+    two subscriptions to no channel, binary data: five status errors naming what is wrong,
+    ``refused_requests`` 5; then a good subscription gets its message (header as the spec
     says: opcode 1, subscription id u32 LE, log time u64 LE, the CDR bytes)."""
     ts = server.typestore
     server.add_topic("/robot_description", STRING)
@@ -248,9 +248,11 @@ def test_bad_requests_are_refused_and_counted_and_the_server_runs_on(server: Liv
         assert "'getParameters' is not supported" in _status(ws)["message"]
         ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": 1, "channelId": 99}]}))
         assert "not an advertised channel" in _status(ws)["message"]
+        ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": 2, "channelId": [1]}]}))
+        assert "not an advertised channel" in _status(ws)["message"]
         ws.send(b"\x01\x00\x00\x00\x00")
         assert _status(ws)["level"] == 2
-        assert server.stats()["refused_requests"] == "4"
+        assert server.stats()["refused_requests"] == "5"
         sub = {"id": 7, "channelId": channel["id"]}
         ws.send(json.dumps({"op": "subscribe", "subscriptions": [sub]}))
         frame = ws.recv(timeout=30)
