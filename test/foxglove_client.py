@@ -25,9 +25,16 @@ def client_missing() -> str | None:
 
 
 def client_command(
-    url: str, out: Path, topics: list[str], timeout: float, stall: bool = False
+    url: str,
+    out: Path,
+    topics: list[str],
+    timeout: float,
+    stall: bool = False,
+    subprotocol: str | None = None,
 ) -> list[str]:
-    """The command line of the npm client (``subscribed TOPIC`` lines on stdout)."""
+    """The command line of the npm client (``subscribed TOPIC`` lines on stdout);
+    ``subprotocol``: the one it offers ("client": FoxgloveClient's own constant), else
+    foxglove.sdk.v1."""
     return [
         shutil.which("node") or "node",
         str(CLIENT),
@@ -35,6 +42,7 @@ def client_command(
         str(out),
         f"{timeout:g}",
         *(["--stall"] if stall else []),
+        *([f"--subprotocol={subprotocol}"] if subprotocol else []),
         *topics,
     ]
 
@@ -43,12 +51,18 @@ class Client:
     """The npm client in its own process group; its stdout lines collected as they come."""
 
     def __init__(
-        self, url: str, out: Path, topics: list[str], timeout: float, stall: bool = False
+        self,
+        url: str,
+        out: Path,
+        topics: list[str],
+        timeout: float,
+        stall: bool = False,
+        subprotocol: str | None = None,
     ) -> None:
         self.out = out
         self.lines: list[str] = []
         self.proc = subprocess.Popen(
-            client_command(url, out, topics, timeout, stall),
+            client_command(url, out, topics, timeout, stall, subprotocol),
             cwd=CLIENT_DIR,
             stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT,
@@ -71,10 +85,12 @@ class Client:
 
 
 def read_messages(out: Path) -> list[dict]:
-    """The client's decoded messages: {topic, log_time, schema, message} per line."""
+    """The client's decoded messages: {topic, log_time, schema, message} per line; a last line
+    still being written (no newline yet) is left for the next read."""
     if not out.is_file():
         return []
-    return [json.loads(line) for line in out.read_text().splitlines() if line.strip()]
+    complete = out.read_text().split("\n")[:-1]
+    return [json.loads(line) for line in complete if line.strip()]
 
 
 def free_port(host: str = "127.0.0.1") -> int:

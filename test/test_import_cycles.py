@@ -24,8 +24,8 @@ PACKAGE = Path(fence_sorter.__file__).parent
 #: cumulative, docs/design/imports.md): Numba's compiler and the kernel (~0.4-1.6 s), SciPy's
 #: submodules (0.6-1 s), rclpy (0.25 s) and the ROS message and ament packages (present only in
 #: a ROS environment), Rerun (0.5 s), Dask's scheduler (1.6 s), Matplotlib (0.7-1.3 s), rosbags
-#: and mcap (40-70 ms, only for bag files), foxglove-sdk (0.1-0.2 s, only to serve Foxglove),
-#: CyRK (optional: only the compiled peers of the benchmark, ``cyrk:*``).
+#: and mcap (40-70 ms, only for bag files), websockets (0.1-0.3 s with asyncio, only to serve
+#: Foxglove), CyRK (optional: only the compiled peers of the benchmark, ``cyrk:*``).
 #: numpy (80 ms), yaml and tqdm are imported at the top.
 HEAVY = frozenset(
     {
@@ -48,7 +48,7 @@ HEAVY = frozenset(
         "matplotlib",
         "rosbags",
         "mcap",
-        "foxglove",
+        "websockets",
         "CyRK",
     }
 )

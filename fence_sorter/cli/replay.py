@@ -107,7 +107,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _foxglove_server(contents, address: tuple[str, int], topics: list[str] | None):
     """A Foxglove server with a channel per replayed topic (the bag's embedded definitions)."""
-    # lazy: foxglove-sdk and rosbags only when serving
+    # lazy: websockets and rosbags only when serving
     from fence_sorter.recording.msgtypes import make_typestore
     from fence_sorter.visualisation.foxglove_live import LiveServer
 

@@ -1,15 +1,14 @@
 """Foxglove node: every topic of the run to the Foxglove app over the Foxglove WebSocket protocol.
 
 Raw subscriptions (the CDR bytes as they came over DDS) with the QoS each topic is published
-with, forwarded unchanged on ``ros2msg``/``cdr`` channels of a foxglove-sdk server
+with, forwarded unchanged on ``ros2msg``/``cdr`` channels of a Foxglove WebSocket server
 (:class:`fence_sorter.visualisation.foxglove_live.LiveServer`): /tf, /tf_static,
 /robot_description, /joint_states and /markers give Foxglove's 3D panel the sorter, the other
 topics its plots and tables. /clock is the server's time. The server binds ``host`` (default
-127.0.0.1, this machine only: docs/design/security.md) and ``port``; clients, forwarded messages,
-the messages handed over for each client and the slow clients foxglove-sdk reports (their
-outbox overflowed, the oldest messages dropped; how many, the SDK does not tell:
-docs/guide/foxglove.md) are on /diagnostics. ``fence-sorter run --foxglove [HOST:]PORT``
-starts it in a process of its own.
+127.0.0.1, this machine only: docs/design/security.md) and ``port``; clients, forwarded messages
+and, per client, the messages handed to its queue, sent, and dropped when its queue of
+``client_backlog`` was full (exact counts: docs/guide/foxglove.md) are on /diagnostics.
+``fence-sorter run --foxglove [HOST:]PORT`` starts it in a process of its own.
 """
 
 from __future__ import annotations
@@ -32,11 +31,11 @@ from fence_sorter.visualisation.foxglove_live import LiveServer
 
 
 class ServeError(RuntimeError):
-    """The server cannot start (one line: the address and the SDK's reason)."""
+    """The server cannot start (one line: the address and the reason)."""
 
 
 class FoxgloveNode(FenceSorterNode):
-    """Serves the run's topics to Foxglove (foxglove-sdk WebSocket server, ros2msg/cdr)."""
+    """Serves the run's topics to Foxglove (Foxglove WebSocket server, ros2msg/cdr)."""
 
     NODE_NAME = "foxglove"
     STATUS = "serving"
@@ -57,7 +56,7 @@ class FoxgloveNode(FenceSorterNode):
             self.server = LiveServer(
                 make_typestore(), host=host, port=port, backlog=int(p["client_backlog"])
             )
-        except RuntimeError as exc:  # the SDK's FoxgloveError: a port in use, no such address
+        except RuntimeError as exc:  # foxglove_ws.ServeError: a port in use, no such address
             raise ServeError(f"cannot serve on {host}:{port}: {exc}") from None
         self.lost = 0  # messages the middleware reports lost before this node took them
         self.served_subscriptions = []
@@ -109,11 +108,11 @@ class FoxgloveNode(FenceSorterNode):
         status = super().heartbeat_status()
         values = {**self.server.stats(), "lost_before_taken": str(self.lost)}
         status.values.extend(KeyValue(key=k, value=v) for k, v in values.items())
-        if self.server.slow_clients:
+        if values["dropped"] != "0":
             status.level = DiagnosticStatus.WARN
             status.message = (
-                f"serving; {len(self.server.slow_clients)} slow clients lost messages "
-                f"(outbox of {self.server.backlog} full)"
+                f"serving; {values['slow_clients']} slow clients lost {values['dropped']} "
+                f"messages (queue of {self.server.backlog} full)"
             )
         return status
 

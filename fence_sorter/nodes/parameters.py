@@ -624,8 +624,8 @@ FOXGLOVE_PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "client_backlog",
         1024,
-        "Outgoing messages held per client; beyond it the oldest are dropped and the client "
-        "is counted as slow on /diagnostics",
+        "Outgoing messages held per client; beyond it the oldest are dropped, each one "
+        "counted per client and topic on /diagnostics",
         True,
         16,
         1_000_000,

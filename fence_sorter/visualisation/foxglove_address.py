@@ -1,5 +1,5 @@
 """The address a Foxglove WebSocket server binds: ``[HOST:]PORT`` of ``--foxglove`` (light:
-no foxglove-sdk import, so ``fence-sorter run`` checks it before anything starts)."""
+no websockets import, so ``fence-sorter run`` checks it before anything starts)."""
 
 from __future__ import annotations
 

@@ -3,15 +3,16 @@
 // server, subscribes to the named topics and writes every message it decodes as one JSON line
 // {topic, log_time, schema, message} to OUT. Used by test/ros/test_foxglove_live.py.
 //
-//   node client.mjs URL OUT TIMEOUT_S [--stall] TOPIC...
+//   node client.mjs URL OUT TIMEOUT_S [--stall] [--subprotocol=NAME] TOPIC...
 //
 // It retries the connection until the server is up (within TIMEOUT_S), prints
 // "subscribed TOPIC" for each subscription and "closed N" when the server goes away (the end
 // of the run), then exits 0. --stall: once subscribed to every topic, stop reading the socket
 // (prints "stalled"): a slow client whose outbox on the server fills up; SIGUSR2 makes it read
-// again (prints "resumed"), so what the server did not drop arrives. The server speaks the subprotocol "foxglove.sdk.v1";
-// FoxgloveClient.SUPPORTED_SUBPROTOCOL still names the older "foxglove.websocket.v1", so the
-// socket is opened here with the new name and handed to FoxgloveClient.
+// again (prints "resumed"), so what the server did not drop arrives. The socket is opened here
+// and handed to FoxgloveClient, with the subprotocol "foxglove.sdk.v1" (foxglove-sdk's name)
+// unless --subprotocol=NAME says another; --subprotocol=client: the client's own constant
+// FoxgloveClient.SUPPORTED_SUBPROTOCOL ("foxglove.websocket.v1").
 import { createWriteStream } from "node:fs";
 import rosmsg from "@foxglove/rosmsg";
 import serialization from "@foxglove/rosmsg2-serialization";
@@ -23,10 +24,16 @@ const { parse } = rosmsg;
 const { MessageReader } = serialization;
 const { FoxgloveClient } = wsProtocol;
 
-const SUBPROTOCOL = "foxglove.sdk.v1";
 const [url, outPath, timeoutText, ...rest] = process.argv.slice(2);
-const stall = rest[0] === "--stall";
-const topics = stall ? rest.slice(1) : rest;
+let stall = false;
+let SUBPROTOCOL = "foxglove.sdk.v1";
+while (rest.length > 0 && rest[0].startsWith("--")) {
+  const option = rest.shift();
+  if (option === "--stall") stall = true;
+  else if (option.startsWith("--subprotocol=")) SUBPROTOCOL = option.slice("--subprotocol=".length);
+}
+if (SUBPROTOCOL === "client") SUBPROTOCOL = FoxgloveClient.SUPPORTED_SUBPROTOCOL;
+const topics = rest;
 if (!url || !outPath || !timeoutText || topics.length === 0) {
   console.error("usage: node client.mjs URL OUT TIMEOUT_S TOPIC...");
   process.exit(2);
@@ -57,6 +64,7 @@ function connect() {
   let opened = false;
   ws.on("open", () => {
     opened = true;
+    console.log(`open ${ws.protocol}`);
   });
   ws.on("error", () => {
     if (!opened) {
