@@ -260,7 +260,7 @@ def _freezes_md(sec: dict) -> list[str]:
         sim, c = r["simulator"], r["controller"]
         rec = r["recording_failed"]
         rec_text = (
-            f"failed at sim {rec['failed_at_sim_s']:.2f} s, bag ends at "
+            f"failed at sim {rec['failed_at_sim_s']:.2f} s, bag complete to "
             f"{rec['bag_ends_sim_s']:.2f} s, {rec['messages_not_written']} not written"
             if rec
             else "-"

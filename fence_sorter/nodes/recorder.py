@@ -257,7 +257,8 @@ class RecorderNode(FenceSorterNode):
             self.bag_ends_at = durable * 1e-9 if durable is not None else math.nan
             self.get_logger().error(
                 f"bag {self.path}: writing failed at t = {self.write_failed_at:.3f} s "
-                f"(the bag ends at t = {self.bag_ends_at:.3f} s; recording stops, the run goes "
+                f"(the bag holds every message up to t = {self.bag_ends_at:.3f} s, the last "
+                f"flush; recording stops, the run goes "
                 f"on): {self.write_error}"
             )
             try:  # the error on /diagnostics now, not at the next heartbeat

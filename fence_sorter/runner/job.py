@@ -720,7 +720,8 @@ def _tell_recording_failure(records, say: Callable[[str], None]) -> bool:
         return False
     say(
         f"recorder: writing the bag failed at sim time {failure['failed_at_sim_s']:.2f} s: "
-        f"{failure['error']}; the bag ends at sim time {failure['bag_ends_sim_s']:.2f} s, "
+        f"{failure['error']}; the bag holds every message up to sim time "
+        f"{failure['bag_ends_sim_s']:.2f} s, "
         "the run goes on unrecorded"
     )
     return True

@@ -292,7 +292,7 @@ def verdict(s: dict) -> tuple[int, str] | None:
     if rec:
         return EXIT_RECORDING, (
             f"the bag could not be written: {rec['error']} at sim time "
-            f"{rec['failed_at_sim_s']:.2f} s; the bag ends at sim time "
+            f"{rec['failed_at_sim_s']:.2f} s; the bag holds every message up to sim time "
             f"{rec['bag_ends_sim_s']:.2f} s, the run went on unrecorded; {_lost(s)}" + context
         )
     if foreign:
@@ -340,7 +340,7 @@ def format_summary(s: dict) -> str:
     if rec:
         lines.append(
             f"recording FAILED  {rec['error']} at sim time {rec['failed_at_sim_s']:.2f} s; "
-            f"the bag ends at {rec['bag_ends_sim_s']:.2f} s ({rec['messages_not_written']} "
+            f"the bag complete to {rec['bag_ends_sim_s']:.2f} s ({rec['messages_not_written']} "
             "messages not written)"
         )
     for node, counts in sorted(s["dropped"].items()):

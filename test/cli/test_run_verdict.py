@@ -215,8 +215,8 @@ def test_a_recorder_write_error_exits_5_naming_the_error_and_where_the_bag_ends(
     assert code == EXIT_RECORDING == 5
     assert why == (
         "the bag could not be written: BagWriteError: /b: cannot flush segment b_1: [Errno 28] "
-        "No space left at sim time 12.35 s; the bag ends at sim time 11.90 s, the run went on "
-        "unrecorded; every divert parcel of the run was sorted"
+        "No space left at sim time 12.35 s; the bag holds every message up to sim time 11.90 s, "
+        "the run went on unrecorded; every divert parcel of the run was sorted"
     )
     assert s["recording_failed"]["messages_not_written"] == 4711
     assert "recording FAILED  BagWriteError" in format_summary(s)

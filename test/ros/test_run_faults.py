@@ -164,10 +164,15 @@ def test_a_full_disk_is_reported_when_it_happens_and_the_run_exits_5(tmp_path: P
     assert row["recording_told"].startswith(
         f"recorder: writing the bag failed at sim time {rec['failed_at_sim_s']:.2f} s"
     )
-    assert f"the bag ends at sim time {rec['bag_ends_sim_s']:.2f} s" in row["recording_told"]
+    assert (
+        f"the bag holds every message up to sim time {rec['bag_ends_sim_s']:.2f} s"
+        in row["recording_told"]
+    )
     assert 0.0 < rec["bag_ends_sim_s"] <= rec["failed_at_sim_s"]
     assert rec["messages_not_written"] > 0
     assert not row["divert_without_outcome"] and row["sorted_divert"] == row["divert"]
     last = max(m.t_ns for m in read_bag(row["bag_copy"]).messages) * 1e-9
-    assert last == pytest.approx(rec["bag_ends_sim_s"], abs=2e-3)
+    # every message up to the last flush is there; a chunk the failing write completed before
+    # the disk filled may hold later ones, never later than the failure
+    assert rec["bag_ends_sim_s"] - 2e-3 <= last <= rec["failed_at_sim_s"] + 2e-3
     assert freeze_met(row)
