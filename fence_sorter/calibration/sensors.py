@@ -453,6 +453,10 @@ class SensorStream:
         self._pending: list[tuple[float, int, CameraFrame]] = []  # heap of (due, seq, frame)
         self._seq = 0
         self.clock = -math.inf  # the newest state stamp [s]
+        # the newest stamp of each state stream: the two topics arrive independently, so
+        # each sensor's published count is a function of its own stream's clock
+        self.fence_clock = -math.inf
+        self.load_clock = -math.inf
         #: shortest and longest delay of a released frame: state clock - capture time [s]
         self.delay_range = (math.inf, -math.inf)
 
@@ -472,6 +476,7 @@ class SensorStream:
         (times, angles) since the previous fence state, and the gauge's (times, moments) one
         state interval behind (its cubic interpolation needs the state after it)."""
         self.clock = max(self.clock, t)
+        self.fence_clock = max(self.fence_clock, t)
         moment = self.moment_factor * tip_deflection if self.moment_factor is not None else 0.0
         hist, empty = self._fence, (np.zeros(0), np.zeros(0))
         if hist and t <= hist[-1][0]:
@@ -522,6 +527,7 @@ class SensorStream:
         ``velocity`` at ``t`` (sorter frame): the camera's frames since its previous state are
         measured and held for their latency."""
         self.clock = max(self.clock, t)
+        self.load_clock = max(self.load_clock, t)
         pid = int(parcel_id)
         cam = self.cfg.camera
         prev = self._poses.get(pid)

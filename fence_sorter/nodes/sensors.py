@@ -180,6 +180,10 @@ class SensorsNode(FenceSorterNode):
         values = {
             "sensors": self.config.name,
             "state_clock_s": f"{self.stream.clock:.4f}",
+            # the newest /fence_state and /load_states stamps: the encoder's and gauge's
+            # samples follow the first, the camera's frames the second
+            "fence_clock_s": f"{self.stream.fence_clock:.4f}",
+            "load_clock_s": f"{self.stream.load_clock:.4f}",
             # state clock at a camera frame's publication - its capture time (the latency)
             "camera_delay_min_s": f"{lo:.4f}",
             "camera_delay_max_s": f"{hi:.4f}",
