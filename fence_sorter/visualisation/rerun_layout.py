@@ -27,6 +27,13 @@ CONTACT_AXIS = (-0.25, 3.0)  # [kN]
 DEFLECTION_AXIS = (-0.5, 2.5)  # [cm]
 ALPHA_AXIS = (-0.2, 2.0)  # [rad]
 SPEED_AXIS = (-0.25, SPEED_AXIS_MAX)  # [m/s]
+#: the damage-risk tab's plots: impact speed [m/s], peak acceleration [10^2 m/s^2] and peak
+#: force [kN], each with single-digit tick labels like the time series (the paper's limits
+#: w_dop 2.4 m/s and a_Ndop 300 m/s^2 of a 7 kg parcel, 2.1 kN, inside with headroom)
+ACCEL_PLOT_UNIT = 100.0  # [m/s^2]
+DAMAGE_SPEED_AXIS = (-0.25, SPEED_AXIS_MAX)  # [m/s]
+DAMAGE_ACCEL_AXIS = (-0.25, 4.0)  # [10^2 m/s^2]
+DAMAGE_FORCE_AXIS = (-0.25, 4.0)  # [kN]
 RISK = "risk"  # root of the damage-risk chart (one column per parcel, value / limit upwards)
 #: the top view's damage marks: a grid below the belt, this many per row, rows this far apart
 RISK_MARKS_PER_ROW = 4
@@ -145,9 +152,21 @@ def blueprint(scene: SceneGeometry | None = None, paused: bool = False):
                     name="per parcel, value / limit: w_n blue, a_N orange, limit red",
                     origin=RISK,
                 ),
-                plot("impact speed w_n [m/s]: o parcels, x w_dop", "damage/w_n"),
-                plot("peak acceleration a_N [m/s^2]: o parcels, x a_Ndop", "damage/a_N"),
-                plot("peak force N [kN]: o parcels, x a_Ndop m_p", "damage/N"),
+                plot(
+                    "impact speed w_n [m/s]: o parcels, x w_dop",
+                    "damage/w_n",
+                    DAMAGE_SPEED_AXIS,
+                ),
+                plot(
+                    "peak acceleration a_N [10^2 m/s^2]: o parcels, x a_Ndop",
+                    "damage/a_N",
+                    DAMAGE_ACCEL_AXIS,
+                ),
+                plot(
+                    "peak force N [kN]: o parcels, x a_Ndop m_p",
+                    "damage/N",
+                    DAMAGE_FORCE_AXIS,
+                ),
                 row_shares=[2, 1, 1, 1],
                 name="damage risk",
             ),

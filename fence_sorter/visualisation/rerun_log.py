@@ -16,8 +16,9 @@ recording stream and its layout are ``visualisation/rerun_layout.py``'s. Entity 
   ``plots/fence/alpha_w`` [rad], ``plots/speed/<id>`` [m/s] at the publish rate;
 - per sorting event at the solver's resolution (:meth:`RerunLogger.log_event`):
   ``plots/contact/<id>/N_steps``, ``.../N_stiff_course`` [kN],
-  ``plots/fence/tip_deflection/steps/<id>`` [cm]; ``damage/w_n``, ``damage/a_N``, ``damage/N``
-  (``value`` and ``limit``): each parcel's impact against the limits at its outcome time.
+  ``plots/fence/tip_deflection/steps/<id>`` [cm]; ``damage/w_n`` [m/s], ``damage/a_N``
+  [10^2 m/s^2], ``damage/N`` [kN] (``value`` and ``limit``): each parcel's impact against the
+  limits at its outcome time.
 
 Frame "sorter" (REP-103, z up): x0 along the belt, y0 across it towards the chute. The default
 blueprint opens on the top view with the time series beside it (the 3D view in a tab behind,
@@ -43,6 +44,7 @@ from fence_sorter.visualisation.frames import (
     scene_from_bag,
 )
 from fence_sorter.visualisation.rerun_layout import (
+    ACCEL_PLOT_UNIT,
     ALPHA_AXIS,
     APP_ID,
     CONTACT_AXIS,
@@ -432,8 +434,8 @@ class RerunLogger:
         points = (
             ("damage/w_n/value", "w_n", w_n),
             ("damage/w_n/limit", "w_dop", risk["w_dop"]),
-            ("damage/a_N/value", "a_N", (1.0 - risk["accel_margin"]) * risk["a_ndop"]),
-            ("damage/a_N/limit", "a_Ndop", risk["a_ndop"]),
+            ("damage/a_N/value", "a_N", a_ratio * risk["a_ndop"] / ACCEL_PLOT_UNIT),
+            ("damage/a_N/limit", "a_Ndop", risk["a_ndop"] / ACCEL_PLOT_UNIT),
             ("damage/N/value", "peak N [kN]", peak_n / FORCE_PLOT_UNIT),
             ("damage/N/limit", "a_Ndop m_p [kN]", risk["a_ndop"] * ev.mass / FORCE_PLOT_UNIT),
         )

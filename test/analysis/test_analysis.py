@@ -20,6 +20,7 @@ from processes import run_cli
 from fence_sorter.analysis import analyze_bag
 from fence_sorter.analysis.run import Series, check_row, crossing
 from fence_sorter.recording.bagread import read_bag
+from fence_sorter.visualisation import rerun_layout as layout
 from fence_sorter.visualisation import rerun_log as rl
 
 REPO = Path(__file__).resolve().parents[2]
@@ -359,6 +360,9 @@ def test_rrd_from_the_example_bag(example, tmp_path):
     assert axes["legend"] == dict.fromkeys(plots, False)
     # fixed y ranges with single-digit tick labels on every time series plot (one plot area)
     assert axes["y_range"] == {
+        by_origin["damage/w_n"]: list(layout.DAMAGE_SPEED_AXIS),
+        by_origin["damage/a_N"]: list(layout.DAMAGE_ACCEL_AXIS),
+        by_origin["damage/N"]: list(layout.DAMAGE_FORCE_AXIS),
         by_origin["plots/contact"]: list(rl.CONTACT_AXIS),
         by_origin["plots/fence/tip_deflection"]: list(rl.DEFLECTION_AXIS),
         by_origin["plots/fence/alpha_w"]: list(rl.ALPHA_AXIS),

@@ -64,6 +64,8 @@ def colour_pixels(png: Path, colour: tuple[int, int, int], box, tol: int = 12) -
     return int((np.abs(img - np.asarray(colour)).max(axis=-1) <= tol).sum())
 
 
+#: the damage-risk tab's three plots (w_n, a_N, N): their plot areas below the titles
+DAMAGE_PLOTS = [(775, 372, 1280, 475), (775, 514, 1280, 614), (775, 656, 1280, 758)]
 #: the damage-risk chart's y-scale labels, and the 3D view's chute label (x0, y0, x1, y1)
 RISK_SCALE = (770, 130, 800, 300)
 CHUTE_LABEL_3D = (380, 360, 530, 400)
@@ -137,6 +139,10 @@ def test_example_recording_renders_in_the_web_viewer(tmp_path):
     seen("damage", rl.N_COLOR, RIGHT, 30)
     seen("damage", rl.N_STIFF_COLOR, RIGHT, 30)
     seen("damage", rl.MARGIN_COLORS[0], RIGHT, 100)
+    # its three plots: one instant, one x (their tick labels as narrow as each other's)
+    xs = [cursor_x(png["damage"], box) for box in DAMAGE_PLOTS]
+    assert None not in xs, f"damage: no time cursor found in a plot: {xs}"
+    assert max(xs) - min(xs) <= 2.0, f"damage: time cursor at x = {xs} px"
     # its y scale: the ratios 0, 0.5 and 1 in dark text left of the chart (40 pixels here)
     assert colour_pixels(png["damage"], rl.LABEL_COLOR, RISK_SCALE, tol=30) >= 20
     # the end: the damage marks under the belt, each in its parcel's margin colour
