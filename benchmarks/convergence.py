@@ -2,18 +2,22 @@
 
 Each bench scene is solved by its default method (``adaptive``) with ``solver.rtol`` replaced
 (atol = 1e-2 rtol, as ``accuracy.configure`` sets it) and its peak contact force compared with
-the one of docs/reports/accuracy/reference/<scene>.npz (``fence-sorter accuracy`` writes them). Run
-``python -m benchmarks.convergence`` for the markdown table of docs/design/numerics.md
-("Convergence of the adaptive scheme with rtol"); test/campaigns/test_convergence.py asserts it.
+the one of docs/reports/accuracy/reference/<scene>.npz (``fence-sorter accuracy`` writes them).
+``python -m benchmarks.convergence`` writes the figures, with its command line and commit, to
+docs/reports/convergence.json and renders them into the marked section of
+docs/design/numerics.md ("Convergence of the adaptive scheme with rtol"); ``--from-json`` renders
+a committed JSON again without measuring. test/campaigns/test_convergence.py asserts the target,
+test/campaigns/test_reports.py that the committed section is the committed JSON rendered.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
 import sys
 import time
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -24,8 +28,13 @@ from fence_sorter.physics.simulate import simulate
 from fence_sorter.physics.stepper import collector_off
 from fence_sorter.scene import load_scene
 from fence_sorter.verification.accuracy_runs import ATOL_PER_RTOL, SCENES
+from fence_sorter.verification.machine import git_revision, load_average
 
 REFERENCE_DIR = REPO / "docs" / "reports" / "accuracy" / "reference"
+JSON = REPO / "docs" / "reports" / "convergence.json"
+DOC = REPO / "docs" / "design" / "numerics.md"
+#: the section of DOC the renderer rewrites
+BEGIN, END = "<!-- convergence:begin -->", "<!-- convergence:end -->"
 RTOLS = (1e-4, 1e-5, 1e-6, 1e-7)
 GAIN = 100.0  # the error at the tightest rtol at least this much below the loosest's
 MONOTONE = 2.0  # ... and no error more than this above the one of the looser rtol before it
@@ -108,6 +117,51 @@ def table(points: list[ConvergencePoint], rtols=RTOLS) -> list[str]:
     return lines
 
 
+def points_of(data: dict) -> list[ConvergencePoint]:
+    """The points of a convergence JSON (as :func:`report` writes it)."""
+    return [ConvergencePoint(**p) for p in data["points"]]
+
+
+def report(points: list[ConvergencePoint], rtols, repeats: int, command: str) -> dict:
+    """The JSON of a measurement: the points with the command line, commit and load."""
+    return {
+        "command": command,
+        "commit": git_revision(REPO),
+        "load_average": load_average(),
+        "repeats": repeats,
+        "atol_per_rtol": ATOL_PER_RTOL,
+        "rtols": list(rtols),
+        "points": [asdict(p) for p in points],
+    }
+
+
+def render(data: dict) -> str:
+    """The marked section of docs/design/numerics.md, from the JSON alone."""
+    lines = [
+        BEGIN,
+        f"<!-- written by `{data['command']}` from docs/reports/convergence.json; "
+        "do not edit by hand -->",
+        "",
+        f"Error / steps / median wall ms of {data['repeats']} solves per cell "
+        f"(atol = {data['atol_per_rtol']:g} rtol), measured at {data['commit']} by "
+        f"`{data['command']}` (load average {data['load_average']} at the start, on 2 cores "
+        "shared with other work: the milliseconds are only indicative, a solve longer than a "
+        "few ms is preempted):",
+        "",
+        *table(points_of(data), tuple(data["rtols"])),
+        "",
+        END,
+    ]
+    return "\n".join(lines)
+
+
+def write_doc(path: Path, section: str) -> None:
+    """Replace the marked section of ``path`` by ``section``."""
+    text = path.read_text(encoding="utf-8")
+    a, b = text.index(BEGIN), text.index(END) + len(END)
+    path.write_text(text[:a] + section + text[b:], encoding="utf-8")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
         prog="python -m benchmarks.convergence",
@@ -117,7 +171,28 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scenes", nargs="*", default=list(SCENES))
     ap.add_argument("--rtols", nargs="*", type=float, default=list(RTOLS))
     ap.add_argument("--repeats", type=int, default=3, help="timed solves per point (median)")
+    ap.add_argument("--json", default=str(JSON), help="where the figures go ('' : nowhere)")
+    ap.add_argument(
+        "--doc", default=str(DOC), help="the document whose marked section is rewritten ('': none)"
+    )
+    ap.add_argument(
+        "--from-json", metavar="PATH", help="render this JSON into --doc again, measuring nothing"
+    )
     args = ap.parse_args(argv)
+    if args.doc:
+        try:
+            text = Path(args.doc).read_text(encoding="utf-8")
+        except OSError as exc:
+            ap.error(f"--doc: {exc}")
+        if BEGIN not in text or END not in text:
+            ap.error(f"--doc: {args.doc} has no section between {BEGIN} and {END}")
+    if args.from_json:
+        try:
+            data = json.loads(Path(args.from_json).read_text(encoding="utf-8"))
+            section = render(data)
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            ap.error(f"--from-json: {args.from_json}: not a convergence report ({exc})")
+        return _write(section, None, args)
     for scene in args.scenes:
         if scene not in SCENES:
             ap.error(f"--scenes: unknown scene {scene!r}; one of {', '.join(SCENES)}")
@@ -143,7 +218,22 @@ def main(argv: list[str] | None = None) -> int:
                 flush=True,
             )
             points.append(p)
-    print("\n".join(table(points, tuple(args.rtols))))
+    command = "python -m benchmarks.convergence " + " ".join(
+        sys.argv[1:] if argv is None else argv
+    )
+    data = report(points, args.rtols, args.repeats, command.rstrip())
+    return _write(render(data), data, args)
+
+
+def _write(section: str, data: dict | None, args: argparse.Namespace) -> int:
+    """Print the section; write the JSON (when measured) and the document where asked."""
+    print(section)
+    if data is not None and args.json:
+        Path(args.json).write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
+        print(f"written: {args.json}", file=sys.stderr)
+    if args.doc:
+        write_doc(Path(args.doc), section)
+        print(f"written: {args.doc}", file=sys.stderr)
     return 0
 
 
