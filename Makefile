@@ -50,7 +50,8 @@ reports: bootstrap
 		&& nice -n 10 python -m benchmarks line-bench four_units --parcels 100 \
 			--rates 2000,3000,4000,6000,8000,12000 --out docs/reports/line-bench.md \
 		&& nice -n 10 python -m benchmarks.startup --rounds 5 --runs 3 --load 4 \
-			--out docs/reports/startup
+			--out docs/reports/startup \
+		&& nice -n 10 python -m benchmarks.convergence
 
 clean:
 	rm -rf .build

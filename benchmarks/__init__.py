@@ -18,7 +18,8 @@ checkout (``source scripts/env.sh`` first):
 - ``python -m benchmarks.startup``: a process's start-up, part by part -> docs/reports/startup/;
 - ``python -m benchmarks.versus BASE``: the solve's speed against commit BASE ->
   docs/reports/versus.md;
-- ``python -m benchmarks.convergence``: the convergence table of docs/design/numerics.md;
+- ``python -m benchmarks.convergence``: the adaptive scheme's convergence with rtol ->
+  docs/reports/convergence.json and its section of docs/design/numerics.md;
 - ``python -m benchmarks.simulator_bench``: the simulator node's pacing in one process;
 - ``python -m benchmarks.rerun_bench [BAG]``: the cost of Rerun logging per frame.
 

@@ -396,6 +396,7 @@ REPORTS = {
     "docs/reports/calibration.md": "python -m benchmarks calibrate-bench",
     "docs/reports/line-bench.md": "--out docs/reports/line-bench.md",
     "docs/reports/startup/README.md": "python -m benchmarks.startup",
+    "docs/reports/convergence.json": "python -m benchmarks.convergence",
 }
 
 

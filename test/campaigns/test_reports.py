@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks import bench, faults, startup, versus
+from benchmarks import bench, convergence, faults, startup, versus
 from fence_sorter.verification import accuracy, stability_report
 from fence_sorter.verification.report import fmt, table, tables
 
@@ -219,3 +219,21 @@ def test_calibration_md_figures_are_its_json_rendered() -> None:
     rendered = tables(calibration_bench.render(data, data["command"], data["commit"]))
     assert len(rendered) >= 2
     assert tables(section) == rendered
+
+
+def test_numerics_convergence_section_is_its_json_rendered() -> None:
+    """The convergence section of docs/design/numerics.md is docs/reports/convergence.json
+    rendered, and its figures are the points' own: one row per scene, a cell per rtol."""
+    data = json.loads((DOCS / "convergence.json").read_text(encoding="utf-8"))
+    doc = (DOCS.parent / "design" / "numerics.md").read_text(encoding="utf-8")
+    section = doc[doc.index(convergence.BEGIN) : doc.index(convergence.END) + len(convergence.END)]
+    assert section == convergence.render(data)
+    (rendered,) = tables(section)
+    scenes = {p["scene"] for p in data["points"]}
+    assert len(rendered) == 2 + len(scenes) and len(data["points"]) == len(scenes) * len(
+        data["rtols"]
+    )
+    first = data["points"][0]
+    assert f"{first['error']:.1e} / {first['steps']} / " in rendered[2]
+    assert data["command"].startswith("python -m benchmarks.convergence")
+    assert f"at {data['commit']} by `{data['command']}`" in section
