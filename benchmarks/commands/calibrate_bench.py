@@ -3,7 +3,7 @@ docs/reports/calibration.md.
 
 Interval coverage over seeds (camera60, impact_flexible), the coverage over fresh noise for
 given seeds' parcels, the b_p flag from 25 Hz poses and the wall time of a 50-parcel,
-5-parameter calibration (fence_sorter/calibration/bench.py).
+5-parameter calibration (benchmarks/calibrate_bench.py).
 Heavy: run it niced. Exit codes: 0 done, 2 bad input.
 """
 
@@ -11,12 +11,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
 from pathlib import Path
 
+from benchmarks import REPO
 from fence_sorter.cli.calibrate import add_scheduler_argument
 from fence_sorter.cli.simulate import error
+from fence_sorter.verification.machine import git_revision
 
 
 def register(parser: argparse.ArgumentParser) -> None:
@@ -91,8 +92,7 @@ def run(args: argparse.Namespace) -> int:
             return error(f"--from-json {args.from_json}: not a calibrate-bench JSON ({exc})")
     else:
         report = measure(bench, args)
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
-                                text=True, check=False).stdout.strip() or "unknown"  # fmt: skip
+        commit = git_revision(REPO)
         command = "nice -n 10 python -m benchmarks calibrate-bench " + " ".join(sys.argv[2:])
         report.update(command=command.strip(), commit=commit)
     section = bench.render(report, command.strip(), commit)
