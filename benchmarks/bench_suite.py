@@ -21,6 +21,7 @@ from collections.abc import Sequence
 from dataclasses import asdict
 from pathlib import Path
 
+from benchmarks.sections import replace_section
 from benchmarks.stall_probe import StallReport, run_probe
 from fence_sorter.recording import topics
 from fence_sorter.runner.job import RunOptions, run_job
@@ -337,11 +338,4 @@ def _probe_line(probes: list[dict]) -> str:
 
 def write_section(path: Path, section: str) -> None:
     """Replace the text between the suite markers (append them if absent); keep the rest."""
-    text = path.read_text(encoding="utf-8") if path.exists() else ""
-    if BEGIN in text and END in text and text.index(BEGIN) < text.index(END):
-        head, rest = text.split(BEGIN, 1)
-        _, tail = rest.split(END, 1)
-        new = head + section + tail
-    else:
-        new = text.rstrip("\n") + ("\n\n" if text else "") + section + "\n"
-    path.write_text(new, encoding="utf-8")
+    replace_section(path, section, BEGIN, END, append=True)

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.sections import replace_section
 from fence_sorter.calibration.bag import read_measured_bag, write_measured_bag
 from fence_sorter.calibration.emulate import (
     draw_events,
@@ -327,6 +328,4 @@ def _render_fresh_noise(fresh: dict) -> list[str]:
 
 
 def write_doc(path: Path, section: str) -> None:
-    text = path.read_text(encoding="utf-8")
-    a, b = text.index(BEGIN), text.index(END) + len(END)
-    path.write_text(text[:a] + section + text[b:], encoding="utf-8")
+    replace_section(path, section, BEGIN, END)

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import REPO
+from benchmarks.sections import has_section, replace_section
 from fence_sorter.physics.params import ParameterError, SolverParams
 from fence_sorter.physics.simulate import simulate
 from fence_sorter.physics.stepper import collector_off
@@ -155,13 +156,6 @@ def render(data: dict) -> str:
     return "\n".join(lines)
 
 
-def write_doc(path: Path, section: str) -> None:
-    """Replace the marked section of ``path`` by ``section``."""
-    text = path.read_text(encoding="utf-8")
-    a, b = text.index(BEGIN), text.index(END) + len(END)
-    path.write_text(text[:a] + section + text[b:], encoding="utf-8")
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
         prog="python -m benchmarks.convergence",
@@ -184,7 +178,7 @@ def main(argv: list[str] | None = None) -> int:
             text = Path(args.doc).read_text(encoding="utf-8")
         except OSError as exc:
             ap.error(f"--doc: {exc}")
-        if BEGIN not in text or END not in text:
+        if not has_section(text, BEGIN, END):
             ap.error(f"--doc: {args.doc} has no section between {BEGIN} and {END}")
     if args.from_json:
         try:
@@ -232,7 +226,7 @@ def _write(section: str, data: dict | None, args: argparse.Namespace) -> int:
         Path(args.json).write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
         print(f"written: {args.json}", file=sys.stderr)
     if args.doc:
-        write_doc(Path(args.doc), section)
+        replace_section(Path(args.doc), section, BEGIN, END)
         print(f"written: {args.doc}", file=sys.stderr)
     return 0
 

@@ -23,6 +23,7 @@ from pathlib import Path
 
 from benchmarks import bench as B
 from benchmarks.bench_suite import BEGIN, END
+from benchmarks.sections import section_of
 
 EXIT_OK = 0
 EXIT_BAD_ARGS = 2
@@ -98,10 +99,8 @@ def _suite_section(out: Path) -> str:
     """The node-suite section ``python -m benchmarks bench-suite`` keeps in the same file
     (between its markers): carried over, since this command regenerates everything else."""
     old = out.read_text(encoding="utf-8") if out.is_file() else ""
-    if BEGIN not in old or END not in old or old.index(BEGIN) > old.index(END):
-        return ""
-    start, stop = old.index(BEGIN), old.index(END) + len(END)
-    return "\n" + old[start:stop] + "\n"
+    section = section_of(old, BEGIN, END)
+    return "\n" + section + "\n" if section else ""
 
 
 def write_markdown(out: Path, text: str) -> None:

@@ -1,0 +1,33 @@
+"""The marked section of a document: found, replaced with the rest kept, appended on request."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from benchmarks.sections import has_section, replace_section, section_of
+
+B, E = "<!-- x:begin -->", "<!-- x:end -->"
+
+
+def test_the_section_is_replaced_and_the_rest_kept(tmp_path: Path) -> None:
+    doc = tmp_path / "d.md"
+    doc.write_text(f"{E} head\n{B}\nold\n{E}\ntail {E}\n", encoding="utf-8")
+    replace_section(doc, f"{B}\nnew\n{E}", B, E)
+    assert doc.read_text(encoding="utf-8") == f"{E} head\n{B}\nnew\n{E}\ntail {E}\n"
+    assert section_of(doc.read_text(encoding="utf-8"), B, E) == f"{B}\nnew\n{E}"
+
+
+def test_without_the_marks_it_appends_on_request_or_refuses(tmp_path: Path) -> None:
+    doc = tmp_path / "d.md"
+    doc.write_text(f"head\n{E} before {B}\n", encoding="utf-8")  # no end after the begin
+    assert not has_section(doc.read_text(encoding="utf-8"), B, E)
+    assert section_of(doc.read_text(encoding="utf-8"), B, E) == ""
+    with pytest.raises(ValueError, match="no section between"):
+        replace_section(doc, f"{B}\n{E}", B, E)
+    replace_section(doc, f"{B}\nnew\n{E}", B, E, append=True)
+    assert doc.read_text(encoding="utf-8") == f"head\n{E} before {B}\n\n{B}\nnew\n{E}\n"
+    fresh = tmp_path / "new.md"
+    replace_section(fresh, f"{B}\n{E}", B, E, append=True)
+    assert fresh.read_text(encoding="utf-8") == f"{B}\n{E}\n"
