@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import statistics
 import sys
 import time
@@ -212,7 +213,7 @@ def main(argv: list[str] | None = None) -> int:
                 flush=True,
             )
             points.append(p)
-    command = "python -m benchmarks.convergence " + " ".join(
+    command = "python -m benchmarks.convergence " + shlex.join(
         sys.argv[1:] if argv is None else argv
     )
     data = report(points, args.rtols, args.repeats, command.rstrip())
