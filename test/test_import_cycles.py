@@ -4,10 +4,10 @@ Every ``import`` and ``from ... import`` of a fence_sorter module counts, also o
 function: an import moved into a function hides a cycle from the interpreter, not from the
 design. The graph is read from the sources with ``ast`` (nothing is imported).
 
-An import inside a function is allowed only for a heavy or optional dependency (:data:`HEAVY`,
-or a fence_sorter module that loads one when imported) and says why in a ``# lazy: <why>``
-comment on the import or on the line above it (one comment may head a block of consecutive
-imports). Everything else is imported at the top of its module.
+An import inside a function is allowed only for a heavy or optional dependency
+(:data:`fence_sorter.lazy.HEAVY`, or a fence_sorter module that loads one when imported) and
+says why in a ``# lazy: <why>`` comment on the import or on the line above it (one comment may
+head a block of consecutive imports). Everything else is imported at the top of its module.
 """
 
 from __future__ import annotations
@@ -16,42 +16,11 @@ import ast
 from pathlib import Path
 
 import fence_sorter
+from fence_sorter.lazy import HEAVY
 
 PACKAGE = Path(fence_sorter.__file__).parent
 
 
-#: Dependencies loaded only where used, from ``python -X importtime -c "import M"`` (best of 3,
-#: cumulative, docs/design/imports.md): Numba's compiler and the kernel (~0.4-1.6 s), SciPy's
-#: submodules (0.6-1 s), rclpy (0.25 s) and the ROS message and ament packages (present only in
-#: a ROS environment), Rerun (0.5 s), Dask's scheduler (1.6 s), Matplotlib (0.7-1.3 s), rosbags
-#: and mcap (40-70 ms, only for bag files), websockets (0.1-0.3 s with asyncio, only to serve
-#: Foxglove), CyRK (optional: only the compiled peers of the benchmark, ``cyrk:*``).
-#: numpy (80 ms), yaml and tqdm are imported at the top.
-HEAVY = frozenset(
-    {
-        "numba",
-        "llvmlite",
-        "scipy",
-        "rclpy",
-        "rcl_interfaces",
-        "rosgraph_msgs",
-        "diagnostic_msgs",
-        "fence_sorter_msgs",
-        "tf2_msgs",
-        "geometry_msgs",
-        "sensor_msgs",
-        "std_msgs",
-        "ament_index_python",
-        "rerun",
-        "dask",
-        "distributed",
-        "matplotlib",
-        "rosbags",
-        "mcap",
-        "websockets",
-        "CyRK",
-    }
-)
 LAZY_MARK = "# lazy:"
 
 

@@ -1,0 +1,173 @@
+"""Start-up of the command line: the modules each subcommand's ``--help`` imports, its wall time.
+
+``python -m benchmarks.imports`` runs each command of :data:`COMMANDS` in fresh interpreters:
+once as ``python -X importtime -m fence_sorter.cli.main ARGS`` for the modules it imports and
+which of them are heavy (:data:`fence_sorter.lazy.HEAVY`, by top-level name), then ``--rounds``
+times as ``fence-sorter ARGS`` (the console script of this environment) for the best wall time.
+The figures go, with the command line, commit and load, to docs/reports/imports.json and are
+rendered into the marked section of docs/design/imports.md; ``--from-json`` renders a
+committed JSON again without measuring. Exit codes: 0 done, 2 bad arguments, 1 a command failed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from benchmarks import REPO
+from benchmarks.sections import has_section, replace_section
+from fence_sorter.lazy import HEAVY
+from fence_sorter.verification.machine import git_revision, load_average
+from fence_sorter.verification.report import table
+
+JSON = REPO / "docs" / "reports" / "imports.json"
+DOC = REPO / "docs" / "design" / "imports.md"
+#: the section of DOC the renderer rewrites
+BEGIN, END = "<!-- imports:begin -->", "<!-- imports:end -->"
+#: the commands measured: the top level and the subcommands with the most imports at their top
+COMMANDS = (
+    ("--help",),
+    ("simulate", "--help"),
+    ("run", "--help"),
+    ("calibrate", "--help"),
+    ("topic", "--help"),
+    ("optimize", "--help"),
+)
+
+
+def imported_modules(importtime_stderr: str) -> list[str]:
+    """The modules ``python -X importtime`` reports imported, in order (its header left out)."""
+    modules = []
+    for line in importtime_stderr.splitlines():
+        if line.startswith("import time:") and "|" in line:
+            name = line.rsplit("|", 1)[1].strip()
+            if name != "imported package":
+                modules.append(name)
+    return modules
+
+
+def heavy_of(modules: list[str]) -> list[str]:
+    """The heavy dependencies among ``modules`` (top-level names, sorted)."""
+    return sorted({m.split(".", 1)[0] for m in modules} & HEAVY)
+
+
+def measure(args: tuple[str, ...], rounds: int, script: str) -> dict:
+    """Modules and heavy dependencies of ``fence-sorter ARGS``, and its best wall time [s]."""
+    traced = subprocess.run(
+        [sys.executable, "-X", "importtime", "-m", "fence_sorter.cli.main", *args],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        check=False,
+    )
+    if traced.returncode != 0:
+        raise RuntimeError(f"fence-sorter {' '.join(args)} exited {traced.returncode}")
+    modules = imported_modules(traced.stderr)
+    walls = []
+    for _ in range(rounds):
+        t0 = time.perf_counter()
+        subprocess.run([script, *args], capture_output=True, cwd=REPO, check=True)
+        walls.append(time.perf_counter() - t0)
+    return {
+        "command": " ".join(("fence-sorter", *args)),
+        "modules": len(modules),
+        "heavy": heavy_of(modules),
+        "wall": min(walls),
+    }
+
+
+def render(data: dict) -> str:
+    """The marked section of docs/design/imports.md, from the JSON alone."""
+    rows = [
+        [
+            f"`{c['command']}`",
+            c["modules"],
+            f"{1e3 * c['wall']:.0f}",
+            ", ".join(c["heavy"]) or "none",
+        ]
+        for c in data["commands"]
+    ]
+    lines = [
+        BEGIN,
+        f"<!-- written by `{data['command']}` from docs/reports/imports.json; "
+        "do not edit by hand -->",
+        "",
+        f"At {data['commit']} (load average {data['load_average']} at the start, on 2 cores "
+        "shared with other work, so the module counts are the firm figures): `python -X "
+        "importtime -m fence_sorter.cli.main ARGS` for the modules imported and the heavy ones "
+        f"among them, the best of {data['rounds']} wall times of `fence-sorter ARGS`; measured by "
+        f"`{data['command']}`.",
+        "",
+        *table(["command", "modules imported", "wall time [ms]", "heavy modules loaded"], rows),
+        "",
+        END,
+    ]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(
+        prog="python -m benchmarks.imports",
+        description="Modules imported and wall time of the command line's --help per subcommand.",
+    )
+    ap.add_argument("--rounds", type=int, default=5, help="timed runs per command (best)")
+    ap.add_argument("--json", default=str(JSON), help="where the figures go ('': nowhere)")
+    ap.add_argument(
+        "--doc", default=str(DOC), help="the document whose marked section is rewritten ('': none)"
+    )
+    ap.add_argument(
+        "--from-json", metavar="PATH", help="render this JSON into --doc again, measuring nothing"
+    )
+    args = ap.parse_args(argv)
+    if args.rounds < 1:
+        ap.error(f"--rounds must be >= 1, got {args.rounds}")
+    if args.doc:
+        try:
+            text = Path(args.doc).read_text(encoding="utf-8")
+        except OSError as exc:
+            ap.error(f"--doc: {exc}")
+        if not has_section(text, BEGIN, END):
+            ap.error(f"--doc: {args.doc} has no section between {BEGIN} and {END}")
+    data = None
+    if args.from_json:
+        try:
+            section = render(json.loads(Path(args.from_json).read_text(encoding="utf-8")))
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            ap.error(f"--from-json: {args.from_json}: not an imports report ({exc})")
+    else:
+        script = shutil.which("fence-sorter", path=str(Path(sys.executable).parent))
+        if script is None:
+            ap.error(f"no fence-sorter script beside {sys.executable}: run scripts/bootstrap.sh")
+        command = "python -m benchmarks.imports " + shlex.join(
+            sys.argv[1:] if argv is None else argv
+        )
+        data = {
+            "command": command.rstrip(),
+            "commit": git_revision(REPO),
+            "load_average": load_average(),
+            "rounds": args.rounds,
+        }
+        try:
+            data["commands"] = [measure(c, args.rounds, script) for c in COMMANDS]
+        except (RuntimeError, subprocess.CalledProcessError) as exc:
+            print(f"benchmarks.imports: {exc}", file=sys.stderr)
+            return 1
+        section = render(data)
+    print(section)
+    if data is not None and args.json:
+        Path(args.json).write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
+        print(f"written: {args.json}", file=sys.stderr)
+    if args.doc:
+        replace_section(Path(args.doc), section, BEGIN, END)
+        print(f"written: {args.doc}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
