@@ -12,6 +12,7 @@ committed JSON again without measuring. Exit codes: 0 done, 2 bad arguments, 1 a
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import shlex
 import shutil
@@ -42,14 +43,18 @@ COMMANDS = (
 
 
 def imported_modules(importtime_stderr: str) -> list[str]:
-    """The modules ``python -X importtime`` reports imported, in order (its header left out)."""
-    modules = []
+    """The modules ``python -X importtime`` reports imported by the last interpreter of its
+    output (an interpreter that re-executes itself reports twice), each once, in order; the
+    imports of modules this platform lacks (``nt``, ``_winapi``) are tried, not imported."""
+    modules: dict[str, None] = {}
     for line in importtime_stderr.splitlines():
         if line.startswith("import time:") and "|" in line:
             name = line.rsplit("|", 1)[1].strip()
-            if name != "imported package":
-                modules.append(name)
-    return modules
+            if name == "imported package":  # the header of an interpreter's report
+                modules.clear()
+            elif importlib.util.find_spec(name.split(".", 1)[0]) is not None:
+                modules[name] = None
+    return list(modules)
 
 
 def heavy_of(modules: list[str]) -> list[str]:
