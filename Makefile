@@ -51,7 +51,8 @@ reports: bootstrap
 			--rates 2000,3000,4000,6000,8000,12000 --out docs/reports/line-bench.md \
 		&& nice -n 10 python -m benchmarks.startup --rounds 5 --runs 3 --load 4 \
 			--out docs/reports/startup \
-		&& nice -n 10 python -m benchmarks.convergence
+		&& nice -n 10 python -m benchmarks.convergence \
+		&& nice -n 10 python -m benchmarks.imports
 
 clean:
 	rm -rf .build

@@ -20,6 +20,8 @@ checkout (``source scripts/env.sh`` first):
   docs/reports/versus.md;
 - ``python -m benchmarks.convergence``: the adaptive scheme's convergence with rtol ->
   docs/reports/convergence.json and its section of docs/design/numerics.md;
+- ``python -m benchmarks.imports``: the modules and wall time of the command line's ``--help``
+  -> docs/reports/imports.json and its section of docs/design/imports.md;
 - ``python -m benchmarks.simulator_bench``: the simulator node's pacing in one process;
 - ``python -m benchmarks.rerun_bench [BAG]``: the cost of Rerun logging per frame.
 

@@ -397,6 +397,7 @@ REPORTS = {
     "docs/reports/line-bench.md": "--out docs/reports/line-bench.md",
     "docs/reports/startup/README.md": "python -m benchmarks.startup",
     "docs/reports/convergence.json": "python -m benchmarks.convergence",
+    "docs/reports/imports.json": "python -m benchmarks.imports",
 }
 
 

@@ -8,7 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks import bench, convergence, faults, startup, versus
+from benchmarks import bench, convergence, faults, imports, startup, versus
+from benchmarks.sections import section_of
 from fence_sorter.verification import accuracy, stability_report
 from fence_sorter.verification.report import fmt, table, tables
 
@@ -226,7 +227,7 @@ def test_numerics_convergence_section_is_its_json_rendered() -> None:
     rendered, and its figures are the points' own: one row per scene, a cell per rtol."""
     data = json.loads((DOCS / "convergence.json").read_text(encoding="utf-8"))
     doc = (DOCS.parent / "design" / "numerics.md").read_text(encoding="utf-8")
-    section = doc[doc.index(convergence.BEGIN) : doc.index(convergence.END) + len(convergence.END)]
+    section = section_of(doc, convergence.BEGIN, convergence.END)
     assert section == convergence.render(data)
     (rendered,) = tables(section)
     scenes = {p["scene"] for p in data["points"]}
@@ -237,3 +238,16 @@ def test_numerics_convergence_section_is_its_json_rendered() -> None:
     assert f"{first['error']:.1e} / {first['steps']} / " in rendered[2]
     assert data["command"].startswith("python -m benchmarks.convergence")
     assert f"at {data['commit']} by `{data['command']}`" in section
+
+
+def test_imports_section_is_its_json_rendered_and_no_help_loads_a_heavy_module() -> None:
+    """docs/design/imports.md's measured section is docs/reports/imports.json rendered, with a
+    row per command of the campaign; none of them loaded a heavy dependency (what the section
+    and the lazy dispatch of the command line promise)."""
+    data = json.loads((DOCS / "imports.json").read_text(encoding="utf-8"))
+    doc = (DOCS.parent / "design" / "imports.md").read_text(encoding="utf-8")
+    assert section_of(doc, imports.BEGIN, imports.END) == imports.render(data)
+    (rendered,) = tables(imports.render(data))
+    assert len(rendered) == 2 + len(imports.COMMANDS) == 2 + len(data["commands"])
+    assert [c["heavy"] for c in data["commands"]] == [[]] * len(imports.COMMANDS)
+    assert all(c["modules"] > 50 and c["wall"] > 0 for c in data["commands"])
