@@ -144,6 +144,9 @@ def _decision_points() -> tuple[dict, ...]:
 
 def _defs() -> dict[str, SweepDef]:
     alpha = ("alpha_k_deg", "alpha_k [deg]")
+    length = ("load_length", "load length A [m]")
+    a_ndop = ("a_ndop", "a_Ndop [m/s^2]")
+    fig8_points = ("fig8", _fig8(C_POS))  # Fig. 9 is drawn from the optima of Fig. 8
     defs = [
         SweepDef(
             "fig3",
@@ -174,8 +177,7 @@ def _defs() -> dict[str, SweepDef]:
             "arbitrary placement, (7)-(10), alpha_k 40 deg, B 0.1 m: vs load length A and w_dop",
             "fig5",
             _fig5(),
-            "load_length",
-            "load length A [m]",
+            *length,
             "w_dop",
             "w_dop [m/s]",
             (P_WT, P_RS, P_RZ),
@@ -187,8 +189,7 @@ def _defs() -> dict[str, SweepDef]:
             "fig6",
             _fig6(C_POS),
             *alpha,
-            "a_ndop",
-            "a_Ndop [m/s^2]",
+            *a_ndop,
             (P_T1, P_WT, P_RS, P_V, P_RZ, P_EXIT),
         ),
         SweepDef(
@@ -198,32 +199,25 @@ def _defs() -> dict[str, SweepDef]:
             "fig7",
             _fig6(C_POS12),
             *alpha,
-            "a_ndop",
-            "a_Ndop [m/s^2]",
+            *a_ndop,
             (P_T1, P_WT, P_ACC),
         ),
         SweepDef(
             "fig8",
             "Fig. 8",
             "positioned, (7), (8), (11), alpha_k 40 deg, B 0.1 m: vs load length A and a_Ndop",
-            "fig8",
-            _fig8(C_POS),
-            "load_length",
-            "load length A [m]",
-            "a_ndop",
-            "a_Ndop [m/s^2]",
+            *fig8_points,
+            *length,
+            *a_ndop,
             (P_T1, P_WT, P_RS),
         ),
         SweepDef(
             "fig9",
             "Fig. 9",
             "exit speed towards the chute of the Fig. 8 optima (worst centre of gravity)",
-            "fig8",
-            _fig8(C_POS),
-            "load_length",
-            "load length A [m]",
-            "a_ndop",
-            "a_Ndop [m/s^2]",
+            *fig8_points,
+            *length,
+            *a_ndop,
             (P_EXIT,),
         ),
         SweepDef(
@@ -232,10 +226,8 @@ def _defs() -> dict[str, SweepDef]:
             "positioned, (7), (8), (11) and (12), alpha_k 40 deg: vs load length A and a_Ndop",
             "fig10",
             _fig8(C_POS12),
-            "load_length",
-            "load length A [m]",
-            "a_ndop",
-            "a_Ndop [m/s^2]",
+            *length,
+            *a_ndop,
             (P_T1, P_WT, P_V),
         ),
     ]
@@ -247,8 +239,7 @@ def _defs() -> dict[str, SweepDef]:
             "fig7-fixed-rz",
             _fig7_fixed_rz(),
             *alpha,
-            "a_ndop",
-            "a_Ndop [m/s^2]",
+            *a_ndop,
             (P_T1, P_WT, P_ACC, P_RS, P_V, P_EXIT),
         ),
         SweepDef(
@@ -257,10 +248,8 @@ def _defs() -> dict[str, SweepDef]:
             "as Fig. 10 with the fence length held at 1.2 m (section 4.3)",
             "fig10-fixed-rz",
             _fig8(C_POS12, FIXED_RZ),
-            "load_length",
-            "load length A [m]",
-            "a_ndop",
-            "a_Ndop [m/s^2]",
+            *length,
+            *a_ndop,
             (P_T1, P_WT, P_V, P_ACC, P_RS, P_EXIT),
         ),
     ]
