@@ -13,7 +13,6 @@ test/campaigns/test_reports.py that the committed section is the committed JSON 
 from __future__ import annotations
 
 import argparse
-import json
 import shlex
 import statistics
 import sys
@@ -24,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import REPO
-from benchmarks.sections import has_section, replace_section
+from benchmarks.sections import SectionReport
 from fence_sorter.physics.params import ParameterError, SolverParams
 from fence_sorter.physics.simulate import simulate
 from fence_sorter.physics.stepper import collector_off
@@ -157,6 +156,9 @@ def render(data: dict) -> str:
     return "\n".join(lines)
 
 
+REPORT = SectionReport("convergence", JSON, DOC, BEGIN, END, render)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
         prog="python -m benchmarks.convergence",
@@ -166,28 +168,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scenes", nargs="*", default=list(SCENES))
     ap.add_argument("--rtols", nargs="*", type=float, default=list(RTOLS))
     ap.add_argument("--repeats", type=int, default=3, help="timed solves per point (median)")
-    ap.add_argument("--json", default=str(JSON), help="where the figures go ('' : nowhere)")
-    ap.add_argument(
-        "--doc", default=str(DOC), help="the document whose marked section is rewritten ('': none)"
-    )
-    ap.add_argument(
-        "--from-json", metavar="PATH", help="render this JSON into --doc again, measuring nothing"
-    )
+    REPORT.add_arguments(ap)
     args = ap.parse_args(argv)
-    if args.doc:
-        try:
-            text = Path(args.doc).read_text(encoding="utf-8")
-        except OSError as exc:
-            ap.error(f"--doc: {exc}")
-        if not has_section(text, BEGIN, END):
-            ap.error(f"--doc: {args.doc} has no section between {BEGIN} and {END}")
-    if args.from_json:
-        try:
-            data = json.loads(Path(args.from_json).read_text(encoding="utf-8"))
-            section = render(data)
-        except (OSError, ValueError, KeyError, TypeError) as exc:
-            ap.error(f"--from-json: {args.from_json}: not a convergence report ({exc})")
-        return _write(section, None, args)
+    section = REPORT.rendered_again(ap, args)
+    if section is not None:
+        return REPORT.write(section, None, args)
     for scene in args.scenes:
         if scene not in SCENES:
             ap.error(f"--scenes: unknown scene {scene!r}; one of {', '.join(SCENES)}")
@@ -217,19 +202,7 @@ def main(argv: list[str] | None = None) -> int:
         sys.argv[1:] if argv is None else argv
     )
     data = report(points, args.rtols, args.repeats, command.rstrip())
-    return _write(render(data), data, args)
-
-
-def _write(section: str, data: dict | None, args: argparse.Namespace) -> int:
-    """Print the section; write the JSON (when measured) and the document where asked."""
-    print(section)
-    if data is not None and args.json:
-        Path(args.json).write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
-        print(f"written: {args.json}", file=sys.stderr)
-    if args.doc:
-        replace_section(Path(args.doc), section, BEGIN, END)
-        print(f"written: {args.doc}", file=sys.stderr)
-    return 0
+    return REPORT.write(render(data), data, args)
 
 
 if __name__ == "__main__":

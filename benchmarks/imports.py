@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
-import json
 import shlex
 import shutil
 import subprocess
@@ -22,7 +21,7 @@ import time
 from pathlib import Path
 
 from benchmarks import REPO
-from benchmarks.sections import has_section, replace_section
+from benchmarks.sections import SectionReport
 from fence_sorter.lazy import HEAVY
 from fence_sorter.verification.machine import git_revision, load_average
 from fence_sorter.verification.report import table
@@ -116,36 +115,22 @@ def render(data: dict) -> str:
     return "\n".join(lines)
 
 
+REPORT = SectionReport("imports", JSON, DOC, BEGIN, END, render)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
         prog="python -m benchmarks.imports",
         description="Modules imported and wall time of the command line's --help per subcommand.",
     )
     ap.add_argument("--rounds", type=int, default=5, help="timed runs per command (best)")
-    ap.add_argument("--json", default=str(JSON), help="where the figures go ('': nowhere)")
-    ap.add_argument(
-        "--doc", default=str(DOC), help="the document whose marked section is rewritten ('': none)"
-    )
-    ap.add_argument(
-        "--from-json", metavar="PATH", help="render this JSON into --doc again, measuring nothing"
-    )
+    REPORT.add_arguments(ap)
     args = ap.parse_args(argv)
     if args.rounds < 1:
         ap.error(f"--rounds must be >= 1, got {args.rounds}")
-    if args.doc:
-        try:
-            text = Path(args.doc).read_text(encoding="utf-8")
-        except OSError as exc:
-            ap.error(f"--doc: {exc}")
-        if not has_section(text, BEGIN, END):
-            ap.error(f"--doc: {args.doc} has no section between {BEGIN} and {END}")
+    section = REPORT.rendered_again(ap, args)
     data = None
-    if args.from_json:
-        try:
-            section = render(json.loads(Path(args.from_json).read_text(encoding="utf-8")))
-        except (OSError, ValueError, KeyError, TypeError) as exc:
-            ap.error(f"--from-json: {args.from_json}: not an imports report ({exc})")
-    else:
+    if section is None:
         script = shutil.which("fence-sorter", path=str(Path(sys.executable).parent))
         if script is None:
             ap.error(f"no fence-sorter script beside {sys.executable}: run scripts/bootstrap.sh")
@@ -164,14 +149,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"benchmarks.imports: {exc}", file=sys.stderr)
             return 1
         section = render(data)
-    print(section)
-    if data is not None and args.json:
-        Path(args.json).write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
-        print(f"written: {args.json}", file=sys.stderr)
-    if args.doc:
-        replace_section(Path(args.doc), section, BEGIN, END)
-        print(f"written: {args.doc}", file=sys.stderr)
-    return 0
+    return REPORT.write(section, data, args)
 
 
 if __name__ == "__main__":

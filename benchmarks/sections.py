@@ -7,6 +7,11 @@ comments of its own; these functions are the one place that finds and replaces t
 
 from __future__ import annotations
 
+import argparse
+import json
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 
@@ -40,3 +45,53 @@ def replace_section(path: Path, section: str, begin: str, end: str, append: bool
     else:
         raise ValueError(f"{path} has no section between {begin} and {end}")
     path.write_text(text, encoding="utf-8")
+
+
+@dataclass(frozen=True)
+class SectionReport:
+    """A campaign whose figures go to a JSON and are rendered into a marked section of a
+    document: its ``--json``, ``--doc`` and ``--from-json`` options, their checks and writing."""
+
+    name: str  # the campaign, as its error lines name it
+    json_path: Path
+    doc_path: Path
+    begin: str
+    end: str
+    render: Callable[[dict], str]
+
+    def add_arguments(self, ap: argparse.ArgumentParser) -> None:
+        ap.add_argument("--json", default=str(self.json_path), help="the figures' file ('': none)")
+        ap.add_argument(
+            "--doc", default=str(self.doc_path), help="the document whose section is rewritten"
+        )
+        ap.add_argument(
+            "--from-json", metavar="PATH", help="render this JSON into --doc, measuring nothing"
+        )
+
+    def rendered_again(self, ap: argparse.ArgumentParser, args: argparse.Namespace) -> str | None:
+        """Check ``--doc`` (exit 2 when it has no section); the section ``--from-json`` renders,
+        None when the campaign is to measure."""
+        if args.doc:
+            try:
+                text = Path(args.doc).read_text(encoding="utf-8")
+            except OSError as exc:
+                ap.error(f"--doc: {exc}")
+            if not has_section(text, self.begin, self.end):
+                ap.error(f"--doc: {args.doc} has no section between {self.begin} and {self.end}")
+        if not args.from_json:
+            return None
+        try:
+            return self.render(json.loads(Path(args.from_json).read_text(encoding="utf-8")))
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            ap.error(f"--from-json: {args.from_json}: not a {self.name} report ({exc})")
+
+    def write(self, section: str, data: dict | None, args: argparse.Namespace) -> int:
+        """Print the section; write the JSON (when measured) and the document where asked."""
+        print(section)
+        if data is not None and args.json:
+            Path(args.json).write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
+            print(f"written: {args.json}", file=sys.stderr)
+        if args.doc:
+            replace_section(Path(args.doc), section, self.begin, self.end)
+            print(f"written: {args.doc}", file=sys.stderr)
+        return 0
