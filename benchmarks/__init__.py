@@ -22,6 +22,8 @@ checkout (``source scripts/env.sh`` first):
   docs/reports/convergence.json and its section of docs/design/numerics.md;
 - ``python -m benchmarks.imports``: the modules and wall time of the command line's ``--help``
   -> docs/reports/imports.json and its section of docs/design/imports.md;
+- ``python -m benchmarks.dt_max``: the adaptive step cap on a stiff scene ->
+  docs/reports/dt_max.json and its section of docs/design/numerics.md;
 - ``python -m benchmarks.simulator_bench``: the simulator node's pacing in one process;
 - ``python -m benchmarks.rerun_bench [BAG]``: the cost of Rerun logging per frame.
 
