@@ -52,7 +52,8 @@ reports: bootstrap
 		&& nice -n 10 python -m benchmarks.startup --rounds 5 --runs 3 --load 4 \
 			--out docs/reports/startup \
 		&& nice -n 10 python -m benchmarks.convergence \
-		&& nice -n 10 python -m benchmarks.imports
+		&& nice -n 10 python -m benchmarks.imports \
+		&& nice -n 10 python -m benchmarks.dt_max
 
 clean:
 	rm -rf .build

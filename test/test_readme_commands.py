@@ -398,6 +398,7 @@ REPORTS = {
     "docs/reports/startup/README.md": "python -m benchmarks.startup",
     "docs/reports/convergence.json": "python -m benchmarks.convergence",
     "docs/reports/imports.json": "python -m benchmarks.imports",
+    "docs/reports/dt_max.json": "python -m benchmarks.dt_max",
 }
 
 

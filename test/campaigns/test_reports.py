@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks import bench, convergence, faults, imports, startup, versus
+from benchmarks import bench, convergence, dt_max, faults, imports, startup, versus
 from benchmarks.sections import section_of
 from fence_sorter.verification import accuracy, stability_report
 from fence_sorter.verification.report import fmt, table, tables
@@ -251,3 +251,15 @@ def test_imports_section_is_its_json_rendered_and_no_help_loads_a_heavy_module()
     assert len(rendered) == 2 + len(imports.COMMANDS) == 2 + len(data["commands"])
     assert [c["heavy"] for c in data["commands"]] == [[]] * len(imports.COMMANDS)
     assert all(c["modules"] > 50 and c["wall"] > 0 for c in data["commands"])
+
+
+def test_numerics_dt_max_section_is_its_json_rendered() -> None:
+    """The dt_max section of docs/design/numerics.md is docs/reports/dt_max.json rendered: a
+    column per cap, its steps and error those of the JSON's rows."""
+    data = json.loads((DOCS / "dt_max.json").read_text(encoding="utf-8"))
+    doc = (DOCS.parent / "design" / "numerics.md").read_text(encoding="utf-8")
+    assert section_of(doc, dt_max.BEGIN, dt_max.END) == dt_max.render(data)
+    (rendered,) = tables(dt_max.render(data))
+    assert rendered[0].count("|") == 2 + len(data["rows"])
+    cells = rendered[3].split("|")[2:-1]  # steps / rejected
+    assert [c.strip() for c in cells] == [f"{r['steps']}/{r['rejected']}" for r in data["rows"]]
