@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import REPO
-from benchmarks.sections import SectionReport
+from benchmarks.sections import SectionReport, framed
 from fence_sorter.physics.params import ParameterError, SolverParams
 from fence_sorter.physics.simulate import simulate
 from fence_sorter.physics.stepper import collector_off
@@ -138,11 +138,7 @@ def report(points: list[ConvergencePoint], rtols, repeats: int, command: str) ->
 
 def render(data: dict) -> str:
     """The marked section of docs/design/numerics.md, from the JSON alone."""
-    lines = [
-        BEGIN,
-        f"<!-- written by `{data['command']}` from docs/reports/convergence.json; "
-        "do not edit by hand -->",
-        "",
+    body = [
         f"Error / steps / median wall ms of {data['repeats']} solves per cell "
         f"(atol = {data['atol_per_rtol']:g} rtol), measured at {data['commit']} by "
         f"`{data['command']}` (load average {data['load_average']} at the start, on 2 cores "
@@ -150,10 +146,8 @@ def render(data: dict) -> str:
         "few ms is preempted):",
         "",
         *table(points_of(data), tuple(data["rtols"])),
-        "",
-        END,
     ]
-    return "\n".join(lines)
+    return framed(BEGIN, END, "docs/reports/convergence.json", data["command"], body)
 
 
 REPORT = SectionReport("convergence", JSON, DOC, BEGIN, END, render)

@@ -19,7 +19,7 @@ from dataclasses import replace
 
 from benchmarks import REPO
 from benchmarks.convergence import reference_peak
-from benchmarks.sections import SectionReport
+from benchmarks.sections import SectionReport, framed
 from fence_sorter.physics.params import ParameterError
 from fence_sorter.physics.simulate import simulate
 from fence_sorter.physics.stepper import collector_off
@@ -75,11 +75,7 @@ def measure(scene: str, dt_max_ms: list[float], rounds: int) -> list[dict]:
 def render(data: dict) -> str:
     """The marked section of docs/design/numerics.md, from the JSON alone."""
     rows = data["rows"]
-    lines = [
-        BEGIN,
-        f"<!-- written by `{data['command']}` from docs/reports/dt_max.json; "
-        "do not edit by hand -->",
-        "",
+    body = [
         f"{data['scene']}, median of {data['rounds']} interleaved solves per value, measured at "
         f"{data['commit']} by `{data['command']}` (load average {data['load_average']} at the "
         "start, on 2 cores shared with other work):",
@@ -92,10 +88,8 @@ def render(data: dict) -> str:
                 ["peak-N error", *(f"{r['error']:.2e}" for r in rows)],
             ],
         ),
-        "",
-        END,
     ]
-    return "\n".join(lines)
+    return framed(BEGIN, END, "docs/reports/dt_max.json", data["command"], body)
 
 
 REPORT = SectionReport("dt_max", JSON, DOC, BEGIN, END, render)

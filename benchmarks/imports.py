@@ -21,7 +21,7 @@ import time
 from pathlib import Path
 
 from benchmarks import REPO
-from benchmarks.sections import SectionReport
+from benchmarks.sections import SectionReport, framed
 from fence_sorter.lazy import HEAVY
 from fence_sorter.verification.machine import git_revision, load_average
 from fence_sorter.verification.report import table
@@ -97,11 +97,7 @@ def render(data: dict) -> str:
         ]
         for c in data["commands"]
     ]
-    lines = [
-        BEGIN,
-        f"<!-- written by `{data['command']}` from docs/reports/imports.json; "
-        "do not edit by hand -->",
-        "",
+    body = [
         f"At {data['commit']} (load average {data['load_average']} at the start, on 2 cores "
         "shared with other work, so the module counts are the firm figures): `python -X "
         "importtime -m fence_sorter.cli.main ARGS` for the modules imported and the heavy ones "
@@ -109,10 +105,8 @@ def render(data: dict) -> str:
         f"`{data['command']}`.",
         "",
         *table(["command", "modules imported", "wall time [ms]", "heavy modules loaded"], rows),
-        "",
-        END,
     ]
-    return "\n".join(lines)
+    return framed(BEGIN, END, "docs/reports/imports.json", data["command"], body)
 
 
 REPORT = SectionReport("imports", JSON, DOC, BEGIN, END, render)

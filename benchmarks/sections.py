@@ -33,6 +33,13 @@ def section_of(text: str, begin: str, end: str) -> str:
     return text[span[0] : span[1]] if span else ""
 
 
+def framed(begin: str, end: str, source: str, command: str, body: list[str]) -> str:
+    """A rendered section: the marks around ``body``, with the command and the JSON (``source``)
+    it is written from, so a reader knows not to edit it by hand."""
+    note = f"<!-- written by `{command}` from {source}; do not edit by hand -->"
+    return "\n".join([begin, note, "", *body, "", end])
+
+
 def replace_section(path: Path, section: str, begin: str, end: str, append: bool = False) -> None:
     """Replace the marked section of ``path`` by ``section`` (which carries the markers); a
     document without one gets it appended when ``append``, else ValueError."""

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks.sections import has_section, replace_section, section_of
+from benchmarks.sections import framed, has_section, replace_section, section_of
 
 B, E = "<!-- x:begin -->", "<!-- x:end -->"
 
@@ -31,3 +31,18 @@ def test_without_the_marks_it_appends_on_request_or_refuses(tmp_path: Path) -> N
     fresh = tmp_path / "new.md"
     replace_section(fresh, f"{B}\n{E}", B, E, append=True)
     assert fresh.read_text(encoding="utf-8") == f"{B}\n{E}\n"
+
+
+def test_a_framed_section_names_its_command_and_source_and_is_found_again() -> None:
+    text = framed(B, E, "docs/reports/x.json", "python -m benchmarks.x --n 2", ["| a |", "|---|"])
+    assert text.splitlines() == [
+        B,
+        "<!-- written by `python -m benchmarks.x --n 2` from docs/reports/x.json; "
+        "do not edit by hand -->",
+        "",
+        "| a |",
+        "|---|",
+        "",
+        E,
+    ]
+    assert section_of(f"intro\n{text}\nrest", B, E) == text
