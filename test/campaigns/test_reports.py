@@ -164,10 +164,7 @@ def without_suite_section(markdown: str) -> str:
     ``python -m benchmarks bench-suite`` keeps in the same file."""
     from benchmarks.bench_suite import BEGIN, END
 
-    if BEGIN in markdown and END in markdown:
-        head, rest = markdown.split(BEGIN, 1)
-        return head + rest.split(END, 1)[1]
-    return markdown
+    return markdown.replace(section_of(markdown, BEGIN, END), "", 1)
 
 
 @pytest.mark.skipif(
@@ -216,7 +213,7 @@ def test_calibration_md_figures_are_its_json_rendered() -> None:
 
     data = json.loads((DOCS / "calibration.json").read_text(encoding="utf-8"))
     doc = (DOCS / "calibration.md").read_text(encoding="utf-8")
-    section = doc[doc.index(calibration_bench.BEGIN) : doc.index(calibration_bench.END)]
+    section = section_of(doc, calibration_bench.BEGIN, calibration_bench.END)
     rendered = tables(calibration_bench.render(data, data["command"], data["commit"]))
     assert len(rendered) >= 2
     assert tables(section) == rendered
