@@ -219,9 +219,16 @@ def timing(parcels: int, workers=None, scheduler="processes") -> dict:
             "cpus": os.cpu_count()}  # fmt: skip
 
 
+def machine() -> dict:
+    """The machine a measurement ran on, as the report names it."""
+    return {"arch": platform.machine(), "cpus": os.cpu_count()}
+
+
 def render(report: dict, command: str, commit: str) -> str:
-    lines = [BEGIN, "", f"Measured by `{command}` at {commit} ({platform.machine()}, "
-             f"{os.cpu_count()} CPUs).", ""]  # fmt: skip
+    """The generated section of docs/reports/calibration.md, from the report alone."""
+    m = report["machine"]
+    lines = [BEGIN, "", f"Measured by `{command}` at {commit} ({m['arch']}, {m['cpus']} CPUs).",
+             ""]  # fmt: skip
     cov = report.get("coverage")
     if cov:
         lines += _render_coverage(cov)

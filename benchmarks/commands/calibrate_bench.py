@@ -88,13 +88,15 @@ def run(args: argparse.Namespace) -> int:
         try:
             report = json.loads(Path(args.from_json).read_text(encoding="utf-8"))
             command, commit = report["command"], report["commit"]
-        except (OSError, ValueError, KeyError) as exc:
+            if not {"arch", "cpus"} <= set(report["machine"]):
+                raise KeyError("machine: arch, cpus")
+        except (OSError, ValueError, KeyError, TypeError) as exc:
             return error(f"--from-json {args.from_json}: not a calibrate-bench JSON ({exc})")
     else:
         report = measure(bench, args)
         commit = git_revision(REPO)
         command = "nice -n 10 python -m benchmarks calibrate-bench " + " ".join(sys.argv[2:])
-        report.update(command=command.strip(), commit=commit)
+        report.update(command=command.strip(), commit=commit, machine=bench.machine())
     section = bench.render(report, command.strip(), commit)
     if args.json and not args.from_json:
         Path(args.json).write_text(json.dumps(report, indent=1, default=str), encoding="utf-8")

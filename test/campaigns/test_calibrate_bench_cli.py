@@ -44,6 +44,7 @@ def test_from_json_renders_the_measured_figures_with_their_command(tmp_path, cap
     report = {
         "command": "nice -n 10 python -m benchmarks calibrate-bench --seeds 2",
         "commit": "abc1234",
+        "machine": {"arch": "riscv64", "cpus": 64},
         "coverage": {"seeds": 2, "parcels": 8, "share_inside": dict.fromkeys(TRUTH, 0.5),
                      "share_inside_first": dict.fromkeys(TRUTH, 0.5),
                      "rms_z": dict.fromkeys(TRUTH, 1.8), "median_rel_halfwidth":
@@ -59,6 +60,7 @@ def test_from_json_renders_the_measured_figures_with_their_command(tmp_path, cap
     assert text.startswith("before\n") and text.endswith("\nafter\n")
     assert "stale figures" not in text
     assert "`nice -n 10 python -m benchmarks calibrate-bench --seeds 2` at abc1234" in text
+    assert "at abc1234 (riscv64, 64 CPUs)." in text  # the machine of the JSON, not this one
     assert "| 100 | " + " | ".join(["+0.50"] * n) + " |" in text
     assert "| 101 | " + " | ".join(["**-2.50**"] * n) + " |" in text
     assert "50 % (1 of 2; " in text
@@ -87,7 +89,8 @@ def test_from_json_renders_blocks_the_first_seeds_later_misses_and_fresh_noise(
             }
         ],
     }
-    report = {"command": "c", "commit": "abc1234", "fresh_noise": fresh,
+    report = {"command": "c", "commit": "abc1234", "machine": {"arch": "x86_64", "cpus": 2},
+              "fresh_noise": fresh,
               "coverage": {"seeds": 40, "parcels": 8, "rows": rows}}  # fmt: skip
     src = tmp_path / "bench.json"
     src.write_text(json.dumps(report), encoding="utf-8")
