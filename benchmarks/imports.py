@@ -4,6 +4,8 @@
 once as ``python -X importtime -m fence_sorter.cli.main ARGS`` for the modules it imports and
 which of them are heavy (:data:`fence_sorter.lazy.HEAVY`, by top-level name), then ``--rounds``
 times as ``fence-sorter ARGS`` (the console script of this environment) for the best wall time.
+Then each module of :data:`MODULES` is imported alone (``python -X importtime -c "import M"``)
+for the modules and heavy dependencies it loads, and whether the compiled kernel is among them.
 The figures go, with the command line, commit and load, to docs/reports/imports.json and are
 rendered into the marked section of docs/design/imports.md; ``--from-json`` renders a
 committed JSON again without measuring. Exit codes: 0 done, 2 bad arguments, 1 a command failed.
@@ -39,6 +41,15 @@ COMMANDS = (
     ("topic", "--help"),
     ("optimize", "--help"),
 )
+#: the modules whose import a node process or a scene reader pays before its first line runs
+MODULES = (
+    "fence_sorter.nodes.scanner",
+    "fence_sorter.nodes.controller",
+    "fence_sorter.nodes.simulator",
+    "fence_sorter.nodes.recorder",
+    "fence_sorter.scene",
+)
+KERNEL = "fence_sorter.physics.kernel"
 
 
 def imported_modules(importtime_stderr: str) -> list[str]:
@@ -86,6 +97,26 @@ def measure(args: tuple[str, ...], rounds: int, script: str) -> dict:
     }
 
 
+def measure_module(module: str) -> dict:
+    """Modules and heavy dependencies that importing ``module`` in a fresh interpreter loads."""
+    traced = subprocess.run(
+        [sys.executable, "-X", "importtime", "-c", f"import {module}"],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        check=False,
+    )
+    if traced.returncode != 0:
+        raise RuntimeError(f"import {module} exited {traced.returncode}")
+    modules = imported_modules(traced.stderr)
+    return {
+        "module": module,
+        "modules": len(modules),
+        "heavy": heavy_of(modules),
+        "kernel": any(m == KERNEL or m.startswith(KERNEL + ".") for m in modules),
+    }
+
+
 def render(data: dict) -> str:
     """The marked section of docs/design/imports.md, from the JSON alone."""
     rows = [
@@ -105,6 +136,22 @@ def render(data: dict) -> str:
         f"`{data['command']}`.",
         "",
         *table(["command", "modules imported", "wall time [ms]", "heavy modules loaded"], rows),
+        "",
+        'Importing one module alone (`python -X importtime -c "import M"`), as a node process '
+        "or a reader of a scene does first:",
+        "",
+        *table(
+            ["module", "modules imported", "heavy modules loaded", "the kernel"],
+            [
+                [
+                    f"`{m['module']}`",
+                    m["modules"],
+                    ", ".join(m["heavy"]) or "none",
+                    "yes" if m["kernel"] else "no",
+                ]
+                for m in data["modules"]
+            ],
+        ),
     ]
     return framed(BEGIN, END, "docs/reports/imports.json", data["command"], body)
 
@@ -139,6 +186,7 @@ def main(argv: list[str] | None = None) -> int:
         }
         try:
             data["commands"] = [measure(c, args.rounds, script) for c in COMMANDS]
+            data["modules"] = [measure_module(m) for m in MODULES]
         except (RuntimeError, subprocess.CalledProcessError) as exc:
             print(f"benchmarks.imports: {exc}", file=sys.stderr)
             return 1

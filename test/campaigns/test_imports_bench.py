@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks.imports import COMMANDS, heavy_of, imported_modules, main, measure
+from benchmarks.imports import COMMANDS, heavy_of, imported_modules, main, measure, measure_module
 
 IMPORTTIME = """import time: self [us] | cumulative | imported package
 import time:        99 |         99 |   encodings
@@ -78,3 +78,11 @@ def test_bad_arguments_exit_2_with_one_line_naming_them(args, names, capsys) -> 
         main(args)
     assert exc.value.code == 2
     assert names in capsys.readouterr().err.strip().splitlines()[-1]
+
+
+def test_importing_one_module_names_its_heavy_dependencies_and_the_kernel() -> None:
+    scene = measure_module("fence_sorter.scene")
+    assert scene["heavy"] == [] and not scene["kernel"] and scene["modules"] > 20
+    kernel = measure_module("fence_sorter.physics.kernel")
+    assert kernel["kernel"] and "numba" in kernel["heavy"]
+    assert kernel["modules"] > scene["modules"]
