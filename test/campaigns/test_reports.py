@@ -244,10 +244,17 @@ def test_imports_section_is_its_json_rendered_and_no_help_loads_a_heavy_module()
     data = json.loads((DOCS / "imports.json").read_text(encoding="utf-8"))
     doc = (DOCS.parent / "design" / "imports.md").read_text(encoding="utf-8")
     assert section_of(doc, imports.BEGIN, imports.END) == imports.render(data)
-    (rendered,) = tables(imports.render(data))
+    rendered = tables(imports.render(data))[0]
     assert len(rendered) == 2 + len(imports.COMMANDS) == 2 + len(data["commands"])
     assert [c["heavy"] for c in data["commands"]] == [[]] * len(imports.COMMANDS)
     assert all(c["modules"] > 50 and c["wall"] > 0 for c in data["commands"])
+    # what the text beside the table says of the modules a node or a scene reader imports
+    of = {m["module"].rsplit(".", 1)[1]: m for m in data["modules"]}
+    assert len(tables(imports.render(data))) == 2 and len(of) == len(imports.MODULES)
+    assert of["scene"]["heavy"] == [] and not of["scene"]["kernel"]
+    assert not of["scanner"]["kernel"] and not of["recorder"]["kernel"]
+    assert "rclpy" in of["scanner"]["heavy"] and "numba" not in of["recorder"]["heavy"]
+    assert of["controller"]["kernel"] and of["simulator"]["kernel"]
 
 
 def test_numerics_dt_max_section_is_its_json_rendered() -> None:
