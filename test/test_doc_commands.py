@@ -5,14 +5,18 @@ docs/ (the generated reports included) that starts with ``fence-sorter`` or ``py
 (after ``nice``, ``&&`` or environment assignments). ``fence-sorter SUB`` and ``python -m
 benchmarks SUB`` must name a subcommand their ``--help`` lists, each ``--option`` of the
 command must be one that subcommand's parser accepts, and ``python -m MODULE`` must name a
-module of this checkout. All in this process: the top-level help is formatted from the same
-parser the command line builds, and only the named subcommand's module is imported.
+module of this checkout (a campaign's ``--help`` listing each ``--option`` named). All in this
+process: the top-level help is formatted from the same parser the command line builds, and
+only the named subcommand's module is imported.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import importlib
 import importlib.util
+import io
 import re
 import shlex
 from functools import cache
@@ -95,6 +99,15 @@ def options_of(prog: str, sub: str) -> frozenset[str]:
     return frozenset(options)
 
 
+@cache
+def module_options(module: str) -> frozenset[str]:
+    """The options ``python -m MODULE --help`` lists, from its ``main(["--help"])`` run here."""
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out), pytest.raises(SystemExit):
+        importlib.import_module(module).main(["--help"])
+    return frozenset(re.findall(r"(?<![\w-])--[a-z][a-z0-9-]*", out.getvalue()))
+
+
 COMMANDS = documented_commands()
 
 
@@ -128,6 +141,10 @@ def test_named_command_exists(doc: str, words: tuple[str, ...]) -> None:
         assert importlib.util.find_spec(module) is not None, (
             f"{doc}: `{' '.join(words)}`: no module {module}"
         )
+    named = [w.split("=", 1)[0] for w in words[3:] if w.startswith("--")]
+    if named and module.startswith("benchmarks."):
+        unknown = [o for o in named if o not in module_options(module)]
+        assert unknown == [], f"{doc}: `{' '.join(words)}`: {module} has no {unknown}"
 
 
 def test_commands_are_found_in_spans_blocks_and_chains() -> None:
@@ -142,3 +159,9 @@ def test_commands_are_found_in_spans_blocks_and_chains() -> None:
     assert commands_in("source scripts/env.sh && A=1 fence-sorter run --rtf 0") == [
         ["fence-sorter", "run", "--rtf", "0"]
     ]
+
+
+def test_a_campaigns_options_are_read_from_its_help() -> None:
+    assert {"--rounds", "--runs", "--load", "--out"} <= module_options("benchmarks.startup")
+    assert {"--dt-max", "--rounds", "--from-json"} <= module_options("benchmarks.dt_max")
+    assert "--bogus" not in module_options("benchmarks.dt_max")
