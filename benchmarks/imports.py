@@ -72,25 +72,32 @@ def heavy_of(modules: list[str]) -> list[str]:
     return sorted({m.split(".", 1)[0] for m in modules} & HEAVY)
 
 
-def measure(args: tuple[str, ...], rounds: int, script: str) -> dict:
-    """Modules and heavy dependencies of ``fence-sorter ARGS``, and its best wall time [s]."""
-    traced = subprocess.run(
-        [sys.executable, "-X", "importtime", "-m", "fence_sorter.cli.main", *args],
+def traced(what: str, *argv: str) -> list[str]:
+    """The modules ``python -X importtime ARGV`` imports in a fresh interpreter (RuntimeError
+    naming ``what`` when it fails)."""
+    done = subprocess.run(
+        [sys.executable, "-X", "importtime", *argv],
         capture_output=True,
         text=True,
         cwd=REPO,
         check=False,
     )
-    if traced.returncode != 0:
-        raise RuntimeError(f"fence-sorter {' '.join(args)} exited {traced.returncode}")
-    modules = imported_modules(traced.stderr)
+    if done.returncode != 0:
+        raise RuntimeError(f"{what} exited {done.returncode}")
+    return imported_modules(done.stderr)
+
+
+def measure(args: tuple[str, ...], rounds: int, script: str) -> dict:
+    """Modules and heavy dependencies of ``fence-sorter ARGS``, and its best wall time [s]."""
+    command = " ".join(("fence-sorter", *args))
+    modules = traced(command, "-m", "fence_sorter.cli.main", *args)
     walls = []
     for _ in range(rounds):
         t0 = time.perf_counter()
         subprocess.run([script, *args], capture_output=True, cwd=REPO, check=True)
         walls.append(time.perf_counter() - t0)
     return {
-        "command": " ".join(("fence-sorter", *args)),
+        "command": command,
         "modules": len(modules),
         "heavy": heavy_of(modules),
         "wall": min(walls),
@@ -99,16 +106,7 @@ def measure(args: tuple[str, ...], rounds: int, script: str) -> dict:
 
 def measure_module(module: str) -> dict:
     """Modules and heavy dependencies that importing ``module`` in a fresh interpreter loads."""
-    traced = subprocess.run(
-        [sys.executable, "-X", "importtime", "-c", f"import {module}"],
-        capture_output=True,
-        text=True,
-        cwd=REPO,
-        check=False,
-    )
-    if traced.returncode != 0:
-        raise RuntimeError(f"import {module} exited {traced.returncode}")
-    modules = imported_modules(traced.stderr)
+    modules = traced(f"import {module}", "-c", f"import {module}")
     return {
         "module": module,
         "modules": len(modules),
