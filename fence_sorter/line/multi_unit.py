@@ -23,40 +23,34 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from fence_sorter.capacity.formulas import stroke_capacity
-from fence_sorter.capacity.planner import LoadRequest, Planner
-from fence_sorter.codes import OutcomeCode, StartMode
-from fence_sorter.inputs import ParcelSpec, StrokeCommand
-from fence_sorter.line.line_file import UNIT_LEAD, LineSpec, UnitSpec
-from fence_sorter.line.one_fence import LineConfig, SortingLine
+from fence_sorter.inputs import ParcelSpec
+from fence_sorter.line.handoff import (
+    INDUCTION,
+    RECIRCULATION,
+    Failed,
+    HandOff,
+    LinkCounts,
+    Sorted,
+    link_name,
+)
+from fence_sorter.line.line_file import UNIT_LEAD, LineSpec
 from fence_sorter.line.routing import (
-    CHUTE_FULL,
-    FENCE_BUSY,
-    NO_FEASIBLE_STROKE,
-    NO_READ,
-    NOT_SERVED,
     REASONS,
     SETTLE_SLACK,
     Booking,
-    Decision,
     Track,
     footprint,
-    guard,
-    to_line,
-    to_local,
     track_hits_sector,
 )
-from fence_sorter.line.types import Outcome, OverlapWarning, StrokeStarted
+from fence_sorter.line.unit import LineUnit, Record, Traffic, track_of
 from fence_sorter.stream.model import generate
 
 __all__ = ["LinePlant", "LineRunConfig", "run_line"]
-
-#: a parcel's id in a unit's simulation: line id * ID_STRIDE + pass (ids stay unique per unit)
-ID_STRIDE = 16
 
 
 @dataclass(frozen=True)
@@ -87,46 +81,22 @@ class _LP:
     # new (not yet announced) | scheduled (announced, front not yet at the induction) | belt |
     # loop | sorted | rejected | failed
     state: str = "new"
-    track: Track | None = None
-    next_unit: int = 0
+    track: Track | None = None  # the line's prediction of its ride, from its latest hand-off
+    next_unit: int = 0  # the unit its pending hand-off goes to
+    pending: HandOff | None = None  # the hand-off sent for it and not yet received
     stroke_unit: int | None = None  # unit with a booked or running stroke for it
-    stroke: tuple[int, float, float] | None = None  # (unit, R_s, t1) of that stroke
-    missed: set[tuple[int, float, float]] = field(default_factory=set)  # strokes that missed it
     return_time: float = math.nan
     end: str = ""  # chute or reject it ended in
 
-    @property
-    def local_id(self) -> int:
-        return self.pid * ID_STRIDE + self.passes
-
-
-@dataclass
-class _Unit:
-    spec: UnitSpec
-    index: int
-    line: SortingLine
-    planner: Planner
-    chute: int = 0
-    declined: dict[str, int] = field(default_factory=lambda: dict.fromkeys(REASONS, 0))
-    accepted: int = 0
-    sorted: int = 0
-    missed: int = 0
-    refused: int = 0  # commands the unit's simulation refused
-    failed: int = 0
-    intrusions: int = 0
-    busy: float = 0.0  # sum of the strokes' cycles 2 t1 [s]
-    strokes: list[tuple[float, float]] = field(default_factory=list)  # (R_s, t1) made
-    peak_force: float = 0.0
-    peak_force_stiff: float = 0.0
-    max_impact_speed: float = 0.0
-    max_accel: float = 0.0
-    handoffs_in: int = 0
-    late_handoffs: int = 0
-    late_past_axis: int = 0
-
 
 class LinePlant:
-    """The line's state and clock; :meth:`run` to the drain, :meth:`summary` for the figures."""
+    """The line's state and clock; :meth:`run` to the drain, :meth:`summary` for the figures.
+
+    The units are :class:`~fence_sorter.line.unit.LineUnit` objects; the plant is the
+    induction, the recirculation and the wiring between them: it delivers each unit's
+    hand-offs to the next one when the parcel's front reaches that unit's scan line, and keeps
+    the line's predicted tracks and booked strokes (the :class:`~fence_sorter.line.unit.
+    Traffic` a unit's guard is given)."""
 
     def __init__(self, line: LineSpec, cfg: LineRunConfig = LineRunConfig()):
         self.spec = line
@@ -150,9 +120,13 @@ class LinePlant:
         for s in specs:
             d = dests[int(self.rng.choice(len(dests), p=shares / shares.sum()))]
             self.parcels.append(_LP(s.parcel_id, s, d, s.arrival_time))
+        self.by_id = {p.pid: p for p in self.parcels}
         self.live: list[_LP] = []  # announced and not yet ended (sorted, rejected, failed)
-        self.by_local: dict[int, _LP] = {}
-        self.units = [self._make_unit(i, u) for i, u in enumerate(line.units)]
+        self.units = [
+            LineUnit(u, i, len(line.units), self.width, self.v, line.planner, cfg.dt, cfg.guard)
+            for i, u in enumerate(line.units)
+        ]
+        self.names = [u.name for u in line.units]
         self.bookings: list[Booking] = []
         self._next_new = 0  # index of the next stream parcel to announce
         self.horizon = self._horizon()
@@ -160,14 +134,12 @@ class LinePlant:
         self.merges_waited = 0.0  # summed waiting time of returning parcels at the merge [s]
         self.hold = 0.0  # the induction's summed hold of the stream for returning parcels [s]
         self.handoffs = 0
+        self.induction_sent = 0  # hand-offs the induction sent to the first unit
+        self.recirculation_received = 0  # hand-offs the recirculation took from the last unit
+        self.records_ignored = 0  # records for a parcel not in the sender's stroke
         self.wall = 0.0
 
     # -- set-up ----------------------------------------------------------------------------
-    def _make_unit(self, i: int, u: UnitSpec) -> _Unit:
-        cfg = LineConfig.from_scenario(u.scenario, scan_line_x=None)
-        planner = Planner(u.scenario, self.spec.planner)
-        return _Unit(u, i, SortingLine(cfg, t0=0.0), planner)
-
     def _horizon(self) -> float:
         """How far ahead a stroke can be booked: from a unit's scan line to the end of the
         latest stroke the planner may choose [s]; new parcels are announced this early."""
@@ -211,6 +183,8 @@ class LinePlant:
             p.inducted_at = t
         p.inducted_last = t
         self.inductions += 1
+        for u in self.units:
+            u.announce(p.pid, p.passes)
 
     def _announce(self) -> None:
         while (
@@ -304,113 +278,30 @@ class LinePlant:
         return delay, held
 
     # -- hand-offs -------------------------------------------------------------------------
-    def _local_spec(self, p: _LP, u: UnitSpec, t: float, divert: bool) -> ParcelSpec:
-        """The parcel as the unit's simulation sees it at time t (unit frame)."""
+    def _induction_handoff(self, p: _LP) -> HandOff:
+        """The induction's hand-off of a parcel to the first unit (its scan result: no
+        destination on a no-read pass)."""
         tr = p.track
-        x, y, yaw = to_local(u.position, u.mirrored, self.width, tr.x + self.v * (t - tr.t_ref),
-                             tr.y, tr.yaw)  # fmt: skip
-        cx, cy = tr.cog_x, (-tr.cog_y if u.mirrored else tr.cog_y)
-        # a turned parcel: the same rectangle with yaw in [-pi/2, pi/2] (C_s offsets flip)
-        while yaw > 0.5 * math.pi:
-            yaw -= math.pi
-            cx, cy = -cx, -cy
-        while yaw < -0.5 * math.pi:
-            yaw += math.pi
-            cx, cy = -cx, -cy
-        pts = footprint(tr.length_a, tr.width_b, cx, cy, x, y, yaw)
-        front = max(c[0] for c in pts)
-        fw = max(c[1] for c in pts) - min(c[1] for c in pts)
-        gap = min(max(min(c[1] for c in pts), 0.0), max(self.width - fw, 0.0))
-        return replace(
-            p.spec,
-            parcel_id=p.local_id,
-            cog_offset_x=cx,
-            cog_offset_y=cy,
-            lateral_gap=gap,
-            yaw=yaw,
-            divert=divert,
-            scan_time=t,
-            scan_position_x=front,
-        )
+        self.induction_sent += 1
+        return HandOff(
+            p.pid, "" if p.no_read else p.destination, p.passes,
+            replace(p.spec, cog_offset_x=tr.cog_x, cog_offset_y=tr.cog_y),
+            tr.x, tr.y, tr.yaw, self.v, 0.0, 0.0, tr.t_ref, self.t, INDUCTION, 0,
+        )  # fmt: skip
 
-    def _route(self, p: _LP, u: _Unit, spec: ParcelSpec) -> tuple[Decision, StrokeCommand | None]:
-        us = u.spec
-        if p.no_read:
-            return Decision(False, NO_READ), None
-        if p.destination not in us.destinations:
-            return Decision(False, NOT_SERVED), None
-        if us.chute_capacity is not None and u.chute >= us.chute_capacity:
-            return Decision(False, CHUTE_FULL), None
-        req = LoadRequest(spec.parcel_id, spec.to_parcel_params(), spec.scan_time,
-                          spec.scan_position_x)  # fmt: skip
-        alpha_k = self.spec.planner.alpha_k
-        others = [tr for tr in self._live_tracks() if tr.parcel_id != p.pid]
-        refusals: list[Decision] = []
-
-        def booking(start: float, end: float) -> Booking:
-            return Booking(
-                u.index, p.pid, start, end, alpha_k,
-                u.line.config.length, us.position, us.mirrored,
-            )  # fmt: skip
-
-        def clear(ev, start: float, end: float) -> bool:
-            """A feasible stroke the unit may make: not one that missed this parcel on an
-            earlier pass, and (guard) none another parcel would be struck by; the planner
-            passes a refused one over for its next feasible one."""
-            if (u.index, ev.r_s, ev.t1) in p.missed:
-                return False
-            if not self.cfg.guard:
-                return True
-            d = guard(booking(start, end), p.track, others, self.bookings, self.width)
-            if not d.accepted:
-                refusals.append(d)
-            return d.accepted
-
-        plan = u.planner.plan(req, self.t, commit=False, accept=clear)
-        if not plan.feasible:
-            if refusals:
-                return refusals[0], None
-            code = FENCE_BUSY if "fence busy" in plan.reason else NO_FEASIBLE_STROKE
-            return Decision(False, code, plan.reason), None
-        ev = plan.evaluation
-        self.bookings.append(booking(plan.start_time, plan.end_time))
-        u.planner.busy_until = plan.end_time
-        p.track.free_after = plan.start_time
-        p.track.free_until = plan.end_time + SETTLE_SLACK
-        p.stroke = (u.index, ev.r_s, ev.t1)
-        cmd = StrokeCommand(spec.parcel_id, StartMode.AT_RS, ev.r_s, 0.0, ev.t1, alpha_k)
-        return Decision(True), cmd
-
-    def _hand_off(self, p: _LP, u: _Unit, late: bool) -> None:
-        spec = self._local_spec(p, u.spec, self.t, divert=False)
-        if not late:
-            # the exact crossing of the scan line (within the last step)
-            t_c = p.track.t_ref + (u.spec.zone[0] - (self._front(p.track, p.track.t_ref))) / self.v
-            spec = self._local_spec(p, u.spec, min(max(t_c, self.t - self.cfg.dt), self.t), False)
-        else:
-            u.late_handoffs += 1
-            if self._front(p.track, self.t) > u.spec.position:
-                u.late_past_axis += 1
-        decision, cmd = self._route(p, u, spec)
-        if cmd is not None:
-            spec = replace(spec, divert=True)
-        u.line.add_parcel(spec, t=self.t)
-        self.by_local[spec.parcel_id] = p
-        u.handoffs_in += 1
+    def _deliver(self, p: _LP, u: LineUnit) -> None:
+        traffic = Traffic(tuple(self._live_tracks()), tuple(self.bookings))
+        reply = u.receive(p.pending, self.t, traffic)
         self.handoffs += 1
+        p.pending = None
         p.next_unit = u.index + 1
-        if cmd is None:
-            u.declined[decision.reason] += 1
-            return
-        res = u.line.command(cmd, t=self.t)
-        if res.accepted:
-            u.accepted += 1
+        if reply.booking is not None:
+            self.bookings.append(reply.booking)
+            p.track.free_after = reply.booking.t_start
+            p.track.free_until = reply.booking.t_end + SETTLE_SLACK
             p.stroke_unit = u.index
-        else:
-            u.refused += 1
-            u.declined[FENCE_BUSY if res.code == "fence_busy" else NO_FEASIBLE_STROKE] += 1
-            p.track.free_after = p.track.free_until = math.inf
-            self.bookings = [b for b in self.bookings if b.parcel_id != p.pid]
+        for rec in reply.records:
+            self._on_record(u, rec)
 
     def _hand_offs(self) -> None:
         for p in self.live:
@@ -427,52 +318,35 @@ class LinePlant:
                 front = self._front(p.track, self.t)
                 if front < u.spec.zone[0]:
                     break
-                late = front > u.spec.zone[0] + self.v * self.cfg.dt + 1e-9
-                self._hand_off(p, u, late)
+                if p.next_unit == 0 and p.pending is None:
+                    p.pending = self._induction_handoff(p)
+                self._deliver(p, u)
                 if p.stroke_unit is not None:
                     break
 
-    # -- unit events -----------------------------------------------------------------------
-    def _on_outcome(self, u: _Unit, ev: Outcome) -> None:
-        p = self.by_local.get(ev.parcel_id)
-        if p is None or p.stroke_unit != u.index or p.state != "belt":
+    # -- unit records ----------------------------------------------------------------------
+    def _on_record(self, u: LineUnit, rec: Record) -> None:
+        p = self.by_id.get(rec.parcel_id)
+        if p is None or p.state != "belt":
+            self.records_ignored += 1
             return
-        p.stroke_unit = None
-        self.bookings = [b for b in self.bookings if b.parcel_id != p.pid]
-        if ev.code is OutcomeCode.SORTED:
+        if p.stroke_unit is not None:
+            if p.stroke_unit != u.index:
+                self.records_ignored += 1
+                return
+            p.stroke_unit = None
+            self.bookings = [b for b in self.bookings if b.parcel_id != p.pid]
+        if isinstance(rec, Sorted):
             p.state = "sorted"
-            p.sorted_at = self.t
-            p.end = p.destination if p.destination in u.spec.destinations else f"wrong:{u.index}"
+            p.sorted_at = rec.t
+            p.end = rec.chute
             p.track = None
-            u.sorted += 1
-            u.chute += 1
-        elif ev.code is OutcomeCode.SOLVER_FAILURE:
+        elif isinstance(rec, Failed):
             p.state = "failed"
             p.track = None
-            u.failed += 1
-        else:
-            if ev.code is OutcomeCode.MISSED:
-                u.missed += 1
-                if p.stroke is not None:  # not that stroke again on a later pass
-                    p.missed.add(p.stroke)
-            lp = u.line.parcels.get(ev.parcel_id)
-            if lp is not None:  # rides on with the pose its stroke left it in
-                x, y, yaw = to_line(u.spec.position, u.spec.mirrored, self.width,
-                                    *lp.pose(self.t))  # fmt: skip
-                cy = -lp.spec.cog_offset_y if u.spec.mirrored else lp.spec.cog_offset_y
-                p.track = replace(
-                    p.track, x=x, y=y, yaw=yaw, t_ref=self.t, cog_x=lp.spec.cog_offset_x,
-                    cog_y=cy, free_after=math.inf, free_until=math.inf,
-                )  # fmt: skip
-            else:
-                p.track.free_after = p.track.free_until = math.inf
-        if ev.code in (OutcomeCode.SORTED, OutcomeCode.MISSED) and math.isfinite(
-            ev.peak_normal_force
-        ):
-            u.peak_force = max(u.peak_force, ev.peak_normal_force)
-            u.peak_force_stiff = max(u.peak_force_stiff, ev.peak_normal_force_stiff)
-            u.max_impact_speed = max(u.max_impact_speed, ev.impact_normal_speed)
-            u.max_accel = max(u.max_accel, ev.peak_normal_accel)
+        else:  # rides on from the pose it left the unit with
+            p.track = track_of(rec, self.v)
+            p.pending = rec
 
     def _leave_belt(self) -> None:
         for p in self.live:
@@ -480,6 +354,9 @@ class LinePlant:
                 continue
             if self._rear(p.track, self.t) < self.spec.length:
                 continue
+            if p.pending is not None and p.pending.to_unit == RECIRCULATION:
+                self.recirculation_received += 1
+            p.pending = None
             p.passes += 1
             p.track = None
             if p.passes >= self.spec.max_passes:
@@ -499,14 +376,8 @@ class LinePlant:
         self._hand_offs()
         t_next = self.t + self.cfg.dt
         for u in self.units:
-            for ev in u.line.advance(t_next):
-                if isinstance(ev, Outcome):
-                    self._on_outcome(u, ev)
-                elif isinstance(ev, OverlapWarning):
-                    u.intrusions += 1
-                elif isinstance(ev, StrokeStarted):
-                    u.busy += 2.0 * ev.t1
-                    u.strokes.append((ev.r_s, ev.t1))
+            for rec in u.advance(t_next, stamp=self.t):
+                self._on_record(u, rec)
         self.t = t_next
         self._leave_belt()
         self.live = [p for p in self.live if p.state not in ("sorted", "rejected", "failed")]
@@ -564,24 +435,7 @@ class LinePlant:
         units = {}
         for u in self.units:
             units[u.spec.name] = {
-                "side": u.spec.side,
-                "position_m": u.spec.position,
-                "destinations": list(u.spec.destinations),
-                "handoffs_in": u.handoffs_in,
-                "late_handoffs": u.late_handoffs,
-                "late_handoffs_past_axis": u.late_past_axis,
-                "strokes": u.accepted,
-                "sorted": u.sorted,
-                "missed": u.missed,
-                "commands_refused": u.refused,
-                "solver_failures": u.failed,
-                "declined": dict(u.declined),
-                "swept_sector_intrusions": u.intrusions,
-                "utilisation": u.busy / self.t if self.t > 0 else 0.0,
-                "peak_normal_force_N": u.peak_force,
-                "peak_normal_force_stiff_N": u.peak_force_stiff,
-                "max_impact_speed_m_s": u.max_impact_speed,
-                "max_normal_accel_m_s2": u.max_accel,
+                **u.figures(self.t),
                 "impact_speed_margin_m_s": prof.w_dop - u.max_impact_speed,
                 "accel_margin_m_s2": prof.a_ndop - u.max_accel,
                 "capacity_bound_pcs_h": self.unit_capacity(u),
@@ -608,6 +462,8 @@ class LinePlant:
             "solver_failures": count["failed"],
             "swept_sector_intrusions": sum(u.intrusions for u in self.units),
             "handoffs": self.handoffs,
+            "links": self.links().table(),
+            "handoffs_balanced": self.links().balanced(),
             "declined": {r: sum(u.declined[r] for u in self.units) for r in REASONS},
             "throughput_in_pcs_h": throughput_in,
             "throughput_out_pcs_h": throughput_out,
@@ -623,7 +479,23 @@ class LinePlant:
             "units": units,
         }
 
-    def unit_capacity(self, u: _Unit) -> float:
+    def links(self) -> LinkCounts:
+        """Hand-offs per link, counted at both ends (the units count their own); a hand-off
+        still pending for a parcel on the line is neither received nor lost yet."""
+        lc = LinkCounts()
+        first = link_name(INDUCTION, 0, self.names)
+        lc.sent[first] = self.induction_sent
+        for u in self.units:
+            up = link_name(u.upstream, u.index, self.names)
+            lc.received[up] = u.received
+            lc.refused[up] = dict(u.refused_handoffs)
+            lc.sent[link_name(u.index, u.downstream, self.names)] = u.sent
+        lc.received[link_name(len(self.units) - 1, RECIRCULATION, self.names)] = (
+            self.recirculation_received
+        )
+        return lc
+
+    def unit_capacity(self, u: LineUnit) -> float:
         """W_t (1) with Delta_c (2) of the unit's median stroke (by scraping time t_z) and the
         stream's median parcel length [pcs/h]; NaN before its first stroke."""
         if not u.strokes:

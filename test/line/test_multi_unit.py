@@ -14,6 +14,7 @@ import pytest
 from fence_sorter.line.line_file import load_line
 from fence_sorter.line.multi_unit import LinePlant, LineRunConfig
 from fence_sorter.line.routing import NO_READ, REASONS
+from fence_sorter.line.unit import track_of
 
 LINE = load_line("two_units")
 
@@ -134,7 +135,8 @@ def test_a_unit_sees_the_parcel_where_the_line_has_it(unit, yaw):
     tr = plant._track_at_induction(p, 0.0)
     p.track = replace(tr, x=7.3, y=0.33, yaw=yaw, cog_x=0.04, cog_y=-0.03)
     u = LINE.units[unit]
-    spec = plant._local_spec(p, u, 0.5, divert=False)
+    h = plant._induction_handoff(p)
+    spec = plant.units[unit]._local_spec(h, track_of(h, plant.v), 0.5, divert=False)
     body = parcel_body(spec.to_parcel_params(), ConveyorParams())
     x, y, phi = initial_pose(body, spec.scan_position_x, spec.lateral_gap, spec.yaw)
     got = sorted(

@@ -1,0 +1,238 @@
+"""A line's units as objects that talk only through records (fence_sorter/line/unit.py).
+
+The in-process line (LinePlant) is the wiring of LineUnit objects; it must give the figures
+the line gave before it was split into them, every hand-off must be counted at both ends of
+its link, and a unit must refuse a hand-off it cannot take, counting it with a reason.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import pytest
+
+from fence_sorter.line.handoff import (
+    DUPLICATE,
+    INDUCTION,
+    NOT_FROM_UPSTREAM,
+    RECIRCULATION,
+    UNKNOWN_PARCEL,
+    HandOff,
+    Sorted,
+)
+from fence_sorter.line.line_file import load_line
+from fence_sorter.line.multi_unit import LinePlant, LineRunConfig
+from fence_sorter.line.routing import NOT_SERVED
+from fence_sorter.line.unit import LineUnit, track_of
+
+TWO = load_line("two_units")
+
+#: main's LinePlant at 6dd615c (before the split into LineUnit objects): the fields below of
+#: ``LinePlant(load_line(LINE), LineRunConfig(**CONFIG)).run()`` for each case of CASES, with
+#: that commit's module (``git show 6dd615c:fence_sorter/line/multi_unit.py``, written to a
+#: file of its own and loaded by path with importlib beside the current package)
+MAIN = {
+    "four": {
+        "sorted": 40, "sorted_per_destination": {"D1": 4, "D2": 3, "D3": 6, "D4": 6, "D5": 2,
+        "D6": 5, "D7": 5, "D8": 9}, "rejected": 0, "inductions": 63, "recirculated": 19,
+        "no_read": 1, "handoffs": 200,
+        "declined": {"no_read": 4, "not_served": 134, "sector_occupied": 20},
+        "swept_sector_intrusions": 0, "induction_hold_s": 19.10030866772516,
+        "sim_time_s": 147.310000000011, "throughput_in_pcs_h": 3887.0099724661036,
+        "throughput_out_pcs_h": 1846.3297369213992,
+        "units": {
+            "unit_1": {"strokes": 9, "sorted": 7, "missed": 2, "late_handoffs": 0,
+                       "declined": {"no_read": 1, "not_served": 50, "sector_occupied": 3},
+                       "swept_sector_intrusions": 0, "utilisation": 0.06788405403570195,
+                       "peak_normal_force_N": 1497.5567336463275,
+                       "max_impact_speed_m_s": 2.1521557560281055},
+            "unit_2": {"strokes": 12, "sorted": 12, "missed": 0, "late_handoffs": 0,
+                       "declined": {"no_read": 1, "not_served": 37, "sector_occupied": 6},
+                       "swept_sector_intrusions": 0, "utilisation": 0.08010318376212829,
+                       "peak_normal_force_N": 1026.8747642790843,
+                       "max_impact_speed_m_s": 2.4717202940176133},
+            "unit_3": {"strokes": 7, "sorted": 7, "missed": 0, "late_handoffs": 0,
+                       "declined": {"no_read": 1, "not_served": 33, "sector_occupied": 3},
+                       "swept_sector_intrusions": 0, "utilisation": 0.0420881135021352,
+                       "peak_normal_force_N": 831.2394795041049,
+                       "max_impact_speed_m_s": 2.210692734320392},
+            "unit_4": {"strokes": 14, "sorted": 14, "missed": 0, "late_handoffs": 0,
+                       "declined": {"no_read": 1, "not_served": 14, "sector_occupied": 8},
+                       "swept_sector_intrusions": 0, "utilisation": 0.13441042699068986,
+                       "peak_normal_force_N": 1771.6850141780412,
+                       "max_impact_speed_m_s": 2.3476347116361467},
+        },
+    },
+    "two_guard": {
+        "sorted": 28, "sorted_per_destination": {"A": 10, "B": 11, "C": 7}, "rejected": 12,
+        "inductions": 67, "recirculated": 27, "no_read": 4, "handoffs": 121,
+        "declined": {"no_feasible_stroke": 4, "no_read": 8, "not_served": 40,
+                     "sector_occupied": 40},
+        "swept_sector_intrusions": 0, "induction_hold_s": 28.019556944229304,
+        "sim_time_s": 108.94000000001883, "throughput_in_pcs_h": 1897.0522969864571,
+        "throughput_out_pcs_h": 995.95245591789,
+        "units": {
+            "unit_1": {"strokes": 13, "sorted": 13, "missed": 0, "late_handoffs": 0,
+                       "declined": {"no_feasible_stroke": 4, "no_read": 4, "not_served": 28,
+                                    "sector_occupied": 18},
+                       "swept_sector_intrusions": 0, "utilisation": 0.11015237745546105,
+                       "peak_normal_force_N": 1128.3815614190992,
+                       "max_impact_speed_m_s": 2.2818274628323194},
+            "unit_2": {"strokes": 16, "sorted": 15, "missed": 1, "late_handoffs": 0,
+                       "declined": {"no_read": 4, "not_served": 12, "sector_occupied": 22},
+                       "swept_sector_intrusions": 0, "utilisation": 0.1340187259041443,
+                       "peak_normal_force_N": 1343.9472122625466,
+                       "max_impact_speed_m_s": 2.3649926233259846},
+        },
+    },
+    "two_noguard": {
+        "sorted": 38, "sorted_per_destination": {"A": 14, "B": 17, "C": 7}, "rejected": 2,
+        "inductions": 54, "recirculated": 14, "no_read": 2, "handoffs": 91,
+        "declined": {"fence_busy": 12, "no_feasible_stroke": 6, "no_read": 4,
+                     "not_served": 29},
+        "swept_sector_intrusions": 24, "induction_hold_s": 15.217665569177278,
+        "sim_time_s": 98.42000000001345, "throughput_in_pcs_h": 2377.2613149229996,
+        "throughput_out_pcs_h": 1901.8090519383998,
+        "units": {
+            "unit_1": {"strokes": 18, "sorted": 17, "missed": 1, "late_handoffs": 0,
+                       "declined": {"fence_busy": 4, "no_feasible_stroke": 6, "no_read": 2,
+                                    "not_served": 24},
+                       "swept_sector_intrusions": 9, "utilisation": 0.21540337329808074,
+                       "peak_normal_force_N": 1128.3815614190992,
+                       "max_impact_speed_m_s": 2.2182061439069853},
+            "unit_2": {"strokes": 22, "sorted": 21, "missed": 1, "late_handoffs": 0,
+                       "declined": {"fence_busy": 8, "no_read": 2, "not_served": 5},
+                       "swept_sector_intrusions": 15, "utilisation": 0.3800040642145387,
+                       "peak_normal_force_N": 2150.285574963285,
+                       "max_impact_speed_m_s": 2.4007183336823403},
+        },
+    },
+}  # fmt: skip
+CASES = {
+    "four": ("four_units", dict(parcels=40, rate_pcs_h=6000.0, seed=2)),
+    "two_guard": ("two_units", dict(parcels=40, rate_pcs_h=3000.0, seed=3)),
+    "two_noguard": ("two_units", dict(parcels=40, rate_pcs_h=3000.0, seed=3, guard=False)),
+}
+
+
+def pick(summary: dict, like: dict) -> dict:
+    """The fields of ``summary`` that ``like`` has (declines: the reasons that occurred)."""
+    out = {}
+    for k, v in like.items():
+        got = summary[k]
+        if k == "declined":
+            got = {r: n for r, n in got.items() if n}
+        out[k] = pick(got, v) if isinstance(v, dict) and k != "declined" else got
+    return out
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_the_wired_units_give_main_s_figures(case):
+    """Same line, stream and seed: the split line's summary equals main's, exactly (strokes,
+    missed strokes whose disturbed pose went downstream, declines, forces, times)."""
+    name, cfg = CASES[case]
+    s = LinePlant(load_line(name), LineRunConfig(**cfg)).run()
+    assert pick(s, MAIN[case]) == MAIN[case]
+
+
+@pytest.mark.slow
+def test_every_handoff_is_counted_at_both_ends():
+    """After the drain every link's sent == received, none refused or lost, and the counts
+    are the parcels' own: the first unit got one hand-off per induction, the recirculation one
+    per parcel that went round (or was rejected at the belt's end)."""
+    plant = LinePlant(TWO, LineRunConfig(parcels=40, rate_pcs_h=3000.0, seed=3))
+    s = plant.run()
+    links = s["links"]
+    assert list(links) == ["induction>unit_1", "unit_1>unit_2", "unit_2>recirculation"]
+    for v in links.values():
+        assert v["sent"] == v["received"] and v["lost"] == 0
+        assert sum(v["refused"].values()) == 0
+    assert s["handoffs_balanced"]
+    assert links["induction>unit_1"]["received"] == s["inductions"]
+    ends = sum(p.passes for p in plant.parcels)  # each pass ended at the belt's end
+    assert links["unit_2>recirculation"]["received"] == ends
+    assert s["handoffs"] == sum(v["received"] for k, v in links.items() if "recirc" not in k)
+    # unit_1 passes on what it does not sort
+    u1 = s["units"]["unit_1"]
+    assert u1["handoffs_out"] == u1["handoffs_in"] - u1["sorted"] - u1["solver_failures"]
+
+
+def unit(index: int, guard_on: bool = True) -> LineUnit:
+    u = TWO.units[index]
+    return LineUnit(u, index, len(TWO.units), TWO.width, TWO.speed, TWO.planner, 0.01, guard_on)
+
+
+def handoff(pid: int, dest: str, frm: int, to: int, t: float, front_x: float) -> HandOff:
+    """A parcel of the stream with its front at X = ``front_x`` at time t, on the belt at v."""
+    plant = LinePlant(TWO, LineRunConfig(parcels=1, seed=1))
+    p = plant.parcels[0]
+    spec = replace(p.spec, parcel_id=pid, yaw=0.0, cog_offset_x=0.0, cog_offset_y=0.0)
+    x = front_x - 0.5 * spec.length_a
+    y = spec.lateral_gap + 0.5 * spec.width_b
+    return HandOff(pid, dest, 0, spec, x, y, 0.0, TWO.speed, 0.0, 0.0, t, t, frm, to)
+
+
+def test_a_unit_refuses_handoffs_it_cannot_take_and_counts_them():
+    u = unit(1)
+    h = handoff(5, "B", 0, 1, 4.0, TWO.units[1].zone[0])
+    r = u.receive(h, 4.0)
+    assert r.refusal == UNKNOWN_PARCEL  # the induction never announced parcel 5
+    u.announce(5, 0)
+    assert u.receive(replace(h, from_unit=INDUCTION), 4.0).refusal == NOT_FROM_UPSTREAM
+    assert u.receive(replace(h, passes=1), 4.0).refusal == UNKNOWN_PARCEL  # not that pass
+    assert u.receive(replace(h, to_unit=0), 4.0).refusal == NOT_FROM_UPSTREAM
+    assert not u.line.parcels and u.received == 0
+    assert u.receive(h, 4.0).refusal == ""
+    assert u.receive(h, 4.0).refusal == DUPLICATE
+    assert u.refused_handoffs == {UNKNOWN_PARCEL: 2, NOT_FROM_UPSTREAM: 2, DUPLICATE: 1}
+    assert u.received == 1 and len(u.line.parcels) == 1
+
+
+def test_a_declined_parcel_goes_on_with_the_pose_it_came_with():
+    """Destination A is not unit_2's: declined ``not_served`` and handed to the recirculation
+    at once, with the pose and velocity it came with (the unit did not touch it), while the
+    unit's simulation carries it through its zone."""
+    u = unit(1)
+    u.announce(7, 0)
+    h = handoff(7, "A", 0, 1, 6.0, TWO.units[1].zone[0])
+    r = u.receive(h, 6.0)
+    assert r.decision.reason == NOT_SERVED and r.booking is None
+    [out] = r.records
+    assert (out.from_unit, out.to_unit, out.t) == (1, RECIRCULATION, 6.0)
+    assert (out.x, out.y, out.yaw, out.vx, out.vy, out.yaw_rate, out.pose_time) == (
+        h.x, h.y, h.yaw, h.vx, h.vy, h.yaw_rate, h.pose_time,
+    )  # fmt: skip
+    assert u.sent == 1 and u.declined[NOT_SERVED] == 1
+    # the unit's simulation has it where the record puts it (mirrored unit: y0 = s - Y)
+    lp = u.line.parcels[7 * 16]
+    x0, y0, _ = lp.pose(6.5)
+    tr = track_of(h, TWO.speed)
+    assert x0 + TWO.units[1].position == pytest.approx(tr.x + TWO.speed * 0.5, abs=1e-9)
+    assert TWO.width - y0 == pytest.approx(tr.y, abs=1e-9)
+
+
+@pytest.mark.slow
+def test_a_unit_sorts_a_parcel_of_its_destination_from_records_alone():
+    """unit_1 alone, fed one hand-off for destination A at its scan line: it books a stroke
+    (start after the hand-off, end 2 t1 later), and stepping its clock gives one Sorted record
+    into chute A, with the stroke's peak force in its figures."""
+    u = unit(0)
+    u.announce(3, 0)
+    h = handoff(3, "A", INDUCTION, 0, 1.0, TWO.units[0].zone[0])
+    r = u.receive(h, 1.0)
+    assert r.decision.accepted, r.decision
+    b = r.booking
+    assert 1.0 <= b.t_start < b.t_end and b.unit == 0 and b.parcel_id == 3
+    out = []
+    t = 1.0
+    while not out and t < 10.0:
+        t = round(t + 0.01, 2)
+        out += u.advance(t)
+    [rec] = out
+    assert isinstance(rec, Sorted) and rec.chute == "A" and rec.unit == 0
+    assert b.t_start < rec.t <= b.t_end + 1.0  # during the stroke or its settling
+    f = u.figures(t)
+    assert f["sorted"] == 1 and f["strokes"] == 1 and math.isfinite(f["peak_normal_force_N"])
+    assert f["peak_normal_force_N"] > 0.0 and u.chute == 1
