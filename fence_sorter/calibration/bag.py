@@ -130,6 +130,8 @@ def write_measured_bag(
             divert=True,
             scan_time=_stamp(ts, t_scan),
             scan_position_x=-3.0,
+            destination="",
+            passes=0,
         )
         cmd = T["fence_sorter_msgs/msg/FenceCommand"](
             header=_header(ts, t_scan, "sorter"),

@@ -5,7 +5,8 @@ sequences and arrays become lists of Python numbers, so a message received over 
 exactly with one read back from a bag.
 
 Line dataclasses (:mod:`fence_sorter.line`): ``parcel_from_msg``/``parcel_to_msg``,
-``command_from_msg``/``command_to_msg``, ``outcome_to_msg``/``outcome_from_msg`` and the state
+``command_from_msg``/``command_to_msg``, ``outcome_to_msg``/``outcome_from_msg``,
+``handoff_to_msg``/``handoff_from_msg`` (a line's hand-offs) and the state
 messages of a :class:`~fence_sorter.line.LineSnapshot` (FenceState, JointState, LoadState,
 MarkerArray). Times are sim seconds (float) below this layer; SI units throughout.
 """
@@ -15,6 +16,7 @@ from __future__ import annotations
 import array
 import importlib
 import math
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -28,6 +30,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from fence_sorter.capacity.constraints import ConstraintProfile, damage_risk
 from fence_sorter.codes import StartMode
 from fence_sorter.inputs import ParcelSpec, StrokeCommand
+from fence_sorter.line.handoff import HandOff
 from fence_sorter.line.types import (
     EventTrace,
     FenceSnapshot,
@@ -45,6 +48,9 @@ from fence_sorter_msgs.msg import (
     Parcel,
     SortEvent,
     SortOutcome,
+)
+from fence_sorter_msgs.msg import (
+    HandOff as HandOffMsg,
 )
 
 MessageDict = dict[str, Any]
@@ -146,8 +152,15 @@ def parcel_from_msg(msg: Parcel) -> ParcelSpec:
     )
 
 
-def parcel_to_msg(p: ParcelSpec, frame_id: str = FRAME_ID, run_id: int = 0) -> Parcel:
-    """ParcelSpec -> fence_sorter_msgs/Parcel of run ``run_id`` stamped with its scan time."""
+def parcel_to_msg(
+    p: ParcelSpec,
+    frame_id: str = FRAME_ID,
+    run_id: int = 0,
+    destination: str = "",
+    passes: int = 0,
+) -> Parcel:
+    """ParcelSpec -> fence_sorter_msgs/Parcel of run ``run_id`` stamped with its scan time
+    (``destination`` and ``passes``: a line's parcel; empty and 0 on one fence)."""
     return Parcel(
         header=header(p.scan_time, frame_id),
         parcel_id=int(p.parcel_id),
@@ -165,6 +178,59 @@ def parcel_to_msg(p: ParcelSpec, frame_id: str = FRAME_ID, run_id: int = 0) -> P
         divert=bool(p.divert),
         scan_time=sec_to_time(p.scan_time),
         scan_position_x=float(p.scan_position_x),
+        destination=str(destination),
+        passes=int(passes),
+    )
+
+
+#: frame of a line's hand-offs (fence_sorter.line.line_file: x from the induction scan line)
+LINE_FRAME_ID = "line"
+
+
+def handoff_to_msg(h: HandOff, run_id: int = 0) -> HandOffMsg:
+    """A line's HandOff record -> fence_sorter_msgs/HandOff stamped with the hand-off's sim
+    time; the pose time travels as float64, so the receiver predicts the same ride."""
+    return HandOffMsg(
+        header=header(h.t, LINE_FRAME_ID),
+        run_id=int(run_id),
+        parcel=parcel_to_msg(
+            replace(h.spec, parcel_id=h.parcel_id),
+            LINE_FRAME_ID,
+            run_id,
+            h.destination,
+            h.passes,
+        ),
+        from_unit=int(h.from_unit),
+        to_unit=int(h.to_unit),
+        x=float(h.x),
+        y=float(h.y),
+        yaw=float(h.yaw),
+        vx=float(h.vx),
+        vy=float(h.vy),
+        yaw_rate=float(h.yaw_rate),
+        pose_time=float(h.pose_time),
+    )
+
+
+def handoff_from_msg(msg: HandOffMsg) -> HandOff:
+    """fence_sorter_msgs/HandOff -> the line's HandOff record (no checks: the receiving unit
+    refuses one it cannot take, :meth:`fence_sorter.line.unit.LineUnit.check`)."""
+    spec = parcel_from_msg(msg.parcel)
+    return HandOff(
+        parcel_id=spec.parcel_id,
+        destination=str(msg.parcel.destination),
+        passes=int(msg.parcel.passes),
+        spec=spec,
+        x=float(msg.x),
+        y=float(msg.y),
+        yaw=float(msg.yaw),
+        vx=float(msg.vx),
+        vy=float(msg.vy),
+        yaw_rate=float(msg.yaw_rate),
+        pose_time=float(msg.pose_time),
+        t=time_to_sec(msg.header.stamp),
+        from_unit=int(msg.from_unit),
+        to_unit=int(msg.to_unit),
     )
 
 

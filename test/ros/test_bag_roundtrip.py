@@ -81,6 +81,7 @@ def test_msg_defs_are_the_registered_types(typestore: Typestore) -> None:
     assert names == [
         "FenceCommand",
         "FenceState",
+        "HandOff",
         "LoadState",
         "Parcel",
         "RunClock",
