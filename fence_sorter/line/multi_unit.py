@@ -47,7 +47,8 @@ from fence_sorter.line.routing import (
     footprint,
     track_hits_sector,
 )
-from fence_sorter.line.unit import LineUnit, Record, Traffic, track_of
+from fence_sorter.line.traffic import Announce, Hold, Left, TrafficView
+from fence_sorter.line.unit import LineUnit, Record, track_of
 from fence_sorter.stream.model import generate
 
 __all__ = ["LinePlant", "LineRunConfig", "run_line"]
@@ -128,6 +129,7 @@ class LinePlant:
         ]
         self.names = [u.name for u in line.units]
         self.bookings: list[Booking] = []
+        self.view = TrafficView(self.v)  # the traffic the units are given: records alone
         self._next_new = 0  # index of the next stream parcel to announce
         self.horizon = self._horizon()
         self.inductions = 0
@@ -185,6 +187,7 @@ class LinePlant:
         self.inductions += 1
         for u in self.units:
             u.announce(p.pid, p.passes)
+        self.view.apply(Announce(p.pid, p.passes, p.track))
 
     def _announce(self) -> None:
         while (
@@ -223,6 +226,7 @@ class LinePlant:
             delay, tracks = held
             for tr in tracks:
                 tr.t_ref += delay
+            self.view.apply(Hold(tuple(tr.parcel_id for tr in tracks), delay))
             self.hold += delay
             self.merges_waited += self.t - p.return_time
             self._induct(p, self.t)
@@ -247,6 +251,7 @@ class LinePlant:
                     return
         for tr in tracks:
             tr.t_ref += delay
+        self.view.apply(Hold(tuple(tr.parcel_id for tr in tracks), delay))
         self.hold += delay
 
     def _merge_hold(self, cand: Track) -> tuple[float, list[Track]] | None:
@@ -290,13 +295,13 @@ class LinePlant:
         )  # fmt: skip
 
     def _deliver(self, p: _LP, u: LineUnit) -> None:
-        traffic = Traffic(tuple(self._live_tracks()), tuple(self.bookings))
-        reply = u.receive(p.pending, self.t, traffic)
+        reply = u.receive(p.pending, self.t, self.view.traffic())
         self.handoffs += 1
         p.pending = None
         p.next_unit = u.index + 1
         if reply.booking is not None:
             self.bookings.append(reply.booking)
+            self.view.apply(reply.booking)
             p.track.free_after = reply.booking.t_start
             p.track.free_until = reply.booking.t_end + SETTLE_SLACK
             p.stroke_unit = u.index
@@ -326,6 +331,7 @@ class LinePlant:
 
     # -- unit records ----------------------------------------------------------------------
     def _on_record(self, u: LineUnit, rec: Record) -> None:
+        self.view.apply(rec)
         p = self.by_id.get(rec.parcel_id)
         if p is None or p.state != "belt":
             self.records_ignored += 1
@@ -357,6 +363,7 @@ class LinePlant:
             if p.pending is not None and p.pending.to_unit == RECIRCULATION:
                 self.recirculation_received += 1
             p.pending = None
+            self.view.apply(Left(p.pid))
             p.passes += 1
             p.track = None
             if p.passes >= self.spec.max_passes:
@@ -383,6 +390,7 @@ class LinePlant:
         self.live = [p for p in self.live if p.state not in ("sorted", "rejected", "failed")]
         running = {p.pid for p in self.live if p.stroke_unit is not None}
         self.bookings = [b for b in self.bookings if b.t_end > self.t or b.parcel_id in running]
+        self.view.tick(self.t)
 
     def limit(self) -> float:
         """Sim time the run stops at, drained or not: ``cfg.max_time``, else a bound on the

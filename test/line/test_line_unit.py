@@ -236,3 +236,34 @@ def test_a_unit_sorts_a_parcel_of_its_destination_from_records_alone():
     f = u.figures(t)
     assert f["sorted"] == 1 and f["strokes"] == 1 and math.isfinite(f["peak_normal_force_N"])
     assert f["peak_normal_force_N"] > 0.0 and u.chute == 1
+
+
+def _picture(tracks, bookings) -> tuple[dict, set]:
+    cols = ("x", "y", "yaw", "t_ref", "cog_x", "cog_y", "free_after", "free_until")
+    return (
+        {tr.parcel_id: tuple(getattr(tr, c) for c in cols) for tr in tracks},
+        set(bookings),
+    )
+
+
+@pytest.mark.slow
+def test_the_traffic_kept_from_records_is_the_line_s_own():
+    """At every hand-off the traffic a unit is given (kept by a TrafficView from the records
+    of the induction, the units and the belt's end alone) holds the same tracks, poses and
+    free times bit for bit, and the same booked strokes, as the line's own state."""
+    checked = []
+
+    class Checked(LinePlant):
+        def _deliver(self, p, u):
+            view = self.view.traffic()
+            assert _picture(view.tracks, view.bookings) == _picture(
+                self._live_tracks(), self.bookings
+            )
+            checked.append(len(view.tracks))
+            super()._deliver(p, u)
+
+    plant = Checked(TWO, LineRunConfig(parcels=40, rate_pcs_h=3000.0, seed=3))
+    s = plant.run()
+    assert s["drained"] and plant.records_ignored == 0
+    assert len(checked) == s["handoffs"] and max(checked) > 1
+    assert not plant.view.tracks and not plant.view.stroking  # everything left the traffic
