@@ -2,8 +2,9 @@
 
 Loads a line file (``config/lines/``), draws the induction stream, runs the line to the drain
 (:mod:`fence_sorter.line.multi_unit`) and prints the line summary (``--json``: one JSON object).
-Exit codes: 0 a drained run with conservation exact, 0 wrong destinations and, with the guard,
-0 swept-sector intrusions; 1 otherwise; 2 a bad line file or option (one line naming it).
+Exit codes: 0 a drained run with conservation exact, 0 wrong destinations, every hand-off
+received at the other end of its link and, with the guard, 0 swept-sector intrusions; 1
+otherwise; 2 a bad line file or option (one line naming it).
 """
 
 from __future__ import annotations
@@ -74,6 +75,7 @@ def run(args: argparse.Namespace) -> int:
         s["drained"]
         and s["conservation_ok"]
         and s["sorted_wrong_destination"] == 0
+        and s["handoffs_balanced"]
         and (not s["guard"] or s["swept_sector_intrusions"] == 0)
     )
     if args.json:
@@ -106,6 +108,13 @@ def format_summary(s: dict) -> str:
             f" a {u['accel_margin_m_s2']:.0f} m/s^2, intrusions {u['swept_sector_intrusions']};"
             f" declined: {dec or 'none'}"
         )
+    links = s["links"]
+    lines.append(
+        "hand-offs sent/received: "
+        + ", ".join(f"{k} {v['sent']}/{v['received']}" for k, v in links.items())
+        + f"; refused {sum(sum(v['refused'].values()) for v in links.values())}"
+        + f", lost {sum(v['lost'] for v in links.values())}"
+    )
     lines.append(
         f"conservation: {s['parcels_inducted']} = sorted {s['sorted']} + rejected "
         f"{s['rejected']} + failed {s['solver_failures']} + on the line {s['still_on_line']}: "

@@ -117,6 +117,8 @@ def test_cli_json(capsys):
     assert code == 0
     assert s["parcels_inducted"] == 8 and s["conservation_ok"] and s["drained"]
     assert set(s["units"]) == {"unit_1", "unit_2"}
+    assert s["handoffs_balanced"]
+    assert s["links"]["induction>unit_1"]["received"] == s["inductions"]
 
 
 @pytest.mark.parametrize("unit", [0, 1])
