@@ -138,7 +138,10 @@ class LinePlant:
         self.handoffs = 0
         self.induction_sent = 0  # hand-offs the induction sent to the first unit
         self.recirculation_received = 0  # hand-offs the recirculation took from the last unit
+        self.recirculation_lost = 0  # parcels that reached it without their hand-off
         self.records_ignored = 0  # records for a parcel not in the sender's stroke
+        #: fault injection: hand-offs (parcel id, sender index) the wiring drops, once each
+        self.drop: set[tuple[int, int]] = set()
         self.wall = 0.0
 
     # -- set-up ----------------------------------------------------------------------------
@@ -186,7 +189,7 @@ class LinePlant:
         p.inducted_last = t
         self.inductions += 1
         for u in self.units:
-            u.announce(p.pid, p.passes)
+            u.announce(p.pid, p.passes, p.spec, "" if p.no_read else p.destination)
         self.view.apply(Announce(p.pid, p.passes, p.track))
 
     def _announce(self) -> None:
@@ -295,6 +298,12 @@ class LinePlant:
         )  # fmt: skip
 
     def _deliver(self, p: _LP, u: LineUnit) -> None:
+        key = (p.pid, p.pending.from_unit)
+        if key in self.drop:  # lost on the way: the unit never gets it
+            self.drop.discard(key)
+            p.pending = None
+            p.next_unit = u.index + 1
+            return
         reply = u.receive(p.pending, self.t, self.view.traffic())
         self.handoffs += 1
         p.pending = None
@@ -325,6 +334,8 @@ class LinePlant:
                     break
                 if p.next_unit == 0 and p.pending is None:
                     p.pending = self._induction_handoff(p)
+                if p.pending is None:  # lost on its way: the unit's deadline sends it on
+                    break
                 self._deliver(p, u)
                 if p.stroke_unit is not None:
                     break
@@ -362,6 +373,8 @@ class LinePlant:
                 continue
             if p.pending is not None and p.pending.to_unit == RECIRCULATION:
                 self.recirculation_received += 1
+            else:  # the last unit's hand-off never came: lost on that link
+                self.recirculation_lost += 1
             p.pending = None
             self.view.apply(Left(p.pid))
             p.passes += 1
@@ -381,6 +394,10 @@ class LinePlant:
         self._announce()
         self._merge()
         self._hand_offs()
+        traffic = self.view.traffic()
+        for u in self.units:
+            for rec in u.deadlines(self.t, traffic):
+                self._on_record(u, rec)
         t_next = self.t + self.cfg.dt
         for u in self.units:
             for rec in u.advance(t_next, stamp=self.t):
@@ -497,10 +514,11 @@ class LinePlant:
             up = link_name(u.upstream, u.index, self.names)
             lc.received[up] = u.received
             lc.refused[up] = dict(u.refused_handoffs)
+            lc.lost[up] = u.lost
             lc.sent[link_name(u.index, u.downstream, self.names)] = u.sent
-        lc.received[link_name(len(self.units) - 1, RECIRCULATION, self.names)] = (
-            self.recirculation_received
-        )
+        last = link_name(len(self.units) - 1, RECIRCULATION, self.names)
+        lc.received[last] = self.recirculation_received
+        lc.lost[last] = self.recirculation_lost
         return lc
 
     def unit_capacity(self, u: LineUnit) -> float:

@@ -120,6 +120,9 @@ class LineUnit:
         self.upstream = INDUCTION if index == 0 else index - 1
         self.downstream = RECIRCULATION if index == n_units - 1 else index + 1
         self.known: dict[int, int] = {}  # parcel id -> passes of its latest announcement
+        self.announced: dict[int, tuple[ParcelSpec, str]] = {}  # parcel id -> (spec, destination)
+        self.lost = 0  # hand-offs not received by their deadline (on the upstream link)
+        self._due: dict[int, tuple[tuple, float]] = {}  # parcel id -> (ride, deadline)
         self.taken: set[tuple[int, int]] = set()  # (parcel id, passes) received
         self.held: dict[int, _Held] = {}  # local id -> parcel in a stroke of this unit
         self.missed_strokes: dict[int, set[tuple[float, float]]] = {}  # parcel id -> (R_s, t1)
@@ -144,9 +147,64 @@ class LineUnit:
         self.late_past_axis = 0
 
     # -- records in ------------------------------------------------------------------------
-    def announce(self, parcel_id: int, passes: int) -> None:
-        """The induction scanned this parcel for this pass: a hand-off for it may follow."""
+    def announce(
+        self, parcel_id: int, passes: int, spec: ParcelSpec | None = None, destination: str = ""
+    ) -> None:
+        """The induction scanned this parcel for this pass (its spec and the destination the
+        scan read, as the induction's Parcel message carries them): a hand-off may follow."""
         self.known[parcel_id] = passes
+        if spec is not None:
+            self.announced[parcel_id] = (spec, destination)
+
+    def deadlines(self, t: float, traffic: Traffic) -> list[HandOff]:
+        """Hand-offs lost upstream: an announced parcel the traffic puts on the belt at sim
+        time ``t``, riding the belt (no stroke of any unit holds it), with its front past
+        this unit's fence axis (no stroke can be planned for it any more), and no hand-off
+        for it received. Each is counted lost on the upstream link once (a late arrival is
+        then refused as a duplicate), and passed on downstream from the line's prediction of
+        its ride, so that the units after this one do not count it again."""
+        out = []
+        for tr in traffic.tracks:
+            pid = tr.parcel_id
+            passes = self.known.get(pid)
+            if passes is None or (pid, passes) in self.taken or pid not in self.announced:
+                continue
+            if tr.free_after != math.inf:
+                continue
+            # when its front reaches the axis, kept per ride (a hold or a new pose changes it)
+            ride = (tr.x, tr.y, tr.yaw, tr.t_ref, tr.cog_x, tr.cog_y)
+            due = self._due.get(pid)
+            if due is None or due[0] != ride:
+                front = max(c[0] for c in tr.corners(tr.t_ref))
+                due = (ride, tr.t_ref + (self.spec.position - front) / self.v)
+                self._due[pid] = due
+            if t <= due[1]:
+                continue
+            del self._due[pid]
+            self.taken.add((pid, passes))
+            self.lost += 1
+            spec, dest = self.announced[pid]
+            spec = replace(spec, cog_offset_x=tr.cog_x, cog_offset_y=tr.cog_y)
+            self.sent += 1
+            out.append(
+                HandOff(
+                    pid,
+                    dest,
+                    passes,
+                    spec,
+                    tr.x,
+                    tr.y,
+                    tr.yaw,
+                    self.v,
+                    0.0,
+                    0.0,
+                    tr.t_ref,
+                    t,
+                    self.index,
+                    self.downstream,
+                )  # fmt: skip
+            )
+        return out
 
     def check(self, h: HandOff) -> str:
         """The reason the unit refuses ``h`` ("" if it takes it)."""
@@ -166,6 +224,7 @@ class LineUnit:
             self.refused_handoffs[why] += 1
             return UnitReply(refusal=why)
         self.taken.add((h.parcel_id, h.passes))
+        self._due.pop(h.parcel_id, None)
         self.received += 1
         track = track_of(h, self.v)
         front = max(c[0] for c in track.corners(t))
@@ -355,6 +414,7 @@ class LineUnit:
             "handoffs_in": self.received,
             "handoffs_out": self.sent,
             "handoffs_refused": dict(self.refused_handoffs),
+            "handoffs_lost": self.lost,
             "late_handoffs": self.late_handoffs,
             "late_handoffs_past_axis": self.late_past_axis,
             "strokes": self.accepted,

@@ -24,7 +24,7 @@ from fence_sorter.line.handoff import (
 from fence_sorter.line.line_file import load_line
 from fence_sorter.line.multi_unit import LinePlant, LineRunConfig
 from fence_sorter.line.routing import NOT_SERVED
-from fence_sorter.line.unit import LineUnit, track_of
+from fence_sorter.line.unit import LineUnit, Traffic, track_of
 
 TWO = load_line("two_units")
 
@@ -267,3 +267,47 @@ def test_the_traffic_kept_from_records_is_the_line_s_own():
     assert s["drained"] and plant.records_ignored == 0
     assert len(checked) == s["handoffs"] and max(checked) > 1
     assert not plant.view.tracks and not plant.view.stroking  # everything left the traffic
+
+
+def test_a_handoff_not_received_by_its_deadline_is_counted_lost_once():
+    """unit_2 knows parcel 9 (announced) but gets no hand-off: while the traffic puts its
+    front before unit_2's fence axis nothing happens; once past it, the unit counts one
+    hand-off lost on its upstream link and sends the parcel on from the predicted ride; a
+    hand-off arriving after that is refused as a duplicate."""
+    u = unit(1)
+    h = handoff(9, "B", 0, 1, 0.0, 0.0)  # front at X = 0 at t = 0, riding at v
+    u.announce(9, 0, h.spec, "B")
+    tr = track_of(h, TWO.speed)
+    axis_t = TWO.units[1].position / TWO.speed  # its front reaches the axis
+    traffic = Traffic((tr,))
+    assert u.deadlines(axis_t - 0.01, traffic) == [] and u.lost == 0
+    [out] = u.deadlines(axis_t + 0.01, traffic)
+    assert u.lost == 1 and u.sent == 1 and u.received == 0
+    assert (out.parcel_id, out.destination, out.from_unit, out.to_unit) == (9, "B", 1, -2)
+    assert (out.x, out.y, out.yaw, out.pose_time) == (tr.x, tr.y, tr.yaw, tr.t_ref)
+    assert u.deadlines(axis_t + 1.0, traffic) == []  # once
+    assert u.receive(h, axis_t + 1.0).refusal == DUPLICATE
+    # a parcel in a stroke upstream (its ride not predicted) is not overdue
+    u.announce(10, 0, h.spec, "B")
+    busy = replace(track_of(replace(h, parcel_id=10), TWO.speed), free_after=0.5)
+    assert u.deadlines(axis_t + 1.0, Traffic((busy,))) == []
+
+
+@pytest.mark.slow
+def test_a_handoff_lost_on_a_link_is_counted_there_and_the_parcel_is_not_lost():
+    """The wiring drops unit_1's hand-off of one parcel for unit_2 (destination B, unit_2's):
+    unit_2 counts it lost on unit_1>unit_2 and no other link counts anything lost; the
+    parcel goes round and ends sorted or rejected like every other: conservation exact."""
+    plant = LinePlant(TWO, LineRunConfig(parcels=12, rate_pcs_h=2000.0, seed=3))
+    victim = next(p for p in plant.parcels if p.destination == "B")
+    plant.drop.add((victim.pid, 0))
+    s = plant.run()
+    assert not plant.drop  # it was dropped
+    links = s["links"]
+    assert links["unit_1>unit_2"]["lost"] == 1
+    assert links["unit_1>unit_2"]["sent"] == links["unit_1>unit_2"]["received"] + 1
+    assert sum(v["lost"] for v in links.values()) == 1
+    assert s["handoffs_balanced"] and s["units"]["unit_2"]["handoffs_lost"] == 1
+    assert s["drained"] and s["conservation_ok"] and s["sorted_wrong_destination"] == 0
+    assert victim.passes >= 1 and victim.state in ("sorted", "rejected")
+    assert victim.end in ("B", TWO.reject_chute)
