@@ -70,7 +70,7 @@ def rhs_cost(sc) -> tuple[float, int]:
     on_belt = ys[:, 1] < sc.conveyor.width
     n_el = md.n_el
     scratch = (
-        np.zeros((K.N_SLOTS, K.N_COLS)), np.zeros(K.N_RES), np.zeros(md.n_modes),
+        K.zero_slots(), K.zero_result(), np.zeros(md.n_modes),
         np.zeros(max(2 * n_el, 2)), np.zeros(max(2 * n_el, 2)), np.zeros((n_el + 1, 2)),
         np.zeros(K.N_SLOTS), np.zeros(3), np.zeros(md.n_state),
     )  # fmt: skip

@@ -65,22 +65,22 @@ class _Tap:
     def add(self, stepper: SolveStepper) -> bool:
         """Keep the stepper's last accepted point; True if C_s crossed y0 = s at it."""
         t, y = stepper.t, stepper.y.copy()
-        res, slots = stepper.resultants, stepper.contacts
-        active = np.flatnonzero(slots[: K.SLOT_BORDER, K.C_ACTIVE])
+        res, slots = stepper.resultants[0], stepper.contacts
+        active = np.flatnonzero(slots["active"][: K.SLOT_BORDER])
         if len(active):
-            k = active[np.argmax(slots[active, K.C_N])]
-            px, py, ddot = slots[k, K.C_PX], slots[k, K.C_PY], slots[k, K.C_DDOT]
+            slot = slots[active[np.argmax(slots["n"][active])]]
+            px, py, ddot = slot["px"], slot["py"], slot["ddot"]
         else:
             px = py = math.nan
             ddot = 0.0
         impacts = stepper.impacts
         extra = np.array(
             [
-                res[K.R_ALPHA],
-                res[K.R_RATE],
-                res[K.R_ACCEL],
-                res[K.R_FENCE_N],
-                res[K.R_MAX_D],
+                res["alpha"],
+                res["rate"],
+                res["accel"],
+                res["fence_n"],
+                res["max_d"],
                 ddot,
                 px,
                 py,
@@ -94,8 +94,8 @@ class _Tap:
         self.ts.append(t)
         self.points.append((y, extra))
         self.trace.append((
-            t, extra[HELD], res[K.R_ACTIVE_MASK], res[K.R_FENCE_N], res[K.R_MAX_D], ddot,
-            res[K.R_TIP_W], res[K.R_ALPHA], y[0], y[1], y[2], y[3], y[4], y[5],
+            t, extra[HELD], res["active_mask"], res["fence_n"], res["max_d"], ddot,
+            res["tip_w"], res["alpha"], y[0], y[1], y[2], y[3], y[4], y[5],
         ))  # fmt: skip
         if stepper.sorted and self.t_sorted is None:
             t0, y0 = (prev[0], prev[1][1]) if prev is not None else (t, 0.0)

@@ -57,8 +57,8 @@ class RightHandSide:
         n = md.n_el
         self.model = md
         self.n = md.n_state
-        self.out = np.zeros((K.N_SLOTS, K.N_COLS))
-        self.res = np.zeros(K.N_RES)
+        self.out = K.zero_slots()
+        self.res = K.zero_result()
         self.modal = np.zeros(md.n_modes)
         self.w = np.zeros(max(2 * n, 2))
         self.wdot = np.zeros(max(2 * n, 2))

@@ -218,7 +218,7 @@ def observe_points(
         if (
             counters[0].n_impacts >= impact_rows.shape[0]
             or counters[0].n_stages >= stage_rows.shape[0]
-            or counters[0].n_rec >= record.shape[1]
+            or counters[0].n_rec >= record.shape[0]
         ):
             return OBS_GROW, k, on_belt
         t = ts[k]
@@ -322,8 +322,8 @@ class CyrkStepper(ObservedStepper):
         md = model
         n_el = md.n_el
         self.scratch = (
-            np.zeros((K.N_SLOTS, K.N_COLS)),
-            np.zeros(K.N_RES),
+            K.zero_slots(),
+            K.zero_result(),
             np.zeros(md.n_modes),
             np.zeros(max(2 * n_el, 2)),
             np.zeros(max(2 * n_el, 2)),

@@ -248,8 +248,8 @@ def _loop_state(n: int, m: int, n_el: int, propagators: tuple, cols: int) -> tup
         np.zeros(s),
         np.zeros((s, n)),
         np.zeros((s, 3)),
-        np.zeros((s, K.N_SLOTS, K.N_COLS)),
-        np.zeros((s, K.N_RES)),
+        np.zeros((s, K.N_SLOTS), K.CONTACT),
+        np.zeros((s, 1), K.RESULT),
         np.zeros((s, m)),
         np.zeros((s, 3 + m)),
         np.zeros(max(2 * n_el, 2)),
@@ -260,10 +260,10 @@ def _loop_state(n: int, m: int, n_el: int, propagators: tuple, cols: int) -> tup
         *propagators[:4],
         np.zeros((8, 3)),
         np.zeros((16, 2)),
-        # a column per accepted point when anything is recorded (one otherwise: none is
-        # written). Not zeroed: the loop writes every row of a column, and only the columns
+        # a point per accepted point when anything is recorded (one otherwise: none is
+        # written). Not zeroed: the loop writes every field of a point, and only the points
         # written are read
-        np.empty((K.N_REC_COLS, cols)),
+        np.empty(cols, K.RECORDED),
     )
 
 
@@ -316,33 +316,32 @@ def _loop_static(sc: Scenario) -> tuple:
     return loop_model, t_end, min(cols, 1 << 16), model.initial_state()
 
 
-# each recordable group's series: (name, row of the loop's record REC_*)
+# each recordable group's series: (name, field of the loop's RECORDED point, its element or -1)
 _SERIES_ROWS = {
     "trajectory": (
-        ("t", K.REC_T),
-        *((key, K.REC_Y + k) for k, key in enumerate(("x", "y", "phi", "vx", "vy", "phidot"))),
+        ("t", "t", -1),
+        *((key, "y", k) for k, key in enumerate(("x", "y", "phi", "vx", "vy", "phidot"))),
     ),
     "fence": (
-        ("t_fence", K.REC_T_FENCE),
-        ("alpha_w", K.REC_ALPHA),
-        ("tip_deflection", K.REC_TIP_W),
+        ("t_fence", "t_fence", -1),
+        ("alpha_w", "alpha", -1),
+        ("tip_deflection", "tip_w", -1),
     ),
     "forces": (
-        ("t_forces", K.REC_T_FORCES),
-        ("normal_force", K.REC_FENCE_N),
-        ("deformation", K.REC_MAX_D),
+        ("t_forces", "t_forces", -1),
+        ("normal_force", "fence_n", -1),
+        ("deformation", "max_d", -1),
     ),
-    "stages": (("t_stage", K.REC_T_STAGE), ("stage", K.REC_STAGE)),
+    "stages": (("t_stage", "t_stage", -1), ("stage", "stage", -1)),
 }
 assert tuple(_SERIES_ROWS) == RECORDABLE, "a series layout per recordable group"
 
 
 @lru_cache(maxsize=16)
-def _series_layout(want: tuple[str, ...]) -> tuple[tuple[str, ...], np.ndarray]:
-    """The names of the series of the recorded groups ``want`` (in RECORDABLE's order) and
-    their rows in the loop's record."""
-    pairs = [pair for group in RECORDABLE if group in want for pair in _SERIES_ROWS[group]]
-    return tuple(name for name, _ in pairs), np.array([row for _, row in pairs], dtype=np.intp)
+def _series_layout(want: tuple[str, ...]) -> tuple[tuple[str, str, int], ...]:
+    """The series of the recorded groups ``want`` (in RECORDABLE's order): (name, field,
+    element or -1) of the loop's RECORDED points."""
+    return tuple(entry for group in RECORDABLE if group in want for entry in _SERIES_ROWS[group])
 
 
 class Stepper:
@@ -379,8 +378,8 @@ class Stepper:
                 state = state._replace(
                     propagator_keys=keys, propagators=maps, propagator_g0=g0, propagator_g1=g1
                 )
-            if state.record.shape[1] < cols:
-                state = state._replace(record=np.empty((K.N_REC_COLS, cols)))
+            if state.record.shape[0] < cols:
+                state = state._replace(record=np.empty(cols, K.RECORDED))
         for name, array in zip(_STATE_ATTRIBUTES, state, strict=True):
             setattr(self, name, array)
         self._args: tuple | None = (static, state)
@@ -444,12 +443,12 @@ class Stepper:
 
     @property
     def resultants(self) -> np.ndarray:
-        """The resultants R_* at :attr:`t`."""
+        """The resultants (one RESULT record) at :attr:`t`."""
         return self.resultant_rows[self.counters["cur"][0]]
 
     @property
     def contacts(self) -> np.ndarray:
-        """The contact slots C_* at :attr:`t`."""
+        """The contact slots (CONTACT records) at :attr:`t`."""
         return self.contact_rows[self.counters["cur"][0]]
 
     @property
@@ -533,9 +532,9 @@ class Stepper:
                 bigger[:used] = arr[:used]
                 setattr(self, name, bigger)
         used = self.counters["n_rec"][0]
-        if used >= self.record.shape[1]:
-            bigger = np.zeros((self.record.shape[0], 2 * self.record.shape[1]))
-            bigger[:, :used] = self.record[:, :used]
+        if used >= self.record.shape[0]:
+            bigger = np.zeros(2 * self.record.shape[0], K.RECORDED)
+            bigger[:used] = self.record[:used]
             self.record = bigger
         self._args = None
 
@@ -545,7 +544,7 @@ class Stepper:
         if self._key is None:
             return
         pool = _WORKSPACES.setdefault(self._key, [])
-        if len(pool) < 4 and self.record.shape[1] <= _POOLED_RECORD:
+        if len(pool) < 4 and self.record.shape[0] <= _POOLED_RECORD:
             pool.append(self._loop_arrays()[1])
         self._key = None
 
@@ -559,7 +558,7 @@ class Stepper:
         if (
             counters["n_impacts"][0] >= self.impact_rows.shape[0]
             or counters["n_stages"][0] >= self.stage_rows.shape[0]
-            or counters["n_rec"][0] >= self.record.shape[1]
+            or counters["n_rec"][0] >= self.record.shape[0]
         ):
             self._grow()  # a point adds at most one row to each
         i = int(self.counters["cur"][0])
@@ -659,15 +658,18 @@ class Stepper:
         )
 
     def series(self, want, stages=None) -> dict[str, np.ndarray]:
-        """The recorded series (each its own array: a row of the loop's REC, which records the
-        time once per group); ``stages``: the run's stage list, if known (the recorded stage
-        names are the names in it)."""
+        """The recorded series (each its own array: a field of the loop's RECORDED points, which
+        record the time once per group); ``stages``: the run's stage list, if known (the
+        recorded stage names are the names in it)."""
         if not want:
             return {}
-        names, rows = _series_layout(tuple(want))
-        # one copy of the rows wanted (the record is reused by the next solve once this one is
-        # released), a series per row
-        out = dict(zip(names, self.record[rows, : self.counters["n_rec"][0]], strict=True))
+        # a copy of each series (the record is reused by the next solve once this one is
+        # released)
+        points = self.record[: self.counters["n_rec"][0]]
+        out = {
+            name: np.array(points[field] if k < 0 else points[field][:, k])
+            for name, field, k in _series_layout(tuple(want))
+        }
         if "stage" in out:
             codes = out["stage"].astype(np.intp)
             # the names' string width: the longest present (every stage the run entered was
@@ -705,10 +707,10 @@ class SolveStepper(Protocol):
     def running(self) -> bool: ...
 
     @property
-    def resultants(self) -> np.ndarray: ...  # R_* at t
+    def resultants(self) -> np.ndarray: ...  # the RESULT record at t
 
     @property
-    def contacts(self) -> np.ndarray: ...  # the contact slots C_* at t
+    def contacts(self) -> np.ndarray: ...  # the contact slots (CONTACT) at t
 
     @property
     def stage(self) -> Stage: ...

@@ -153,7 +153,7 @@ def test_both_families_step_through_one_interface(method):
     while stepper.running:
         assert stepper.step() is None
         times.append(stepper.t)
-        assert stepper.resultants[K.R_FENCE_N] >= 0.0 and stepper.contacts.shape[0] == K.N_SLOTS
+        assert stepper.resultants[0]["fence_n"] >= 0.0 and stepper.contacts.shape[0] == K.N_SLOTS
     assert np.all(np.diff(times) > 0.0)
     assert stepper.status == "finished" and stepper.sorted and stepper.stage is Stage.SORTED
     t_end, breaks = segments(sc)

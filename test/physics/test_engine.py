@@ -98,7 +98,7 @@ def test_each_divergence_check_names_its_kind() -> None:
         if k is not None:
             y[k] = v
         if depth is not None:
-            res[K.R_MAX_D] = depth
+            res[0]["max_d"] = depth
         stepper.observe(0.25, y, np.zeros(3), stepper.contacts.copy(), res, True)
         d = stepper.diverged()
         assert isinstance(d, Diagnosis) and d.kind is kind and d.t == 0.25

@@ -102,7 +102,7 @@ def test_generalized_alpha_damps_the_top_fence_mode_by_rho_inf(rho_inf):
     assert s.advance(2.0 * sc.drive.t1 + 0.05)  # the drive is at rest from 2 t1
     i = int(s.counters[0].cur)
     assert (
-        s.resultant_rows[i, K.R_FENCE_N] == 0.0 and s.modal_forces[i].max() == 0.0
+        s.resultant_rows[i, 0]["fence_n"] == 0.0 and s.modal_forces[i].max() == 0.0
     )  # no load on the modes
     s.states[i, 6:] = 0.0
     s.states[i, 6] = 1e-3  # mode 1
@@ -304,9 +304,9 @@ def test_oscillation_step_caps_only_lightly_damped_contacts() -> None:
     sc = load_scene("positioned_stiff").scenario
     md = SortingModel(sc)
     m, k = md.mass, sc.contact.k_p
-    out = np.zeros((K.N_SLOTS, K.N_COLS))
+    out = K.zero_slots()
     assert K.oscillation_step(md.P, out, 1e-4) == math.inf  # no contact
-    out[1, K.C_ACTIVE], out[1, K.C_D], out[1, K.C_DDOT] = 1.0, 0.0139, 0.0  # N ~ 65 N
+    out[1]["active"], out[1]["d"], out[1]["ddot"] = 1.0, 0.0139, 0.0  # N ~ 65 N
     b = sc.contact.b_p * m**0.4
     stiff = 4.0 * k * 0.0139**3
     zeta = b * 0.0139**2 / (2.0 * math.sqrt(stiff * m))
@@ -318,7 +318,7 @@ def test_oscillation_step_caps_only_lightly_damped_contacts() -> None:
     # k_p x1000 at the same force (D smaller by 1000^0.25): zeta ~ 0.003, capped
     stiffer = SortingModel(load_scene("positioned_stiff", ["contact.k_p=1.72e12"]).scenario)
     d = 0.0139 / 1000.0**0.25
-    out[1, K.C_D] = d
+    out[1]["d"] = d
     stiff = 4.0 * 1.72e12 * d**3
     assert b * d * d / (2.0 * math.sqrt(stiff * m)) < K.OSC_ZETA
     h = K.oscillation_step(stiffer.P, out, 1e-5)
@@ -326,5 +326,5 @@ def test_oscillation_step_caps_only_lightly_damped_contacts() -> None:
     # the damping ratio's boundary: just above it no cap, just below it the cap
     for scale, capped in ((1.01, False), (0.99, True)):
         d_b = (2.0 * K.OSC_ZETA * scale * math.sqrt(4.0 * k * m) / b) ** 2  # zeta ~ sqrt(D)
-        out[1, K.C_D] = d_b
+        out[1]["d"] = d_b
         assert (K.oscillation_step(md.P, out, 1e-4) < math.inf) == capped

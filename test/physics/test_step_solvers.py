@@ -29,7 +29,7 @@ def _step(md, cs, a, h, max_iter, force, tol=1e-14):
     """One trapezoidal step from row a (the Python body of the compiled function, so the module
     flag NEWTON is read at call time); (status, y1, iterations)."""
     y1, lam1 = np.zeros(md.n_state), np.zeros(3)
-    out, res = np.zeros((K.N_SLOTS, K.N_COLS)), np.zeros(K.N_RES)
+    out, res = K.zero_slots(), K.zero_result()
     props = (np.zeros((0, 2, 3)), np.zeros((0, 2)), np.zeros((0, 2)))
     status = K.trapezoidal_step.py_func(
         md.P,
@@ -64,7 +64,7 @@ def _step(md, cs, a, h, max_iter, force, tol=1e-14):
         cs.friction_prev,
         cs.work,
     )
-    return status, y1, int(res[K.R_ITERATIONS])
+    return status, y1, int(res[0]["iterations"])
 
 
 def _distance(y, ref, h):
@@ -85,7 +85,7 @@ def test_newton_contact_iteration_converges_quadratically_to_the_plain_fixed_poi
     tolerance of 1e-14 m), Newton quadratically (e_2 <= 1e4 / m e_1^2, down to round-off),
     the fixed point linearly."""
     md, cs, a = _state_at(t)
-    assert cs.resultant_rows[a, K.R_FENCE_N] > 10.0  # pushing
+    assert cs.resultant_rows[a, 0]["fence_n"] > 10.0  # pushing
     h = STIFF.solver.dt_max
     errors = {}
     ends = {}
@@ -202,7 +202,7 @@ def _free_step(gap):
     cs.states[a, 1] += gap  # the long face along the fence (D = 0 at t = 0), moved off it
     h = STIFF.solver.dt_max
     y1, lam1 = np.zeros(md.n_state), np.zeros(3)
-    out, res = np.zeros((K.N_SLOTS, K.N_COLS)), np.zeros(K.N_RES)
+    out, res = K.zero_slots(), K.zero_result()
     props = (np.zeros((0, 2, 3)), np.zeros((0, 2)), np.zeros((0, 2)))
     status = K.trapezoidal_step(
         md.P,
@@ -237,8 +237,8 @@ def _free_step(gap):
         cs.friction_prev,
         cs.work,
     )
-    assert status == K.STEP_OK and res[K.R_ITERATIONS] == 1
-    out2, res2 = np.zeros((K.N_SLOTS, K.N_COLS)), np.zeros(K.N_RES)
+    assert status == K.STEP_OK and res[0]["iterations"] == 1
+    out2, res2 = K.zero_slots(), K.zero_result()
     K.evaluate(
         md.P,
         md.corners,
@@ -272,14 +272,14 @@ def test_a_contact_free_step_ends_on_the_forces_at_its_end_state(near) -> None:
     gap = 0.05
     if near:  # the gap that leaves the nearest corner 5e-9 m off the fence at the step end
         out2 = _free_step(gap)[2]
-        gap += out2[:4, K.C_D][out2[:4, K.C_GAP] != 0.0].max() + 5e-9
+        gap += out2["d"][:4][out2["gap"][:4] != 0.0].max() + 5e-9
     out, res, out2, res2 = _free_step(gap)
-    assert res2[K.R_ACTIVE_MASK] == 0.0
-    fields = [K.R_FX, K.R_FY, K.R_MZ, K.R_FENCE_N, K.R_ACTIVE_MASK]
-    assert np.array_equal(res[fields], res2[fields])
-    d, d2 = out[:4, K.C_D], out2[:4, K.C_D]
-    assert np.array_equal(out[:4, K.C_GAP], out2[:4, K.C_GAP])
-    end_gap = -d2[out2[:4, K.C_GAP] != 0.0].max()
+    assert res2[0]["active_mask"] == 0.0
+    fields = ["fx", "fy", "mz", "fence_n", "active_mask"]
+    assert all(np.array_equal(res[f], res2[f]) for f in fields)
+    d, d2 = out["d"][:4], out2["d"][:4]
+    assert np.array_equal(out["gap"][:4], out2["gap"][:4])
+    end_gap = -d2[out2["gap"][:4] != 0.0].max()
     if near:
         assert 0.0 < end_gap < 10 * tol
         assert np.array_equal(d, d2)

@@ -2,7 +2,7 @@
 
 This package is the one implementation of the forces of one sorting event: the fence surface
 (21)-(32), the contact law (16) with fence and border friction (37), belt friction (34)-(36) and
-the fence's modal load (20). Its modules: ``layout`` (the arrays' indices, :func:`pack`),
+the fence's modal load (20). Its modules: ``layout`` (the arrays' records, :func:`pack`),
 ``forces`` (:func:`evaluate`), ``steps`` (the one-step maps), ``rhs`` (the ODE form of the
 SciPy baselines), ``impact`` (N_stiff), ``control`` (propagators, error estimate, events),
 ``loop`` (:func:`solve`), ``observer`` (:func:`observe`, the reductions of a run at its
@@ -15,9 +15,10 @@ is importable from the package. Everything works on NumPy arrays so that Numba c
   too (``layout``);
 - ``y``: the state [x, y, phi, vx, vy, phidot, eta_1..m, etadot_1..m] (C_s over ground, yaw,
   their rates, then the fence's modal coordinates and rates; m = 0 for a stiff fence);
-- ``out``: one row per contact slot (0-3 corner k on the fence, 4-7 the fence tip in face k,
-  8-11 corner k on the border wall) with the columns ``C_*``;
-- ``res``: the resultant and a few scalars (indices ``R_*``).
+- ``out``: one :data:`CONTACT` record per contact slot (0-3 corner k on the fence, 4-7 the
+  fence tip in face k, 8-11 corner k on the border wall), ``out[k].d``;
+- ``res``: the resultant and a few scalars, an array of one :data:`RESULT` record
+  (``res[0].fx``).
 
 Why compiled: the pure-Python stepper ran impact_flexible at 2.4x real time; the accuracy and
 speed targets (75x real time) need the force evaluation in the 1-10 us range, which only a

@@ -41,7 +41,7 @@ import numba
 import numpy as np
 from numba.np.numpy_support import as_dtype
 
-from .layout import COUNTERS, FIGURES, PARAMS, SETTINGS
+from .layout import CONTACT, COUNTERS, FIGURES, PARAMS, RECORDED, RESULT, SETTINGS
 
 MODULE = "solve_aot"  # the extension's module name (its PyInit_ symbol)
 BUILD_FILE = "build.json"
@@ -70,7 +70,15 @@ def aot_directory(cache: Path) -> Path:
 
 
 # the record dtypes by name, for build.json (a structured dtype's str() does not parse back)
-RECORDS = {"PARAMS": PARAMS, "SETTINGS": SETTINGS, "COUNTERS": COUNTERS, "FIGURES": FIGURES}
+RECORDS = {
+    "PARAMS": PARAMS,
+    "SETTINGS": SETTINGS,
+    "COUNTERS": COUNTERS,
+    "FIGURES": FIGURES,
+    "CONTACT": CONTACT,
+    "RESULT": RESULT,
+    "RECORDED": RECORDED,
+}
 
 
 def _dtype_name(dtype: np.dtype) -> str:

@@ -9,13 +9,6 @@ import numpy as np
 from numba import njit
 
 from .layout import (
-    C_ACTIVE,
-    C_D,
-    C_DDOT,
-    C_GAP,
-    C_NRAW,
-    C_S,
-    C_SLACK,
     N_SLOTS,
     SLOT_BORDER,
     SLOT_TIP,
@@ -173,13 +166,13 @@ EVENT_STICK = 4  # mu N - |f_stick|: a pushing corner's fence friction switches 
 def event_value(P, out, slot, kind):
     """The event function of ``kind`` for ``slot`` at a point (nan where it is not defined)."""
     if kind == EVENT_STICK:
-        return out[slot, C_SLACK] if out[slot, C_ACTIVE] != 0.0 else math.nan
+        return out[slot].slack if out[slot].active != 0.0 else math.nan
     if kind == EVENT_SLIDE_OFF:
-        s_arc = out[slot, C_S]
+        s_arc = out[slot].s
         return P[0].length - s_arc if s_arc > 0.0 else math.nan
-    if out[slot, C_GAP] == 0.0:
+    if out[slot].gap == 0.0:
         return math.nan
-    return out[slot, C_D] if kind == EVENT_ONSET else out[slot, C_NRAW]
+    return out[slot].d if kind == EVENT_ONSET else out[slot].n_raw
 
 
 @njit(cache=True, _nrt=False)
@@ -190,7 +183,7 @@ def first_event(P, out_a, out_b, friction):
     lose it (release or the N >= 0 clamp engaging; the function is the law (16) unclipped), and
     a pushing corner can slide past the fence tip (the function is R_z - s); with ``friction``
     a pushing corner's fence friction can switch between slip and stick (the function is
-    mu N - |the implicit stick force|, ``C_SLACK``); only functions defined at both points
+    mu N - |the implicit stick force|, ``slack``); only functions defined at both points
     count. The first is estimated by linear interpolation.
     Returns (slot, kind, g_a, g_b).
     """
@@ -199,9 +192,9 @@ def first_event(P, out_a, out_b, friction):
     kind_best = EVENT_ONSET
     ga_best = gb_best = 0.0
     for k in range(SLOT_BORDER):
-        active = out_a[k, C_ACTIVE] != 0.0
+        active = out_a[k].active != 0.0
         kind = EVENT_RELEASE if active else EVENT_ONSET
-        if active and k < SLOT_TIP and out_b[k, C_GAP] == 0.0:
+        if active and k < SLOT_TIP and out_b[k].gap == 0.0:
             kind = EVENT_SLIDE_OFF
         ga = event_value(P, out_a, k, kind)
         gb = event_value(P, out_b, k, kind)
@@ -228,10 +221,10 @@ def time_to_contact(out):
     the onset then shows as a sign change of D within the step."""
     best = math.inf
     for k in range(SLOT_BORDER):
-        if out[k, C_GAP] == 0.0 or out[k, C_ACTIVE] != 0.0:
+        if out[k].gap == 0.0 or out[k].active != 0.0:
             continue
-        d = out[k, C_D]
-        rate = out[k, C_DDOT]
+        d = out[k].d
+        rate = out[k].ddot
         if d < 0.0 and rate > 0.0:
             ttc = -d / rate
             if ttc < best:
@@ -261,12 +254,12 @@ def oscillation_step(P, out, rtol):
     k = P[0].k_p
     b = P[0].b_eff
     for s in range(N_SLOTS):
-        if out[s, C_ACTIVE] == 0.0:
+        if out[s].active == 0.0:
             continue
-        d = out[s, C_D]
+        d = out[s].d
         if not d > 0.0:
             continue
-        stiff = 4.0 * k * d**3 + 2.0 * b * d * out[s, C_DDOT]
+        stiff = 4.0 * k * d**3 + 2.0 * b * d * out[s].ddot
         if not stiff > 0.0:
             continue
         if b * d * d < 2.0 * OSC_ZETA * math.sqrt(stiff * mass):
@@ -287,6 +280,6 @@ def flexible_contact_step(out, h_nom, scale):
     error on the fence sets the peak force's (4.9e-5 at any rtol). A step held to
     dt_max (rtol / 1e-4)^(1/2) makes it fall with rtol; inf without a fence contact."""
     for k in range(SLOT_BORDER):
-        if out[k, C_ACTIVE] != 0.0:
+        if out[k].active != 0.0:
             return h_nom * scale
     return math.inf

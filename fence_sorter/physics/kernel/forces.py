@@ -5,40 +5,10 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
-from .layout import (
-    C_ACTIVE,
-    C_D,
-    C_DDOT,
-    C_FT,
-    C_GAP,
-    C_N,
-    C_NRAW,
-    C_NX,
-    C_NY,
-    C_PX,
-    C_PY,
-    C_S,
-    C_SLACK,
-    C_VSX,
-    C_VSY,
-    R_ACCEL,
-    R_ACTIVE_MASK,
-    R_ALPHA,
-    R_ENERGY_CONTACT,
-    R_FENCE_N,
-    R_FX,
-    R_FY,
-    R_MAX_D,
-    R_MAX_W,
-    R_MZ,
-    R_POWER_FENCE,
-    R_RATE,
-    R_TIP_W,
-    SLOT_BORDER,
-    SLOT_TIP,
-)
+from .layout import SLOT_BORDER, SLOT_TIP
 
 
 # -- drive --------------------------------------------------------------------------------------
@@ -361,33 +331,33 @@ def _add(
         slack = math.nan
     fx = n * nx + ft * tx
     fy = n * ny + ft * ty
-    res[R_FX] += fx
-    res[R_FY] += fy
-    res[R_MZ] += (px - x) * fy - (py - y) * fx
-    res[R_ENERGY_CONTACT] += 0.2 * P[0].k_p * d**5
+    res[0].fx += fx
+    res[0].fy += fy
+    res[0].mz += (px - x) * fy - (py - y) * fx
+    res[0].energy_contact += 0.2 * P[0].k_p * d**5
     if on_fence:
-        res[R_FENCE_N] += n
-        res[R_POWER_FENCE] += fx * vsx + fy * vsy
+        res[0].fence_n += n
+        res[0].power_fence += fx * vsx + fy * vsy
         if P[0].flexible != 0.0:
             _modal_share(P, phi, s_arc, alpha, -fx, -fy, modal)
-    res[R_ACTIVE_MASK] += float(1 << slot)
-    if d > res[R_MAX_D]:
-        res[R_MAX_D] = d
+    res[0].active_mask += float(1 << slot)
+    if d > res[0].max_d:
+        res[0].max_d = d
     row = out[slot]
-    row[C_ACTIVE] = 1.0
-    row[C_S] = s_arc
-    row[C_D] = d
-    row[C_DDOT] = d_rate
-    row[C_N] = n
-    row[C_NRAW] = n_raw
-    row[C_FT] = ft
-    row[C_SLACK] = slack
-    row[C_PX] = px
-    row[C_PY] = py
-    row[C_NX] = nx
-    row[C_NY] = ny
-    row[C_VSX] = vsx
-    row[C_VSY] = vsy
+    row.active = 1.0
+    row.s = s_arc
+    row.d = d
+    row.ddot = d_rate
+    row.n = n
+    row.n_raw = n_raw
+    row.ft = ft
+    row.slack = slack
+    row.px = px
+    row.py = py
+    row.nx = nx
+    row.ny = ny
+    row.vsx = vsx
+    row.vsy = vsy
 
 
 @njit(cache=True, _nrt=False)
@@ -436,25 +406,25 @@ def _evaluate(
     """:func:`evaluate` with the drive state (alpha, rate, accel), cos, sin of alpha and c, s
     = cos, sin of the yaw y[2] given: a step's iteration evaluates every iterate at the same
     time, so it computes alpha's once, and the yaw's from the first iterate's (``_turn``)."""
-    out[:, :] = 0.0
-    res[:] = 0.0
+    out.view(np.float64)[:] = 0.0
+    res.view(np.float64)[:] = 0.0
     modal[:] = 0.0
     x, yy, vx, vy, om = y[0], y[1], y[3], y[4], y[5]
     m = modal.shape[0]
-    res[R_ALPHA], res[R_RATE], res[R_ACCEL] = alpha, rate, accel
+    res[0].alpha, res[0].rate, res[0].accel = alpha, rate, accel
     flex = P[0].flexible != 0.0
     if flex:
         fence_shape(P, phi, y[6 : 6 + m], y[6 + m : 6 + 2 * m], alpha, w, wdot, nodes)
         n_el = int(P[0].n_el)
-        res[R_TIP_W] = w[2 * n_el - 2]
+        res[0].tip_w = w[2 * n_el - 2]
         mw = 0.0
         for k in range(n_el):
             if abs(w[2 * k]) > mw:
                 mw = abs(w[2 * k])
-        res[R_MAX_W] = mw
+        res[0].max_w = mw
     length = P[0].length
     use_tip = P[0].use_tip != 0.0
-    reach = res[R_MAX_W] + P[0].margin
+    reach = res[0].max_w + P[0].margin
     lam_x, lam_y = lam[0], lam[1]
     # corner k of the load: (x + c a_k - s b_k, y + s a_k + c b_k), recomputed where used (the
     # same arithmetic; no array allocated per evaluation)
@@ -477,7 +447,7 @@ def _evaluate(
         else:
             s_arc = px * ca + py * sa  # the same projection on the straight rigid fence
         if s_arc > length:
-            out[k, C_S] = s_arc  # beyond the tip: the slide-off event function is R_z - s
+            out[k].s = s_arc  # beyond the tip: the slide-off event function is R_z - s
             continue
         if s_arc < 0.0:
             continue
@@ -491,10 +461,10 @@ def _evaluate(
         vpx = vx - om * (py - yy)
         vpy = vy + om * (px - x)
         d_rate = (vux - vpx) * nx + (vuy - vpy) * ny
-        out[k, C_GAP] = 1.0
-        out[k, C_D] = d
-        out[k, C_DDOT] = d_rate
-        out[k, C_NRAW] = d  # negative before contact: the onset function
+        out[k].gap = 1.0
+        out[k].d = d
+        out[k].ddot = d_rate
+        out[k].n_raw = d  # negative before contact: the onset function
         if d > 0.0:
             slide = (vpx - vux) * tx + (vpy - vuy) * ty
             _add(
@@ -561,7 +531,7 @@ def _evaluate(
             ftx, fty = fny, -fnx
             slide = (vpx - vtx) * ftx + (vpy - vty) * fty
             slot = SLOT_TIP + exit_face
-            out[slot, C_GAP] = 1.0
+            out[slot].gap = 1.0
             _add(
                 P,
                 phi,
@@ -629,6 +599,6 @@ def _evaluate(
     if flex:
         for j in range(m):
             modal[j] -= rigid_modal[j] * accel
-    res[R_FX] += P[0].ext_x
-    res[R_FY] += P[0].ext_y
-    res[R_MZ] += P[0].ext_m
+    res[0].fx += P[0].ext_x
+    res[0].fy += P[0].ext_y
+    res[0].mz += P[0].ext_m

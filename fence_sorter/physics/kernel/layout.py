@@ -1,8 +1,9 @@
 """Layout of the kernel's arrays: the named records of one event's parameters (:data:`PARAMS`,
 :func:`pack`) and solver settings (:data:`SETTINGS`) and of the loop's counters
-(:data:`COUNTERS`) and float state (:data:`FIGURES`); contact slot columns ``C_*``, resultants
-``R_*``, and the solve loop's arrays (:data:`LoopModel`, :data:`LoopState`): state rows ``S_*``,
-diagnoses ``DIAG_*``, recorded rows ``REC_*``.
+(:data:`COUNTERS`) and float state (:data:`FIGURES`); an evaluation's contact slots
+(:data:`CONTACT`) and resultants (:data:`RESULT`), a recorded point (:data:`RECORDED`), and the
+solve loop's arrays (:data:`LoopModel`, :data:`LoopState`): state rows ``S_*``, diagnoses
+``DIAG_*``.
 
 A record travels as an array of one element (``params[0].mass``, ``counters[0].n_steps``):
 Numba compiles a field of it to the same load or store at a fixed offset as an index into a
@@ -88,44 +89,74 @@ def pack(
     return np.array([row], dtype=PARAMS)
 
 
-# -- contact slot columns -----------------------------------------------------------------------
-C_ACTIVE = 0  # 1: force acting (D > 0)
-C_GAP = 1  # 1: a fence candidate whose D and Ddot are known (for onset/release location)
-C_S = 2  # arc position [m]
-C_D = 3  # D [m]
-C_DDOT = 4  # Ddot [m/s]
-C_N = 5  # N [N] (clipped >= 0)
-C_NRAW = 6  # the law (16) before the clip (negative: adhesion the clip removes)
-C_FT = 7  # tangential friction force on the load [N]
-C_PX = 8  # contact point
-C_PY = 9
-C_NX = 10  # unit normal of the force on the load
-C_NY = 11
-C_VSX = 12  # surface velocity at the contact point (0 for the border)
-C_VSY = 13
-C_SLACK = 14  # fence friction: mu N - |the implicit stick force| (> 0 sticks; nan explicit)
-C_FMEAN = 15  # the step's mean friction (impulse / h) of a contact sticking at the step end
-N_COLS = 16
+# -- contact slots ------------------------------------------------------------------------------
+# a slot of the contact array (``out[k].d``; an evaluation's slots are an array of N_SLOTS)
+CONTACT = _record(
+    [
+        ("active", "f8"),  # 1: force acting (D > 0)
+        ("gap", "f8"),  # 1: a fence candidate whose D and Ddot are known (onset/release location)
+        ("s", "f8"),  # arc position [m]
+        ("d", "f8"),  # D [m]
+        ("ddot", "f8"),  # Ddot [m/s]
+        ("n", "f8"),  # N [N] (clipped >= 0)
+        ("n_raw", "f8"),  # the law (16) before the clip (negative: adhesion the clip removes)
+        ("ft", "f8"),  # tangential friction force on the load [N]
+        ("px", "f8"),  # contact point
+        ("py", "f8"),
+        ("nx", "f8"),  # unit normal of the force on the load
+        ("ny", "f8"),
+        ("vsx", "f8"),  # surface velocity at the contact point (0 for the border)
+        ("vsy", "f8"),
+        (
+            "slack",
+            "f8",
+        ),  # fence friction: mu N - |the implicit stick force| (> 0 sticks; nan explicit)
+        (
+            "fmean",
+            "f8",
+        ),  # the step's mean friction (impulse / h) of a contact sticking at the step end
+    ]
+)
 N_SLOTS = 12
 SLOT_TIP = 4
 SLOT_BORDER = 8
 
 # -- results ------------------------------------------------------------------------------------
-R_FX = 0  # contact resultant plus external wrench on the load (belt friction excluded)
-R_FY = 1
-R_MZ = 2
-R_FENCE_N = 3  # sum of N over fence contacts [N]
-R_MAX_D = 4  # deepest D [m]
-R_POWER_FENCE = 5  # power of the fence contact forces at the fence surface velocity [W]
-R_ALPHA = 6  # alpha_w [rad]
-R_RATE = 7
-R_ACCEL = 8
-R_TIP_W = 9  # tip deflection [m]
-R_MAX_W = 10  # largest nodal |w| [m]
-R_ENERGY_CONTACT = 11  # potential of the k_p D^4 springs, sum k D^5 / 5 [J]
-R_ACTIVE_MASK = 12  # bit k set: slot k carries a force
-R_ITERATIONS = 13  # contact iterations the step that produced this point took
-N_RES = 14
+# the resultants of one evaluation (an array of one record, ``res[0].fx``)
+RESULT = _record(
+    [
+        (
+            "fx",
+            "f8",
+        ),  # contact resultant plus external wrench on the load (belt friction excluded)
+        ("fy", "f8"),
+        ("mz", "f8"),
+        ("fence_n", "f8"),  # sum of N over fence contacts [N]
+        ("max_d", "f8"),  # deepest D [m]
+        (
+            "power_fence",
+            "f8",
+        ),  # power of the fence contact forces at the fence surface velocity [W]
+        ("alpha", "f8"),  # alpha_w [rad]
+        ("rate", "f8"),
+        ("accel", "f8"),
+        ("tip_w", "f8"),  # tip deflection [m]
+        ("max_w", "f8"),  # largest nodal |w| [m]
+        ("energy_contact", "f8"),  # potential of the k_p D^4 springs, sum k D^5 / 5 [J]
+        ("active_mask", "f8"),  # bit k set: slot k carries a force
+        ("iterations", "f8"),  # contact iterations the step that produced this point took
+    ]
+)
+
+
+def zero_slots() -> np.ndarray:
+    """Zeroed contact slots of one evaluation (an array of N_SLOTS :data:`CONTACT` records)."""
+    return np.zeros(N_SLOTS, CONTACT)
+
+
+def zero_result() -> np.ndarray:
+    """Zeroed resultants of one evaluation (an array of one :data:`RESULT` record)."""
+    return np.zeros(1, RESULT)
 
 
 # -- the solve loop's arrays ---------------------------------------------------------------
@@ -246,20 +277,23 @@ DIAG_DEEP = 2
 DIAG_SPEED = 3
 DIAG_MIN_DT = 4
 
-# rows of the recorded series
-REC_T = 0
-REC_Y = 1  # x, y, phi, vx, vy, phidot
-REC_ALPHA = 7
-REC_TIP_W = 8
-REC_FENCE_N = 9
-REC_MAX_D = 10
-REC_STAGE = 11
-# the time again, once per series group that has its own time array (fence, forces, stages), so
-# each recorded array is a row of ``record`` of its own
-REC_T_FENCE = 12
-REC_T_FORCES = 13
-REC_T_STAGE = 14
-N_REC_COLS = 15
+# a recorded point (the loop's ``record`` is an array of them, one per accepted point)
+RECORDED = _record(
+    [
+        ("t", "f8"),
+        ("y", "f8", (6,)),  # x, y, phi, vx, vy, phidot
+        ("alpha", "f8"),
+        ("tip_w", "f8"),
+        ("fence_n", "f8"),
+        ("max_d", "f8"),
+        ("stage", "f8"),
+        # the time again, once per series group that has its own time array (fence, forces,
+        # stages), so each recorded series is a field of its own
+        ("t_fence", "f8"),
+        ("t_forces", "f8"),
+        ("t_stage", "f8"),
+    ]
+)
 N_PROP_CACHE = 256
 
 # The loop's arrays in two groups, as MuJoCo's MjModel and MjData: what one event is (read only)
@@ -286,8 +320,8 @@ LoopState = namedtuple(
         "times",  # t of the state rows S_* [s]
         "states",  # state vectors of the rows
         "belt_wrench",  # belt friction (F_x, F_y, M_z) of the rows
-        "contacts",  # contact slots C_* of the rows
-        "resultants",  # resultants R_* of the rows
+        "contacts",  # contact slots (CONTACT) of the rows
+        "resultants",  # resultants (one RESULT) of the rows
         "modal_forces",  # modal force of the rows
         "accelerations",  # accelerations of the rows
         "deflection",  # nodal deflection and slope of the fence (scratch)
@@ -301,10 +335,14 @@ LoopState = namedtuple(
         "propagator_g1",
         "impacts",  # rows (t, w_n, N_stiff)
         "stages",  # rows (t, stage code)
-        "record",  # recorded series REC_*, a column per accepted point
+        "record",  # recorded points (RECORDED), one per accepted point
     ],
 )
 
 
 #: the names of the layout, re-exported by the package (``from .layout import *``)
-__all__ = [n for n in tuple(globals()) if n.isupper() or n in ("LoopModel", "LoopState", "pack")]
+__all__ = [
+    n
+    for n in tuple(globals())
+    if n.isupper() or n in ("LoopModel", "LoopState", "pack", "zero_slots", "zero_result")
+]

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
 from .control import (
@@ -25,7 +26,6 @@ from .forces import evaluate, karnopp_belt, stick_wrench
 from .layout import (
     DIAG_MIN_DT,
     DIAG_NONE,
-    N_COLS,
     N_SLOTS,
     S_ALPHA,
     S_BEFORE,
@@ -69,9 +69,8 @@ def _copy_state(
     times[dst] = times[src]
     _copy_row(states, dst, src)
     _copy_row(belt_wrench, dst, src)
-    for r in range(N_SLOTS):
-        for c in range(N_COLS):
-            contacts[dst, r, c] = contacts[src, r, c]
+    for k in range(N_SLOTS):
+        contacts[dst, k] = contacts[src, k]
     _copy_row(resultants, dst, src)
     _copy_row(modal_forces, dst, src)
     _copy_row(accelerations, dst, src)
@@ -135,9 +134,9 @@ def _trap(
         modal_forces[b], deflection, deflection_rate, nodes, friction_prev, work,
     )  # fmt: skip
     if status != STEP_REJECTED:
-        accelerations[b, 0] = (resultants[b, 0] + belt_wrench[b, 0]) / params[0].mass
-        accelerations[b, 1] = (resultants[b, 1] + belt_wrench[b, 1]) / params[0].mass
-        accelerations[b, 2] = (resultants[b, 2] + belt_wrench[b, 2]) / params[0].inertia
+        accelerations[b, 0] = (resultants[b, 0].fx + belt_wrench[b, 0]) / params[0].mass
+        accelerations[b, 1] = (resultants[b, 0].fy + belt_wrench[b, 1]) / params[0].mass
+        accelerations[b, 2] = (resultants[b, 0].mz + belt_wrench[b, 2]) / params[0].inertia
     times[b] = times[a] + h
     return status
 
@@ -171,9 +170,9 @@ def _accelerations(
     acceleration jump at 2 t1, which the forces at the breakpoint do not contain yet)."""
     m = omega.shape[0]
     y = states[i]
-    accelerations[i, 0] = (resultants[i, 0] + belt_wrench[i, 0]) / params[0].mass
-    accelerations[i, 1] = (resultants[i, 1] + belt_wrench[i, 1]) / params[0].mass
-    accelerations[i, 2] = (resultants[i, 2] + belt_wrench[i, 2]) / params[0].inertia
+    accelerations[i, 0] = (resultants[i, 0].fx + belt_wrench[i, 0]) / params[0].mass
+    accelerations[i, 1] = (resultants[i, 0].fy + belt_wrench[i, 1]) / params[0].mass
+    accelerations[i, 2] = (resultants[i, 0].mz + belt_wrench[i, 2]) / params[0].inertia
     for j in range(m):
         accelerations[i, 3 + j] = (
             modal_forces[i, j]
@@ -290,7 +289,7 @@ def solve(model, state, max_attempts, t_target):
     """Run the solve loop on ``model`` (:data:`LoopModel`) from where ``state``
     (:data:`LoopState`) left it: until it ends (SOLVE_DONE, the diagnosis in counters[0].diag),
     ``max_attempts`` step attempts (SOLVE_PAUSED; 1: at most one accepted step), an output
-    buffer (impacts, stages rows; record columns, one row per recorded quantity REC_*) without a
+    buffer (impacts, stages rows; recorded points) without a
     free entry (SOLVE_GROW) or the accepted time reaching ``t_target`` (SOLVE_REACHED). Row 0 of
     the states holds the initial state on the first call, which zeroes the other state rows and
     the scratch arrays, evaluates the forces there and observes it (``max_attempts`` 0: only
@@ -324,8 +323,8 @@ def solve(model, state, max_attempts, t_target):
             if i != a:
                 states[i, :] = 0.0
         belt_wrench[:, :] = 0.0
-        contacts[:, :, :] = 0.0
-        resultants[:, :] = 0.0
+        contacts.view(np.float64)[:, :] = 0.0
+        resultants.view(np.float64)[:, :] = 0.0
         modal_forces[:, :] = 0.0
         accelerations[:, :] = 0.0
         deflection[:] = 0.0
@@ -340,13 +339,15 @@ def solve(model, state, max_attempts, t_target):
             deflection, deflection_rate, nodes,
         )  # fmt: skip
         y, r = states[a], resultants[a]
-        bx, by, bz = karnopp_belt(params, y[3] - params[0].belt, y[4], y[5], r[0], r[1], r[2])
+        bx, by, bz = karnopp_belt(
+            params, y[3] - params[0].belt, y[4], y[5], r[0].fx, r[0].fy, r[0].mz
+        )
         belt_wrench[a, 0], belt_wrench[a, 1], belt_wrench[a, 2] = bx, by, bz
         if (
             math.hypot(y[3] - params[0].belt, y[4]) <= settings[0].v_min
             and abs(y[5]) <= settings[0].phidot_min
         ):
-            bx, by, bz = stick_wrench(params, r[0], r[1], r[2])
+            bx, by, bz = stick_wrench(params, r[0].fx, r[0].fy, r[0].mz)
             belt_wrench[a, 0], belt_wrench[a, 1], belt_wrench[a, 2] = bx, by, bz
         _accelerations(
             params, rigid_modal, omega, zeta, states, belt_wrench, resultants, modal_forces,
@@ -375,7 +376,7 @@ def solve(model, state, max_attempts, t_target):
         if (
             counters[0].n_impacts >= impacts.shape[0]
             or counters[0].n_stages >= stages.shape[0]
-            or counters[0].n_rec >= record.shape[1]
+            or counters[0].n_rec >= record.shape[0]
         ):
             return SOLVE_GROW
         attempts += 1

@@ -24,32 +24,11 @@ from numba import njit
 
 from .impact import n_stiff
 from .layout import (
-    C_ACTIVE,
-    C_DDOT,
-    C_NX,
-    C_NY,
     DIAG_DEEP,
     DIAG_NONE,
     DIAG_NONFINITE,
     DIAG_SPEED,
     N_SLOTS,
-    R_ACTIVE_MASK,
-    R_ALPHA,
-    R_ENERGY_CONTACT,
-    R_FENCE_N,
-    R_MAX_D,
-    R_POWER_FENCE,
-    R_TIP_W,
-    REC_ALPHA,
-    REC_FENCE_N,
-    REC_MAX_D,
-    REC_STAGE,
-    REC_T,
-    REC_T_FENCE,
-    REC_T_FORCES,
-    REC_T_STAGE,
-    REC_TIP_W,
-    REC_Y,
     SLOT_BORDER,
     SLOT_TIP,
 )
@@ -92,17 +71,17 @@ def classify_code(out, normals, phi, touched, flush):
     n_corners = 0
     first = -1
     for k in range(4):
-        if out[k, C_ACTIVE] != 0.0:
+        if out[k].active != 0.0:
             n_corners += 1
             if first < 0:
                 first = k
     tip = False
     for k in range(SLOT_TIP, SLOT_BORDER):
-        if out[k, C_ACTIVE] != 0.0:
+        if out[k].active != 0.0:
             tip = True
     border = False
     for k in range(SLOT_BORDER, N_SLOTS):
-        if out[k, C_ACTIVE] != 0.0:
+        if out[k].active != 0.0:
             border = True
     if n_corners == 0 and not tip:
         return STAGE_CODE_E4 if touched else STAGE_CODE_ON_BELT
@@ -111,9 +90,9 @@ def classify_code(out, normals, phi, touched, flush):
     if tip:
         return STAGE_CODE_E2
     for k in range(4):
-        if out[k, C_ACTIVE] != 0.0 and out[(k + 1) % 4, C_ACTIVE] != 0.0:
+        if out[k].active != 0.0 and out[(k + 1) % 4].active != 0.0:
             return STAGE_CODE_E2
-    tangent_angle = math.atan2(out[first, C_NX], -out[first, C_NY])
+    tangent_angle = math.atan2(out[first].nx, -out[first].ny)
     for face in (first, (first - 1) % 4):
         face_angle = phi + math.atan2(normals[face, 0], -normals[face, 1])
         if abs(_remainder(face_angle - tangent_angle, math.pi)) < flush:
@@ -178,8 +157,8 @@ def observe(
     mass = params[0].mass
     vx, vy, om = y[3], y[4], y[5]
     energy = 0.5 * mass * (vx * vx + vy * vy) + 0.5 * params[0].inertia * om * om
-    energy += res[R_ENERGY_CONTACT]
-    power = res[R_POWER_FENCE] + params[0].ext_x * vx + params[0].ext_y * vy + params[0].ext_m * om
+    energy += res[0].energy_contact
+    power = res[0].power_fence + params[0].ext_x * vx + params[0].ext_y * vy + params[0].ext_m * om
     if on_belt:
         power += belt_wrench[i, 0] * params[0].belt
     width = settings[0].width
@@ -198,14 +177,14 @@ def observe(
             frac = (width - py1) / (y[1] - py1)
             figures[0].exit_speed = figures[0].prev_y[4] + frac * (vy - figures[0].prev_y[4])
             counters[0].sorted = 1
-    mask = int(res[R_ACTIVE_MASK])
+    mask = int(res[0].active_mask)
     fence_on = (mask & 0xFF) != 0
     if fence_on and counters[0].had_fence == 0:
         counters[0].touched = 1
         w_n = -math.inf
         for k in range(SLOT_BORDER):
-            if out[k, C_ACTIVE] != 0.0:
-                v = out[k, C_DDOT]
+            if out[k].active != 0.0:
+                v = out[k].ddot
                 if math.isnan(v) or math.isnan(w_n):
                     w_n = math.nan
                 elif v > w_n:
@@ -219,7 +198,7 @@ def observe(
         impacts[n_imp, 2] = peak
         counters[0].n_impacts = n_imp + 1
     counters[0].had_fence = 1 if fence_on else 0
-    n = res[R_FENCE_N]
+    n = res[0].fence_n
     if n > figures[0].peak_n:
         figures[0].peak_n = n
     n1, n2 = figures[0].last_n1, figures[0].last_n2
@@ -232,11 +211,11 @@ def observe(
             figures[0].peak_n = peak
     figures[0].last_n1, figures[0].last_n2 = n2, n
     figures[0].last_t1, figures[0].last_t2 = figures[0].last_t2, t
-    tip = abs(res[R_TIP_W])
+    tip = abs(res[0].tip_w)
     if tip > figures[0].peak_tip:
         figures[0].peak_tip = tip
-    if res[R_MAX_D] > figures[0].max_depth:
-        figures[0].max_depth = res[R_MAX_D]
+    if res[0].max_d > figures[0].max_depth:
+        figures[0].max_depth = res[0].max_d
     if y[1] > figures[0].y_max:
         figures[0].y_max = y[1]
     sorted_ = counters[0].sorted != 0
@@ -254,17 +233,18 @@ def observe(
             counters[0].n_stages = n_stg + 1
     if settings[0].record != 0.0:
         n_rec = counters[0].n_rec
-        record[REC_T, n_rec] = t
-        record[REC_T_FENCE, n_rec] = t
-        record[REC_T_FORCES, n_rec] = t
-        record[REC_T_STAGE, n_rec] = t
+        point = record[n_rec]
+        point.t = t
+        point.t_fence = t
+        point.t_forces = t
+        point.t_stage = t
         for k in range(6):
-            record[REC_Y + k, n_rec] = y[k]
-        record[REC_ALPHA, n_rec] = res[R_ALPHA]
-        record[REC_TIP_W, n_rec] = res[R_TIP_W]
-        record[REC_FENCE_N, n_rec] = res[R_FENCE_N]
-        record[REC_MAX_D, n_rec] = res[R_MAX_D]
-        record[REC_STAGE, n_rec] = counters[0].stage
+            point.y[k] = y[k]
+        point.alpha = res[0].alpha
+        point.tip_w = res[0].tip_w
+        point.fence_n = res[0].fence_n
+        point.max_d = res[0].max_d
+        point.stage = counters[0].stage
         counters[0].n_rec = n_rec + 1
     figures[0].prev_t = t
     for k in range(6):
@@ -283,8 +263,8 @@ def diverged(params, settings, figures, t, y, res):
     figures[0].diag_t = t
     if not math.isfinite(total):
         return DIAG_NONFINITE
-    if res[R_MAX_D] > settings[0].deep:
-        figures[0].diag_v = res[R_MAX_D]
+    if res[0].max_d > settings[0].deep:
+        figures[0].diag_v = res[0].max_d
         return DIAG_DEEP
     speed = math.hypot(y[3], y[4])
     if speed > settings[0].speed_limit:

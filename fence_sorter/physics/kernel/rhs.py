@@ -8,7 +8,7 @@ import math
 from numba import njit
 
 from .forces import evaluate, karnopp_belt
-from .layout import N_SLOTS, R_FX, R_FY, R_MZ
+from .layout import N_SLOTS
 
 
 # -- right-hand side for ODE solvers (scipy.integrate baselines) --------------------------------
@@ -61,7 +61,7 @@ def rhs(
         wdot,
         nodes,
     )
-    fx, fy, mz = res[R_FX], res[R_FY], res[R_MZ]
+    fx, fy, mz = res[0].fx, res[0].fy, res[0].mz
     if on_belt:
         bx, by, bz = karnopp_belt(P, y[3] - P[0].belt, y[4], y[5], fx, fy, mz)
         fx += bx

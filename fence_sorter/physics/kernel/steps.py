@@ -18,28 +18,7 @@ from .forces import (
     stick_wrench,
 )
 from .layout import (
-    C_ACTIVE,
-    C_D,
-    C_DDOT,
-    C_FMEAN,
-    C_FT,
-    C_GAP,
-    C_N,
-    C_NX,
-    C_NY,
-    C_PX,
-    C_PY,
-    C_S,
-    C_VSX,
-    C_VSY,
     N_SLOTS,
-    R_ACTIVE_MASK,
-    R_ALPHA,
-    R_FX,
-    R_FY,
-    R_ITERATIONS,
-    R_MZ,
-    R_POWER_FENCE,
     SLOT_BORDER,
     SLOT_TIP,
 )
@@ -69,7 +48,7 @@ def _turn(c, s, d):
 @njit(cache=True, _nrt=False, inline="always")
 def _friction_prev(out, prev):
     for k in range(N_SLOTS):
-        prev[k] = out[k, C_FT] if out[k, C_ACTIVE] != 0.0 else math.nan
+        prev[k] = out[k].ft if out[k].active != 0.0 else math.nan
 
 
 # the contact iteration of a stiff fence by Newton (``_newton_load``); False: the Anderson-
@@ -107,23 +86,23 @@ def _newton_load(P, out, y1, g_new, hh, im0, im2, rate, sigma, u0, u1, u2):
     active = False
     for k in range(N_SLOTS):
         row = out[k]
-        if row[C_ACTIVE] == 0.0:
+        if row.active == 0.0:
             continue
-        nn = row[C_N]
+        nn = row.n
         if nn <= 0.0:
             continue
-        d = row[C_D]
-        c = hh * (4.0 * kp * d * d * d + 2.0 * b * d * row[C_DDOT]) + b * d * d
+        d = row.d
+        c = hh * (4.0 * kp * d * d * d + 2.0 * b * d * row.ddot) + b * d * d
         if c <= 0.0:
             continue
         active = True
-        nx, ny = row[C_NX], row[C_NY]
+        nx, ny = row.nx, row.ny
         tx, ty = ny, -nx
-        rx, ry = row[C_PX] - x, row[C_PY] - y
+        rx, ry = row.px - x, row.py - y
         j2 = rx * ny - ry * nx
         t2 = rx * ty - ry * tx
         u0_, u1_, u2_ = nx, ny, j2
-        ft = row[C_FT]
+        ft = row.ft
         if ft != 0.0 and abs(ft) >= mu2 * nn * (1.0 - 1e-12):
             sf = ft / nn
             u0_ += sf * tx
@@ -135,7 +114,7 @@ def _newton_load(P, out, y1, g_new, hh, im0, im2, rate, sigma, u0, u1, u2):
         e0, e1, e2 = c * nx, c * ny, c * j2
         if SLOT_TIP <= k < SLOT_BORDER:  # the fence tip in a face: the face normal turns
             vpx, vpy = vx - om * ry, vy + om * rx
-            slide = (vpx - row[C_VSX]) * tx + (vpy - row[C_VSY]) * ty
+            slide = (vpx - row.vsx) * tx + (vpy - row.vsy) * ty
             e0 -= cd * om * ny
             e1 += cd * om * nx
             e2 -= cd * slide
@@ -271,7 +250,7 @@ def trapezoidal_step(
     im2 = 1.0 / P[0].inertia
     belt = P[0].belt
     hh = 0.5 * h
-    fs0, fs1, fs2 = f0[0] + lam0[0], f0[1] + lam0[1], f0[2] + lam0[2]
+    fs0, fs1, fs2 = f0[0].fx + lam0[0], f0[0].fy + lam0[1], f0[0].mz + lam0[2]
     vn0 = y0[3] + h * fs0 * im0
     vn1 = y0[4] + h * fs1 * im0
     vn2 = y0[5] + h * fs2 * im2
@@ -362,12 +341,12 @@ def trapezoidal_step(
         )  # fmt: skip
         _friction_prev(out, prev)
         if not (
-            math.isfinite(res[R_FX]) and math.isfinite(res[R_FY]) and math.isfinite(res[R_MZ])
+            math.isfinite(res[0].fx) and math.isfinite(res[0].fy) and math.isfinite(res[0].mz)
         ):
             return STEP_REJECTED
-        vf0 = y0[3] + hh * (f0[0] + lam0[0] + res[R_FX]) * im0
-        vf1 = y0[4] + hh * (f0[1] + lam0[1] + res[R_FY]) * im0
-        vf2 = y0[5] + hh * (f0[2] + lam0[2] + res[R_MZ]) * im2
+        vf0 = y0[3] + hh * (f0[0].fx + lam0[0] + res[0].fx) * im0
+        vf1 = y0[4] + hh * (f0[0].fy + lam0[1] + res[0].fy) * im0
+        vf2 = y0[5] + hh * (f0[0].mz + lam0[2] + res[0].mz) * im2
         if on_belt:
             w0, w1, w2 = hh * im0, hh * im0, hh * im2
             sigma = belt_multiplier(P, vf0 - belt, vf1, vf2, w0, w1, w2, lam1, sigma)
@@ -460,9 +439,9 @@ def trapezoidal_step(
     # corners' D, Ddot, s (event values) are left at the iterate, within the tolerance
     again = not converged
     if converged and iterations < 2:
-        again = res[R_ACTIVE_MASK] != 0.0
+        again = res[0].active_mask != 0.0
         for k in range(SLOT_TIP):
-            if out[k, C_GAP] != 0.0 and out[k, C_D] > -10.0 * tol:
+            if out[k].gap != 0.0 and out[k].d > -10.0 * tol:
                 again = True
     if again:
         if abs(y1[2] - ph_ref) > 1e-4:
@@ -475,8 +454,8 @@ def trapezoidal_step(
         )  # fmt: skip
     _unring_stick(P, phi, out0, out, res, modal1, y1[0], y1[1], h, h_prev, resolve_stick)
     if stuck:
-        lam1[0], lam1[1], lam1[2] = stick_wrench(P, res[R_FX], res[R_FY], res[R_MZ])
-    res[R_ITERATIONS] = iterations
+        lam1[0], lam1[1], lam1[2] = stick_wrench(P, res[0].fx, res[0].fy, res[0].mz)
+    res[0].iterations = iterations
     return STEP_OK if converged else STEP_FORCED
 
 
@@ -488,17 +467,17 @@ def _unring_stick(P, phi, out0, out, res, modal, x, y, h, h_prev, extrapolate):
     through the two means at the step end (second order; the mean lags by h / 2)."""
     mu2 = P[0].mu2
     for k in range(N_SLOTS):
-        if out[k, C_ACTIVE] == 0.0 or out0[k, C_ACTIVE] == 0.0:
+        if out[k].active == 0.0 or out0[k].active == 0.0:
             continue
-        ft1, ft0 = out[k, C_FT], out0[k, C_FT]
-        if abs(ft1) >= mu2 * out[k, C_N] * (1.0 - 1e-9):
+        ft1, ft0 = out[k].ft, out0[k].ft
+        if abs(ft1) >= mu2 * out[k].n * (1.0 - 1e-9):
             continue
-        if abs(ft0) >= mu2 * out0[k, C_N] * (1.0 - 1e-9):
+        if abs(ft0) >= mu2 * out0[k].n * (1.0 - 1e-9):
             continue
         mean = 0.5 * (ft0 + ft1)
-        out[k, C_FMEAN] = mean
+        out[k].fmean = mean
         stick = mean
-        mean0 = out0[k, C_FMEAN]
+        mean0 = out0[k].fmean
         if extrapolate and h_prev > 0.0 and mean0 != 0.0:
             stick = mean + (mean - mean0) * h / (h + h_prev)
         shift_friction(P, phi, out, res, modal, x, y, k, stick - ft1)
@@ -507,16 +486,16 @@ def _unring_stick(P, phi, out0, out, res, modal, x, y, h, h_prev, extrapolate):
 @njit(cache=True, _nrt=False)
 def shift_friction(P, phi, out, res, modal, x, y, k, d):
     """Add d to slot k's friction force and to the resultants it enters."""
-    tx, ty = out[k, C_NY], -out[k, C_NX]  # n = (-t_y, t_x)
+    tx, ty = out[k].ny, -out[k].nx  # n = (-t_y, t_x)
     dfx, dfy = d * tx, d * ty
-    res[R_FX] += dfx
-    res[R_FY] += dfy
-    res[R_MZ] += (out[k, C_PX] - x) * dfy - (out[k, C_PY] - y) * dfx
+    res[0].fx += dfx
+    res[0].fy += dfy
+    res[0].mz += (out[k].px - x) * dfy - (out[k].py - y) * dfx
     if k < SLOT_BORDER:
-        res[R_POWER_FENCE] += dfx * out[k, C_VSX] + dfy * out[k, C_VSY]
+        res[0].power_fence += dfx * out[k].vsx + dfy * out[k].vsy
         if P[0].flexible != 0.0:
-            _modal_share(P, phi, out[k, C_S], res[R_ALPHA], -dfx, -dfy, modal)
-    out[k, C_FT] += d
+            _modal_share(P, phi, out[k].s, res[0].alpha, -dfx, -dfy, modal)
+    out[k].ft += d
 
 
 @njit(cache=True, _nrt=True)
@@ -614,7 +593,7 @@ def generalized_alpha_step(
         )
         _friction_prev(out, prev)
         if not (
-            math.isfinite(res[R_FX]) and math.isfinite(res[R_FY]) and math.isfinite(res[R_MZ])
+            math.isfinite(res[0].fx) and math.isfinite(res[0].fy) and math.isfinite(res[0].mz)
         ):
             return STEP_REJECTED
         if it == max_iter:
@@ -624,7 +603,7 @@ def generalized_alpha_step(
         # point lambda_a = (1 - af) lambda1 + af lambda0, lambda1 from the end-velocity law
         # (stick is exact at the step end); applying lambda1 itself at the alpha point made
         # the scheme first order under sliding friction
-        fa0, fa1, fa2 = res[R_FX], res[R_FY], res[R_MZ]
+        fa0, fa1, fa2 = res[0].fx, res[0].fy, res[0].mz
         vs0 = y0[3] + h * (1.0 - gamma) * acc0[0] + wv * (fa0 * im[0] - am * acc0[0])
         vs1 = y0[4] + h * (1.0 - gamma) * acc0[1] + wv * (fa1 * im[1] - am * acc0[1])
         vs2 = y0[5] + h * (1.0 - gamma) * acc0[2] + wv * (fa2 * im[2] - am * acc0[2])
@@ -709,5 +688,5 @@ def generalized_alpha_step(
         nodes,
     )
     if stuck:
-        lam1[0], lam1[1], lam1[2] = stick_wrench(P, res[R_FX], res[R_FY], res[R_MZ])
+        lam1[0], lam1[1], lam1[2] = stick_wrench(P, res[0].fx, res[0].fy, res[0].mz)
     return STEP_OK if converged else STEP_FORCED
