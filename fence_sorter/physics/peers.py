@@ -88,6 +88,8 @@ def _pointer_to(nbtype):
 
 _f64_at = _pointer_to(types.float64)
 _params_at = _pointer_to(numba.from_dtype(K.PARAMS))
+_contact_at = _pointer_to(numba.from_dtype(K.CONTACT))
+_result_at = _pointer_to(numba.from_dtype(K.RESULT))
 
 # the args buffer of the diffeq: three scalars, then (address, rows, columns) of each array
 A_N_STATE, A_ON_BELT, A_AFTER = 0, 1, 2
@@ -115,6 +117,17 @@ N_ARGS = 3 + 3 * len(_ARRAYS)
 def _vec(args, k):
     j = 3 + 3 * k
     return carray(_f64_at(np.int64(args[j])), (np.int64(args[j + 1]),))
+
+
+@njit(inline="always")
+def _slots(args, k):
+    j = 3 + 3 * k
+    return carray(_contact_at(np.int64(args[j])), (np.int64(args[j + 1]),))
+
+
+@njit(inline="always")
+def _result(args, k):
+    return carray(_result_at(np.int64(args[3 + 3 * k])), (1,))
 
 
 @njit(inline="always")
@@ -151,8 +164,8 @@ def rhs_cfunc(dy_ptr, t, y_ptr, args_ptr):
         carray(y_ptr, (n,)),
         args[A_ON_BELT] != 0.0,
         carray(dy_ptr, (n,)),
-        _mat(args, 7),
-        _vec(args, 8),
+        _slots(args, 7),
+        _result(args, 8),
         _vec(args, 9),
         _vec(args, 10),
         _vec(args, 11),

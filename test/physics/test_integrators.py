@@ -107,20 +107,7 @@ def test_generalized_alpha_damps_the_top_fence_mode_by_rho_inf(rho_inf):
     s.states[i, 6:] = 0.0
     s.states[i, 6] = 1e-3  # mode 1
     s.states[i, 6 + m - 1] = 1e-6  # top mode
-    rigid_modal, omega, zeta = s.loop_model.rigid_modal, s.loop_model.omega, s.loop_model.zeta
-    K.loop._accelerations(
-        model.P,
-        rigid_modal,
-        omega,
-        zeta,
-        s.states,
-        s.belt_wrench,
-        s.resultant_rows,
-        s.modal_forces,
-        s.accelerations,
-        i,
-        0.0,
-    )
+    K.loop._accelerations(s.loop_model, s._loop_arrays()[1], i, 0.0)
     t0 = s.t
     amp1, top = [], []
     for _ in range(40):

@@ -156,14 +156,15 @@ def test_a_slide_off_is_located_once_before_and_once_across(monkeypatch) -> None
     loop = K.loop
     seen = []
     trials = []
-    locate, step = loop._locate, loop._trap
+    locate, step = loop._locate, loop._attempt
 
     def spy(*args):
         # the located trial is left in the trial row; its event function (slot, kind, g0, g1
         # are the last four arguments)
         trials.append(0)
         taken = locate.py_func(*args)  # as Python: its trial steps go through the spy below
-        P, ctl, OUT = args[0], args[8], args[12]
+        model, state = args[0], args[1]
+        P, ctl, OUT = model.params, state.counters, state.contacts
         slot, kind, g0 = args[-4], args[-3], args[-2]
         if kind == K.EVENT_SLIDE_OFF:
             seen.append((g0, K.event_value(P, OUT[ctl[0].trial], slot, kind), trials[-1]))
@@ -176,7 +177,7 @@ def test_a_slide_off_is_located_once_before_and_once_across(monkeypatch) -> None
 
     # the loop's source run as Python (its callees compiled), with the spies in its module
     monkeypatch.setattr(loop, "_locate", spy)
-    monkeypatch.setattr(loop, "_trap", counted)
+    monkeypatch.setattr(loop, "_attempt", counted)
     stepper = Stepper(SortingModel(STIFF))
     model, state = stepper._loop_arrays()
     while loop.solve.py_func(model, state, 1 << 30, math.inf) != K.SOLVE_DONE:

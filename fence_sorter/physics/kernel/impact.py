@@ -35,17 +35,12 @@ def _vertex(left, peak, right):
     return peak
 
 
-@njit(cache=True, _nrt=False)
-def stiff_impact_peak(mass, approach_speed, b_p, k_p, steps):
-    """Peak force, max deformation, duration and restitution of law (16) against a rigid wall.
-
-    Classical RK4 on m D'' = -N(D, D') with ``steps`` steps over the elastic contact time
-    estimate 2.5074 D_max / w_n, continued until separation, the peak refined by ``_vertex``;
-    used on the hot path (one call per impact) with N_STIFF_STEPS, checked against the DOP853
-    reference in ``contact.stiff_impact`` (test_contact_friction).
-    """
-    if approach_speed <= 0.0:
-        return 0.0, 0.0, 0.0, 1.0
+@njit(cache=True, _nrt=False, inline="always")
+def _impact(mass, approach_speed, b_p, k_p, steps, to_peak):
+    """RK4 on m D'' = -N(D, D') with ``steps`` steps over the elastic contact time estimate
+    2.5074 D_max / w_n, until separation (``to_peak``: until the first step past the deepest
+    compression whose force is below the peak); returns the peak refined by ``_vertex``, the
+    deepest D, the time and D' where it stopped (``approach_speed`` > 0)."""
     b = b_p * mass**0.4
     d_max = (5.0 * mass * approach_speed**2 / (2.0 * k_p)) ** 0.2
     h = 2.5074 * d_max / approach_speed / steps
@@ -68,10 +63,27 @@ def stiff_impact_peak(mass, approach_speed, b_p, k_p, steps):
         if d_new <= 0.0 or (f <= 0.0 and v_new < 0.0):
             # separation inside the step: interpolate the time linearly on D
             frac = d / (d - d_new) if d_new <= 0.0 and d > d_new else 1.0
-            return _vertex(left, peak, right), dm, t + frac * h, -v_new / approach_speed
+            return _vertex(left, peak, right), dm, t + frac * h, v_new
+        if to_peak and v_new < 0.0 and f < peak:
+            return _vertex(left, peak, right), dm, t + h, v_new
         d, v = d_new, v_new
         t += h
-    return _vertex(left, peak, right), dm, t, -v / approach_speed
+    return _vertex(left, peak, right), dm, t, v
+
+
+@njit(cache=True, _nrt=False)
+def stiff_impact_peak(mass, approach_speed, b_p, k_p, steps):
+    """Peak force, max deformation, duration and restitution of law (16) against a rigid wall.
+
+    Classical RK4 on m D'' = -N(D, D') with ``steps`` steps over the elastic contact time
+    estimate 2.5074 D_max / w_n, continued until separation, the peak refined by ``_vertex``;
+    used on the hot path (one call per impact) with N_STIFF_STEPS, checked against the DOP853
+    reference in ``contact.stiff_impact`` (test_contact_friction).
+    """
+    if approach_speed <= 0.0:
+        return 0.0, 0.0, 0.0, 1.0
+    peak, dm, t, v = _impact(mass, approach_speed, b_p, k_p, steps, False)
+    return peak, dm, t, -v / approach_speed
 
 
 @njit(cache=True, _nrt=False)
@@ -83,25 +95,7 @@ def stiff_impact_peak_force(mass, approach_speed, b_p, k_p, steps):
     the steps of the whole impact; the loop's reductions need one per impact)."""
     if approach_speed <= 0.0:
         return 0.0
-    b = b_p * mass**0.4
-    d_max = (5.0 * mass * approach_speed**2 / (2.0 * k_p)) ** 0.2
-    h = 2.5074 * d_max / approach_speed / steps
-    d, v = 0.0, approach_speed
-    peak = 0.0
-    f_prev = 0.0
-    left = 0.0
-    right = -1.0
-    for _ in range(100 * steps):
-        d_new, v_new, f = _impact_rk4(b, k_p, mass, h, d, v)
-        if f > peak:
-            peak, left, right = f, f_prev, -1.0
-        elif right < 0.0:
-            right = f
-        f_prev = f
-        if d_new <= 0.0 or (f <= 0.0 and v_new < 0.0) or (v_new < 0.0 and f < peak):
-            return _vertex(left, peak, right)
-        d, v = d_new, v_new
-    return _vertex(left, peak, right)
+    return _impact(mass, approach_speed, b_p, k_p, steps, True)[0]
 
 
 # -- N_stiff by similarity ----------------------------------------------------------------------

@@ -63,9 +63,11 @@ def _copy_row(rows, dst, src):
 
 
 @njit(cache=True, _nrt=False)
-def _copy_state(
-    times, states, belt_wrench, contacts, resultants, modal_forces, accelerations, dst, src
-):
+def _copy_state(state, dst, src):
+    """Copy state row src (time, state, forces, contacts) into row dst."""
+    times, states, belt_wrench = state.times, state.states, state.belt_wrench
+    contacts, resultants = state.contacts, state.resultants
+    modal_forces, accelerations = state.modal_forces, state.accelerations
     times[dst] = times[src]
     _copy_row(states, dst, src)
     _copy_row(belt_wrench, dst, src)
@@ -114,14 +116,17 @@ def _snap(h_nom, h):
 
 
 @njit(cache=True, _nrt=False)
-def _trap(
-    params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings, counters, times,
-    states, belt_wrench, contacts, resultants, modal_forces, accelerations, deflection,
-    deflection_rate, nodes, friction_prev, work, propagator_keys, propagators, propagator_g0,
-    propagator_g1, h, h_prev, a, b, jump, on_belt, force,
-):  # fmt: skip
+def _trap(model, state, h, h_prev, a, b, jump, on_belt, force):
     """One trapezoidal step from state row a into row b (exact modal maps for step h;
     ``h_prev``: the step before a, 0 without history)."""
+    (
+        params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings, _,
+    ) = model  # fmt: skip
+    (
+        counters, _, times, states, belt_wrench, contacts, resultants, modal_forces,
+        accelerations, deflection, deflection_rate, nodes, friction_prev, work, propagator_keys,
+        propagators, propagator_g0, propagator_g1, _, _, _,
+    ) = state  # fmt: skip
     k = _propagator_slot(
         omega, zeta, h, counters, propagator_keys, propagators, propagator_g0, propagator_g1
     )
@@ -142,13 +147,16 @@ def _trap(
 
 
 @njit(cache=True, _nrt=False)
-def _alpha(
-    params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings, times, states,
-    belt_wrench, contacts, resultants, modal_forces, accelerations, deflection, deflection_rate,
-    nodes, friction_prev, h, a, b, on_belt, force,
-):  # fmt: skip
+def _alpha(model, state, h, a, b, on_belt, force):
     """One generalized-alpha step from state row a into row b (``settings[0].gen_alpha``; the
     loop calls it where the other schemes call :func:`_trap`)."""
+    (
+        params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings, _,
+    ) = model  # fmt: skip
+    (
+        _, _, times, states, belt_wrench, contacts, resultants, modal_forces, accelerations,
+        deflection, deflection_rate, nodes, friction_prev, _, _, _, _, _, _, _, _,
+    ) = state  # fmt: skip
     status = generalized_alpha_step(
         params, corners, normals, mode_shapes, rigid_modal, omega, zeta,
         settings[0].alpha_coefficients, h, times[a], states[a], accelerations[a],
@@ -160,14 +168,25 @@ def _alpha(
     return status
 
 
+@njit(cache=True, _nrt=False, inline="always")
+def _attempt(model, state, h, h_hist, a, b, on_belt, force):
+    """One step of the event's scheme from state row a into row b: generalized-alpha
+    (``settings[0].gen_alpha``) or trapezoidal (``h_hist``: the step before a, 0 without
+    history); returns its status."""
+    if model.settings[0].gen_alpha != 0.0:
+        return _alpha(model, state, h, a, b, on_belt, force)
+    jump = _jump_at(model.params, state.times[a])
+    return _trap(model, state, h, h_hist, a, b, jump, on_belt, force)
+
+
 @njit(cache=True, _nrt=False)
-def _accelerations(
-    params, rigid_modal, omega, zeta, states, belt_wrench, resultants, modal_forces, accelerations,
-    i, jump,
-):  # fmt: skip
+def _accelerations(model, state, i, jump):
     """Accelerations of state row i consistent with its forces (the start, and
     generalized-alpha's restart after an event or a drive breakpoint; ``jump``: the drive's
     acceleration jump at 2 t1, which the forces at the breakpoint do not contain yet)."""
+    params, rigid_modal, omega, zeta = model.params, model.rigid_modal, model.omega, model.zeta
+    states, belt_wrench, resultants = state.states, state.belt_wrench, state.resultants
+    modal_forces, accelerations = state.modal_forces, state.accelerations
     m = omega.shape[0]
     y = states[i]
     accelerations[i, 0] = (resultants[i, 0].fx + belt_wrench[i, 0]) / params[0].mass
@@ -183,12 +202,7 @@ def _accelerations(
 
 
 @njit(cache=True, _nrt=False)
-def _locate(
-    params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings, counters, times,
-    states, belt_wrench, contacts, resultants, modal_forces, accelerations, deflection,
-    deflection_rate, nodes, friction_prev, work, propagator_keys, propagators, propagator_g0,
-    propagator_g1, h, h_prev, on_belt, slot, kind, g0, g1,
-):  # fmt: skip
+def _locate(model, state, h, h_prev, on_belt, slot, kind, g0, g1):
     """Shorten the step to end just past the sign change of ``slot``'s event function (or the
     sort crossing): Illinois regula falsi until an onset step ends within EVENT_TOL of D = 0
     (so w_n is read at the onset), a slide-off or sort crossing step ends within the iteration
@@ -196,13 +210,14 @@ def _locate(
     tip ends one step just before the slide-off (the force there is the peak the step would
     otherwise skip) and the next just past it. The located trial is left in the trial row;
     returns the step taken."""
+    params, settings = model.params, model.settings
+    counters, states, contacts = state.counters, state.states, state.contacts
     a = counters[0].cur
     trial = counters[0].trial
     onset = kind == EVENT_ONSET
     sign0 = g0 > 0.0
     lo = 0.0
     hi, g_hi = h, g1
-    jump = _jump_at(params, times[a])
     best = 0.0
     have_best = False
     tol = settings[0].tol
@@ -228,20 +243,7 @@ def _locate(
             h_sec = lo + (g_lo - 0.5 * tol) * (lo - lo_prev) / (g_lo_prev - g_lo)
             if lo < h_sec < hi:
                 h_loc = h_sec
-        if settings[0].gen_alpha != 0.0:
-            st = _alpha(
-                params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings, times,
-                states, belt_wrench, contacts, resultants, modal_forces, accelerations, deflection,
-                deflection_rate, nodes, friction_prev, h_loc, a, S_LOC, on_belt, False,
-            )  # fmt: skip
-        else:
-            st = _trap(
-                params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings,
-                counters, times, states, belt_wrench, contacts, resultants, modal_forces,
-                accelerations, deflection, deflection_rate, nodes, friction_prev, work,
-                propagator_keys, propagators, propagator_g0, propagator_g1, h_loc, h_prev, a,
-                S_LOC, jump, on_belt, False,
-            )  # fmt: skip
+        st = _attempt(model, state, h_loc, h_prev, a, S_LOC, on_belt, False)
         if st == STEP_REJECTED:
             break
         if kind == EVENT_SORT:
@@ -257,10 +259,7 @@ def _locate(
             last = 1
             best = h_loc
             have_best = True
-            _copy_state(
-                times, states, belt_wrench, contacts, resultants, modal_forces, accelerations,
-                trial, S_LOC,
-            )  # fmt: skip
+            _copy_state(state, trial, S_LOC)
         else:
             lo_prev, g_lo_prev = lo, g_lo
             lo, g_lo, f_lo = h_loc, g, g
@@ -270,16 +269,10 @@ def _locate(
             if keep_before:
                 before = h_loc
                 have_before = True
-                _copy_state(
-                    times, states, belt_wrench, contacts, resultants, modal_forces, accelerations,
-                    S_BEFORE, S_LOC,
-                )  # fmt: skip
+                _copy_state(state, S_BEFORE, S_LOC)
     counters[0].n_events += 1
     if have_before:
-        _copy_state(
-            times, states, belt_wrench, contacts, resultants, modal_forces, accelerations, trial,
-            S_BEFORE,
-        )  # fmt: skip
+        _copy_state(state, trial, S_BEFORE)
         return before
     return best if have_best else h
 
@@ -349,10 +342,7 @@ def solve(model, state, max_attempts, t_target):
         ):
             bx, by, bz = stick_wrench(params, r[0].fx, r[0].fy, r[0].mz)
             belt_wrench[a, 0], belt_wrench[a, 1], belt_wrench[a, 2] = bx, by, bz
-        _accelerations(
-            params, rigid_modal, omega, zeta, states, belt_wrench, resultants, modal_forces,
-            accelerations, a, 0.0,
-        )  # fmt: skip
+        _accelerations(model, state, a, 0.0)
         stop, on_belt = observe(
             params, normals, settings, counters, figures, times, states, belt_wrench, contacts,
             resultants, impacts, stages, record, a, True,
@@ -400,20 +390,7 @@ def solve(model, state, max_attempts, t_target):
             tiny = h_try <= 1e-3 * h_nom
         # the modes' force is quadratic through the previous point (adaptive)
         h_hist = figures[0].h_prev if adaptive else 0.0
-        if settings[0].gen_alpha != 0.0:
-            status = _alpha(
-                params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings, times,
-                states, belt_wrench, contacts, resultants, modal_forces, accelerations, deflection,
-                deflection_rate, nodes, friction_prev, h_try, a, b, on_belt, tiny,
-            )  # fmt: skip
-        else:
-            status = _trap(
-                params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings,
-                counters, times, states, belt_wrench, contacts, resultants, modal_forces,
-                accelerations, deflection, deflection_rate, nodes, friction_prev, work,
-                propagator_keys, propagators, propagator_g0, propagator_g1, h_try, h_hist, a, b,
-                _jump_at(params, times[a]), on_belt, tiny,
-            )  # fmt: skip
+        status = _attempt(model, state, h_try, h_hist, a, b, on_belt, tiny)
         if status == STEP_REJECTED:
             counters[0].n_rejected += 1
             figures[0].h = h_try / 2.0
@@ -433,13 +410,7 @@ def solve(model, state, max_attempts, t_target):
             slot, kind, g0, g1 = -1, EVENT_SORT, width - states[a, 1], width - states[b, 1]
         located = False
         if (slot >= 0 or kind == EVENT_SORT) and h_try > 1e-9:
-            h_taken = _locate(
-                params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings,
-                counters, times, states, belt_wrench, contacts, resultants, modal_forces,
-                accelerations, deflection, deflection_rate, nodes, friction_prev, work,
-                propagator_keys, propagators, propagator_g0, propagator_g1, h_try, h_hist, on_belt,
-                slot, kind, g0, g1,
-            )  # fmt: skip
+            h_taken = _locate(model, state, h_try, h_hist, on_belt, slot, kind, g0, g1)
             located = True
         if adaptive:
             h_prev = figures[0].h_prev
@@ -496,10 +467,7 @@ def solve(model, state, max_attempts, t_target):
             if settings[0].gen_alpha != 0.0:
                 # restart from consistent accelerations after an event or a drive breakpoint
                 jump = _jump_at(params, times[b])
-                _accelerations(
-                    params, rigid_modal, omega, zeta, states, belt_wrench, resultants,
-                    modal_forces, accelerations, b, jump,
-                )  # fmt: skip
+                _accelerations(model, state, b, jump)
         counters[0].cur = b
         counters[0].trial = a
         a = b
