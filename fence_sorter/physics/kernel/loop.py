@@ -79,21 +79,22 @@ def _copy_state(state, dst, src):
 
 
 @njit(cache=True, _nrt=False)
-def _propagator_slot(
-    omega, zeta, h, counters, propagator_keys, propagators, propagator_g0, propagator_g1
-):
+def _propagator_slot(model, state, h):
     """Row of the exact modal maps for step h in the cache (computed on a miss; the cache is
     emptied when full)."""
+    omega, counters, keys = model.omega, state.counters, state.propagator_keys
     if omega.shape[0] == 0:
         return 0
     n = counters[0].n_props
     for i in range(n):
-        if propagator_keys[i] == h:
+        if keys[i] == h:
             return i
-    if n >= propagator_keys.shape[0]:
+    if n >= keys.shape[0]:
         n = 0
-    modal_propagators(omega, zeta, h, propagators[n], propagator_g0[n], propagator_g1[n])
-    propagator_keys[n] = h
+    modal_propagators(
+        omega, model.zeta, h, state.propagators[n], state.propagator_g0[n], state.propagator_g1[n]
+    )
+    keys[n] = h
     counters[0].n_props = n + 1
     return n
 
@@ -115,34 +116,33 @@ def _snap(h_nom, h):
     return h_nom * 2.0 ** (-k / 4.0)
 
 
+@njit(cache=True, _nrt=False, inline="always")
+def _load_accelerations(params, state, i):
+    """The load's accelerations of state row i from its contact resultant and belt wrench."""
+    res, belt, acc = state.resultants[i, 0], state.belt_wrench[i], state.accelerations[i]
+    acc[0] = (res.fx + belt[0]) / params[0].mass
+    acc[1] = (res.fy + belt[1]) / params[0].mass
+    acc[2] = (res.mz + belt[2]) / params[0].inertia
+
+
 @njit(cache=True, _nrt=False)
 def _trap(model, state, h, h_prev, a, b, jump, on_belt, force):
     """One trapezoidal step from state row a into row b (exact modal maps for step h;
     ``h_prev``: the step before a, 0 without history)."""
-    (
-        params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings, _,
-    ) = model  # fmt: skip
-    (
-        counters, _, times, states, belt_wrench, contacts, resultants, modal_forces,
-        accelerations, deflection, deflection_rate, nodes, friction_prev, work, propagator_keys,
-        propagators, propagator_g0, propagator_g1, _, _, _,
-    ) = state  # fmt: skip
-    k = _propagator_slot(
-        omega, zeta, h, counters, propagator_keys, propagators, propagator_g0, propagator_g1
-    )
+    m, s, settings = model, state, model.settings
+    k = _propagator_slot(model, state, h)
     status = trapezoidal_step(
-        params, corners, normals, mode_shapes, rigid_modal,
-        (propagators[k], propagator_g0[k], propagator_g1[k]), h, times[a], states[a],
-        resultants[a], belt_wrench[a], modal_forces[a], contacts[a], modal_forces[S_PREV], h_prev,
-        jump, on_belt, settings[0].tol, resolves_stick(settings, omega.shape[0]),
-        int(settings[0].max_iter), force, states[b], belt_wrench[b], contacts[b], resultants[b],
-        modal_forces[b], deflection, deflection_rate, nodes, friction_prev, work,
+        m.params, m.corners, m.normals, m.mode_shapes, m.rigid_modal,
+        (s.propagators[k], s.propagator_g0[k], s.propagator_g1[k]), h, s.times[a], s.states[a],
+        s.resultants[a], s.belt_wrench[a], s.modal_forces[a], s.contacts[a],
+        s.modal_forces[S_PREV], h_prev, jump, on_belt, settings[0].tol,
+        resolves_stick(settings, m.omega.shape[0]), int(settings[0].max_iter), force,
+        s.states[b], s.belt_wrench[b], s.contacts[b], s.resultants[b], s.modal_forces[b],
+        s.deflection, s.deflection_rate, s.nodes, s.friction_prev, s.work,
     )  # fmt: skip
     if status != STEP_REJECTED:
-        accelerations[b, 0] = (resultants[b, 0].fx + belt_wrench[b, 0]) / params[0].mass
-        accelerations[b, 1] = (resultants[b, 0].fy + belt_wrench[b, 1]) / params[0].mass
-        accelerations[b, 2] = (resultants[b, 0].mz + belt_wrench[b, 2]) / params[0].inertia
-    times[b] = times[a] + h
+        _load_accelerations(m.params, state, b)
+    s.times[b] = s.times[a] + h
     return status
 
 
@@ -150,21 +150,16 @@ def _trap(model, state, h, h_prev, a, b, jump, on_belt, force):
 def _alpha(model, state, h, a, b, on_belt, force):
     """One generalized-alpha step from state row a into row b (``settings[0].gen_alpha``; the
     loop calls it where the other schemes call :func:`_trap`)."""
-    (
-        params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings, _,
-    ) = model  # fmt: skip
-    (
-        _, _, times, states, belt_wrench, contacts, resultants, modal_forces, accelerations,
-        deflection, deflection_rate, nodes, friction_prev, _, _, _, _, _, _, _, _,
-    ) = state  # fmt: skip
+    m, s, settings = model, state, model.settings
     status = generalized_alpha_step(
-        params, corners, normals, mode_shapes, rigid_modal, omega, zeta,
-        settings[0].alpha_coefficients, h, times[a], states[a], accelerations[a],
-        belt_wrench[a], on_belt, settings[0].tol, int(settings[0].max_iter), force, states[b],
-        accelerations[b], belt_wrench[b], contacts[b], resultants[b], modal_forces[b], deflection,
-        deflection_rate, nodes, friction_prev, states[S_ALPHA],
+        m.params, m.corners, m.normals, m.mode_shapes, m.rigid_modal, m.omega, m.zeta,
+        settings[0].alpha_coefficients, h, s.times[a], s.states[a], s.accelerations[a],
+        s.belt_wrench[a], on_belt, settings[0].tol, int(settings[0].max_iter), force,
+        s.states[b], s.accelerations[b], s.belt_wrench[b], s.contacts[b], s.resultants[b],
+        s.modal_forces[b], s.deflection, s.deflection_rate, s.nodes, s.friction_prev,
+        s.states[S_ALPHA],
     )  # fmt: skip
-    times[b] = times[a] + h
+    s.times[b] = s.times[a] + h
     return status
 
 
@@ -184,14 +179,11 @@ def _accelerations(model, state, i, jump):
     """Accelerations of state row i consistent with its forces (the start, and
     generalized-alpha's restart after an event or a drive breakpoint; ``jump``: the drive's
     acceleration jump at 2 t1, which the forces at the breakpoint do not contain yet)."""
-    params, rigid_modal, omega, zeta = model.params, model.rigid_modal, model.omega, model.zeta
-    states, belt_wrench, resultants = state.states, state.belt_wrench, state.resultants
+    rigid_modal, omega, zeta = model.rigid_modal, model.omega, model.zeta
     modal_forces, accelerations = state.modal_forces, state.accelerations
     m = omega.shape[0]
-    y = states[i]
-    accelerations[i, 0] = (resultants[i, 0].fx + belt_wrench[i, 0]) / params[0].mass
-    accelerations[i, 1] = (resultants[i, 0].fy + belt_wrench[i, 1]) / params[0].mass
-    accelerations[i, 2] = (resultants[i, 0].mz + belt_wrench[i, 2]) / params[0].inertia
+    y = state.states[i]
+    _load_accelerations(model.params, state, i)
     for j in range(m):
         accelerations[i, 3 + j] = (
             modal_forces[i, j]
@@ -277,6 +269,19 @@ def _locate(model, state, h, h_prev, on_belt, slot, kind, g0, g1):
     return best if have_best else h
 
 
+@njit(cache=True, _nrt=False, inline="always")
+def _observe(model, state, i, on_belt):
+    """Observe accepted state row i (``observer.observe``, the run's reductions); whether to
+    stop and whether the load is on the belt go to the counters."""
+    s = state
+    stop, on_belt = observe(
+        model.params, model.normals, model.settings, s.counters, s.figures, s.times, s.states,
+        s.belt_wrench, s.contacts, s.resultants, s.impacts, s.stages, s.record, i, on_belt,
+    )  # fmt: skip
+    s.counters[0].stop = 1 if stop else 0
+    s.counters[0].on_belt = 1 if on_belt else 0
+
+
 @njit(cache=True, _nrt=False)
 def solve(model, state, max_attempts, t_target):
     """Run the solve loop on ``model`` (:data:`LoopModel`) from where ``state``
@@ -343,12 +348,7 @@ def solve(model, state, max_attempts, t_target):
             bx, by, bz = stick_wrench(params, r[0].fx, r[0].fy, r[0].mz)
             belt_wrench[a, 0], belt_wrench[a, 1], belt_wrench[a, 2] = bx, by, bz
         _accelerations(model, state, a, 0.0)
-        stop, on_belt = observe(
-            params, normals, settings, counters, figures, times, states, belt_wrench, contacts,
-            resultants, impacts, stages, record, a, True,
-        )  # fmt: skip
-        counters[0].stop = 1 if stop else 0
-        counters[0].on_belt = 1 if on_belt else 0
+        _observe(model, state, a, True)
         figures[0].h = h_nom if not adaptive else min(h_nom, settings[0].dt)
         figures[0].h_cap = h_nom
         figures[0].h_prev = 0.0
@@ -472,12 +472,7 @@ def solve(model, state, max_attempts, t_target):
         counters[0].trial = a
         a = b
         counters[0].n_steps += 1
-        stop, on_belt = observe(
-            params, normals, settings, counters, figures, times, states, belt_wrench, contacts,
-            resultants, impacts, stages, record, a, on_belt,
-        )  # fmt: skip
-        counters[0].stop = 1 if stop else 0
-        counters[0].on_belt = 1 if on_belt else 0
+        _observe(model, state, a, on_belt)
         diag = diverged(params, settings, figures, times[a], states[a], resultants[a])
         if diag != DIAG_NONE:
             counters[0].diag = diag
