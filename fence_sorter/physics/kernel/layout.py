@@ -3,7 +3,8 @@
 (:data:`COUNTERS`) and float state (:data:`FIGURES`); an evaluation's contact slots
 (:data:`CONTACT`) and resultants (:data:`RESULT`), a recorded point (:data:`RECORDED`), and the
 solve loop's arrays (:data:`LoopModel`, :data:`LoopState`): state rows ``S_*``, diagnoses
-``DIAG_*``.
+``DIAG_*``. The state rows stay row numbers: they index the rows of arrays whose width is the
+model's (n states, m modes), which a record of fixed fields cannot hold.
 
 A record travels as an array of one element (``params[0].mass``, ``counters[0].n_steps``):
 Numba compiles a field of it to the same load or store at a fixed offset as an index into a
