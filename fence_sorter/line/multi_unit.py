@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -143,6 +144,9 @@ class LinePlant:
         #: fault injection: hand-offs (parcel id, sender index) the wiring drops, once each
         self.drop: set[tuple[int, int]] = set()
         self.wall = 0.0
+        #: called after every step of the line clock with the plant and the records the units'
+        #: simulations sent in it (a view samples the line)
+        self.observers: list[Callable[[LinePlant, list[Record]], None]] = []
 
     # -- set-up ----------------------------------------------------------------------------
     def _horizon(self) -> float:
@@ -399,8 +403,10 @@ class LinePlant:
             for rec in u.deadlines(self.t, traffic):
                 self._on_record(u, rec)
         t_next = self.t + self.cfg.dt
+        records: list[Record] = []
         for u in self.units:
             for rec in u.advance(t_next, stamp=self.t):
+                records.append(rec)
                 self._on_record(u, rec)
         self.t = t_next
         self._leave_belt()
@@ -408,6 +414,8 @@ class LinePlant:
         running = {p.pid for p in self.live if p.stroke_unit is not None}
         self.bookings = [b for b in self.bookings if b.t_end > self.t or b.parcel_id in running]
         self.view.tick(self.t)
+        for observe in self.observers:
+            observe(self, records)
 
     def limit(self) -> float:
         """Sim time the run stops at, drained or not: ``cfg.max_time``, else a bound on the
