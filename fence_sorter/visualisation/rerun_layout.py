@@ -87,6 +87,23 @@ def camera_position(scene: SceneGeometry) -> tuple[float, float, float]:
     return (cx, cy - 0.6 * reach, 0.75 * reach)
 
 
+def time_plot(name: str, origin: str, y_range: tuple[float, float] | None = None):
+    """A time series view showing the whole timeline (the same time range in every plot,
+    not each its own data's), a fixed y range and no legend (its title names the colours)."""
+    import rerun.blueprint as rrb  # lazy: Rerun (0.5 s), only to log
+
+    whole = rrb.TimeRange(
+        start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.infinite()
+    )
+    return rrb.TimeSeriesView(
+        name=name,
+        origin=origin,
+        axis_x=rrb.TimeAxis(link="Independent", view_range=whole),
+        axis_y=rrb.ScalarAxis(range=y_range) if y_range else None,
+        plot_legend=rrb.PlotLegend(visible=False),
+    )
+
+
 def blueprint(scene: SceneGeometry | None = None, paused: bool = False):
     """Default layout: the top view (2D, framed on the belt and chute when ``scene`` is given)
     on the left with the 3D scene in a tab behind it; on the right the time series (forces,
@@ -104,19 +121,7 @@ def blueprint(scene: SceneGeometry | None = None, paused: bool = False):
     if scene is not None:
         x_range, y_range = top_view_bounds(scene)
         bounds = rrb.VisualBounds2D(x_range=x_range, y_range=y_range)
-    whole = rrb.TimeRange(
-        start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.infinite()
-    )
-
-    def plot(name: str, origin: str, y_range: tuple[float, float] | None = None):
-        return rrb.TimeSeriesView(
-            name=name,
-            origin=origin,
-            axis_x=rrb.TimeAxis(link="Independent", view_range=whole),
-            axis_y=rrb.ScalarAxis(range=y_range) if y_range else None,
-            plot_legend=rrb.PlotLegend(visible=False),
-        )
-
+    plot = time_plot
     layout = rrb.Horizontal(
         rrb.Tabs(
             rrb.Spatial2DView(name="top view", origin=TOP, visual_bounds=bounds),
@@ -186,11 +191,13 @@ def open_recording(
     url: str | None = None,
     recording_id=None,
     scene: SceneGeometry | None = None,
+    layout=None,
 ):
     """A RecordingStream saving to ``path`` (.rrd), and/or streaming to a viewer: a spawned one
     (``spawn``) or one listening at ``url`` (gRPC, e.g. rerun+http://127.0.0.1:9876/proxy),
-    with :func:`blueprint` (``scene`` frames the top view) as the default layout; without
-    ``url`` (no live viewer follows it) the recording opens paused."""
+    with ``layout`` (a function of ``paused`` giving a blueprint; default :func:`blueprint`,
+    ``scene`` framing the top view) as the default layout; without ``url`` (no live viewer
+    follows it) the recording opens paused."""
     rr = _rr()
     rec = rr.RecordingStream(APP_ID, recording_id=recording_id)
     if spawn:
@@ -201,5 +208,7 @@ def open_recording(
     if spawn or url:
         sinks.append(rr.GrpcSink(url) if url else rr.GrpcSink())
     if sinks:
-        rec.set_sinks(*sinks, default_blueprint=blueprint(scene, paused=url is None))
+        paused = url is None
+        default = layout(paused) if layout is not None else blueprint(scene, paused=paused)
+        rec.set_sinks(*sinks, default_blueprint=default)
     return rec
