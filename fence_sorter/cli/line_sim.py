@@ -2,9 +2,11 @@
 
 Loads a line file (``config/lines/``), draws the induction stream, runs the line to the drain
 (:mod:`fence_sorter.line.multi_unit`) and prints the line summary (``--json``: one JSON object).
-Exit codes: 0 a drained run with conservation exact, 0 wrong destinations, every hand-off
-received at the other end of its link and, with the guard, 0 swept-sector intrusions; 1
-otherwise; 2 a bad line file or option (one line naming it).
+``--rrd FILE`` also writes a Rerun recording of the whole line, sampled as sim time passes
+(:mod:`fence_sorter.visualisation.line_view`). Exit codes: 0 a drained run with conservation
+exact, 0 wrong destinations, every hand-off received at the other end of its link and, with
+the guard, 0 swept-sector intrusions; 1 otherwise; 2 a bad line file or option (one line
+naming it).
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 
 from fence_sorter.jsonsafe import json_safe
 from fence_sorter.physics.params import ParameterError
@@ -37,6 +40,14 @@ def register(parser: argparse.ArgumentParser) -> None:
         help="turn the swept-sector guard off (the intrusions it prevents are counted)",
     )  # fmt: skip
     parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument(
+        "--rrd", metavar="FILE", default=None,
+        help="write a Rerun recording of the line (top view, per-unit plots) to FILE.rrd",
+    )  # fmt: skip
+    parser.add_argument(
+        "--rrd-period", type=float, default=0.02, metavar="S",
+        help="sim time between the recording's samples [s] (default: %(default)s)",
+    )  # fmt: skip
     parser.set_defaults(func=run)
 
 
@@ -52,9 +63,15 @@ def run(args: argparse.Namespace) -> int:
         return _error(f"--duration must be in (0, 1e6] s, got {args.duration}")
     if args.rate is not None and not 1.0 <= args.rate <= 1e5:
         return _error(f"--rate must be in [1, 100000] pcs/h, got {args.rate}")
+    if args.rrd is not None:
+        rrd = Path(args.rrd)
+        if rrd.suffix != ".rrd" or not rrd.parent.is_dir():
+            return _error(f"--rrd must be a FILE.rrd in an existing directory, got {args.rrd}")
+    if not 0.01 <= args.rrd_period <= 10.0:
+        return _error(f"--rrd-period must be in [0.01, 10] s, got {args.rrd_period}")
     # lazy: the line's physics loads Numba and the compiled kernel
     from fence_sorter.line.line_file import load_line
-    from fence_sorter.line.multi_unit import LineRunConfig, run_line
+    from fence_sorter.line.multi_unit import LinePlant, LineRunConfig
 
     try:
         line = load_line(args.line)
@@ -67,10 +84,19 @@ def run(args: argparse.Namespace) -> int:
         seed=args.seed,
         guard=not args.no_guard,
     )
+    logger = plant = None
     try:
-        s = run_line(line, cfg)
+        plant = LinePlant(line, cfg)
+        plant.warm_up()
+        if args.rrd is not None:
+            logger = _recorder(line, args.rrd, args.rrd_period)
+            plant.observers.append(logger.observe)
+        s = plant.run()
     except ParameterError as exc:
         return _error(str(exc))
+    finally:
+        if logger is not None:
+            logger.close(plant)
     ok = (
         s["drained"]
         and s["conservation_ok"]
@@ -83,6 +109,19 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(format_summary(s))
     return EXIT_OK if ok else EXIT_CHECK
+
+
+def _recorder(line, path: str, period: float):
+    """The line's Rerun logger writing to ``path`` (the line's layout)."""
+    # lazy: the line's view reads the line's units (Numba and the compiled kernel)
+    from fence_sorter.visualisation.line_view import (
+        LineRerunLogger,
+        line_blueprint,
+        open_recording,
+    )
+
+    rec = open_recording(path, layout=lambda paused: line_blueprint(line, paused))
+    return LineRerunLogger(rec, line, period=period)
 
 
 def format_summary(s: dict) -> str:

@@ -28,6 +28,17 @@ class SceneGeometry:
     scan_line_x: float | None = None
 
 
+#: a unit's chute as the views draw it, in the unit's frame: from the fence axis (x0 = 0)
+#: CHUTE_LENGTH downstream, from the far belt border (y0 = s) CHUTE_DEPTH outwards [m]
+CHUTE_LENGTH = 1.5
+CHUTE_DEPTH = 0.6
+
+
+def unit_chute(belt_width: float) -> tuple[float, float, float, float]:
+    """A unit's chute box (centre x, y, size x, y) in its frame [m]."""
+    return (0.5 * CHUTE_LENGTH, belt_width + 0.5 * CHUTE_DEPTH, CHUTE_LENGTH, CHUTE_DEPTH)
+
+
 @dataclass(frozen=True)
 class FenceFrame:
     alpha: float  # alpha_w [rad]

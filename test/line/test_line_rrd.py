@@ -1,0 +1,110 @@
+"""``fence-sorter line-sim LINE --rrd FILE``: the line's Rerun recording read back with Rerun's
+own reader (RrdReader) against the run's summary and the line file.
+
+Line: config/lines/four_units.yaml (units 1 and 3 on the right, 2 and 4 mirrored on the left).
+"""
+
+from __future__ import annotations
+
+import json
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+import pytest
+from processes import run_cli
+
+from fence_sorter.line.line_file import load_line
+from fence_sorter.visualisation.frames import CHUTE_DEPTH, CHUTE_LENGTH
+
+PERIOD = 0.02  # the recording's sampling period [s] (line-sim's default)
+
+
+def read_rrd(path: Path) -> dict[str, list[tuple[float, object]]]:
+    """Per entity on the timeline: (sim time, that row's first data column) in time order,
+    read with Rerun's RrdReader (strips for line strips, scalars for plots, plus labels)."""
+    from rerun.chunk import RrdReader
+
+    rows: dict[str, list[tuple[float, object]]] = defaultdict(list)
+    for chunk in RrdReader(path).stream():
+        if chunk.is_static:
+            continue
+        batch = chunk.to_record_batch()
+        cols = batch.schema.names
+        t = batch.column("sim_time").to_pylist()
+        data = {c.split(":")[-1]: batch.column(c).to_pylist() for c in cols if ":" in c}
+        for i, ti in enumerate(t):
+            ts = ti.total_seconds() if hasattr(ti, "total_seconds") else ti * 1e-9
+            rows[chunk.entity_path].append((ts, {k: v[i] for k, v in data.items()}))
+    for v in rows.values():
+        v.sort(key=lambda r: r[0])
+    return rows
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    out = tmp_path_factory.mktemp("line") / "line.rrd"
+    res = run_cli(
+        "line-sim", "four_units", "--parcels", "16", "--rate", "3000", "--seed", "5",
+        "--rrd", str(out), "--json",
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    return json.loads(res.stdout), read_rrd(out)
+
+
+def test_one_fence_entity_per_unit_with_a_row_per_sample(recorded):
+    """Every unit's fence is logged at every sample (sim time a multiple of the period, up to
+    the end of the run), rooted at its axis on its own border: X = position, Y = 0 on the
+    right, Y = s on a mirrored unit (view y = -Y)."""
+    s, rows = recorded
+    line = load_line("four_units")
+    # on the period's grid, and a last sample at the end of the run if it ended between two
+    grid = PERIOD * np.arange(1, int(s["sim_time_s"] / PERIOD + 1e-6) + 1)
+    if s["sim_time_s"] > grid[-1] + 1e-6:
+        grid = np.append(grid, s["sim_time_s"])
+    for u in line.units:
+        fence = rows[f"/top/units/{u.name}/fence"]
+        assert len(fence) == len(grid), u.name
+        ts = np.array([t for t, _ in fence])
+        assert np.allclose(ts, grid, atol=1e-6)
+        roots = np.array([r["strips"][0][0] for _, r in fence])
+        assert np.allclose(roots[:, 0], u.position)
+        assert np.allclose(roots[:, 1], -(line.width if u.mirrored else 0.0))
+        # the fence swings into the belt and back: alpha_w within [0, alpha_k]
+        alpha = np.array([r["scalars"][0] for _, r in rows[f"/plots/alpha_w/{u.name}"]])
+        assert len(alpha) == len(grid)
+        assert alpha.min() >= -1e-9 and alpha.max() <= line.planner.alpha_k + 1e-6
+        assert alpha.max() > 0.5 * line.planner.alpha_k  # it made strokes
+
+
+def test_every_inducted_parcel_is_drawn(recorded):
+    s, rows = recorded
+    ids = {label.split()[0] for _, r in rows["/top/parcels"] for label in r["labels"] or []}
+    assert len(ids) == s["parcels_inducted"]
+
+
+def test_sorted_parcels_end_in_a_chute_serving_their_destination(recorded):
+    """Each sorted parcel's last logged footprint: its centre in the chute of a unit that
+    serves its destination (the chute from the line file: CHUTE_LENGTH downstream of the
+    unit's axis, beyond the border opposite its fence), within the stream's C_s offsets
+    (sorted means C_s crossed the chute edge)."""
+    s, rows = recorded
+    line = load_line("four_units")
+    last: dict[str, tuple[str, np.ndarray]] = {}
+    for _, r in rows["/top/parcels"]:
+        for label, strip in zip(r["labels"] or [], r["strips"], strict=True):
+            pid, dest = label.split()
+            last[pid] = (dest, np.array(strip[:4]).mean(axis=0) * (1.0, -1.0))
+    tol = 0.1  # the stream's largest C_s offset from the box centre [m]
+    inside = 0
+    for dest, (x, y) in last.values():
+        for u in line.units:
+            if dest not in u.destinations:
+                continue
+            y0, y1 = (-CHUTE_DEPTH, 0.0) if u.mirrored else (line.width, line.width + CHUTE_DEPTH)
+            if u.position - tol <= x <= u.position + CHUTE_LENGTH + tol and (
+                y0 - tol <= y <= y1 + tol
+            ):
+                inside += 1
+    assert s["sorted"] > 0
+    assert inside == s["sorted"]
