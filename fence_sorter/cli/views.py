@@ -24,7 +24,7 @@ def register(parser: argparse.ArgumentParser) -> None:
         "Render a Rerun recording in Rerun's bundled web viewer under headless Chromium "
         "(Debian's chromium, playwright-core) and write PNG screenshots: default.png (as it "
         "opens, paused), mid.png, end.png, damage.png (the damage-risk tab at 80 % of the "
-        "run), 3d.png (the 3D tab, mid-run)."
+        "run), 3d.png (the 3D tab, mid-run); a line's recording (line-sim --rrd): the first three."
     )
     parser.add_argument(
         "rrd", nargs="?", help="the .rrd (default: the checkout's bags/example_4_parcels.rrd)"
@@ -64,14 +64,13 @@ def run(args: argparse.Namespace) -> int:
         )
         return 2
     out.mkdir(exist_ok=True)
-    shots = [
-        browser.Shot("default"),
-        browser.Shot("mid", mid),
-        browser.Shot("end", hi),
-        # late in the run (the outcomes so far in the chart), the cursor inside the plots
-        browser.Shot("damage", lo + 0.8 * (hi - lo), (browser.TAB_DAMAGE,)),
-        browser.Shot("3d", mid, (browser.TAB_3D, browser.TAB_SERIES)),
-    ]
+    shots = [browser.Shot("default"), browser.Shot("mid", mid), browser.Shot("end", hi)]
+    if not browser.is_line_recording(rrd):  # a line's layout has no tabs
+        shots += [
+            # late in the run (the outcomes so far in the chart), the cursor inside the plots
+            browser.Shot("damage", lo + 0.8 * (hi - lo), (browser.TAB_DAMAGE,)),
+            browser.Shot("3d", mid, (browser.TAB_3D, browser.TAB_SERIES)),
+        ]
     try:
         with browser.WebViewer(rrd) as viewer:
             browser.shoot(viewer, shots, out, (lo, hi))

@@ -229,3 +229,12 @@ def time_range(rrd: Path, timeline: str = "sim_time") -> tuple[float, float]:
     if not np.isfinite(lo):
         raise ValueError(f"{rrd}: no data on the timeline {timeline}")
     return lo * 1e-9, hi * 1e-9
+
+
+def is_line_recording(rrd: Path) -> bool:
+    """A line's recording (``fence-sorter line-sim --rrd``: units under ``top/units``)."""
+    from rerun.chunk import RrdReader  # lazy: Rerun (0.5 s), only to read a recording
+
+    return any(
+        chunk.entity_path.startswith("/top/units/") for chunk in RrdReader(Path(rrd)).stream()
+    )
