@@ -7,38 +7,16 @@ Line: config/lines/four_units.yaml (units 1 and 3 on the right, 2 and 4 mirrored
 from __future__ import annotations
 
 import json
-from collections import defaultdict
-from pathlib import Path
 
 import numpy as np
 import pytest
 from processes import run_cli
+from rrd_read import read_rrd
 
 from fence_sorter.line.line_file import load_line
 from fence_sorter.visualisation.frames import CHUTE_DEPTH, CHUTE_LENGTH
 
 PERIOD = 0.02  # the recording's sampling period [s] (line-sim's default)
-
-
-def read_rrd(path: Path) -> dict[str, list[tuple[float, object]]]:
-    """Per entity on the timeline: (sim time, that row's first data column) in time order,
-    read with Rerun's RrdReader (strips for line strips, scalars for plots, plus labels)."""
-    from rerun.chunk import RrdReader
-
-    rows: dict[str, list[tuple[float, object]]] = defaultdict(list)
-    for chunk in RrdReader(path).stream():
-        if chunk.is_static:
-            continue
-        batch = chunk.to_record_batch()
-        cols = batch.schema.names
-        t = batch.column("sim_time").to_pylist()
-        data = {c.split(":")[-1]: batch.column(c).to_pylist() for c in cols if ":" in c}
-        for i, ti in enumerate(t):
-            ts = ti.total_seconds() if hasattr(ti, "total_seconds") else ti * 1e-9
-            rows[chunk.entity_path].append((ts, {k: v[i] for k, v in data.items()}))
-    for v in rows.values():
-        v.sort(key=lambda r: r[0])
-    return rows
 
 
 @pytest.fixture(scope="module")

@@ -155,3 +155,62 @@ def test_example_recording_renders_in_the_web_viewer(tmp_path):
     # the chute's label in dark text (34 pixels here; a label in the chute's translucent blue
     # has none)
     assert colour_pixels(png["3d"], rl.LABEL_COLOR, CHUTE_LABEL_3D, tol=30) >= 15
+
+
+#: the line's layout at WIDTH x HEIGHT: the belt's band in the top view, the alpha_w plot
+LINE_BELT = (85, 150, 1255, 193)
+LINE_ALPHA = (0, 310, 1280, 510)
+
+
+def test_line_recording_renders_in_the_web_viewer(tmp_path):
+    """A four-unit line's recording (``line-sim --rrd``) in the web viewer: exit 0, the three
+    shots settled without a viewer error; at the busiest sample every parcel on the belt in
+    the colour the recording gives it (its destination's), and each unit that made strokes
+    in its colour on the alpha_w plot."""
+    from rrd_read import read_rrd
+
+    from fence_sorter.visualisation import line_view as lv
+
+    rrd = tmp_path / "line.rrd"
+    made = fence_sorter(
+        "line-sim", "four_units", "--parcels", "8", "--rate", "3000", "--rrd", str(rrd)
+    )
+    assert made.returncode == 0, made.stdout + made.stderr
+    rows = read_rrd(rrd)
+    # the sample with the most parcels on the belt (centre at least 0.15 m inside it)
+    width = 0.7
+    busiest, on_belt = 0.0, []
+    for t, r in rows["/top/parcels"]:
+        here = [
+            c
+            for strip, c in zip(r["strips"], r["colors"], strict=True)
+            if 0.15 <= -np.mean(np.array(strip[:4])[:, 1]) <= width - 0.15
+        ]
+        if len(here) > len(on_belt):
+            busiest, on_belt = t, here
+    assert on_belt
+    res = fence_sorter("views", str(rrd), "--out", str(tmp_path / "views"), "--mid", f"{busiest}")
+    assert res.returncode == 0, res.stdout + res.stderr
+    lines = {line.split()[0]: line for line in res.stdout.splitlines()}
+    assert sorted(lines) == ["default", "end", "mid"]
+    for line in lines.values():
+        assert "settled True" in line and "viewer errors 0" in line, line
+    mid = tmp_path / "views" / "mid.png"
+    for rgba in set(on_belt):  # colours come back packed as 0xRRGGBBAA
+        colour = ((rgba >> 24) & 255, (rgba >> 16) & 255, (rgba >> 8) & 255)
+        assert colour in lv.DESTINATION_COLORS
+        n = colour_pixels(mid, colour, LINE_BELT)
+        assert n >= 20, f"parcel colour {colour}: {n} pixels on the belt"
+    stroked = [
+        k
+        for k, u in enumerate(("unit_1", "unit_2", "unit_3", "unit_4"))
+        if max(r["scalars"][0] for _, r in rows[f"/plots/alpha_w/{u}"]) > 0.3
+    ]
+    assert stroked
+    for k in stroked:
+        n = colour_pixels(mid, lv.UNIT_COLORS[k], LINE_ALPHA)
+        assert n >= 20, f"unit {k + 1}'s colour: {n} pixels on the alpha_w plot"
+    # the static scene: belt borders, chutes, fences at rest
+    assert colour_pixels(mid, lv.BORDER_COLOR, (0, 64, 1280, 280)) >= 1000
+    assert colour_pixels(mid, lv.CHUTE_COLOR, (0, 64, 1280, 280)) >= 200
+    assert colour_pixels(mid, lv.FENCE_COLOR, (0, 64, 1280, 280)) >= 100
