@@ -61,6 +61,12 @@ COVERED: dict[str, str] = {
     "fence-sorter views --mid 10.3": (
         "test/views/test_views_browser.py::test_example_recording_renders_in_the_web_viewer"
     ),
+    "fence-sorter line-sim four_units --parcels 30 --rrd /tmp/line.rrd": (
+        "test/views/test_views_browser.py::test_line_recording_renders_in_the_web_viewer"
+    ),
+    "fence-sorter views /tmp/line.rrd --out /tmp/line-views": (
+        "test/views/test_views_browser.py::test_line_recording_renders_in_the_web_viewer"
+    ),
     "fence-sorter replay bags/example_4_parcels --rate 2": (
         "test/ros/test_recording.py::test_replay_republishes_the_run"
     ),
