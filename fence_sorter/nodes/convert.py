@@ -41,6 +41,7 @@ from fence_sorter.line.types import (
 )
 from fence_sorter.physics.params import ContactParams
 from fence_sorter.stamps import time_to_sec
+from fence_sorter.visualisation.frames import unit_chute
 from fence_sorter_msgs.msg import (
     FenceCommand,
     FenceState,
@@ -464,8 +465,9 @@ class MarkerBuilder:
             Point(x=x1, y=belt_width, z=0.0),
         ]
         chute = self._new("chute", 0, Marker.CUBE)
-        chute.pose.position = Point(x=0.75, y=belt_width + 0.3, z=-0.05)
-        chute.scale = Vector3(x=1.5, y=0.6, z=0.02)
+        cx, cy, length, depth = unit_chute(belt_width)
+        chute.pose.position = Point(x=cx, y=cy, z=-0.05)
+        chute.scale = Vector3(x=length, y=depth, z=0.02)
         chute.color = _color(0.2, 0.4, 0.8, 0.6)
         self.fence = self._new("fence", 0, Marker.LINE_STRIP)
         self.fence.scale.x = 0.02

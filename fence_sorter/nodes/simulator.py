@@ -64,7 +64,7 @@ from fence_sorter.nodes.tf_publisher import TfPublisher
 from fence_sorter.recording import topics
 from fence_sorter.scene import DEFAULT_SCENE, load_scene
 from fence_sorter.stamps import time_to_sec
-from fence_sorter.visualisation.frames import SceneGeometry
+from fence_sorter.visualisation.frames import SceneGeometry, unit_chute
 from fence_sorter.visualisation.rerun_live import RerunProcess
 from fence_sorter_msgs.msg import (
     FenceCommand,
@@ -648,9 +648,7 @@ def _start_rerun(p: dict, belt_width: float, belt_x: tuple[float, float], rtf: f
     # what a Rerun view needs, here rather than at an event in the publisher thread
     from fence_sorter.analysis import events  # noqa: F401  # lazy: fence_sorter.analysis pulls rosbags
 
-    # chute as convert.MarkerBuilder draws it
-    chute = (0.75, belt_width + 0.3, 1.5, 0.6)
-    scene = SceneGeometry(belt_width, belt_x, chute, float(p["rrd_scan_line_x"]))
+    scene = SceneGeometry(belt_width, belt_x, unit_chute(belt_width), float(p["rrd_scan_line_x"]))
     return RerunProcess(scene, path or None, url or None, lossless=rtf == 0.0)
 
 
