@@ -32,14 +32,15 @@ in one process; the line's ROS 2 nodes over DDS.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import json
+from dataclasses import dataclass, field, fields, is_dataclass
 
 from fence_sorter.inputs import ParcelSpec
-from fence_sorter.line.handoff import INDUCTION, RECIRCULATION, HandOff
+from fence_sorter.line.handoff import INDUCTION, RECIRCULATION, Failed, HandOff, Sorted
 from fence_sorter.line.line_file import LineSpec
 from fence_sorter.line.multi_unit import LinePlant, LineRunConfig
-from fence_sorter.line.routing import Booking, Decision
-from fence_sorter.line.traffic import TrafficView
+from fence_sorter.line.routing import Booking, Decision, Track
+from fence_sorter.line.traffic import Announce, Hold, Left, TrafficView
 from fence_sorter.line.unit import LineUnit, Record, Traffic, UnitReply
 
 __all__ = [
@@ -57,6 +58,8 @@ __all__ = [
     "Step",
     "Tick",
     "UnitSide",
+    "decode",
+    "encode",
     "make_unit",
 ]
 
@@ -148,6 +151,57 @@ class Figures:
 
 
 Reply = Delivered | Done | Figures
+
+
+# -- on the wire ------------------------------------------------------------------------------
+def _kinds() -> dict[str, type]:
+    return {
+        c.__name__: c
+        for c in (
+            Scan, Tick, Deliver, Step, Report, Delivered, Done, Figures, Announce, Hold, Left,
+            Booking, HandOff, Sorted, Failed, Track, ParcelSpec, Decision,
+        )
+    }  # fmt: skip
+
+
+def _enc(o: object) -> object:
+    if is_dataclass(o) and not isinstance(o, type):
+        return {"_": type(o).__name__, **{f.name: _enc(getattr(o, f.name)) for f in fields(o)}}
+    if isinstance(o, list | tuple):
+        return [_enc(v) for v in o]
+    if isinstance(o, dict):
+        return {str(k): _enc(v) for k, v in o.items()}
+    return o
+
+
+def _tuples(o: object) -> object:
+    return tuple(_tuples(v) for v in o) if isinstance(o, list) else o
+
+
+def _dec(o: object, kinds: dict[str, type]) -> object:
+    if isinstance(o, list):
+        return [_dec(v, kinds) for v in o]
+    if not isinstance(o, dict):
+        return o
+    if "_" not in o:
+        return {k: _dec(v, kinds) for k, v in o.items()}
+    cls = kinds[o["_"]]
+    args = {}
+    for f in fields(cls):
+        v = _dec(o[f.name], kinds)
+        args[f.name] = _tuples(v) if str(f.type).startswith("tuple") else v
+    return cls(**args)
+
+
+def encode(o: object) -> str:
+    """A command, reply or record as JSON text: floats as Python writes them (repr: they read
+    back bit for bit), inf and NaN as JSON5's Infinity and NaN, which :func:`decode` takes."""
+    return json.dumps(_enc(o), separators=(",", ":"))
+
+
+def decode(text: str) -> object:
+    """The object :func:`encode` wrote (KeyError or TypeError on text it did not write)."""
+    return _dec(json.loads(text), _kinds())
 
 
 # -- a unit's side ---------------------------------------------------------------------------
