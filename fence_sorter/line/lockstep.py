@@ -158,8 +158,8 @@ def _kinds() -> dict[str, type]:
     return {
         c.__name__: c
         for c in (
-            Scan, Tick, Deliver, Step, Report, Delivered, Done, Figures, Announce, Hold, Left,
-            Booking, HandOff, Sorted, Failed, Track, ParcelSpec, Decision,
+            Command, Scan, Tick, Deliver, Step, Report, Delivered, Done, Figures, Announce,
+            Hold, Left, Booking, HandOff, Sorted, Failed, Track, ParcelSpec, Decision,
         )
     }  # fmt: skip
 

@@ -632,6 +632,48 @@ FOXGLOVE_PARAMETERS: tuple[ParamSpec, ...] = (
     ),
 )
 
+#: a unit of a line over DDS (fence_sorter.nodes.line_unit; its namespace: /<unit name>)
+LINE_UNIT_PARAMETERS: tuple[ParamSpec, ...] = (
+    ParamSpec("line", "two_units", "Line file (name in config/lines or YAML path)", True),
+    ParamSpec(
+        "unit_index", 0, "Index of this unit in the line file's units (0: the first)", True, 0, 999
+    ),
+    ParamSpec("guard", True, "The swept-sector guard of the unit's planner", True),
+    ParamSpec(
+        "dt", 0.01, "Step of the line clock [s] (the owner's; must match)", True, 0.001, 0.1
+    ),
+)
+
+#: the owner of a line over DDS: induction, recirculation, the lockstep clock
+#: (fence_sorter.nodes.line_owner, namespace /line)
+LINE_OWNER_PARAMETERS: tuple[ParamSpec, ...] = (
+    ParamSpec("line", "two_units", "Line file (name in config/lines or YAML path)", True),
+    ParamSpec("parcels", 10, "Parcels of the stream", True, 1, 1_000_000),
+    ParamSpec("seed", -1, "Seed of the stream; -1: the stream file's own", True, -1, 2**31 - 1),
+    ParamSpec(
+        "rate", 0.0, "Induction rate [pcs/h]; 0: the stream file's own", True, 0.0, 100_000.0
+    ),
+    ParamSpec("guard", True, "The units' swept-sector guard (must match the units')", True),
+    ParamSpec("dt", 0.01, "Step of the line clock [s]", True, 0.001, 0.1),
+    ParamSpec(
+        "reply_timeout",
+        60.0,
+        "Wall time a unit may take to answer one command before the line stops [s]",
+        True,
+        0.1,
+        3600.0,
+    ),
+    ParamSpec(
+        "start_timeout",
+        60.0,
+        "Wall time every unit has to match its topics and say it is ready [s]",
+        True,
+        0.1,
+        3600.0,
+    ),
+    ParamSpec("summary", "", "Write the line summary (JSON) to this file; empty: stdout", True),
+)
+
 #: node name -> every parameter it declares (the common ones first)
 NODE_PARAMETERS: dict[str, tuple[ParamSpec, ...]] = {
     "simulator": COMMON_PARAMETERS + SIMULATOR_PARAMETERS,

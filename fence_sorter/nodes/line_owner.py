@@ -1,0 +1,229 @@
+"""The owner of a line over DDS: induction, recirculation and the lockstep clock.
+
+A :class:`~fence_sorter.line.lockstep.LockstepOwner` whose units are ``line_unit`` nodes (one
+per namespace ``/<unit name>``, on this host or another). It waits until every unit says it is
+ready (its writers matched), then runs the line to the drain: each unit's commands go on
+``/<unit name>/commands``, its answers come on ``/<unit name>/replies``, the induction's
+hand-offs go on ``/line/handoffs`` and the last unit's come back on its ``handoffs`` topic (the
+recirculation's end of that link). Each step of the line clock is published on /clock. At the
+end it writes the line summary (``LinePlant.summary``, JSON) to ``summary`` (or stdout) and
+exits: 0 on a drained line whose hand-offs balance, 1 otherwise, 2 on a bad line file or
+parameter; 1 as well when a unit does not answer within ``reply_timeout``.
+
+The plant's loop runs in the main thread; rclpy spins in a thread of its own and hands the
+replies over through one queue per unit.
+"""
+
+from __future__ import annotations
+
+import json
+import queue
+import sys
+import threading
+import time
+from collections.abc import Sequence
+
+import rclpy
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rosgraph_msgs.msg import Clock
+from std_msgs.msg import String
+
+from fence_sorter.jsonsafe import json_safe
+from fence_sorter.line.handoff import RECIRCULATION, HandOff
+from fence_sorter.line.line_file import load_line
+from fence_sorter.line.lockstep import Command, Links, LockstepOwner, decode, encode
+from fence_sorter.line.multi_unit import LineRunConfig
+from fence_sorter.nodes.base import FenceSorterNode
+from fence_sorter.nodes.convert import handoff_from_msg, handoff_to_msg
+from fence_sorter.nodes.line_unit import INDUCTION_TOPIC, LINE_QOS, READY, handoff_topic
+from fence_sorter.nodes.parameters import LINE_OWNER_PARAMETERS
+from fence_sorter.nodes.qos import CLOCK_QOS
+from fence_sorter.recording.topics import CLOCK
+from fence_sorter_msgs.msg import HandOff as HandOffMsg
+
+
+class UnitSilent(RuntimeError):
+    """A unit did not answer in time (one line)."""
+
+
+class LineOwnerNode(FenceSorterNode, Links):
+    NODE_NAME = "line_owner"
+    STATUS = "running the line"
+    PARAMETERS = LINE_OWNER_PARAMETERS
+    PINNED_CLOCK = False
+
+    def __init__(self, **kwargs: object) -> None:
+        super().__init__(**kwargs)
+        p = self.parameter_values()
+        self.line = load_line(p["line"])
+        self.cfg = LineRunConfig(
+            parcels=int(p["parcels"]),
+            rate_pcs_h=float(p["rate"]) or None,
+            seed=None if int(p["seed"]) < 0 else int(p["seed"]),
+            guard=bool(p["guard"]),
+            dt=float(p["dt"]),
+        )
+        self.reply_timeout = float(p["reply_timeout"])
+        self.start_timeout = float(p["start_timeout"])
+        self.summary_path = str(p["summary"])
+        names = [u.name for u in self.line.units]
+        self.seq = [0] * len(names)
+        self.inbox: list[queue.Queue] = [queue.Queue() for _ in names]
+        self.ready: set[int] = set()
+        self._poll = threading.Event()  # never set: a bounded wait between checks
+        self.induction_published = 0
+        self.recirculation_arrived = 0
+        self.bad_messages = 0
+        self.commands = [self.create_publisher(String, f"/{n}/commands", LINE_QOS) for n in names]
+        for k, n in enumerate(names):
+            self.create_subscription(
+                String, f"/{n}/replies", lambda m, k=k: self._on_reply(k, m), LINE_QOS
+            )
+        self.induction = self.create_publisher(HandOffMsg, INDUCTION_TOPIC, LINE_QOS)
+        self.create_subscription(
+            HandOffMsg, handoff_topic(names[-1]), self._on_recirculation, LINE_QOS
+        )
+        self.clock = self.create_publisher(Clock, CLOCK, CLOCK_QOS)
+        self.owner = LockstepOwner(self.line, self.cfg, self)
+
+    # -- rclpy callbacks (the spin thread) ------------------------------------------------------
+    def _on_reply(self, k: int, msg: String) -> None:
+        if msg.data == READY:
+            self.ready.add(k)
+            return
+        try:
+            self.inbox[k].put(decode(msg.data))
+        except (KeyError, TypeError, ValueError):
+            self.bad_messages += 1
+
+    def _on_recirculation(self, msg: HandOffMsg) -> None:
+        if handoff_from_msg(msg).to_unit == RECIRCULATION:
+            self.recirculation_arrived += 1
+        else:
+            self.bad_messages += 1
+
+    # -- Links (the plant's thread) -------------------------------------------------------------
+    def send(self, k: int, body: object) -> None:
+        self.commands[k].publish(String(data=encode(Command(self.seq[k], body))))
+        self.seq[k] += 1
+
+    def wait(self, k: int):
+        try:
+            return self.inbox[k].get(timeout=self.reply_timeout)
+        except queue.Empty:
+            name = self.line.units[k].name
+            raise UnitSilent(
+                f"line_owner: {name} did not answer command {self.seq[k] - 1} within "
+                f"reply_timeout {self.reply_timeout:g} s"
+            ) from None
+
+    def hand_off(self, h: HandOff) -> None:
+        self.induction.publish(handoff_to_msg(h))
+        self.induction_published += 1
+
+    # -- the run --------------------------------------------------------------------------------
+    def wait_ready(self) -> None:
+        """Until every unit said ready and every writer of the owner has matched its reader."""
+        end = time.monotonic() + self.start_timeout
+        n = len(self.line.units)
+        while time.monotonic() < end:
+            if (
+                len(self.ready) == n
+                and all(c.get_subscription_count() for c in self.commands)
+                and self.induction.get_subscription_count()
+            ):
+                return
+            self._poll.wait(0.05)  # the spin thread fills self.ready
+        missing = sorted(set(range(n)) - self.ready)
+        names = ", ".join(self.line.units[k].name for k in missing) or "(writers not matched)"
+        raise UnitSilent(
+            f"line_owner: not ready within start_timeout {self.start_timeout:g} s: {names}"
+        )
+
+    def run_line(self) -> dict:
+        owner = self.owner
+        wall0 = time.perf_counter()
+        while owner.active() and owner.t < owner.limit():
+            owner.step()
+            self.clock.publish(Clock(clock=_stamp(owner.t)))
+        owner.wall = time.perf_counter() - wall0
+        return owner.summary()
+
+    def heartbeat_status(self) -> DiagnosticStatus:
+        status = super().heartbeat_status()
+        values = {
+            "sim_time": f"{self.owner.t:.3f}",
+            "induction_handoffs_published": self.induction_published,
+            "recirculation_handoffs_arrived": self.recirculation_arrived,
+            "units_ready": len(self.ready),
+            "bad_messages": self.bad_messages,
+        }
+        status.values.extend(KeyValue(key=k, value=str(v)) for k, v in values.items())
+        return status
+
+
+def line_ok(s: dict) -> bool:
+    """``line-sim``'s check: drained, conservation exact, no wrong destination, hand-offs
+    balanced, and (guard on) no swept-sector intrusion."""
+    return bool(
+        s["drained"]
+        and s["conservation_ok"]
+        and s["sorted_wrong_destination"] == 0
+        and s["handoffs_balanced"]
+        and (not s["guard"] or s["swept_sector_intrusions"] == 0)
+    )
+
+
+def _stamp(t: float) -> Time:
+    ns = round(t * 1e9)
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    """Run the line to the drain; exit 0 (drained, hand-offs balanced), 1, or 2 (bad input)."""
+    rclpy.init(args=list(args) if args is not None else None)
+    node: LineOwnerNode | None = None
+    executor = SingleThreadedExecutor()
+    spin = threading.Thread(target=_spin, args=(executor,), daemon=True)
+    try:
+        try:
+            node = LineOwnerNode()
+        except ValueError as exc:
+            print(f"line_owner: {exc}", file=sys.stderr)
+            return 2
+        executor.add_node(node)
+        spin.start()
+        node.wait_ready()
+        summary = node.run_line()
+        text = json.dumps(json_safe(summary))
+        if node.summary_path:
+            with open(node.summary_path, "w", encoding="utf-8") as f:
+                f.write(text + "\n")
+        else:
+            print(text)
+        return 0 if line_ok(summary) else 1
+    except UnitSilent as exc:
+        print(str(exc), file=sys.stderr)
+        return 1
+    except (KeyboardInterrupt, ExternalShutdownException):
+        return 1
+    finally:
+        rclpy.try_shutdown()  # wakes the spin thread, which then ends
+        if spin.is_alive():
+            spin.join(timeout=10.0)
+        executor.shutdown()
+        if node is not None:
+            node.destroy_node()
+
+
+def _spin(executor) -> None:
+    try:
+        executor.spin()
+    except (ExternalShutdownException, Exception):  # the context shut down under it
+        pass
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,136 @@
+"""One unit of a line over DDS: a :class:`~fence_sorter.line.lockstep.UnitSide` in its namespace.
+
+Started in the namespace ``/<unit name>`` (``/unit_1``, ...); its own topic names are relative:
+
+- ``commands`` (std_msgs/String, in): the line owner's numbered command stream, each message a
+  :class:`~fence_sorter.line.lockstep.Command` in the wire format of
+  :func:`~fence_sorter.line.lockstep.encode`;
+- ``replies`` (std_msgs/String, out): ``ready`` until the first command comes, then the
+  answers (Delivered, Done, Figures) in the same format;
+- ``handoffs`` (fence_sorter_msgs/HandOff, out): the hand-offs to the downstream unit, or to
+  the recirculation after the last unit;
+- the upstream link (HandOff, in): ``/line/handoffs`` (the induction) for the first unit, else
+  ``/<upstream unit name>/handoffs``.
+
+Every topic is reliable and keep-all: nothing is dropped silently. The heartbeat on
+/diagnostics counts the hand-offs at this end of both links: arrived on the upstream one,
+received (taken at the scan line), refused per reason and lost; published on the downstream one.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Sequence
+
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import String
+
+from fence_sorter.line.handoff import HandOff
+from fence_sorter.line.line_file import load_line
+from fence_sorter.line.lockstep import UnitSide, decode, encode, make_unit
+from fence_sorter.line.multi_unit import LineRunConfig
+from fence_sorter.nodes.base import FenceSorterNode, run_node
+from fence_sorter.nodes.convert import handoff_from_msg, handoff_to_msg
+from fence_sorter.nodes.parameters import LINE_UNIT_PARAMETERS
+from fence_sorter_msgs.msg import HandOff as HandOffMsg
+
+#: the line's lockstep topics: reliable, keep-all (a writer blocks rather than drop)
+LINE_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_ALL, depth=1, reliability=ReliabilityPolicy.RELIABLE
+)
+#: the induction's hand-offs to the first unit (the owner's namespace is /line)
+INDUCTION_TOPIC = "/line/handoffs"
+READY = "ready"
+
+
+def handoff_topic(unit_name: str) -> str:
+    """The absolute topic a unit publishes its downstream hand-offs on."""
+    return f"/{unit_name}/handoffs"
+
+
+class LineUnitNode(FenceSorterNode):
+    NODE_NAME = "line_unit"
+    STATUS = "sorting"
+    PARAMETERS = LINE_UNIT_PARAMETERS
+    PINNED_CLOCK = False
+
+    def __init__(self, **kwargs: object) -> None:
+        super().__init__(**kwargs)
+        p = self.parameter_values()
+        line = load_line(p["line"])
+        k = int(p["unit_index"])
+        if k >= len(line.units):
+            raise ValueError(
+                f"unit_index: {k} out of range, the line has units 0..{len(line.units) - 1}"
+            )
+        cfg = LineRunConfig(dt=float(p["dt"]), guard=bool(p["guard"]))
+        self.side = UnitSide(make_unit(line, k, cfg))
+        upstream = INDUCTION_TOPIC if k == 0 else handoff_topic(line.units[k - 1].name)
+        self.published = 0  # hand-offs published on the downstream link
+        self.bad_messages = 0  # commands or hand-offs that could not be read (refused)
+        self.started = False
+        self.replies = self.create_publisher(String, "replies", LINE_QOS)
+        self.handoffs = self.create_publisher(HandOffMsg, "handoffs", LINE_QOS)
+        self.create_subscription(String, "commands", self._on_command, LINE_QOS)
+        self.create_subscription(HandOffMsg, upstream, self._on_handoff, LINE_QOS)
+        self._ready_timer = self.create_timer(0.1, self._say_ready)
+
+    def _say_ready(self) -> None:
+        """``ready`` on replies while no command came, once both writers have matched."""
+        if self.started:
+            self._ready_timer.cancel()
+            return
+        if self.replies.get_subscription_count() and self.handoffs.get_subscription_count():
+            self.replies.publish(String(data=READY))
+
+    def _on_command(self, msg: String) -> None:
+        self.started = True
+        try:
+            cmd = decode(msg.data)
+        except (KeyError, TypeError, ValueError) as exc:
+            self.bad_messages += 1
+            self.get_logger().error(f"command refused: {type(exc).__name__}: {exc}")
+            return
+        self._put(self.side.on_command(cmd))
+
+    def _on_handoff(self, msg: HandOffMsg) -> None:
+        self._put(self.side.on_handoff(handoff_from_msg(msg)))
+
+    def _put(self, out: list[object]) -> None:
+        for o in out:
+            if isinstance(o, HandOff):
+                self.handoffs.publish(handoff_to_msg(o))
+                self.published += 1
+            else:
+                self.replies.publish(String(data=encode(o)))
+
+    def heartbeat_status(self) -> DiagnosticStatus:
+        status = super().heartbeat_status()
+        u = self.side.unit
+        values = {
+            "handoffs_arrived": self.side.arrived,
+            "handoffs_received": u.received,
+            "handoffs_refused": sum(u.refused_handoffs.values()),
+            "handoffs_lost": u.lost,
+            "handoffs_sent": u.sent,
+            "handoffs_published": self.published,
+            "handoffs_foreign": self.side.foreign,
+            "commands_applied": self.side.next_seq,
+            "bad_messages": self.bad_messages,
+        }
+        status.values.extend(KeyValue(key=k, value=str(v)) for k, v in values.items())
+        return status
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    """Run one unit until Ctrl-C or SIGTERM; exit 2 with one line on a bad line file or index."""
+    try:
+        return run_node(LineUnitNode, args)
+    except ValueError as exc:
+        print(f"line_unit: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
