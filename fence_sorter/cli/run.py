@@ -15,6 +15,7 @@ import argparse
 import json
 import sys
 
+from fence_sorter.cli.line_sim import format_summary as line_summary
 from fence_sorter.jsonsafe import json_safe
 from fence_sorter.runner.job import BadInput, RunOptions, StopRequest, run_job
 from fence_sorter.runner.summary import format_summary
@@ -26,6 +27,13 @@ def register(parser: argparse.ArgumentParser) -> None:
         "separate processes on an isolated ROS domain, run the stream, stop cleanly, summarise."
     )
     parser.add_argument("--scene", default="impact_flexible", help="scene file or name")
+    parser.add_argument(
+        "--line",
+        metavar="LINE",
+        help="run a line of fence units instead (a file or a name in config/lines): one "
+        "process per unit and the line's owner, in lockstep; with --parcels, --seed, --json, "
+        "--domain, --timeout, --log-dir, --keep-logs (docs/guide/line.md)",
+    )
     amount = parser.add_mutually_exclusive_group()
     amount.add_argument("--parcels", type=int, help="parcels to inject (default 20)")
     amount.add_argument("--duration", type=float, help="inject the parcels arriving within S s")
@@ -98,6 +106,8 @@ def add_param_option(parser: argparse.ArgumentParser, help: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.line is not None:
+        return _run_line(args)
     opts = RunOptions(
         scene=args.scene,
         parcels=args.parcels,
@@ -129,6 +139,51 @@ def run(args: argparse.Namespace) -> int:
         return 2
     finally:
         stop.restore()
+
+
+#: the options of a single-unit run that a line run does not take
+_NOT_FOR_LINE = ("duration", "bag", "rrd", "sensors", "foxglove", "interface", "peers")
+
+
+def _run_line(args: argparse.Namespace) -> int:
+    # lazy: the line's runner loads the line's physics (Numba) for the line file's check
+    from fence_sorter.runner.line_job import LineRunOptions, run_line_job
+
+    for name in _NOT_FOR_LINE:
+        if getattr(args, name) is not None:
+            opt = "--" + name.replace("_", "-")
+            print(f"fence-sorter: error: {opt} does not go with --line", file=sys.stderr)
+            return 2
+    if args.params or args.rtf != 1.0 or args.stream != "default":
+        print("fence-sorter: error: --param, --rtf and --stream do not go with --line "
+              "(the line file names its stream)", file=sys.stderr)  # fmt: skip
+        return 2
+    opts = LineRunOptions(
+        line=args.line,
+        parcels=10 if args.parcels is None else args.parcels,
+        seed=args.seed,
+        domain=args.domain,
+        log_dir=args.log_dir,
+        keep_logs=args.keep_logs,
+        timeout=3600.0 if args.timeout is None else args.timeout,
+    )
+    say = (lambda s: print(s, file=sys.stderr)) if args.json else print
+    stop = StopRequest()
+    stop.install()
+    try:
+        result = run_line_job(opts, say=say, stop=stop)
+    finally:
+        stop.restore()
+    if result.code == 2:
+        print(f"fence-sorter: error: {result.message}", file=sys.stderr)
+        return 2
+    if args.json:
+        print(json.dumps(json_safe(result.summary)))
+    elif result.summary.get("line"):
+        print(line_summary(result.summary))
+    if result.code != 0:
+        print(f"fence-sorter run --line: {result.message}", file=sys.stderr)
+    return result.code
 
 
 def _run_and_report(args: argparse.Namespace, opts, say, stop) -> int:

@@ -58,6 +58,8 @@ __all__ = [
     "Step",
     "Tick",
     "UnitSide",
+    "WarmUp",
+    "Warmed",
     "decode",
     "encode",
     "make_unit",
@@ -109,6 +111,14 @@ class Report:
 
 
 @dataclass(frozen=True)
+class WarmUp:
+    """Fill the planner's cache from these parcels (``LinePlant.warm_up``'s share of a unit)."""
+
+    specs: tuple[ParcelSpec, ...]
+    time_budget: float
+
+
+@dataclass(frozen=True)
 class Command:
     """One command on a unit's ordered stream; ``seq`` counts from 0 per unit."""
 
@@ -150,7 +160,14 @@ class Figures:
     max_accel: float
 
 
-Reply = Delivered | Done | Figures
+@dataclass(frozen=True)
+class Warmed:
+    """A unit's answer to :class:`WarmUp`: the load classes its planner now knows."""
+
+    classes: int
+
+
+Reply = Delivered | Done | Figures | Warmed
 
 
 # -- on the wire ------------------------------------------------------------------------------
@@ -159,7 +176,8 @@ def _kinds() -> dict[str, type]:
         c.__name__: c
         for c in (
             Command, Scan, Tick, Deliver, Step, Report, Delivered, Done, Figures, Announce,
-            Hold, Left, Booking, HandOff, Sorted, Failed, Track, ParcelSpec, Decision,
+            Hold, Left, Booking, HandOff, Sorted, Failed, Track, ParcelSpec, Decision, WarmUp,
+            Warmed,
         )
     }  # fmt: skip
 
@@ -278,6 +296,9 @@ class UnitSide:
             adv = u.advance(body.t_next, stamp=body.t)
             done = Done(body.t, tuple(late), tuple(adv))
             return [*_downstream(late), *_downstream(adv), done]
+        if isinstance(body, WarmUp):
+            loads = [sp.to_parcel_params() for sp in body.specs]
+            return [Warmed(u.planner.warm_up(loads, time_budget=body.time_budget))]
         if isinstance(body, Report):
             return [
                 Figures(
@@ -455,6 +476,18 @@ class LockstepOwner(LinePlant):
         running = {p.pid for p in self.live if p.stroke_unit is not None}
         self.bookings = [b for b in self.bookings if b.t_end > self.t or b.parcel_id in running]
         self.view.tick(self.t)
+
+    def warm_up(self, time_budget: float = 10.0) -> None:
+        """``LinePlant.warm_up`` on every unit's side: each warms its planner with the stream's
+        first parcels and its share of the time budget (the units of a line in processes of
+        their own warm up at the same time)."""
+        specs = tuple(p.spec for p in self.parcels[:200])
+        share = time_budget / max(len(self.units), 1)
+        for u in self.units:
+            self.transport.send(u.index, WarmUp(specs, share))
+        for u in self.units:
+            r = self.transport.wait(u.index)
+            assert isinstance(r, Warmed), r
 
     def summary(self) -> dict:
         for u in self.units:

@@ -68,6 +68,7 @@ class LineOwnerNode(FenceSorterNode, Links):
         self.reply_timeout = float(p["reply_timeout"])
         self.start_timeout = float(p["start_timeout"])
         self.summary_path = str(p["summary"])
+        self.warm = bool(p["warm_up"])
         names = [u.name for u in self.line.units]
         self.seq = [0] * len(names)
         self.inbox: list[queue.Queue] = [queue.Queue() for _ in names]
@@ -144,6 +145,8 @@ class LineOwnerNode(FenceSorterNode, Links):
 
     def run_line(self) -> dict:
         owner = self.owner
+        if self.warm:
+            owner.warm_up()
         wall0 = time.perf_counter()
         while owner.active() and owner.t < owner.limit():
             owner.step()

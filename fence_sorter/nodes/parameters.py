@@ -672,6 +672,12 @@ LINE_OWNER_PARAMETERS: tuple[ParamSpec, ...] = (
         3600.0,
     ),
     ParamSpec("summary", "", "Write the line summary (JSON) to this file; empty: stdout", True),
+    ParamSpec(
+        "warm_up",
+        True,
+        "Warm each unit's planner from the stream before the run (as line-sim does)",
+        True,
+    ),
 )
 
 #: node name -> every parameter it declares (the common ones first)

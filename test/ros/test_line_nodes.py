@@ -67,6 +67,8 @@ def test_two_units_over_dds_give_the_in_process_line_s_figures(env, tmp_path):
                     "-p",
                     "seed:=3",
                     "-p",
+                    "warm_up:=false",
+                    "-p",
                     f"summary:={out}",
                 ),  # fmt: skip
                 env,

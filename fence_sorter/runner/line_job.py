@@ -1,0 +1,171 @@
+"""``fence-sorter run --line LINE``: a line's nodes as separate processes on an isolated domain.
+
+One ``line_unit`` process per unit of the line file (namespace ``/<unit name>``) and the
+``line_owner`` (namespace ``/line``: induction, recirculation, the lockstep clock); the owner
+waits until every unit is ready, runs the line to the drain and writes the line summary. The
+runner waits for it, then stops every process (Ctrl-C or SIGTERM: at once). Exit codes as
+``line-sim``'s: 0 a drained line with every check met, 1 a check failed (unbalanced hand-offs,
+conservation, a wrong destination, an intrusion with the guard on) or a process failed, 2 bad
+input, 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from fence_sorter.line.line_file import load_line, resolve_line
+from fence_sorter.physics.params import ParameterError
+from fence_sorter.runner.job import (
+    EXIT_BAD_INPUT,
+    EXIT_FAILED,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    Interrupted,
+    StopRequest,
+)
+from fence_sorter.runner.processes import (
+    ProcessGroup,
+    choose_domain,
+    clean_shm,
+    node_command,
+    node_env,
+)
+
+__all__ = ["LineRunOptions", "LineRunResult", "run_line_job"]
+
+LOG_DIR_PREFIX = "fence_sorter_line_"
+OWNER = "line_owner"
+
+
+@dataclass(frozen=True)
+class LineRunOptions:
+    line: str
+    parcels: int = 10
+    seed: int | None = None
+    rate: float | None = None
+    guard: bool = True
+    domain: int | None = None
+    log_dir: str | None = None
+    keep_logs: bool = False
+    timeout: float = 3600.0  # wall-time limit of the whole run [s]
+
+
+@dataclass
+class LineRunResult:
+    code: int
+    message: str
+    summary: dict
+
+
+class BadLineInput(ValueError):
+    """A bad option or line file (one line, exit 2)."""
+
+
+def _check(opts: LineRunOptions) -> Path:
+    if not 1 <= opts.parcels <= 10**6:
+        raise BadLineInput(f"--parcels must be in [1, 1000000], got {opts.parcels}")
+    if opts.rate is not None and not 1.0 <= opts.rate <= 1e5:
+        raise BadLineInput(f"--rate must be in [1, 100000] pcs/h, got {opts.rate}")
+    if opts.seed is not None and not 0 <= opts.seed < 2**31:
+        raise BadLineInput(f"--seed must be in [0, 2147483647], got {opts.seed}")
+    try:
+        load_line(opts.line)
+        return resolve_line(opts.line)
+    except (ParameterError, OSError) as exc:
+        raise BadLineInput(str(exc)) from None
+
+
+def run_line_job(
+    opts: LineRunOptions, say: Callable[[str], None] = print, stop: StopRequest | None = None
+) -> LineRunResult:
+    """Run the line once; never leaves a process behind."""
+    own = stop is None
+    if own:
+        stop = StopRequest()
+        stop.install()
+    try:
+        try:
+            path = _check(opts)
+            domain = choose_domain(opts.domain)
+        except ValueError as exc:  # BadLineInput, DomainError
+            return LineRunResult(EXIT_BAD_INPUT, str(exc), {})
+        return _run(opts, path, domain, say, stop)
+    finally:
+        if own:
+            stop.restore()
+
+
+def _run(
+    opts: LineRunOptions, path: Path, domain: int, say: Callable[[str], None], stop: StopRequest
+) -> LineRunResult:
+    line = load_line(path)
+    log_dir = Path(opts.log_dir or tempfile.mkdtemp(prefix=LOG_DIR_PREFIX))
+    log_dir.mkdir(parents=True, exist_ok=True)
+    env = node_env(domain, log_dir / "ros")
+    clean_shm()
+    group = ProcessGroup(env, log_dir)
+    out = log_dir / "summary.json"
+    guard = "true" if opts.guard else "false"
+    code, message, summary = EXIT_OK, "done", {}
+    try:
+        stop.check()
+        say(
+            f"fence-sorter run --line: {line.name}, {len(line.units)} units, {opts.parcels} "
+            f"parcels, ROS domain {domain}, logs {log_dir}"
+        )
+        for k, u in enumerate(line.units):
+            group.start(
+                u.name,
+                node_command(
+                    "line_unit",
+                    ["-r", f"__ns:=/{u.name}", "-p", f"line:={path}", "-p", f"unit_index:={k}",
+                     "-p", f"guard:={guard}"],
+                ),
+            )  # fmt: skip
+        args = ["-r", "__ns:=/line", "-p", f"line:={path}", "-p", f"parcels:={opts.parcels}",
+                "-p", f"guard:={guard}", "-p", f"summary:={out}"]  # fmt: skip
+        if opts.seed is not None:
+            args += ["-p", f"seed:={opts.seed}"]
+        if opts.rate is not None:
+            args += ["-p", f"rate:={float(opts.rate)!r}"]
+        owner = group.start(OWNER, node_command(OWNER, args))
+        end = time.monotonic() + opts.timeout
+        while owner.proc.poll() is None:
+            stop.check()
+            failed = [n.name for n in group.dead() if n.name != OWNER]
+            if failed:
+                raise RuntimeError(f"{', '.join(failed)} ended during the run")
+            if time.monotonic() > end:
+                raise RuntimeError(f"the line did not drain within --timeout {opts.timeout:g} s")
+            try:
+                owner.proc.wait(timeout=0.2)
+            except subprocess.TimeoutExpired:
+                pass
+        rc = owner.proc.returncode
+        if out.exists():
+            summary = json.loads(out.read_text())
+        if rc == 0:
+            code, message = EXIT_OK, "done"
+        elif summary:
+            code, message = EXIT_FAILED, "a check of the line failed (see the summary)"
+        else:
+            code, message = EXIT_FAILED, f"line_owner exited {rc}: {owner.tail(3)}"
+    except Interrupted as exc:
+        code, message = EXIT_INTERRUPTED, f"interrupted ({exc})"
+    except RuntimeError as exc:
+        code, message = EXIT_FAILED, str(exc)
+    finally:
+        stop.stopping()
+        group.stop(order=[OWNER], urgent=stop.urgent)
+    if code == EXIT_OK and not opts.keep_logs and opts.log_dir is None:
+        shutil.rmtree(log_dir, ignore_errors=True)
+    else:
+        summary["log_dir"] = str(log_dir)
+    return LineRunResult(code, message, summary)
