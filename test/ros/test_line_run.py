@@ -46,3 +46,15 @@ def test_run_line_refuses_a_bad_line_file(tmp_path: Path) -> None:
     assert proc.returncode == 2, proc.stderr
     err = proc.stderr.strip().splitlines()
     assert len(err) == 1 and "conveyor.speed" in err[0], proc.stderr
+
+
+@pytest.mark.parametrize(
+    ("args", "option"),
+    [(["--bag", "x"], "--bag"), (["--rtf", "2"], "--rtf"), (["--parcels", "0"], "--parcels")],
+)
+def test_run_line_refuses_what_a_line_run_does_not_take(args: list[str], option: str) -> None:
+    """A single-unit option, or a parcel count out of range: exit 2, one line naming it."""
+    proc = run_cli("run", "--line", "two_units", *args)
+    assert proc.returncode == 2, proc.stderr
+    err = proc.stderr.strip().splitlines()
+    assert len(err) == 1 and option in err[0], proc.stderr
