@@ -467,8 +467,10 @@ class LockstepOwner(LinePlant):
         for u, d in zip(self.units, done, strict=True):
             for rec in d.deadline_records:
                 self._on_record(u, rec)
+        records: list[Record] = []
         for u, d in zip(self.units, done, strict=True):
             for rec in d.advance_records:
+                records.append(rec)
                 self._on_record(u, rec)
         self.t = t_next
         self._leave_belt()
@@ -476,6 +478,8 @@ class LockstepOwner(LinePlant):
         running = {p.pid for p in self.live if p.stroke_unit is not None}
         self.bookings = [b for b in self.bookings if b.t_end > self.t or b.parcel_id in running]
         self.view.tick(self.t)
+        for observe in self.observers:
+            observe(self, records)
 
     def warm_up(self, time_budget: float = 10.0) -> None:
         """``LinePlant.warm_up`` on every unit's side: each warms its planner with the stream's

@@ -205,3 +205,22 @@ def test_the_wire_format_reads_back_bit_for_bit():
         assert type(back) is type(o)
         assert repr(back) == repr(o)  # NaN fields (mu_belt) included
     assert decode(encode(tr)).free_after == math.inf
+
+
+def test_the_owner_s_observers_see_every_step_and_the_units_records():
+    """A view's hook on the owner (LinePlant.observers): called once per step of the clock,
+    with the records the units' simulations sent in it, as on LinePlant."""
+    cfg = LineRunConfig(parcels=3, rate_pcs_h=2000.0, seed=3)
+
+    def watch(plant):
+        seen = []
+        plant.observers.append(lambda pl, recs: seen.append((pl.t, list(recs))))
+        plant.run()
+        return seen
+
+    ref = watch(LinePlant(TWO, cfg))
+    owner, _, _ = _line(cfg)
+    got = watch(owner)
+    assert [t for t, _ in got] == [t for t, _ in ref] and len(got) > 100
+    assert [recs for _, recs in got] == [recs for _, recs in ref]
+    assert any(recs for _, recs in got)
