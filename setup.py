@@ -59,6 +59,8 @@ setup(
             "recorder = fence_sorter.nodes.recorder:main",
             "sensors = fence_sorter.nodes.sensors:main",
             "foxglove_bridge = fence_sorter.nodes.foxglove_bridge:main",
+            "line_unit = fence_sorter.nodes.line_unit:main",
+            "line_owner = fence_sorter.nodes.line_owner:main",
             "fence-sorter = fence_sorter.cli.main:main",
         ],
     },
