@@ -33,6 +33,7 @@ in one process; the line's ROS 2 nodes over DDS.
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field, fields, is_dataclass
 
 from fence_sorter.inputs import ParcelSpec
@@ -481,14 +482,13 @@ class LockstepOwner(LinePlant):
         for observe in self.observers:
             observe(self, records)
 
-    def warm_up(self, time_budget: float = 10.0) -> None:
+    def warm_up(self, time_budget: float = math.inf) -> None:
         """``LinePlant.warm_up`` on every unit's side: each warms its planner with the stream's
-        first parcels and its share of the time budget (the units of a line in processes of
-        their own warm up at the same time)."""
+        first parcels (complete by default, as in process; ``time_budget`` [s] is each
+        unit's)."""
         specs = tuple(p.spec for p in self.parcels[:200])
-        share = time_budget / max(len(self.units), 1)
         for u in self.units:
-            self.transport.send(u.index, WarmUp(specs, share))
+            self.transport.send(u.index, WarmUp(specs, time_budget))
         for u in self.units:
             r = self.transport.wait(u.index)
             assert isinstance(r, Warmed), r

@@ -155,11 +155,13 @@ class LinePlant:
         pc = self.spec.planner
         return (UNIT_LEAD + pc.r_s_max) / self.v + 2.0 * pc.t1_max + 1.0
 
-    def warm_up(self, time_budget: float = 10.0) -> None:
-        """Fill each planner's cache from the stream's parcels (and load the JIT)."""
+    def warm_up(self, time_budget: float = math.inf) -> None:
+        """Fill each planner's cache from the stream's parcels (and load the JIT). Complete
+        by default (about 0.1 s a unit for 200 parcels), so the line's figures do not depend
+        on how busy the machine was while it warmed up; ``time_budget`` [s] is each unit's."""
         loads = [p.spec.to_parcel_params() for p in self.parcels[:200]]
         for u in self.units:
-            u.planner.warm_up(loads, time_budget=time_budget / max(len(self.units), 1))
+            u.planner.warm_up(loads, time_budget=time_budget)
 
     # -- tracks ----------------------------------------------------------------------------
     def _track_at_induction(self, p: _LP, t: float) -> Track:
