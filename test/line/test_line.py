@@ -321,12 +321,36 @@ def test_every_parcel_gets_exactly_one_outcome():
     assert line.parcels_on_line == 0
 
 
+@pytest.mark.parametrize("method", ["scipy:LSODA", "cyrk:LSODA"])
+def test_the_line_steps_a_baseline_and_a_compiled_peer_as_simulate_does(method):
+    """One stepper interface: the line steps a SciPy baseline and a CyRK peer through the same
+    SolveStepper as our schemes, and its outcome equals simulate()'s figures of that scheme."""
+    sc = replace(SCENE, solver=replace(SCENE.solver, method=method, rtol=1e-4))
+    line = SortingLine(LineConfig.from_scenario(sc))
+    line.add_parcel(heavy(1))
+    assert line.command(stroke(1)).accepted
+    scenario = []
+
+    def watch(ln: SortingLine) -> None:
+        got = ln.stroke_scenario(1)
+        if got is not None and not scenario:
+            scenario.append(got)
+
+    out = outcomes(run(line, 3.0, on_step=watch))[1]
+    assert out.code is OutcomeCode.SORTED
+    assert scenario[0].solver.method == method
+    ref = simulate(replace(scenario[0], solver=replace(scenario[0].solver, stop_when_sorted=True)))
+    assert ref.sorted
+    assert out.peak_normal_force == ref.peak_contact_force
+    assert out.exit_speed_y == ref.exit_speed_y
+    # the same physics as our default scheme: the 0.3 m free fall's impact speed
+    assert out.impact_normal_speed == pytest.approx(2.43, abs=0.03)
+
+
 def test_line_config_is_checked():
     with pytest.raises(ValueError, match="solver.method"):
         SortingLine(
-            LineConfig.from_scenario(
-                replace(SCENE, solver=replace(SCENE.solver, method="scipy:RK45"))
-            )
+            LineConfig.from_scenario(replace(SCENE, solver=replace(SCENE.solver, method="rk99")))
         )
     with pytest.raises(ValueError, match="line_end_x"):
         SortingLine(LineConfig.from_scenario(SCENE, line_end_x=1.0))
