@@ -46,13 +46,11 @@ ROUNDS = 21
 
 
 @njit(cache=True)
-def _rhs_loop(P, corners, normals, phi, rigid_modal, omega, zeta, ts, ys, on_belt, scratch):
+def _rhs_loop(model, ts, ys, on_belt, ev, dy):
     """kernel.rhs at every (t, y) of the event (the contact work of the real states)."""
-    out, res, modal, w, wdot, nodes, prev, lam, dy = scratch
     total = 0.0
     for k in range(ts.shape[0]):
-        K.rhs(P, corners, normals, phi, rigid_modal, omega, zeta, ts[k], ys[k], on_belt[k], dy,
-              out, res, modal, w, wdot, nodes, prev, lam)  # fmt: skip
+        K.rhs(model, ts[k], ys[k], on_belt[k], dy, ev)
         total += dy[3]
     return total
 
@@ -69,16 +67,17 @@ def rhs_cost(sc) -> tuple[float, int]:
     ys = np.ascontiguousarray(np.stack([s[k] for k in ("x", "y", "phi", "vx", "vy", "phidot")], 1))
     on_belt = ys[:, 1] < sc.conveyor.width
     n_el = md.n_el
-    scratch = (
+    ev = K.Evaluation(
         K.zero_slots(), K.zero_result(), np.zeros(md.n_modes),
         np.zeros(max(2 * n_el, 2)), np.zeros(max(2 * n_el, 2)), np.zeros((n_el + 1, 2)),
-        np.zeros(K.N_SLOTS), np.zeros(3), np.zeros(md.n_state),
+        np.zeros(K.N_SLOTS), np.zeros(3),
     )  # fmt: skip
-    args = (md.P, md.corners, md.normals, md.phi, md.rigid_modal, md.omega, md.zeta)
+    model = K.ForceModel(md.P, md.corners, md.normals, md.phi, md.rigid_modal, md.omega, md.zeta)
+    dy = np.zeros(md.n_state)
     walls = []
     for _ in range(31):
         t0 = time.perf_counter()
-        _rhs_loop(*args, ts, ys, on_belt, scratch)
+        _rhs_loop(model, ts, ys, on_belt, ev, dy)
         walls.append(time.perf_counter() - t0)
     return statistics.median(walls) / len(ts), len(ts)
 

@@ -57,47 +57,26 @@ class RightHandSide:
         n = md.n_el
         self.model = md
         self.n = md.n_state
-        self.out = K.zero_slots()
-        self.res = K.zero_result()
-        self.modal = np.zeros(md.n_modes)
-        self.w = np.zeros(max(2 * n, 2))
-        self.wdot = np.zeros(max(2 * n, 2))
-        self.nodes = np.zeros((n + 1, 2))
-        self.prev = np.zeros(K.N_SLOTS)
-        self.lam = np.zeros(3)
+        self.arrays = K.ForceModel(
+            md.P, md.corners, md.normals, md.phi, md.rigid_modal, md.omega, md.zeta
+        )
+        self.ev = K.Evaluation(
+            K.zero_slots(), K.zero_result(), np.zeros(md.n_modes), np.zeros(max(2 * n, 2)),
+            np.zeros(max(2 * n, 2)), np.zeros((n + 1, 2)), np.zeros(K.N_SLOTS), np.zeros(3),
+        )  # fmt: skip
         self.on_belt = True
         self.after = -math.inf  # t at or below this is evaluated just past it (a segment start)
 
-    def fill(self, t: float, y: np.ndarray, dy, out, res, modal, lam) -> None:
-        md = self.model
+    def fill(self, t: float, y: np.ndarray, dy) -> None:
+        """dy at (t, y); the forces, contacts and belt wrench there go to :attr:`ev`."""
         if t <= self.after:
             t = math.nextafter(self.after, math.inf)
-        K.rhs(
-            md.P,
-            md.corners,
-            md.normals,
-            md.phi,
-            md.rigid_modal,
-            md.omega,
-            md.zeta,
-            float(t),
-            y,
-            self.on_belt,
-            dy,
-            out,
-            res,
-            modal,
-            self.w,
-            self.wdot,
-            self.nodes,
-            self.prev,
-            lam,
-        )
+        K.rhs(self.arrays, float(t), y, self.on_belt, dy, self.ev)
 
     def __call__(self, t, y):
         y = np.ascontiguousarray(y, dtype=np.float64)
         dy = np.empty(self.n)
-        self.fill(t, y, dy, self.out, self.res, self.modal, self.lam)
+        self.fill(t, y, dy)
         return dy
 
     def observe(self, stepper: Stepper, t: float, y: np.ndarray, on_belt: bool):
@@ -105,8 +84,9 @@ class RightHandSide:
         solve loop's reductions; ``(stop, on_belt)`` after it."""
         y = np.ascontiguousarray(y, dtype=np.float64)
         dy = np.empty(self.n)
-        self.fill(float(t), y, dy, self.out, self.res, self.modal, self.lam)
-        return stepper.observe(float(t), y, self.lam, self.out, self.res, on_belt)
+        self.fill(float(t), y, dy)
+        ev = self.ev
+        return stepper.observe(float(t), y, ev.belt, ev.contacts, ev.resultant, on_belt)
 
 
 def _edge_crossing(dense, t0: float, t1: float, width: float) -> tuple[float, np.ndarray]:

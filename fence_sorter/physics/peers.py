@@ -93,23 +93,8 @@ _result_at = _pointer_to(numba.from_dtype(K.RESULT))
 
 # the args buffer of the diffeq: three scalars, then (address, rows, columns) of each array
 A_N_STATE, A_ON_BELT, A_AFTER = 0, 1, 2
-_ARRAYS = (
-    "P",
-    "corners",
-    "normals",
-    "phi",
-    "rigid_modal",
-    "omega",
-    "zeta",
-    "out",
-    "res",
-    "modal",
-    "w",
-    "wdot",
-    "nodes",
-    "prev",
-    "lam",
-)
+# (the fields of a ForceModel and of an Evaluation, in their order)
+_ARRAYS = K.ForceModel._fields + K.Evaluation._fields
 N_ARGS = 3 + 3 * len(_ARRAYS)
 
 
@@ -152,27 +137,15 @@ def rhs_cfunc(dy_ptr, t, y_ptr, args_ptr):
     after = args[A_AFTER]
     if t <= after:
         t = np.nextafter(after, np.inf)
-    K.rhs(
-        carray(_params_at(np.int64(args[3])), (1,)),
-        _mat(args, 1),
-        _mat(args, 2),
-        _mat(args, 3),
-        _vec(args, 4),
-        _vec(args, 5),
-        _vec(args, 6),
-        t,
-        carray(y_ptr, (n,)),
-        args[A_ON_BELT] != 0.0,
-        carray(dy_ptr, (n,)),
-        _slots(args, 7),
-        _result(args, 8),
-        _vec(args, 9),
-        _vec(args, 10),
-        _vec(args, 11),
-        _mat(args, 12),
-        _vec(args, 13),
-        _vec(args, 14),
-    )
+    model = K.ForceModel(
+        carray(_params_at(np.int64(args[3])), (1,)), _mat(args, 1), _mat(args, 2), _mat(args, 3),
+        _vec(args, 4), _vec(args, 5), _vec(args, 6),
+    )  # fmt: skip
+    ev = K.Evaluation(
+        _slots(args, 7), _result(args, 8), _vec(args, 9), _vec(args, 10), _vec(args, 11),
+        _mat(args, 12), _vec(args, 13), _vec(args, 14),
+    )  # fmt: skip
+    K.rhs(model, t, carray(y_ptr, (n,)), args[A_ON_BELT] != 0.0, carray(dy_ptr, (n,)), ev)
 
 
 # -- the observation of a segment's accepted points -------------------------------------------
@@ -213,8 +186,8 @@ def observe_points(
     k - 1 (the segment's first point: computed here when k == 1). A crossing of the belt edge
     between two points ends the segment at the crossing (:func:`_crossing`, its state in
     ``point``). Returns (OBS_* status, next k, on_belt)."""
-    P, corners, normals, phi, rigid_modal, omega, zeta = model
-    out, res, modal, w, wdot, nodes, prev, lam = scratch
+    P, normals = model.params, model.normals
+    out, res, lam = scratch.contacts, scratch.resultant, scratch.belt
     (settings, counters, figures, times, states, belt_wrench, contact_rows, resultant_rows,
      impact_rows, stage_rows, record) = reduce  # fmt: skip
     n = ts.shape[0]
@@ -222,8 +195,7 @@ def observe_points(
         t0 = ts[0]
         if t0 <= after:
             t0 = np.nextafter(after, np.inf)
-        K.rhs(P, corners, normals, phi, rigid_modal, omega, zeta, t0, ys[0], on_belt, dprev,
-              out, res, modal, w, wdot, nodes, prev, lam)  # fmt: skip
+        K.rhs(model, t0, ys[0], on_belt, dprev, scratch)
     done = 0
     while k < n:
         if done == count:
@@ -236,15 +208,13 @@ def observe_points(
             return OBS_GROW, k, on_belt
         t = ts[k]
         y = ys[k]
-        K.rhs(P, corners, normals, phi, rigid_modal, omega, zeta, t, y, on_belt, dy,
-              out, res, modal, w, wdot, nodes, prev, lam)  # fmt: skip
+        K.rhs(model, t, y, on_belt, dy, scratch)
         crossed = on_belt and ys[k - 1, 1] < width <= y[1]
         if crossed:
             t = _crossing(ts[k - 1], ys[k - 1], dprev, t, y, dy, width, point)
             point[1] = max(point[1], width)
             y = point
-            K.rhs(P, corners, normals, phi, rigid_modal, omega, zeta, t, y, on_belt, dy,
-                  out, res, modal, w, wdot, nodes, prev, lam)  # fmt: skip
+            K.rhs(model, t, y, on_belt, dy, scratch)
         i = counters[0].cur
         times[i] = t
         states[i] = y
@@ -334,7 +304,7 @@ class CyrkStepper(ObservedStepper):
         self._method = int(method_int(self.name))
         md = model
         n_el = md.n_el
-        self.scratch = (
+        self.scratch = K.Evaluation(
             K.zero_slots(),
             K.zero_result(),
             np.zeros(md.n_modes),
@@ -345,7 +315,7 @@ class CyrkStepper(ObservedStepper):
             np.zeros(3),
         )
         arrays = (md.P, md.corners, md.normals, md.phi, md.rigid_modal, md.omega, md.zeta)
-        self.arrays = tuple(np.ascontiguousarray(a) for a in arrays)
+        self.arrays = K.ForceModel(*(np.ascontiguousarray(a) for a in arrays))
         self.args = np.zeros(N_ARGS)
         self.args[A_N_STATE] = md.n_state
         for k, a in enumerate(self.arrays + self.scratch):

@@ -25,46 +25,37 @@ def _state_at(t: float):
     return md, cs, int(cs.counters[0].cur)
 
 
+def _evaluation(cs, i, out, res, lam):
+    """The kernel.Evaluation of state row i (i None: of the given contacts, resultant, belt)."""
+    if i is not None:
+        out, res, lam = cs.contact_rows[i], cs.resultant_rows[i], cs.belt_wrench[i]
+    modal = cs.modal_forces[i] if i is not None else np.zeros(0)
+    return K.Evaluation(
+        out, res, modal, cs.deflection, cs.deflection_rate, cs.nodes, cs.friction_prev, lam
+    )
+
+
+def _trapezoidal(step, md, cs, a, h, max_iter, force, tol):
+    """One trapezoidal step of ``step`` (the compiled function or its Python body) from row a,
+    with the given iteration tolerance and limit; (status, y1, end Evaluation)."""
+    settings = cs.loop_model.settings.copy()
+    settings[0].tol, settings[0].max_iter = tol, max_iter
+    model = cs.loop_model._replace(settings=settings)
+    y1 = np.zeros(md.n_state)
+    end = _evaluation(cs, None, K.zero_slots(), K.zero_result(), np.zeros(3))
+    props = (np.zeros((0, 2, 3)), np.zeros((0, 2)), np.zeros((0, 2)))
+    status = step(
+        model, props, h, 0.0, cs.times[a], cs.states[a], _evaluation(cs, a, None, None, None),
+        np.zeros(0), 0.0, bool(cs.counters[0].on_belt), force, y1, end, cs.work,
+    )  # fmt: skip
+    return status, y1, end
+
+
 def _step(md, cs, a, h, max_iter, force, tol=1e-14):
     """One trapezoidal step from row a (the Python body of the compiled function, so the module
     flag NEWTON is read at call time); (status, y1, iterations)."""
-    y1, lam1 = np.zeros(md.n_state), np.zeros(3)
-    out, res = K.zero_slots(), K.zero_result()
-    props = (np.zeros((0, 2, 3)), np.zeros((0, 2)), np.zeros((0, 2)))
-    status = K.trapezoidal_step.py_func(
-        md.P,
-        md.corners,
-        md.normals,
-        cs.loop_model.mode_shapes,
-        cs.loop_model.rigid_modal,
-        props,
-        h,
-        cs.times[a],
-        cs.states[a],
-        cs.resultant_rows[a],
-        cs.belt_wrench[a],
-        cs.modal_forces[a],
-        cs.contact_rows[a],
-        np.zeros(0),
-        0.0,
-        0.0,
-        bool(cs.counters[0].on_belt),
-        tol,
-        False,
-        max_iter,
-        force,
-        y1,
-        lam1,
-        out,
-        res,
-        np.zeros(0),
-        cs.deflection,
-        cs.deflection_rate,
-        cs.nodes,
-        cs.friction_prev,
-        cs.work,
-    )
-    return status, y1, int(res[0]["iterations"])
+    status, y1, end = _trapezoidal(K.trapezoidal_step.py_func, md, cs, a, h, max_iter, force, tol)
+    return status, y1, int(end.resultant[0]["iterations"])
 
 
 def _distance(y, ref, h):
@@ -202,63 +193,17 @@ def _free_step(gap):
     md, cs, a = _state_at(0.0)
     cs.states[a, 1] += gap  # the long face along the fence (D = 0 at t = 0), moved off it
     h = STIFF.solver.dt_max
-    y1, lam1 = np.zeros(md.n_state), np.zeros(3)
-    out, res = K.zero_slots(), K.zero_result()
-    props = (np.zeros((0, 2, 3)), np.zeros((0, 2)), np.zeros((0, 2)))
-    status = K.trapezoidal_step(
-        md.P,
-        md.corners,
-        md.normals,
-        cs.loop_model.mode_shapes,
-        cs.loop_model.rigid_modal,
-        props,
-        h,
-        cs.times[a],
-        cs.states[a],
-        cs.resultant_rows[a],
-        cs.belt_wrench[a],
-        cs.modal_forces[a],
-        cs.contact_rows[a],
-        np.zeros(0),
-        0.0,
-        0.0,
-        True,
-        STIFF.solver.tolerance,
-        False,
-        50,
-        False,
-        y1,
-        lam1,
-        out,
-        res,
-        np.zeros(0),
-        cs.deflection,
-        cs.deflection_rate,
-        cs.nodes,
-        cs.friction_prev,
-        cs.work,
+    status, y1, end = _trapezoidal(
+        K.trapezoidal_step, md, cs, a, h, 50, False, STIFF.solver.tolerance
     )
+    out, res = end.contacts, end.resultant
     assert status == K.STEP_OK and res[0]["iterations"] == 1
     out2, res2 = K.zero_slots(), K.zero_result()
-    K.evaluate(
-        md.P,
-        md.corners,
-        md.normals,
-        cs.loop_model.mode_shapes,
-        cs.loop_model.rigid_modal,
-        cs.times[a] + h,
-        0.0,
-        y1,
-        cs.belt_wrench[a],
-        0.5 * h,
-        np.full(K.N_SLOTS, math.nan),
-        out2,
-        res2,
-        np.zeros(0),
-        cs.deflection,
-        cs.deflection_rate,
-        cs.nodes,
+    prev = np.full(K.N_SLOTS, math.nan)
+    ev = K.Evaluation(
+        out2, res2, np.zeros(0), cs.deflection, cs.deflection_rate, cs.nodes, prev, np.zeros(3)
     )
+    K.evaluate(cs.loop_model, cs.times[a] + h, 0.0, y1, cs.belt_wrench[a], 0.5 * h, ev)
     return out, res, out2, res2
 
 

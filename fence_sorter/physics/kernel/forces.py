@@ -282,43 +282,31 @@ def belt_multiplier(P, u0, u1, u2, w0, w1, w2, lam, sigma0):
 
 # -- contacts -----------------------------------------------------------------------------------
 @njit(cache=True, _nrt=False, inline="always")
-def _add(
-    P,
-    phi,
-    out,
-    res,
-    modal,
-    slot,
-    s_arc,
-    d,
-    d_rate,
-    px,
-    py,
-    nx,
-    ny,
-    tx,
-    ty,
-    slide,
-    vsx,
-    vsy,
-    x,
-    y,
-    lam_x,
-    lam_y,
-    weight,
-    prev,
-    on_fence,
-    alpha,
-):
+def _place(row, s_arc, d, d_rate, px, py, nx, ny, vsx, vsy):
+    """The geometry of a contact in its slot: arc position, D, Ddot, point, normal, surface
+    velocity (:func:`_add` reads them back)."""
+    row.s, row.d, row.ddot = s_arc, d, d_rate
+    row.px, row.py, row.nx, row.ny, row.vsx, row.vsy = px, py, nx, ny, vsx, vsy
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _add(model, ev, slot, tx, ty, slide, y, lam, weight):
+    """The contact law (16) and friction (37) of the contact placed in ``slot`` (``_place``;
+    unit tangent (tx, ty), slip velocity ``slide``) at load state y: its force into the slot and
+    the resultants, and on the fence (slots below SLOT_BORDER) its modal share."""
+    P, out, res = model.params, ev.contacts, ev.resultant
+    row = out[slot]
+    d, d_rate, px, py, nx, ny = row.d, row.ddot, row.px, row.py, row.nx, row.ny
+    x, yy = y[0], y[1]
     mass = P[0].mass
     n_raw = P[0].b_eff * d_rate * d * d + P[0].k_p * d**4
     n = n_raw if n_raw > 0.0 else 0.0
     mu2 = P[0].mu2
-    f_prev = prev[slot]
+    f_prev = ev.friction_prev[slot]
     if weight > 0.0 and not math.isnan(f_prev):
         # implicit (37): the friction that stops this contact's slip by the step end if it lies
         # within mu2 N, else mu2 N against the slip
-        arm = (px - x) * ty - (py - y) * tx
+        arm = (px - x) * ty - (py - yy) * tx
         w_eff = weight * (1.0 / mass + arm * arm / P[0].inertia)
         slip_free = slide - w_eff * f_prev
         limit = mu2 * n
@@ -327,85 +315,59 @@ def _add(
         if abs(ft) > limit:
             ft = -math.copysign(limit, slip_free)
     else:
-        ft = _fence_friction(n, slide, lam_x * tx + lam_y * ty, mu2, P[0].v_min)
+        ft = _fence_friction(n, slide, lam[0] * tx + lam[1] * ty, mu2, P[0].v_min)
         slack = math.nan
     fx = n * nx + ft * tx
     fy = n * ny + ft * ty
     res[0].fx += fx
     res[0].fy += fy
-    res[0].mz += (px - x) * fy - (py - y) * fx
+    res[0].mz += (px - x) * fy - (py - yy) * fx
     res[0].energy_contact += 0.2 * P[0].k_p * d**5
-    if on_fence:
+    if slot < SLOT_BORDER:
         res[0].fence_n += n
-        res[0].power_fence += fx * vsx + fy * vsy
+        res[0].power_fence += fx * row.vsx + fy * row.vsy
         if P[0].flexible != 0.0:
-            _modal_share(P, phi, s_arc, alpha, -fx, -fy, modal)
+            _modal_share(P, model.mode_shapes, row.s, res[0].alpha, -fx, -fy, ev.modal)
     res[0].active_mask += float(1 << slot)
     if d > res[0].max_d:
         res[0].max_d = d
-    row = out[slot]
     row.active = 1.0
-    row.s = s_arc
-    row.d = d
-    row.ddot = d_rate
     row.n = n
     row.n_raw = n_raw
     row.ft = ft
     row.slack = slack
-    row.px = px
-    row.py = py
-    row.nx = nx
-    row.ny = ny
-    row.vsx = vsx
-    row.vsy = vsy
 
 
 @njit(cache=True, _nrt=False)
-def evaluate(
-    P,
-    corners,
-    normals,
-    phi,
-    rigid_modal,
-    t,
-    accel_jump,
-    y,
-    lam,
-    weight,
-    prev,
-    out,
-    res,
-    modal,
-    w,
-    wdot,
-    nodes,
-):
+def evaluate(model, t, accel_jump, y, lam, weight, ev):
     """All contact forces on the load at time t and state y (see the module docstring).
 
-    ``lam``: the belt wrench, the applied tangential force of (37)'s stick branch. ``weight``
-    > 0 (velocity change per unit end-of-step force over the mass) with ``prev`` (each slot's
-    friction at the previous iterate, NaN if none) makes (37) implicit inside a step's
-    iteration. ``accel_jump`` is added to the drive acceleration (a step starting on the far
-    side of the jump at 2 t1). Fills ``out``, ``res`` and ``modal`` (the fence's generalized
-    force including the drive's inertial load -Phi^T M_fa r alpha_ddot).
+    ``model``: a :data:`ForceModel` (or a LoopModel). ``lam``: the belt wrench, the applied
+    tangential force of (37)'s stick branch. ``weight`` > 0 (velocity change per unit
+    end-of-step force over the mass) with ``ev.friction_prev`` (each slot's friction at the
+    previous iterate, NaN if none) makes (37) implicit inside a step's iteration.
+    ``accel_jump`` is added to the drive acceleration (a step starting on the far side of the
+    jump at 2 t1). Fills the :data:`Evaluation` ``ev``: its contacts, resultant and modal force
+    (the fence's generalized force including the drive's inertial load -Phi^T M_fa r
+    alpha_ddot), and its fence shape.
     """
-    alpha, rate, accel = drive(P, t)
+    alpha, rate, accel = drive(model.params, t)
     accel += accel_jump
     _evaluate(
-        P, corners, normals, phi, rigid_modal, alpha, rate, accel, math.cos(alpha),
-        math.sin(alpha), y, math.cos(y[2]), math.sin(y[2]), lam, weight, prev, out, res, modal,
-        w, wdot, nodes,
+        model, alpha, rate, accel, math.cos(alpha), math.sin(alpha), y, math.cos(y[2]),
+        math.sin(y[2]), lam, weight, ev,
     )  # fmt: skip
 
 
 @njit(cache=True, _nrt=False)
-def _evaluate(
-    P, corners, normals, phi, rigid_modal, alpha, rate, accel, ca, sa, y, c, s, lam, weight, prev,
-    out, res, modal, w, wdot, nodes,
-):  # fmt: skip
+def _evaluate(model, alpha, rate, accel, ca, sa, y, c, s, lam, weight, ev):
     """:func:`evaluate` with the drive state (alpha, rate, accel), cos, sin of alpha and c, s
     = cos, sin of the yaw y[2] given: a step's iteration evaluates every iterate at the same
     time, so it computes alpha's once, and the yaw's from the first iterate's (``_turn``)."""
+    P, corners, normals = model.params, model.corners, model.normals
+    phi, rigid_modal = model.mode_shapes, model.rigid_modal
+    out, res, modal = ev.contacts, ev.resultant, ev.modal
+    w, wdot, nodes = ev.deflection, ev.deflection_rate, ev.nodes
     out.view(np.float64)[:] = 0.0
     res.view(np.float64)[:] = 0.0
     modal[:] = 0.0
@@ -425,7 +387,6 @@ def _evaluate(
     length = P[0].length
     use_tip = P[0].use_tip != 0.0
     reach = res[0].max_w + P[0].margin
-    lam_x, lam_y = lam[0], lam[1]
     # corner k of the load: (x + c a_k - s b_k, y + s a_k + c b_k), recomputed where used (the
     # same arithmetic; no array allocated per evaluation)
     tip_x = tip_y = ttx = tty = vtx = vty = 0.0
@@ -467,34 +428,8 @@ def _evaluate(
         out[k].n_raw = d  # negative before contact: the onset function
         if d > 0.0:
             slide = (vpx - vux) * tx + (vpy - vuy) * ty
-            _add(
-                P,
-                phi,
-                out,
-                res,
-                modal,
-                k,
-                s_arc,
-                d,
-                d_rate,
-                px,
-                py,
-                nx,
-                ny,
-                tx,
-                ty,
-                slide,
-                vux,
-                vuy,
-                x,
-                yy,
-                lam_x,
-                lam_y,
-                weight,
-                prev,
-                True,
-                alpha,
-            )
+            _place(out[k], s_arc, d, d_rate, px, py, nx, ny, vux, vuy)
+            _add(model, ev, k, tx, ty, slide, y, lam, weight)
     # the fence tip inside the load (past a corner that slid off it, or pressed into a face
     # beyond the last pushing corner): it presses on the face that faces the fence (outward
     # normal most against the fence normal), the depth is the tip's distance to that face's
@@ -532,34 +467,8 @@ def _evaluate(
             slide = (vpx - vtx) * ftx + (vpy - vty) * fty
             slot = SLOT_TIP + exit_face
             out[slot].gap = 1.0
-            _add(
-                P,
-                phi,
-                out,
-                res,
-                modal,
-                slot,
-                length,
-                depth,
-                d_rate,
-                tip_x,
-                tip_y,
-                fnx,
-                fny,
-                ftx,
-                fty,
-                slide,
-                vtx,
-                vty,
-                x,
-                yy,
-                lam_x,
-                lam_y,
-                weight,
-                prev,
-                True,
-                alpha,
-            )
+            _place(out[slot], length, depth, d_rate, tip_x, tip_y, fnx, fny, vtx, vty)
+            _add(model, ev, slot, ftx, fty, slide, y, lam, weight)
     if P[0].use_border != 0.0:
         for k in range(4):
             px = x + c * corners[k, 0] - s * corners[k, 1]
@@ -568,34 +477,8 @@ def _evaluate(
                 continue
             vpx = vx - om * (py - yy)
             vpy = vy + om * (px - x)
-            _add(
-                P,
-                phi,
-                out,
-                res,
-                modal,
-                SLOT_BORDER + k,
-                math.nan,
-                -py,
-                -vpy,
-                px,
-                py,
-                0.0,
-                1.0,
-                1.0,
-                0.0,
-                vpx,
-                0.0,
-                0.0,
-                x,
-                yy,
-                lam_x,
-                lam_y,
-                weight,
-                prev,
-                False,
-                alpha,
-            )
+            _place(out[SLOT_BORDER + k], math.nan, -py, -vpy, px, py, 0.0, 1.0, 0.0, 0.0)
+            _add(model, ev, SLOT_BORDER + k, 1.0, 0.0, vpx, y, lam, weight)
     if flex:
         for j in range(m):
             modal[j] -= rigid_modal[j] * accel

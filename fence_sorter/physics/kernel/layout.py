@@ -278,29 +278,32 @@ DIAG_DEEP = 2
 DIAG_SPEED = 3
 DIAG_MIN_DT = 4
 
+# the fields of a recorded point: (field, the recordable group of ``scenario.RECORDABLE`` it
+# belongs to, the names of its series, one per element). Each group has its own time field
+# (the time again), so each recorded series is a field of its own; the stepper's series
+# follow this order within a group
+RECORDED_SERIES = (
+    ("t", "trajectory", ("t",)),
+    ("y", "trajectory", ("x", "y", "phi", "vx", "vy", "phidot")),
+    ("t_fence", "fence", ("t_fence",)),
+    ("alpha", "fence", ("alpha_w",)),
+    ("tip_w", "fence", ("tip_deflection",)),
+    ("t_forces", "forces", ("t_forces",)),
+    ("fence_n", "forces", ("normal_force",)),
+    ("max_d", "forces", ("deformation",)),
+    ("t_stage", "stages", ("t_stage",)),
+    ("stage", "stages", ("stage",)),
+)
 # a recorded point (the loop's ``record`` is an array of them, one per accepted point)
 RECORDED = _record(
-    [
-        ("t", "f8"),
-        ("y", "f8", (6,)),  # x, y, phi, vx, vy, phidot
-        ("alpha", "f8"),
-        ("tip_w", "f8"),
-        ("fence_n", "f8"),
-        ("max_d", "f8"),
-        ("stage", "f8"),
-        # the time again, once per series group that has its own time array (fence, forces,
-        # stages), so each recorded series is a field of its own
-        ("t_fence", "f8"),
-        ("t_forces", "f8"),
-        ("t_stage", "f8"),
-    ]
+    [(f, "f8", (len(names),)) if len(names) > 1 else (f, "f8") for f, _, names in RECORDED_SERIES]
 )
 N_PROP_CACHE = 256
 
-# The loop's arrays in two groups, as MuJoCo's MjModel and MjData: what one event is (read only)
-# and what the loop writes as it runs (rows of accepted and trial states, counters, outputs).
-LoopModel = namedtuple(
-    "LoopModel",
+# What the forces and the right-hand side read of one event (``forces.evaluate``, ``rhs.rhs``
+# take it, or a LoopModel, which begins with the same fields)
+ForceModel = namedtuple(
+    "ForceModel",
     [
         "params",  # one PARAMS record (layout.pack)
         "corners",  # the load's corners relative to C_s [m]
@@ -309,6 +312,31 @@ LoopModel = namedtuple(
         "rigid_modal",  # modal load of a unit drive acceleration
         "omega",  # modal angular frequencies [rad/s]
         "zeta",  # modal damping ratios
+    ],
+)
+# What one evaluation of the forces writes (``forces.evaluate``): its contact slots, resultants
+# and modal force, the fence's shape (scratch), each slot's friction at the previous contact
+# iterate, and the belt wrench (``rhs.rhs`` writes it; a step reads the start's)
+Evaluation = namedtuple(
+    "Evaluation",
+    [
+        "contacts",  # N_SLOTS CONTACT records
+        "resultant",  # one RESULT record
+        "modal",  # modal force (m)
+        "deflection",  # nodal deflection and slope of the fence
+        "deflection_rate",
+        "nodes",  # chord chain node positions
+        "friction_prev",  # N_SLOTS
+        "belt",  # belt wrench (F_x, F_y, M_z)
+    ],
+)
+
+# The loop's arrays in two groups, as MuJoCo's MjModel and MjData: what one event is (read only)
+# and what the loop writes as it runs (rows of accepted and trial states, counters, outputs).
+LoopModel = namedtuple(
+    "LoopModel",
+    [
+        *ForceModel._fields,
         "settings",  # one SETTINGS record
         "breakpoints",  # drive breakpoints and the end time [s]
     ],
@@ -345,5 +373,7 @@ LoopState = namedtuple(
 __all__ = [
     n
     for n in tuple(globals())
-    if n.isupper() or n in ("LoopModel", "LoopState", "pack", "zero_slots", "zero_result")
+    if n.isupper()
+    or n
+    in ("ForceModel", "Evaluation", "LoopModel", "LoopState", "pack", "zero_slots", "zero_result")
 ]

@@ -31,6 +31,7 @@ from .layout import (
     S_BEFORE,
     S_LOC,
     S_PREV,
+    Evaluation,
 )
 from .observer import diverged, observe
 from .steps import (
@@ -76,6 +77,19 @@ def _copy_state(state, dst, src):
     _copy_row(resultants, dst, src)
     _copy_row(modal_forces, dst, src)
     _copy_row(accelerations, dst, src)
+
+
+@njit(cache=True, _nrt=True, inline="always")
+def _row(state, i):
+    """The :data:`Evaluation` of state row i (its contacts, resultant, modal force and belt
+    wrench, with the shared scratch arrays). Inlined into its callers, it compiles with their
+    flags; on its own (the loop's source run as Python) it needs Numba's reference counting to
+    hand Python the row views (without it the whole arrays come back)."""
+    s = state
+    return Evaluation(
+        s.contacts[i], s.resultants[i], s.modal_forces[i], s.deflection, s.deflection_rate,
+        s.nodes, s.friction_prev, s.belt_wrench[i],
+    )  # fmt: skip
 
 
 @njit(cache=True, _nrt=False)
@@ -129,19 +143,15 @@ def _load_accelerations(params, state, i):
 def _trap(model, state, h, h_prev, a, b, jump, on_belt, force):
     """One trapezoidal step from state row a into row b (exact modal maps for step h;
     ``h_prev``: the step before a, 0 without history)."""
-    m, s, settings = model, state, model.settings
+    s = state
     k = _propagator_slot(model, state, h)
+    props = (s.propagators[k], s.propagator_g0[k], s.propagator_g1[k])
     status = trapezoidal_step(
-        m.params, m.corners, m.normals, m.mode_shapes, m.rigid_modal,
-        (s.propagators[k], s.propagator_g0[k], s.propagator_g1[k]), h, s.times[a], s.states[a],
-        s.resultants[a], s.belt_wrench[a], s.modal_forces[a], s.contacts[a],
-        s.modal_forces[S_PREV], h_prev, jump, on_belt, settings[0].tol,
-        resolves_stick(settings, m.omega.shape[0]), int(settings[0].max_iter), force,
-        s.states[b], s.belt_wrench[b], s.contacts[b], s.resultants[b], s.modal_forces[b],
-        s.deflection, s.deflection_rate, s.nodes, s.friction_prev, s.work,
+        model, props, h, h_prev, s.times[a], s.states[a], _row(state, a), s.modal_forces[S_PREV],
+        jump, on_belt, force, s.states[b], _row(state, b), s.work,
     )  # fmt: skip
     if status != STEP_REJECTED:
-        _load_accelerations(m.params, state, b)
+        _load_accelerations(model.params, state, b)
     s.times[b] = s.times[a] + h
     return status
 
@@ -150,14 +160,10 @@ def _trap(model, state, h, h_prev, a, b, jump, on_belt, force):
 def _alpha(model, state, h, a, b, on_belt, force):
     """One generalized-alpha step from state row a into row b (``settings[0].gen_alpha``; the
     loop calls it where the other schemes call :func:`_trap`)."""
-    m, s, settings = model, state, model.settings
+    s = state
     status = generalized_alpha_step(
-        m.params, m.corners, m.normals, m.mode_shapes, m.rigid_modal, m.omega, m.zeta,
-        settings[0].alpha_coefficients, h, s.times[a], s.states[a], s.accelerations[a],
-        s.belt_wrench[a], on_belt, settings[0].tol, int(settings[0].max_iter), force,
-        s.states[b], s.accelerations[b], s.belt_wrench[b], s.contacts[b], s.resultants[b],
-        s.modal_forces[b], s.deflection, s.deflection_rate, s.nodes, s.friction_prev,
-        s.states[S_ALPHA],
+        model, h, s.times[a], s.states[a], s.accelerations[a], _row(state, a), on_belt, force,
+        s.states[b], s.accelerations[b], _row(state, b), s.states[S_ALPHA],
     )  # fmt: skip
     s.times[b] = s.times[a] + h
     return status
@@ -331,11 +337,7 @@ def solve(model, state, max_attempts, t_target):
         work[:, :] = 0.0
         for k in range(N_SLOTS):
             friction_prev[k] = math.nan
-        evaluate(
-            params, corners, normals, mode_shapes, rigid_modal, times[a], 0.0, states[a],
-            belt_wrench[a], 0.0, friction_prev, contacts[a], resultants[a], modal_forces[a],
-            deflection, deflection_rate, nodes,
-        )  # fmt: skip
+        evaluate(model, times[a], 0.0, states[a], belt_wrench[a], 0.0, _row(state, a))
         y, r = states[a], resultants[a]
         bx, by, bz = karnopp_belt(
             params, y[3] - params[0].belt, y[4], y[5], r[0].fx, r[0].fy, r[0].mz

@@ -13,54 +13,19 @@ from .layout import N_SLOTS
 
 # -- right-hand side for ODE solvers (scipy.integrate baselines) --------------------------------
 @njit(cache=True, _nrt=False)
-def rhs(
-    P,
-    corners,
-    normals,
-    phi,
-    rigid_modal,
-    omega,
-    zeta,
-    t,
-    y,
-    on_belt,
-    dy,
-    out,
-    res,
-    modal,
-    w,
-    wdot,
-    nodes,
-    prev,
-    lam,
-):
+def rhs(model, t, y, on_belt, dy, ev):
     """dy/dt of the full model with explicit Karnopp friction (34)-(37), the form an ODE solver
-    integrates: the same forces as the steppers, no implicit friction. The fence friction's
-    stick branch sees no belt wrench (it would need the belt friction it feeds): it matters only
-    inside the 1e-6 m/s window."""
+    integrates: the same forces as the steppers, no implicit friction. ``model``: a
+    :data:`ForceModel` (or a LoopModel); ``ev``: the :data:`Evaluation` it fills, with the belt
+    wrench. The fence friction's stick branch sees no belt wrench (it would need the belt
+    friction it feeds): it matters only inside the 1e-6 m/s window."""
+    P, omega, zeta = model.params, model.omega, model.zeta
+    prev, lam, modal, res = ev.friction_prev, ev.belt, ev.modal, ev.resultant
     m = omega.shape[0]
     for k in range(N_SLOTS):
         prev[k] = math.nan
     lam[0] = lam[1] = lam[2] = 0.0
-    evaluate(
-        P,
-        corners,
-        normals,
-        phi,
-        rigid_modal,
-        t,
-        0.0,
-        y,
-        lam,
-        0.0,
-        prev,
-        out,
-        res,
-        modal,
-        w,
-        wdot,
-        nodes,
-    )
+    evaluate(model, t, 0.0, y, lam, 0.0, ev)
     fx, fy, mz = res[0].fx, res[0].fy, res[0].mz
     if on_belt:
         bx, by, bz = karnopp_belt(P, y[3] - P[0].belt, y[4], y[5], fx, fy, mz)

@@ -8,6 +8,7 @@ import math
 import numpy as np
 from numba import njit
 
+from .control import resolves_stick
 from .forces import (
     _evaluate,
     _modal_share,
@@ -186,39 +187,8 @@ def _newton_load(P, out, y1, g_new, hh, im0, im2, rate, sigma, u0, u1, u2):
 
 
 @njit(cache=True, _nrt=False)
-def trapezoidal_step(
-    P,
-    corners,
-    normals,
-    phi,
-    rigid_modal,
-    props,
-    h,
-    t,
-    y0,
-    f0,
-    lam0,
-    modal0,
-    out0,
-    modal_prev,
-    h_prev,
-    jump,
-    on_belt,
-    tol,
-    resolve_stick,
-    max_iter,
-    force,
-    y1,
-    lam1,
-    out,
-    res,
-    modal1,
-    w,
-    wdot,
-    nodes,
-    prev,
-    work,
-):
+def trapezoidal_step(model, props, h, h_prev, t, y0, start, modal_prev, jump, on_belt, force, y1,
+                     end, work):  # fmt: skip
     """One step of the trapezoidal rule, implicit in the contact forces and belt friction.
 
     Load: q1 = q0 + h/2 (v0 + v1), v1 = v0 + h/2 M^-1 (F0 + F1 + lambda1), iterated on F1 until
@@ -231,20 +201,28 @@ def trapezoidal_step(
     event or a drive breakpoint, a fixed step): ``props`` = (A | g2, G0, G1) from Van Loan's
     matrix exponential. The exact modes then carry the force's curvature, an O(h^3) error of
     a linear force that the load's error estimate does not see; the contact iteration is
-    unchanged, the curvature's share of f1 folded into G1. ``f0``/``lam0``/``modal0``: forces
-    at the step start.
-    Returns STEP_OK, STEP_REJECTED or STEP_FORCED; the end-of-step forces are left in out/res/
-    modal1 and the belt wrench in lam1 (the stick wrench when stuck).
+    unchanged, the curvature's share of f1 folded into G1. ``model``: a :data:`LoopModel`
+    (settings: ``tol``, ``max_iter``); ``start``: the :data:`Evaluation` at the step start
+    (y0's forces and belt wrench); ``jump``: the drive's acceleration jump at t.
+    Returns STEP_OK, STEP_REJECTED or STEP_FORCED; the end-of-step forces are left in ``end``
+    (an :data:`Evaluation`: its contacts, resultant and modal force, the belt wrench the
+    stick wrench when stuck).
 
     Stick forces are constraint forces, and the trapezoidal rule rings on them (F1 = 2 F - F0,
     alternating step to step); like the belt's stick wrench, a fence or border contact that
     sticks at both ends of the step stores a force free of the ring as its end force
-    (``_unring_stick``; ``out0``: the contacts at the step start). ``resolve_stick``
-    (``control.resolves_stick``): the iteration converges the load's velocities to ``tol``
-    [m/s] as well, and that end force is extrapolated to second order.
+    (``_unring_stick``). Where ``control.resolves_stick``: the iteration converges the load's
+    velocities to ``tol`` [m/s] as well, and that end force is extrapolated to second order.
     """
+    P, phi, rigid_modal = model.params, model.mode_shapes, model.rigid_modal
+    settings = model.settings
+    f0, lam0, modal0, out0 = start.resultant, start.belt, start.modal, start.contacts
+    out, res, modal1, lam1 = end.contacts, end.resultant, end.modal, end.belt
+    prev = end.friction_prev
+    tol, max_iter = settings[0].tol, int(settings[0].max_iter)
     a_mat, g0, g1 = props
     m = modal0.shape[0]
+    resolve_stick = resolves_stick(settings, model.omega.shape[0])
     t1 = t + h
     im0 = 1.0 / P[0].mass
     im2 = 1.0 / P[0].inertia
@@ -335,10 +313,7 @@ def trapezoidal_step(
             c1, s1 = c_ref, s_ref
         else:
             c1, s1 = _turn(c_ref, s_ref, y1[2] - ph_ref)
-        _evaluate(
-            P, corners, normals, phi, rigid_modal, alpha1, rate1, accel1, ca1, sa1, y1, c1, s1,
-            lam0, hh, prev, out, res, modal1, w, wdot, nodes,
-        )  # fmt: skip
+        _evaluate(model, alpha1, rate1, accel1, ca1, sa1, y1, c1, s1, lam0, hh, end)
         _friction_prev(out, prev)
         if not (
             math.isfinite(res[0].fx) and math.isfinite(res[0].fy) and math.isfinite(res[0].mz)
@@ -448,10 +423,7 @@ def trapezoidal_step(
             c1, s1 = math.cos(y1[2]), math.sin(y1[2])
         else:
             c1, s1 = _turn(c_ref, s_ref, y1[2] - ph_ref)
-        _evaluate(
-            P, corners, normals, phi, rigid_modal, alpha1, rate1, accel1, ca1, sa1, y1, c1, s1,
-            lam0, hh, prev, out, res, modal1, w, wdot, nodes,
-        )  # fmt: skip
+        _evaluate(model, alpha1, rate1, accel1, ca1, sa1, y1, c1, s1, lam0, hh, end)
     _unring_stick(P, phi, out0, out, res, modal1, y1[0], y1[1], h, h_prev, resolve_stick)
     if stuck:
         lam1[0], lam1[1], lam1[2] = stick_wrench(P, res[0].fx, res[0].fy, res[0].mz)
@@ -499,36 +471,7 @@ def shift_friction(P, phi, out, res, modal, x, y, k, d):
 
 
 @njit(cache=True, _nrt=True)
-def generalized_alpha_step(
-    P,
-    corners,
-    normals,
-    phi,
-    rigid_modal,
-    omega,
-    zeta,
-    coef,
-    h,
-    t,
-    y0,
-    acc0,
-    lam0,
-    on_belt,
-    tol,
-    max_iter,
-    force,
-    y1,
-    acc1,
-    lam1,
-    out,
-    res,
-    modal1,
-    w,
-    wdot,
-    nodes,
-    prev,
-    ya,
-):
+def generalized_alpha_step(model, h, t, y0, acc0, start, on_belt, force, y1, acc1, end, ya):
     """One step of the generalized-alpha method (Chung and Hulbert 1993) on load and modes.
 
     M a_{n+1-am} = F(q_{n+1-af}, v_{n+1-af}, t_{n+1-af}) with Newmark updates; ``coef`` =
@@ -537,7 +480,17 @@ def generalized_alpha_step(
     to ``tol`` (fixed point: the contact is soft). Belt friction is resolved at the step end
     like a constraint (stick holds u = 0 exactly), with the velocity weight h gamma /
     ((1 - alpha_m) m). ``acc0``/``acc1``: the algorithmic accelerations of (x, y, phi, eta_1..m).
+    ``model``: a :data:`LoopModel` (settings: ``alpha_coefficients``, ``tol``, ``max_iter``);
+    ``start``/``end``: the :data:`Evaluation` of the step start (its belt wrench) and of the
+    step end (filled: forces and belt wrench); ``ya``: scratch, the state at the alpha point.
     """
+    P, phi, omega, zeta, settings = (
+        model.params, model.mode_shapes, model.omega, model.zeta, model.settings,
+    )  # fmt: skip
+    coef = settings[0].alpha_coefficients
+    tol, max_iter = settings[0].tol, int(settings[0].max_iter)
+    lam0, lam1, out, res, modal1 = start.belt, end.belt, end.contacts, end.resultant, end.modal
+    prev = end.friction_prev
     am, af, beta, gamma = coef[0], coef[1], coef[2], coef[3]
     m = omega.shape[0]
     nd = 3 + m  # second-order DOFs: x, y, phi, eta
@@ -572,25 +525,7 @@ def generalized_alpha_step(
         for i in range(6 + 2 * m):
             ya[i] = (1.0 - af) * y1[i] + af * y0[i]
         # t_a lies inside the step, where the drive's acceleration is already the new one
-        evaluate(
-            P,
-            corners,
-            normals,
-            phi,
-            rigid_modal,
-            t_a,
-            0.0,
-            ya,
-            lam1,
-            (1.0 - af) * wv,
-            prev,
-            out,
-            res,
-            modal1,
-            w,
-            wdot,
-            nodes,
-        )
+        evaluate(model, t_a, 0.0, ya, lam1, (1.0 - af) * wv, end)
         _friction_prev(out, prev)
         if not (
             math.isfinite(res[0].fx) and math.isfinite(res[0].fy) and math.isfinite(res[0].mz)
@@ -668,25 +603,7 @@ def generalized_alpha_step(
     if not converged and not force:
         return STEP_REJECTED
     # end-of-step forces (for recording, events and the next step's explicit quantities)
-    evaluate(
-        P,
-        corners,
-        normals,
-        phi,
-        rigid_modal,
-        t + h,
-        0.0,
-        y1,
-        lam1,
-        0.0,
-        prev,
-        out,
-        res,
-        modal1,
-        w,
-        wdot,
-        nodes,
-    )
+    evaluate(model, t + h, 0.0, y1, lam1, 0.0, end)
     if stuck:
         lam1[0], lam1[1], lam1[2] = stick_wrench(P, res[0].fx, res[0].fy, res[0].mz)
     return STEP_OK if converged else STEP_FORCED
