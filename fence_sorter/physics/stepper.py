@@ -60,13 +60,7 @@ from .model import SortingModel
 from .result import EnergyAudit, SimulationResult, make_result
 from .scenario import RECORDABLE, Scenario, per_scenario
 
-# the solve loop's stage codes are the Stage values; the result's stage names their labels
-assert (K.STAGE_CODE_ON_BELT, K.STAGE_CODE_E1, K.STAGE_CODE_E2, K.STAGE_CODE_E3) == (
-    Stage.ON_BELT,
-    Stage.E1,
-    Stage.E2,
-    Stage.E3,
-) and (K.STAGE_CODE_E4, K.STAGE_CODE_SORTED) == (Stage.E4, Stage.SORTED), "kernel stage codes"
+# the result's stage names: the labels of the Stage values (the solve loop's stage codes)
 STAGE_NAMES = tuple(s.label for s in Stage)
 _STAGE_LENGTHS = np.array([len(n) for n in STAGE_NAMES])
 # the names as arrays of each string width (a recorded series takes the width of its longest)
@@ -211,31 +205,12 @@ _COUNTER_WORD, _FIGURE_WORD = _word_of(K.COUNTERS), _word_of(K.FIGURES)
 _WORKSPACES: dict[tuple, list[tuple]] = {}
 _POOLED_RECORD = 1 << 12  # a state whose record grew past this many columns is not kept
 
-# the stepper's attribute for each field of ``kernel.LoopState``, in its order
-_STATE_ATTRIBUTES = (
-    "counters",
-    "figures",
-    "times",
-    "states",
-    "belt_wrench",
-    "contact_rows",
-    "resultant_rows",
-    "modal_forces",
-    "accelerations",
-    "deflection",
-    "deflection_rate",
-    "nodes",
-    "friction_prev",
-    "work",
-    "propagator_keys",
-    "propagators",
-    "propagator_g0",
-    "propagator_g1",
-    "impact_rows",
-    "stage_rows",
-    "record",
+# the stepper's attribute for each field of ``kernel.LoopState`` (the field's name, but the
+# rows of contacts, resultants, impacts and stages, which the stepper calls ``*_rows``)
+_ROWS = ("contacts", "resultants", "impacts", "stages")
+_STATE_ATTRIBUTES = tuple(
+    f"{name[:-1]}_rows" if name in _ROWS else name for name in K.LoopState._fields
 )
-assert len(_STATE_ATTRIBUTES) == len(K.LoopState._fields), "Stepper's state attributes"
 
 
 def _loop_state(n: int, m: int, n_el: int, propagators: tuple, cols: int) -> tuple:
@@ -316,32 +291,18 @@ def _loop_static(sc: Scenario) -> tuple:
     return loop_model, t_end, min(cols, 1 << 16), model.initial_state()
 
 
-# each recordable group's series: (name, field of the loop's RECORDED point, its element or -1)
-_SERIES_ROWS = {
-    "trajectory": (
-        ("t", "t", -1),
-        *((key, "y", k) for k, key in enumerate(("x", "y", "phi", "vx", "vy", "phidot"))),
-    ),
-    "fence": (
-        ("t_fence", "t_fence", -1),
-        ("alpha_w", "alpha", -1),
-        ("tip_deflection", "tip_w", -1),
-    ),
-    "forces": (
-        ("t_forces", "t_forces", -1),
-        ("normal_force", "fence_n", -1),
-        ("deformation", "max_d", -1),
-    ),
-    "stages": (("t_stage", "t_stage", -1), ("stage", "stage", -1)),
-}
-assert tuple(_SERIES_ROWS) == RECORDABLE, "a series layout per recordable group"
-
-
 @lru_cache(maxsize=16)
 def _series_layout(want: tuple[str, ...]) -> tuple[tuple[str, str, int], ...]:
     """The series of the recorded groups ``want`` (in RECORDABLE's order): (name, field,
-    element or -1) of the loop's RECORDED points."""
-    return tuple(entry for group in RECORDABLE if group in want for entry in _SERIES_ROWS[group])
+    element or -1) of the loop's RECORDED points (``kernel.RECORDED_SERIES``)."""
+    return tuple(
+        (name, field, k if len(names) > 1 else -1)
+        for group in RECORDABLE
+        if group in want
+        for field, of, names in K.RECORDED_SERIES
+        if of == group
+        for k, name in enumerate(names)
+    )
 
 
 class Stepper:

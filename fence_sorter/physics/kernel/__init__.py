@@ -89,23 +89,9 @@ def cache_directory(package: Path = Path(__file__).parent) -> Path:
 # before the modules below are imported: their decorators read it (cache=True)
 numba.config.CACHE_DIR = str(cache_directory())
 
-from . import layout  # noqa: E402 (after the cache directory is set)
+from . import control, layout  # noqa: E402 (after the cache directory is set)
 from .aot import Solve, aot_directory  # noqa: E402 (after the cache directory is set)
-from .control import (  # noqa: E402 (after the cache directory is set)
-    EVENT_ONSET,
-    EVENT_RELEASE,
-    EVENT_SLIDE_OFF,
-    OSC_PHASE,
-    OSC_ZETA,
-    event_value,
-    first_event,
-    flexible_contact_step,
-    milne_error,
-    modal_propagators,
-    oscillation_step,
-    time_to_contact,
-    tolerance_scale,
-)
+from .control import *  # noqa: E402, F403 (every name of control.__all__, re-exported)
 from .forces import (  # noqa: E402 (after the cache directory is set)
     belt_multiplier,
     drive,
@@ -169,6 +155,7 @@ solve = Solve(_solve_jit, aot_directory(Path(numba.config.CACHE_DIR)), source_di
 
 __all__ = [
     *layout.__all__,
+    *control.__all__,
     "belt_multiplier",
     "drive",
     "evaluate",
@@ -194,19 +181,6 @@ __all__ = [
     "N_STIFF_STEPS",
     "stiff_impact_peak",
     "stiff_impact_peak_force",
-    "EVENT_ONSET",
-    "EVENT_RELEASE",
-    "EVENT_SLIDE_OFF",
-    "event_value",
-    "first_event",
-    "milne_error",
-    "flexible_contact_step",
-    "tolerance_scale",
-    "modal_propagators",
-    "OSC_PHASE",
-    "OSC_ZETA",
-    "oscillation_step",
-    "time_to_contact",
     "diverged",
     "classify_code",
     "EVENT_SORT",

@@ -283,3 +283,11 @@ def flexible_contact_step(out, h_nom, scale):
         if out[k].active != 0.0:
             return h_nom * scale
     return math.inf
+
+
+#: the module's constants and compiled functions, re-exported by the package
+__all__ = [
+    n
+    for n, v in tuple(globals().items())
+    if not n.startswith("_") and (isinstance(v, int | float) or hasattr(v, "py_func"))
+]

@@ -22,6 +22,8 @@ import math
 import numpy as np
 from numba import njit
 
+from fence_sorter.codes import Stage
+
 from .impact import n_stiff
 from .layout import (
     DIAG_DEEP,
@@ -33,13 +35,13 @@ from .layout import (
     SLOT_TIP,
 )
 
-# stages: the values of fence_sorter.codes.Stage (the stepper checks them)
-STAGE_CODE_ON_BELT = 0
-STAGE_CODE_E1 = 1
-STAGE_CODE_E2 = 2
-STAGE_CODE_E3 = 3
-STAGE_CODE_E4 = 4
-STAGE_CODE_SORTED = 5
+# stages: the values of fence_sorter.codes.Stage (plain ints: Numba freezes them as constants)
+STAGE_CODE_ON_BELT = int(Stage.ON_BELT)
+STAGE_CODE_E1 = int(Stage.E1)
+STAGE_CODE_E2 = int(Stage.E2)
+STAGE_CODE_E3 = int(Stage.E3)
+STAGE_CODE_E4 = int(Stage.E4)
+STAGE_CODE_SORTED = int(Stage.SORTED)
 
 
 # a single contact whose face lies this close to the fence tangent holds it flush: E2 [rad]
