@@ -470,6 +470,19 @@ def shift_friction(P, phi, out, res, modal, x, y, k, d):
     out[k].ft += d
 
 
+@njit(cache=True, _nrt=False, inline="always")
+def _newmark(h, beta, gamma, m, y0, acc0, acc1, y1):
+    """Newmark's update of the end state y1 from y0 and the accelerations acc0, acc1 of the
+    second-order DOFs (x, y, phi, eta_1..m)."""
+    for i in range(3 + m):
+        if i < 3:
+            qi, vi = i, 3 + i
+        else:
+            qi, vi = 6 + (i - 3), 6 + m + (i - 3)
+        y1[qi] = y0[qi] + h * y0[vi] + h * h * ((0.5 - beta) * acc0[i] + beta * acc1[i])
+        y1[vi] = y0[vi] + h * ((1.0 - gamma) * acc0[i] + gamma * acc1[i])
+
+
 @njit(cache=True, _nrt=True)
 def generalized_alpha_step(model, h, t, y0, acc0, start, on_belt, force, y1, acc1, end, ya):
     """One step of the generalized-alpha method (Chung and Hulbert 1993) on load and modes.
@@ -515,13 +528,7 @@ def generalized_alpha_step(model, h, t, y0, acc0, start, on_belt, force, y1, acc
     converged = False
     for it in range(max_iter + 1):
         # Newmark update of the end state from acc1
-        for i in range(nd):
-            if i < 3:
-                qi, vi = i, 3 + i
-            else:
-                qi, vi = 6 + (i - 3), 6 + m + (i - 3)
-            y1[qi] = y0[qi] + h * y0[vi] + h * h * ((0.5 - beta) * acc0[i] + beta * acc1[i])
-            y1[vi] = y0[vi] + h * ((1.0 - gamma) * acc0[i] + gamma * acc1[i])
+        _newmark(h, beta, gamma, m, y0, acc0, acc1, y1)
         for i in range(6 + 2 * m):
             ya[i] = (1.0 - af) * y1[i] + af * y0[i]
         # t_a lies inside the step, where the drive's acceleration is already the new one
@@ -590,13 +597,7 @@ def generalized_alpha_step(model, h, t, y0, acc0, start, on_belt, force, y1, acc
         if err <= tol and it > 0:
             converged = True
             # final Newmark update with the converged accelerations
-            for i in range(nd):
-                if i < 3:
-                    qi, vi = i, 3 + i
-                else:
-                    qi, vi = 6 + (i - 3), 6 + m + (i - 3)
-                y1[qi] = y0[qi] + h * y0[vi] + h * h * ((0.5 - beta) * acc0[i] + beta * acc1[i])
-                y1[vi] = y0[vi] + h * ((1.0 - gamma) * acc0[i] + gamma * acc1[i])
+            _newmark(h, beta, gamma, m, y0, acc0, acc1, y1)
             if on_belt and stuck:
                 y1[3] = belt
             break
