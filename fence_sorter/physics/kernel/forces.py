@@ -296,7 +296,10 @@ def _add(model, ev, slot, tx, ty, slide, y, lam, weight):
     the resultants, and on the fence (slots below SLOT_BORDER) its modal share."""
     P, out, res = model.params, ev.contacts, ev.resultant
     row = out[slot]
+    # every field read before the first store below (stores to the resultants may alias the
+    # slot, so a later read would load the slot again instead of the value just placed)
     d, d_rate, px, py, nx, ny = row.d, row.ddot, row.px, row.py, row.nx, row.ny
+    s_arc, vsx, vsy = row.s, row.vsx, row.vsy
     x, yy = y[0], y[1]
     mass = P[0].mass
     n_raw = P[0].b_eff * d_rate * d * d + P[0].k_p * d**4
@@ -325,9 +328,9 @@ def _add(model, ev, slot, tx, ty, slide, y, lam, weight):
     res[0].energy_contact += 0.2 * P[0].k_p * d**5
     if slot < SLOT_BORDER:
         res[0].fence_n += n
-        res[0].power_fence += fx * row.vsx + fy * row.vsy
+        res[0].power_fence += fx * vsx + fy * vsy
         if P[0].flexible != 0.0:
-            _modal_share(P, model.mode_shapes, row.s, res[0].alpha, -fx, -fy, ev.modal)
+            _modal_share(P, model.mode_shapes, s_arc, res[0].alpha, -fx, -fy, ev.modal)
     res[0].active_mask += float(1 << slot)
     if d > res[0].max_d:
         res[0].max_d = d
