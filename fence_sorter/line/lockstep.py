@@ -473,14 +473,7 @@ class LockstepOwner(LinePlant):
             for rec in d.advance_records:
                 records.append(rec)
                 self._on_record(u, rec)
-        self.t = t_next
-        self._leave_belt()
-        self.live = [p for p in self.live if p.state not in ("sorted", "rejected", "failed")]
-        running = {p.pid for p in self.live if p.stroke_unit is not None}
-        self.bookings = [b for b in self.bookings if b.t_end > self.t or b.parcel_id in running]
-        self.view.tick(self.t)
-        for observe in self.observers:
-            observe(self, records)
+        self._close_step(t_next, records)
 
     def warm_up(self, time_budget: float = math.inf) -> None:
         """``LinePlant.warm_up`` on every unit's side: each warms its planner with the stream's

@@ -410,6 +410,11 @@ class LinePlant:
             for rec in u.advance(t_next, stamp=self.t):
                 records.append(rec)
                 self._on_record(u, rec)
+        self._close_step(t_next, records)
+
+    def _close_step(self, t_next: float, records: list[Record]) -> None:
+        """The end of a step of the line clock, once every unit has advanced to ``t_next``:
+        parcels off the belt, the finished ones and bookings forgotten, the observers told."""
         self.t = t_next
         self._leave_belt()
         self.live = [p for p in self.live if p.state not in ("sorted", "rejected", "failed")]
