@@ -32,7 +32,19 @@ def register(parser: argparse.ArgumentParser) -> None:
         metavar="LINE",
         help="run a line of fence units instead (a file or a name in config/lines): one "
         "process per unit and the line's owner, in lockstep; with --parcels, --seed, --json, "
-        "--domain, --timeout, --log-dir, --keep-logs (docs/guide/line.md)",
+        "--domain, --timeout, --log-dir, --keep-logs, --units, --no-owner, --interface, "
+        "--peers (docs/guide/line.md)",
+    )
+    parser.add_argument(
+        "--units",
+        metavar="A[,B...]",
+        help="with --line: start only these units here (numbers 1..N or names; default all); "
+        "the other units run on another host, on the same --domain",
+    )
+    parser.add_argument(
+        "--no-owner",
+        action="store_true",
+        help="with --line: another host runs the line's owner (induction, recirculation, clock)",
     )
     amount = parser.add_mutually_exclusive_group()
     amount.add_argument("--parcels", type=int, help="parcels to inject (default 20)")
@@ -108,6 +120,10 @@ def add_param_option(parser: argparse.ArgumentParser, help: str) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.line is not None:
         return _run_line(args)
+    if args.units is not None or args.no_owner:
+        opt = "--units" if args.units is not None else "--no-owner"
+        print(f"fence-sorter: error: {opt} goes with --line only", file=sys.stderr)
+        return 2
     opts = RunOptions(
         scene=args.scene,
         parcels=args.parcels,
@@ -142,7 +158,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 #: the options of a single-unit run that a line run does not take
-_NOT_FOR_LINE = ("duration", "bag", "rrd", "sensors", "foxglove", "interface", "peers")
+_NOT_FOR_LINE = ("duration", "bag", "rrd", "sensors", "foxglove")
 
 
 def _run_line(args: argparse.Namespace) -> int:
@@ -166,6 +182,10 @@ def _run_line(args: argparse.Namespace) -> int:
         log_dir=args.log_dir,
         keep_logs=args.keep_logs,
         timeout=3600.0 if args.timeout is None else args.timeout,
+        units=args.units,
+        owner=not args.no_owner,
+        interface=args.interface,
+        peers=args.peers,
     )
     say = (lambda s: print(s, file=sys.stderr)) if args.json else print
     stop = StopRequest()
@@ -179,6 +199,9 @@ def _run_line(args: argparse.Namespace) -> int:
         return 2
     if args.json:
         print(json.dumps(json_safe(result.summary)))
+    elif result.summary.get("units_here"):
+        print(f"line {result.summary['line']}: {', '.join(result.summary['units_here'])} "
+              "ended with the line (the line summary: on the owner's host)")  # fmt: skip
     elif result.summary.get("line"):
         print(line_summary(result.summary))
     if result.code != 0:

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field, fields, is_dataclass
 
 from fence_sorter.inputs import ParcelSpec
@@ -56,6 +57,7 @@ __all__ = [
     "RemoteUnit",
     "Report",
     "Scan",
+    "StartGate",
     "Step",
     "Tick",
     "UnitSide",
@@ -376,6 +378,37 @@ class LocalLinks(Links):
 
 
 # -- the owner -------------------------------------------------------------------------------
+class StartGate:
+    """The owner's start gate: the first step waits until every unit of the line, on this host
+    or another, said it is ready (its writers matched their readers) and the owner's writers
+    matched theirs: the commands of each unit, the induction's link to the first one."""
+
+    def __init__(self, names: Sequence[str]):
+        self.names = tuple(names)
+        self.ready: set[int] = set()
+
+    def say_ready(self, k: int) -> None:
+        """Unit ``k`` said ready (an index outside the line is ignored)."""
+        if 0 <= k < len(self.names):
+            self.ready.add(k)
+
+    def missing(self, commands_matched: Sequence[bool], induction_matched: bool) -> list[str]:
+        """The names of the units the line still waits for, in line order (empty: open)."""
+        out = [
+            n
+            for k, n in enumerate(self.names)
+            if k not in self.ready or not commands_matched[k] or (k == 0 and not induction_matched)
+        ]
+        return out
+
+    def timeout_message(self, timeout: float, missing: Sequence[str]) -> str:
+        """The one line of a start that did not come within ``timeout`` [s]."""
+        return (
+            f"not every unit of the line answered within start_timeout {timeout:g} s; "
+            f"missing: {', '.join(missing)} (started on no host, or unreachable)"
+        )
+
+
 class RemoteUnit:
     """The plant's stand-in for a unit on a side of its own: its calls become commands."""
 

@@ -26,6 +26,7 @@ from collections.abc import Sequence
 import rclpy
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
@@ -33,11 +34,18 @@ from std_msgs.msg import String
 from fence_sorter.jsonsafe import json_safe
 from fence_sorter.line.handoff import RECIRCULATION, HandOff
 from fence_sorter.line.line_file import load_line
-from fence_sorter.line.lockstep import Command, Links, LockstepOwner, decode, encode
+from fence_sorter.line.lockstep import (
+    Command,
+    Links,
+    LockstepOwner,
+    StartGate,
+    decode,
+    encode,
+)
 from fence_sorter.line.multi_unit import LineRunConfig
 from fence_sorter.nodes.base import FenceSorterNode
 from fence_sorter.nodes.convert import handoff_from_msg, handoff_to_msg
-from fence_sorter.nodes.line_unit import INDUCTION_TOPIC, LINE_QOS, READY, handoff_topic
+from fence_sorter.nodes.line_unit import END, INDUCTION_TOPIC, LINE_QOS, READY, handoff_topic
 from fence_sorter.nodes.parameters import LINE_OWNER_PARAMETERS
 from fence_sorter.nodes.qos import CLOCK_QOS
 from fence_sorter.recording.topics import CLOCK
@@ -72,7 +80,7 @@ class LineOwnerNode(FenceSorterNode, Links):
         names = [u.name for u in self.line.units]
         self.seq = [0] * len(names)
         self.inbox: list[queue.Queue] = [queue.Queue() for _ in names]
-        self.ready: set[int] = set()
+        self.gate = StartGate(names)
         self._poll = threading.Event()  # never set: a bounded wait between checks
         self.induction_published = 0
         self.recirculation_arrived = 0
@@ -92,7 +100,7 @@ class LineOwnerNode(FenceSorterNode, Links):
     # -- rclpy callbacks (the spin thread) ------------------------------------------------------
     def _on_reply(self, k: int, msg: String) -> None:
         if msg.data == READY:
-            self.ready.add(k)
+            self.gate.say_ready(k)
             return
         try:
             self.inbox[k].put(decode(msg.data))
@@ -126,22 +134,29 @@ class LineOwnerNode(FenceSorterNode, Links):
 
     # -- the run --------------------------------------------------------------------------------
     def wait_ready(self) -> None:
-        """Until every unit said ready and every writer of the owner has matched its reader."""
+        """The start gate: until every unit said ready and every writer of the owner has
+        matched its reader, wherever the units run; bounded by ``start_timeout``."""
         end = time.monotonic() + self.start_timeout
-        n = len(self.line.units)
-        while time.monotonic() < end:
-            if (
-                len(self.ready) == n
-                and all(c.get_subscription_count() for c in self.commands)
-                and self.induction.get_subscription_count()
-            ):
+        while True:
+            missing = self.gate.missing(
+                [c.get_subscription_count() > 0 for c in self.commands],
+                self.induction.get_subscription_count() > 0,
+            )
+            if not missing:
                 return
-            self._poll.wait(0.05)  # the spin thread fills self.ready
-        missing = sorted(set(range(n)) - self.ready)
-        names = ", ".join(self.line.units[k].name for k in missing) or "(writers not matched)"
-        raise UnitSilent(
-            f"line_owner: not ready within start_timeout {self.start_timeout:g} s: {names}"
-        )
+            if time.monotonic() >= end:
+                raise UnitSilent(
+                    "line_owner: " + self.gate.timeout_message(self.start_timeout, missing)
+                )
+            self._poll.wait(0.05)  # the spin thread fills the gate
+
+    def end_units(self, timeout: float = 10.0) -> None:
+        """Tell every unit the line is over (each then exits 0), and wait, bounded, until each
+        acknowledged it: a unit on another host ends with the line as well."""
+        for c in self.commands:
+            c.publish(String(data=END))
+        for c in self.commands:
+            c.wait_for_all_acked(Duration(seconds=timeout))
 
     def run_line(self) -> dict:
         owner = self.owner
@@ -160,7 +175,7 @@ class LineOwnerNode(FenceSorterNode, Links):
             "sim_time": f"{self.owner.t:.3f}",
             "induction_handoffs_published": self.induction_published,
             "recirculation_handoffs_arrived": self.recirculation_arrived,
-            "units_ready": len(self.ready),
+            "units_ready": len(self.gate.ready),
             "bad_messages": self.bad_messages,
         }
         status.values.extend(KeyValue(key=k, value=str(v)) for k, v in values.items())
@@ -200,6 +215,7 @@ def main(args: Sequence[str] | None = None) -> int:
         spin.start()
         node.wait_ready()
         summary = node.run_line()
+        node.end_units()
         text = json.dumps(json_safe(summary))
         if node.summary_path:
             with open(node.summary_path, "w", encoding="utf-8") as f:

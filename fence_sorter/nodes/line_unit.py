@@ -4,7 +4,8 @@ Started in the namespace ``/<unit name>`` (``/unit_1``, ...); its own topic name
 
 - ``commands`` (std_msgs/String, in): the line owner's numbered command stream, each message a
   :class:`~fence_sorter.line.lockstep.Command` in the wire format of
-  :func:`~fence_sorter.line.lockstep.encode`;
+  :func:`~fence_sorter.line.lockstep.encode`, then ``end`` once the line is over (the unit
+  exits 0: a unit on another host ends with the line);
 - ``replies`` (std_msgs/String, out): ``ready`` until the first command comes, then the
   answers (Delivered, Done, Figures) in the same format;
 - ``handoffs`` (fence_sorter_msgs/HandOff, out): the hand-offs to the downstream unit, or to
@@ -22,6 +23,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Sequence
 
+import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
@@ -42,6 +44,8 @@ LINE_QOS = QoSProfile(
 #: the induction's hand-offs to the first unit (the owner's namespace is /line)
 INDUCTION_TOPIC = "/line/handoffs"
 READY = "ready"
+#: the owner's last message on ``commands``: the line is over, the unit exits 0
+END = "end"
 
 
 def handoff_topic(unit_name: str) -> str:
@@ -86,6 +90,10 @@ class LineUnitNode(FenceSorterNode):
 
     def _on_command(self, msg: String) -> None:
         self.started = True
+        if msg.data == END:
+            self.get_logger().info("the line is over")
+            rclpy.try_shutdown()  # ends the spin: run_node returns 0
+            return
         try:
             cmd = decode(msg.data)
         except (KeyError, TypeError, ValueError) as exc:

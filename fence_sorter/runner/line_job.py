@@ -3,7 +3,13 @@
 One ``line_unit`` process per unit of the line file (namespace ``/<unit name>``) and the
 ``line_owner`` (namespace ``/line``: induction, recirculation, the lockstep clock); the owner
 waits until every unit is ready, runs the line to the drain and writes the line summary. The
-runner waits for it, then stops every process (Ctrl-C or SIGTERM: at once). Exit codes as
+runner waits for it, then stops every process (Ctrl-C or SIGTERM: at once).
+
+A partial line (``--units 2``, ``--no-owner``) starts only those units (and the owner unless
+told not to): the commands of two hosts make one line on one domain, joined over UDP with
+``--interface``/``--peers`` (the profile of :mod:`fence_sorter.runner.transport`). The owner's
+start gate waits for every unit of the line, wherever it runs; a runner without the owner
+waits until its units end with the line (the owner's ``end``). Exit codes as
 ``line-sim``'s: 0 a drained line with every check met, 1 a check failed (unbalanced hand-offs,
 conservation, a wrong destination, an intrusion with the guard on) or a process failed, 2 bad
 input, 130 interrupted.
@@ -16,7 +22,7 @@ import shutil
 import subprocess
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -31,14 +37,21 @@ from fence_sorter.runner.job import (
     StopRequest,
 )
 from fence_sorter.runner.processes import (
+    FASTDDS_PROFILE,
     ProcessGroup,
     choose_domain,
     clean_shm,
     node_command,
     node_env,
 )
+from fence_sorter.runner.transport import (
+    HostsTransport,
+    TransportError,
+    hosts_transport,
+    write_profile,
+)
 
-__all__ = ["LineRunOptions", "LineRunResult", "run_line_job"]
+__all__ = ["LineRunOptions", "LineRunResult", "parse_units", "run_line_job"]
 
 LOG_DIR_PREFIX = "fence_sorter_line_"
 OWNER = "line_owner"
@@ -55,6 +68,10 @@ class LineRunOptions:
     log_dir: str | None = None
     keep_logs: bool = False
     timeout: float = 3600.0  # wall-time limit of the whole run [s]
+    units: str | None = None  # --units: the units started here (None: all of the line)
+    owner: bool = True  # start the line's owner here (--no-owner: another host runs it)
+    interface: str | None = None  # IPv4 address: the line talks to other hosts on it
+    peers: str | None = None  # the other hosts' IPv4 addresses (comma-separated)
 
 
 @dataclass
@@ -68,7 +85,30 @@ class BadLineInput(ValueError):
     """A bad option or line file (one line, exit 2)."""
 
 
-def _check(opts: LineRunOptions) -> Path:
+def parse_units(text: str | None, names: Sequence[str]) -> tuple[int, ...]:
+    """The indices of ``--units`` (comma-separated unit numbers 1..N or unit names, each once);
+    ``None``: every unit of the line. BadLineInput names the option and the allowed values."""
+    if text is None:
+        return tuple(range(len(names)))
+    allowed = f"1..{len(names)} or {', '.join(names)}"
+    items = [w.strip() for w in text.split(",")]
+    if not text.strip() or any(not w for w in items):
+        raise BadLineInput(f"--units: give units of the line, comma-separated ({allowed})")
+    found: list[int] = []
+    for w in items:
+        if w in names:
+            k = names.index(w)
+        elif w.isdigit() and 1 <= int(w) <= len(names):
+            k = int(w) - 1
+        else:
+            raise BadLineInput(f"--units: {w!r} is no unit of the line ({allowed})")
+        if k in found:
+            raise BadLineInput(f"--units: {w!r} given twice (each unit once: {allowed})")
+        found.append(k)
+    return tuple(sorted(found))
+
+
+def _check(opts: LineRunOptions) -> tuple[Path, tuple[int, ...], HostsTransport | None]:
     if not 1 <= opts.parcels <= 10**6:
         raise BadLineInput(f"--parcels must be in [1, 1000000], got {opts.parcels}")
     if opts.rate is not None and not 1.0 <= opts.rate <= 1e5:
@@ -76,10 +116,20 @@ def _check(opts: LineRunOptions) -> Path:
     if opts.seed is not None and not 0 <= opts.seed < 2**31:
         raise BadLineInput(f"--seed must be in [0, 2147483647], got {opts.seed}")
     try:
-        load_line(opts.line)
-        return resolve_line(opts.line)
+        line = load_line(opts.line)
+        path = resolve_line(opts.line)
     except (ParameterError, OSError) as exc:
         raise BadLineInput(str(exc)) from None
+    units = parse_units(opts.units, [u.name for u in line.units])
+    transport = None
+    if (opts.interface is None) != (opts.peers is None):
+        raise BadLineInput("--interface and --peers go together (this host's, the others')")
+    if opts.interface is not None:
+        try:
+            transport = hosts_transport(opts.interface, opts.peers)
+        except TransportError as exc:
+            raise BadLineInput(str(exc)) from None
+    return path, units, transport
 
 
 def run_line_job(
@@ -92,35 +142,46 @@ def run_line_job(
         stop.install()
     try:
         try:
-            path = _check(opts)
+            path, units, transport = _check(opts)
             domain = choose_domain(opts.domain)
         except ValueError as exc:  # BadLineInput, DomainError
             return LineRunResult(EXIT_BAD_INPUT, str(exc), {})
-        return _run(opts, path, domain, say, stop)
+        return _run(opts, path, units, transport, domain, say, stop)
     finally:
         if own:
             stop.restore()
 
 
 def _run(
-    opts: LineRunOptions, path: Path, domain: int, say: Callable[[str], None], stop: StopRequest
+    opts: LineRunOptions,
+    path: Path,
+    units: tuple[int, ...],
+    transport: HostsTransport | None,
+    domain: int,
+    say: Callable[[str], None],
+    stop: StopRequest,
 ) -> LineRunResult:
     line = load_line(path)
     log_dir = Path(opts.log_dir or tempfile.mkdtemp(prefix=LOG_DIR_PREFIX))
     log_dir.mkdir(parents=True, exist_ok=True)
-    env = node_env(domain, log_dir / "ros")
+    profile = FASTDDS_PROFILE if transport is None else write_profile(transport, log_dir)
+    env = node_env(domain, log_dir / "ros", profile=profile)
     clean_shm()
     group = ProcessGroup(env, log_dir)
     out = log_dir / "summary.json"
     guard = "true" if opts.guard else "false"
     code, message, summary = EXIT_OK, "done", {}
+    here = [line.units[k].name for k in units]
     try:
         stop.check()
+        where = "" if transport is None else f", UDP on {transport.address}"
         say(
-            f"fence-sorter run --line: {line.name}, {len(line.units)} units, {opts.parcels} "
-            f"parcels, ROS domain {domain}, logs {log_dir}"
+            f"fence-sorter run --line: {line.name}, units {', '.join(here)} of "
+            f"{len(line.units)}{'' if opts.owner else ' (the owner on another host)'}, "
+            f"{opts.parcels} parcels, ROS domain {domain}{where}, logs {log_dir}"
         )
-        for k, u in enumerate(line.units):
+        for k in units:
+            u = line.units[k]
             group.start(
                 u.name,
                 node_command(
@@ -129,34 +190,49 @@ def _run(
                      "-p", f"guard:={guard}"],
                 ),
             )  # fmt: skip
-        args = ["-r", "__ns:=/line", "-p", f"line:={path}", "-p", f"parcels:={opts.parcels}",
-                "-p", f"guard:={guard}", "-p", f"summary:={out}"]  # fmt: skip
-        if opts.seed is not None:
-            args += ["-p", f"seed:={opts.seed}"]
-        if opts.rate is not None:
-            args += ["-p", f"rate:={float(opts.rate)!r}"]
-        owner = group.start(OWNER, node_command(OWNER, args))
+        owner = None
+        if opts.owner:
+            args = ["-r", "__ns:=/line", "-p", f"line:={path}", "-p", f"parcels:={opts.parcels}",
+                    "-p", f"guard:={guard}", "-p", f"summary:={out}"]  # fmt: skip
+            if opts.seed is not None:
+                args += ["-p", f"seed:={opts.seed}"]
+            if opts.rate is not None:
+                args += ["-p", f"rate:={float(opts.rate)!r}"]
+            owner = group.start(OWNER, node_command(OWNER, args))
         end = time.monotonic() + opts.timeout
-        while owner.proc.poll() is None:
+
+        def running() -> bool:
+            """With the owner: until it exits; without: until every unit here has ended
+            with the line (the owner's ``end``)."""
+            if owner is not None:
+                return owner.proc.poll() is None
+            return len(group.dead()) < len(group.nodes)
+
+        while running():
             stop.check()
-            failed = [n.name for n in group.dead() if n.name != OWNER]
+            failed = [n.name for n in group.dead() if n.name != OWNER and n.proc.returncode != 0]
             if failed:
                 raise RuntimeError(f"{', '.join(failed)} ended during the run")
             if time.monotonic() > end:
                 raise RuntimeError(f"the line did not drain within --timeout {opts.timeout:g} s")
+            alive = [n for n in group.nodes.values() if n.proc.poll() is None]
             try:
-                owner.proc.wait(timeout=0.2)
+                (owner or alive[0]).proc.wait(timeout=0.2)
             except subprocess.TimeoutExpired:
                 pass
-        rc = owner.proc.returncode
-        if out.exists():
-            summary = json.loads(out.read_text())
-        if rc == 0:
+        if owner is None:
             code, message = EXIT_OK, "done"
-        elif summary:
-            code, message = EXIT_FAILED, "a check of the line failed (see the summary)"
+            summary = {"line": line.name, "units_here": here, "owner": "another host"}
         else:
-            code, message = EXIT_FAILED, f"line_owner exited {rc}: {owner.tail(3)}"
+            rc = owner.proc.returncode
+            if out.exists():
+                summary = json.loads(out.read_text())
+            if rc == 0:
+                code, message = EXIT_OK, "done"
+            elif summary:
+                code, message = EXIT_FAILED, "a check of the line failed (see the summary)"
+            else:
+                code, message = EXIT_FAILED, f"line_owner exited {rc}: {owner.tail(3)}"
     except Interrupted as exc:
         code, message = EXIT_INTERRUPTED, f"interrupted ({exc})"
     except RuntimeError as exc:

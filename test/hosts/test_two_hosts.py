@@ -11,8 +11,6 @@ UDP socket of the run's processes is bound to B's link address (no 0.0.0.0, no l
 from __future__ import annotations
 
 import json
-import os
-import shutil
 import subprocess
 import sys
 import threading
@@ -26,37 +24,6 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.hosts]
 REPO = Path(__file__).resolve().parents[2]
 LISTENER = REPO / "test" / "hosts" / "listener.py"
 PARCELS = 4
-
-
-def _ip(*args: str) -> None:
-    subprocess.run(["ip", *args], check=True, capture_output=True, text=True)
-
-
-@pytest.fixture
-def two_hosts():
-    """(netns A, address A, netns B, address B), removed afterwards."""
-    if os.geteuid() != 0 or shutil.which("ip") is None:
-        pytest.skip("two hosts need root and the ip command (network namespaces, veth)")
-    tag = uuid.uuid4().hex[:6]
-    a, b = f"fs{tag}a", f"fs{tag}b"
-    net = 100 + int(tag, 16) % 150
-    addr_a, addr_b = f"10.{net}.77.1", f"10.{net}.77.2"
-    try:
-        _ip("netns", "add", a)
-        _ip("netns", "add", b)
-        _ip("link", "add", f"v{tag}a", "type", "veth", "peer", "name", f"v{tag}b")
-        for ns, dev, addr in ((a, f"v{tag}a", addr_a), (b, f"v{tag}b", addr_b)):
-            _ip("link", "set", dev, "netns", ns)
-            _ip("-n", ns, "addr", "add", f"{addr}/24", "dev", dev)
-            _ip("-n", ns, "link", "set", dev, "up")
-            _ip("-n", ns, "link", "set", "lo", "up")
-    except subprocess.CalledProcessError as exc:
-        pytest.skip(f"network namespaces not available here: {exc.stderr.strip()}")
-    try:
-        yield a, addr_a, b, addr_b
-    finally:
-        for ns in (a, b):
-            subprocess.run(["ip", "netns", "del", ns], capture_output=True)
 
 
 def _udp_binds(ns: str, pids: set[int] | None = None) -> set[str]:

@@ -1,0 +1,72 @@
+"""A line split over two hosts: two network namespaces joined by a veth pair.
+
+Host A runs the owner of two_units (induction, recirculation, the lockstep clock) and unit_1
+(``fence-sorter run --line two_units --units 1``); host B runs unit_2 alone (``--units 2
+--no-owner``). The link unit_1 -> unit_2 and every command and reply to unit_2 cross the veth
+as UDP (each namespace has its own addresses, so Fast DDS sees two hosts). Checked: both
+commands exit 0, B's ends with the line; A's --json summary equals ``fence-sorter line-sim`` of
+the same line, parcels and seed (the lockstep makes them equal exactly, the wall-clock fields
+aside), conservation is exact and the hand-offs unit_1 sent on the link equal those unit_2
+received.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import uuid
+from pathlib import Path
+
+import pytest
+from processes import run_cli
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.hosts]
+
+REPO = Path(__file__).resolve().parents[2]
+PARCELS, SEED = 10, 3
+WALL = ("wall_time_s", "real_time_factor")
+
+
+def _line(ns: str, *args: str, cwd: Path) -> subprocess.Popen:
+    return subprocess.Popen(
+        ["ip", "netns", "exec", ns, sys.executable, "-m", "fence_sorter.cli.main", "run",
+         "--line", "two_units", "--parcels", str(PARCELS), "--seed", str(SEED), "--json",
+         "--timeout", "600", *args],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=cwd,
+    )  # fmt: skip
+
+
+def test_a_line_over_two_hosts_equals_line_sim(two_hosts, tmp_path: Path) -> None:
+    a, addr_a, b, addr_b = two_hosts
+    domain = str(150 + int(uuid.uuid4().hex[:4], 16) % 50)
+    sim = run_cli("line-sim", "two_units", "--parcels", str(PARCELS), "--seed", str(SEED),
+                  "--json")  # fmt: skip
+    assert sim.returncode == 0, sim.stderr
+    ref = json.loads(sim.stdout)
+    # B first: the owner's start gate then waits for unit_2 across the link
+    side_b = _line(b, "--units", "2", "--no-owner", "--domain", domain, "--interface", addr_b,
+                   "--peers", addr_a, cwd=tmp_path)  # fmt: skip
+    side_a = _line(a, "--units", "1", "--domain", domain, "--interface", addr_a,
+                   "--peers", addr_b, cwd=tmp_path)  # fmt: skip
+    try:
+        out_a, err_a = side_a.communicate(timeout=660)
+        out_b, err_b = side_b.communicate(timeout=60)
+    finally:
+        for p in (side_a, side_b):
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+    assert side_a.returncode == 0, err_a[-3000:]
+    assert side_b.returncode == 0, err_b[-3000:]
+    got = json.loads(out_a)
+    assert {k: (v, got.get(k)) for k, v in ref.items() if k not in WALL and got.get(k) != v} == {}
+    n = got["parcels_inducted"]
+    assert n == PARCELS == got["sorted"] + got["rejected"] + got["still_on_line"]
+    assert got["conservation_ok"] and got["drained"] and got["handoffs_balanced"]
+    # sent: unit_1's count on host A; received: unit_2's on host B (its report to the owner)
+    across = got["links"]["unit_1>unit_2"]
+    assert across["sent"] == across["received"] > 0 and across["lost"] == 0, across
+    # B's runner ran unit_2 only and ended with the line
+    b_says = json.loads(out_b)
+    assert b_says["units_here"] == ["unit_2"] and b_says["line"] == got["line"]
