@@ -136,6 +136,39 @@ def test_interrupted_run_ends_every_process(tmp_path: Path, moment: str, signals
         assert summary["leftover_processes"] == []
 
 
+@pytest.mark.parametrize(
+    ("moment", "signals"),
+    [
+        ("units starting", [signal.SIGINT, signal.SIGINT]),
+        ("running", [signal.SIGTERM, signal.SIGINT, signal.SIGTERM]),
+    ],
+    ids=["starting-2xINT", "running-TERM-INT-TERM"],
+)
+def test_interrupted_line_run_ends_every_process(
+    tmp_path: Path, moment: str, signals: list
+) -> None:
+    """`run --line`: the owner and every unit process end with the runner, exit 130."""
+    proc, tag = _start_run(tmp_path, "--line", "two_units", "--parcels", "200")
+    started = {
+        "units starting": lambda: _running(tag, "fence_sorter.nodes.line_unit"),
+        "running": lambda: (
+            _running(tag, "fence_sorter.nodes.line_owner")
+            and sum("fence_sorter.nodes.line_unit" in c for c in _cmdlines(tag)) == 2
+        ),
+    }[moment]
+    try:
+        assert wait_until(lambda: started() or proc.poll() is not None, 180.0, 0.01)
+        assert proc.poll() is None, proc.communicate()
+        for k, sig in enumerate(signals):
+            proc.send_signal(sig)
+            wait_until(lambda: proc.poll() is not None, 0.1 * (k + 1))
+    finally:
+        _, err = _finish(proc, tag)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err, err
+    assert "interrupted" in err, err
+
+
 def test_killed_runner_takes_every_process_with_it(tmp_path: Path) -> None:
     """SIGKILL of the runner itself (no handler can run): the nodes die by their parent-death
     signal, the pacing worker and the Rerun child with their groups (the reaper)."""
