@@ -26,7 +26,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from fence_sorter.line.line_file import load_line, resolve_line
+from fence_sorter.line.line_file import LineSpec, load_line, resolve_line
 from fence_sorter.physics.params import ParameterError
 from fence_sorter.runner.job import (
     EXIT_BAD_INPUT,
@@ -108,7 +108,9 @@ def parse_units(text: str | None, names: Sequence[str]) -> tuple[int, ...]:
     return tuple(sorted(found))
 
 
-def _check(opts: LineRunOptions) -> tuple[Path, tuple[int, ...], HostsTransport | None]:
+def _check(
+    opts: LineRunOptions,
+) -> tuple[LineSpec, Path, tuple[int, ...], HostsTransport | None]:
     if not 1 <= opts.parcels <= 10**6:
         raise BadLineInput(f"--parcels must be in [1, 1000000], got {opts.parcels}")
     if opts.rate is not None and not 1.0 <= opts.rate <= 1e5:
@@ -129,7 +131,7 @@ def _check(opts: LineRunOptions) -> tuple[Path, tuple[int, ...], HostsTransport 
             transport = hosts_transport(opts.interface, opts.peers)
         except TransportError as exc:
             raise BadLineInput(str(exc)) from None
-    return path, units, transport
+    return line, path, units, transport
 
 
 def run_line_job(
@@ -142,11 +144,11 @@ def run_line_job(
         stop.install()
     try:
         try:
-            path, units, transport = _check(opts)
+            line, path, units, transport = _check(opts)
             domain = choose_domain(opts.domain)
         except ValueError as exc:  # BadLineInput, DomainError
             return LineRunResult(EXIT_BAD_INPUT, str(exc), {})
-        return _run(opts, path, units, transport, domain, say, stop)
+        return _run(opts, line, path, units, transport, domain, say, stop)
     finally:
         if own:
             stop.restore()
@@ -154,6 +156,7 @@ def run_line_job(
 
 def _run(
     opts: LineRunOptions,
+    line: LineSpec,
     path: Path,
     units: tuple[int, ...],
     transport: HostsTransport | None,
@@ -161,7 +164,6 @@ def _run(
     say: Callable[[str], None],
     stop: StopRequest,
 ) -> LineRunResult:
-    line = load_line(path)
     log_dir = Path(opts.log_dir or tempfile.mkdtemp(prefix=LOG_DIR_PREFIX))
     log_dir.mkdir(parents=True, exist_ok=True)
     profile = FASTDDS_PROFILE if transport is None else write_profile(transport, log_dir)
