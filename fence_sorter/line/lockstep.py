@@ -115,7 +115,7 @@ class Report:
 
 @dataclass(frozen=True)
 class WarmUp:
-    """Fill the planner's cache from these parcels (``LinePlant.warm_up``'s share of a unit)."""
+    """Fill the planner's cache from these parcels (``LinePlant.warm_up`` on one unit)."""
 
     specs: tuple[ParcelSpec, ...]
     time_budget: float
