@@ -86,3 +86,24 @@ def test_sorted_parcels_end_in_a_chute_serving_their_destination(recorded):
                 inside += 1
     assert s["sorted"] > 0
     assert inside == s["sorted"]
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (("--rrd", "{tmp}/line.txt"), "--rrd must be a FILE.rrd in an existing directory"),
+        (("--rrd", "{tmp}/no/such/dir/line.rrd"), "--rrd must be a FILE.rrd"),
+        (
+            ("--rrd", "{tmp}/line.rrd", "--rrd-period", "0.001"),
+            "--rrd-period must be in [0.01, 10] s",
+        ),
+    ],
+    ids=["not-rrd", "no-directory", "period-too-short"],
+)
+def test_a_bad_recording_option_exits_2_with_one_line(tmp_path, args, message):
+    res = run_cli("line-sim", "two_units", "--parcels", "2",
+                  *(a.replace("{tmp}", str(tmp_path)) for a in args))  # fmt: skip
+    assert res.returncode == 2, res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0], res.stderr
+    assert not list(tmp_path.rglob("*.rrd"))  # nothing written
