@@ -32,8 +32,8 @@ def register(parser: argparse.ArgumentParser) -> None:
         metavar="LINE",
         help="run a line of fence units instead (a file or a name in config/lines): one "
         "process per unit and the line's owner, in lockstep; with --parcels, --seed, --json, "
-        "--domain, --timeout, --log-dir, --keep-logs, --units, --no-owner, --interface, "
-        "--peers (docs/guide/line.md)",
+        "--bag, --domain, --timeout, --log-dir, --keep-logs, --units, --no-owner, "
+        "--interface, --peers (docs/guide/line.md)",
     )
     parser.add_argument(
         "--units",
@@ -158,7 +158,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 #: the options of a single-unit run that a line run does not take
-_NOT_FOR_LINE = ("duration", "bag", "rrd", "sensors", "foxglove")
+_NOT_FOR_LINE = ("duration", "rrd", "sensors", "foxglove")
 
 
 def _run_line(args: argparse.Namespace) -> int:
@@ -186,6 +186,7 @@ def _run_line(args: argparse.Namespace) -> int:
         owner=not args.no_owner,
         interface=args.interface,
         peers=args.peers,
+        bag=args.bag,
     )
     say = (lambda s: print(s, file=sys.stderr)) if args.json else print
     stop = StopRequest()

@@ -45,6 +45,12 @@ from fence_sorter.line.lockstep import (
 from fence_sorter.line.multi_unit import LineRunConfig
 from fence_sorter.nodes.base import FenceSorterNode
 from fence_sorter.nodes.convert import handoff_from_msg, handoff_to_msg
+from fence_sorter.nodes.line_record import (
+    RecorderGate,
+    publish_setup,
+    publish_summary,
+    summary_publisher,
+)
 from fence_sorter.nodes.line_unit import END, INDUCTION_TOPIC, LINE_QOS, READY, handoff_topic
 from fence_sorter.nodes.parameters import LINE_OWNER_PARAMETERS
 from fence_sorter.nodes.qos import CLOCK_QOS
@@ -96,6 +102,10 @@ class LineOwnerNode(FenceSorterNode, Links):
         )
         self.clock = self.create_publisher(Clock, CLOCK, CLOCK_QOS)
         self.owner = LockstepOwner(self.line, self.cfg, self)
+        # --bag: the gate waits for the recorder too; the summary goes on /line/summary
+        self.recorder_gate = RecorderGate(self, names) if p["recorder"] else None
+        self.summary_pub = summary_publisher(self)
+        self.setup_pub = publish_setup(self, self.line.source_path, self.cfg, self.warm)
 
     # -- rclpy callbacks (the spin thread) ------------------------------------------------------
     def _on_reply(self, k: int, msg: String) -> None:
@@ -142,6 +152,8 @@ class LineOwnerNode(FenceSorterNode, Links):
                 [c.get_subscription_count() > 0 for c in self.commands],
                 self.induction.get_subscription_count() > 0,
             )
+            if self.recorder_gate is not None:
+                missing += self.recorder_gate.missing()
             if not missing:
                 return
             if time.monotonic() >= end:
@@ -215,6 +227,7 @@ def main(args: Sequence[str] | None = None) -> int:
         spin.start()
         node.wait_ready()
         summary = node.run_line()
+        publish_summary(node.summary_pub, summary)
         node.end_units()
         text = json.dumps(json_safe(summary))
         if node.summary_path:

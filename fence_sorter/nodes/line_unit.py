@@ -25,6 +25,7 @@ from collections.abc import Sequence
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from rclpy.duration import Duration
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
@@ -92,6 +93,8 @@ class LineUnitNode(FenceSorterNode):
         self.started = True
         if msg.data == END:
             self.get_logger().info("the line is over")
+            for pub in (self.replies, self.handoffs):  # every reader (a recorder) has them
+                pub.wait_for_all_acked(Duration(seconds=10.0))
             rclpy.try_shutdown()  # ends the spin: run_node returns 0
             return
         try:

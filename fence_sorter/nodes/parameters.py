@@ -526,6 +526,13 @@ RECORDER_PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("storage", "mcap", "rosbag2 storage: mcap or sqlite3", read_only=True),
     ParamSpec("topics", list(TOPIC_TYPES), "Topics to record", read_only=True),
     ParamSpec(
+        "line_units",
+        "",
+        "A line's unit names, comma-separated: record the line's topics (every unit's "
+        "namespace, the owner's) instead of topics; empty: not a line",
+        read_only=True,
+    ),
+    ParamSpec(
         "max_segment_duration",
         10.0,
         "A segment is closed (complete, readable) after this long [s] (wall clock)",
@@ -676,6 +683,12 @@ LINE_OWNER_PARAMETERS: tuple[ParamSpec, ...] = (
         "warm_up",
         True,
         "Warm each unit's planner from the stream before the run (as line-sim does)",
+        True,
+    ),
+    ParamSpec(
+        "recorder",
+        False,
+        "The start gate also waits until the recorder matched every lockstep topic (--bag)",
         True,
     ),
 )

@@ -48,9 +48,15 @@ from rosbags.interfaces import (
 
 from fence_sorter.nodes.base import FenceSorterNode, run_node
 from fence_sorter.nodes.parameters import RECORDER_PARAMETERS
-from fence_sorter.nodes.qos import topic_qos
+from fence_sorter.nodes.qos import profile
 from fence_sorter.recording.logtime import SettleBuffer, StampOrder, starts_with_header
-from fence_sorter.recording.topics import ALL_TOPICS, RECORDER_DEPTH, TOPICS, QosSpec
+from fence_sorter.recording.topics import (
+    ALL_TOPICS,
+    RECORDER_DEPTH,
+    TOPICS,
+    QosSpec,
+    line_topics,
+)
 from fence_sorter.recording.writer import COMPRESSIONS, BagWriteError, SegmentedBagWriter
 
 DEFAULT_TOPICS = list(TOPICS)
@@ -65,7 +71,7 @@ def bag_qos(spec: QosSpec) -> Qos:
     again)."""
     zero = QosTime(0, 0)
     return Qos(
-        QosHistory.KEEP_LAST,
+        QosHistory.KEEP_ALL if spec.keep_all else QosHistory.KEEP_LAST,
         spec.depth,
         QosReliability.RELIABLE if spec.reliable else QosReliability.BEST_EFFORT,
         QosDurability.TRANSIENT_LOCAL if spec.transient_local else QosDurability.VOLATILE,
@@ -169,13 +175,16 @@ class RecorderNode(FenceSorterNode):
         self.write_failed_at = math.nan
         self.bag_ends_at = math.nan
         self.topics: list[_Topic] = []
-        for name in p["topics"]:
-            if name not in ALL_TOPICS:
+        units = [u.strip() for u in str(p["line_units"]).split(",") if u.strip()]
+        # a line's recorder takes the line's topics (every unit's namespace), not ``topics``
+        known = line_topics(units) if units else ALL_TOPICS
+        for name in list(known) if units else p["topics"]:
+            if name not in known:
                 raise ValueError(
                     f"recorder: topics: {name} is not one of the suite's or measured topics "
                     f"({', '.join(ALL_TOPICS)})"
                 )
-            msgtype, spec = ALL_TOPICS[name].msgtype, ALL_TOPICS[name].qos
+            msgtype, spec = known[name].msgtype, known[name].qos
             handle = self.writer.add_topic(name, msgtype, [bag_qos(spec)])
             topic = _Topic(
                 name, msgtype, handle, starts_with_header(self.writer.typestore, msgtype)
@@ -185,7 +194,7 @@ class RecorderNode(FenceSorterNode):
                 message_class(msgtype),
                 name,
                 self._callback(topic),
-                topic_qos(name, max(RECORDER_DEPTH, spec.depth)),
+                profile(spec.with_depth(max(RECORDER_DEPTH, spec.depth))),
                 raw=True,
             )
         self._stop = threading.Event()

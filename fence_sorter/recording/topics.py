@@ -105,8 +105,6 @@ TOPICS: dict[str, Topic] = {
         Topic(MARKERS, "visualization_msgs/msg/MarkerArray", CLOCK_QOS),
         Topic(DIAGNOSTICS, "diagnostic_msgs/msg/DiagnosticArray", EVENT_QOS),
         Topic(TF, "tf2_msgs/msg/TFMessage", TF_QOS),
-        Topic(TF_STATIC, "tf2_msgs/msg/TFMessage", LATCHED_QOS),
-        Topic(ROBOT_DESCRIPTION, "std_msgs/msg/String", LATCHED_QOS),
     )
 }
 #: topic -> (type, reliable), as the recorder and the bag tests look them up
@@ -142,3 +140,45 @@ MEASURED_TOPICS: dict[str, tuple[str, bool]] = {
 }
 #: every topic a node of fence_sorter publishes or records
 ALL_TOPICS: dict[str, Topic] = {**TOPICS, **MEASURED}
+
+#: a line over DDS (fence_sorter.nodes.line_owner, line_unit): the lockstep topics are
+#: reliable and keep-all (nothing is dropped silently; the line_unit module's LINE_QOS)
+LINE_QOS = QosSpec(reliable=True, depth=1, keep_all=True)
+#: the induction's hand-offs to the first unit (the owner's namespace is /line)
+LINE_INDUCTION = "/line/handoffs"
+#: the owner's line summary (std_msgs/String, JSON), once at the end of the run: what the
+#: live run printed, kept in the bag beside the records it is computed from
+LINE_SUMMARY = "/line/summary"
+LINE_SUMMARY_QOS = QosSpec(reliable=True, depth=1, transient_local=True)
+#: the owner's set-up (std_msgs/String, JSON), once at its start: the line file's name and
+#: text and the run's configuration (parcels, seed, rate, guard, clock step, warm-up), what a
+#: bag's analysis needs to replay the owner
+LINE_SETUP = "/line/setup"
+
+
+def line_unit_topics(unit: str) -> tuple[str, str, str]:
+    """A unit's lockstep topics: its commands, its replies, its downstream hand-offs."""
+    return f"/{unit}/commands", f"/{unit}/replies", f"/{unit}/handoffs"
+
+
+def line_topics(units: list[str] | tuple[str, ...]) -> dict[str, Topic]:
+    """Every topic of a line over DDS with units named ``units``, in recording order: the
+    line clock, the owner's set-up, the induction's hand-offs, each unit's commands, replies
+    and hand-offs, the owner's summary, and /diagnostics."""
+    out = [
+        Topic(CLOCK, "rosgraph_msgs/msg/Clock", CLOCK_QOS),
+        Topic(LINE_SETUP, "std_msgs/msg/String", LINE_SUMMARY_QOS),
+        Topic(LINE_INDUCTION, "fence_sorter_msgs/msg/HandOff", LINE_QOS),
+    ]
+    for u in units:
+        commands, replies, handoffs = line_unit_topics(u)
+        out += [
+            Topic(commands, "std_msgs/msg/String", LINE_QOS),
+            Topic(replies, "std_msgs/msg/String", LINE_QOS),
+            Topic(handoffs, "fence_sorter_msgs/msg/HandOff", LINE_QOS),
+        ]
+    out += [
+        Topic(LINE_SUMMARY, "std_msgs/msg/String", LINE_SUMMARY_QOS),
+        Topic(DIAGNOSTICS, "diagnostic_msgs/msg/DiagnosticArray", EVENT_QOS),
+    ]
+    return {t.name: t for t in out}

@@ -9,10 +9,13 @@ A partial line (``--units 2``, ``--no-owner``) starts only those units (and the 
 told not to): the commands of two hosts make one line on one domain, joined over UDP with
 ``--interface``/``--peers`` (the profile of :mod:`fence_sorter.runner.transport`). The owner's
 start gate waits for every unit of the line, wherever it runs; a runner without the owner
-waits until its units end with the line (the owner's ``end``). Exit codes as
-``line-sim``'s: 0 a drained line with every check met, 1 a check failed (unbalanced hand-offs,
-conservation, a wrong destination, an intrusion with the guard on) or a process failed, 2 bad
-input, 130 interrupted.
+waits until its units end with the line (the owner's ``end``). ``--bag DIR``: a recorder
+takes every topic of the line (:func:`~fence_sorter.recording.topics.line_topics`: every
+unit's namespace and the owner's) into one bag; the owner's start gate waits until it matched
+them, and it is stopped last. Exit codes as ``line-sim``'s: 0 a drained line with every check
+met, 1 a check failed (unbalanced hand-offs, conservation, a wrong destination, an intrusion
+with the guard on) or a process failed, 2 bad input, 5 the recorder could not write the bag,
+130 interrupted.
 """
 
 from __future__ import annotations
@@ -44,6 +47,7 @@ from fence_sorter.runner.processes import (
     node_command,
     node_env,
 )
+from fence_sorter.runner.summary import EXIT_RECORDING
 from fence_sorter.runner.transport import (
     HostsTransport,
     TransportError,
@@ -55,6 +59,7 @@ __all__ = ["LineRunOptions", "LineRunResult", "parse_units", "run_line_job"]
 
 LOG_DIR_PREFIX = "fence_sorter_line_"
 OWNER = "line_owner"
+RECORDER = "recorder"
 
 
 @dataclass(frozen=True)
@@ -72,6 +77,7 @@ class LineRunOptions:
     owner: bool = True  # start the line's owner here (--no-owner: another host runs it)
     interface: str | None = None  # IPv4 address: the line talks to other hosts on it
     peers: str | None = None  # the other hosts' IPv4 addresses (comma-separated)
+    bag: str | None = None  # --bag: record every topic of the line into this bag directory
 
 
 @dataclass
@@ -123,6 +129,8 @@ def _check(
     except (ParameterError, OSError) as exc:
         raise BadLineInput(str(exc)) from None
     units = parse_units(opts.units, [u.name for u in line.units])
+    if opts.bag is not None and not opts.owner:
+        raise BadLineInput("--bag records on the owner's host: it does not go with --no-owner")
     transport = None
     if (opts.interface is None) != (opts.peers is None):
         raise BadLineInput("--interface and --peers go together (this host's, the others')")
@@ -182,6 +190,12 @@ def _run(
             f"{len(line.units)}{'' if opts.owner else ' (the owner on another host)'}, "
             f"{opts.parcels} parcels, ROS domain {domain}{where}, logs {log_dir}"
         )
+        if opts.bag is not None:
+            Path(opts.bag).mkdir(parents=True, exist_ok=True)
+            rec_args = ["-p", f"output_dir:={Path(opts.bag).resolve()}", "-p",
+                        "use_sim_time:=true", "-p",
+                        f"line_units:={','.join(u.name for u in line.units)}"]  # fmt: skip
+            group.start(RECORDER, node_command(RECORDER, rec_args))
         for k in units:
             u = line.units[k]
             group.start(
@@ -200,6 +214,8 @@ def _run(
                 args += ["-p", f"seed:={opts.seed}"]
             if opts.rate is not None:
                 args += ["-p", f"rate:={float(opts.rate)!r}"]
+            if opts.bag is not None:
+                args += ["-p", "recorder:=true"]
             owner = group.start(OWNER, node_command(OWNER, args))
         end = time.monotonic() + opts.timeout
 
@@ -241,7 +257,10 @@ def _run(
         code, message = EXIT_FAILED, str(exc)
     finally:
         stop.stopping()
-        group.stop(order=[OWNER], urgent=stop.urgent)
+        # the recorder last: it takes the others' last messages
+        codes = group.stop(order=[OWNER, *here], urgent=stop.urgent)
+    if opts.bag is not None and code == EXIT_OK and codes.get(RECORDER) not in (0, None):
+        code, message = EXIT_RECORDING, f"the recorder could not write the bag {opts.bag}"
     if code == EXIT_OK and not opts.keep_logs and opts.log_dir is None:
         shutil.rmtree(log_dir, ignore_errors=True)
     else:

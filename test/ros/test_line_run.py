@@ -50,7 +50,7 @@ def test_run_line_refuses_a_bad_line_file(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize(
     ("args", "option"),
-    [(["--bag", "x"], "--bag"), (["--rtf", "2"], "--rtf"), (["--parcels", "0"], "--parcels")],
+    [(["--rrd", "x.rrd"], "--rrd"), (["--rtf", "2"], "--rtf"), (["--parcels", "0"], "--parcels")],
 )
 def test_run_line_refuses_what_a_line_run_does_not_take(args: list[str], option: str) -> None:
     """A single-unit option, or a parcel count out of range: exit 2, one line naming it."""

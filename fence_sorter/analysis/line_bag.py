@@ -1,0 +1,234 @@
+"""The line summary of a line's bag (``fence-sorter run --line LINE --bag DIR``), from the bag
+alone (ROS-free).
+
+A line over DDS is a :class:`~fence_sorter.line.lockstep.LockstepOwner` (induction,
+recirculation, clock) and units that answer its commands; the summary is the owner's state
+after the drain, and every input of that state is on the wire: the owner's set-up
+(/line/setup: the line file's text, parcels, seed, rate, guard, clock step, warm-up) and every
+reply of every unit (/<unit>/replies). :func:`analyze_line_bag` replays the owner on the
+recorded replies (:class:`BagLinks`): the same code the live owner ran, fed the same answers,
+so it computes the same summary, every count and float bit for bit. The two wall-clock fields
+(``wall_time_s``, ``real_time_factor``) are the live run's, read from /line/summary (NaN when
+the bag has no summary).
+
+Two checks say that the bag holds the whole run: each command the replayed owner sends must be
+the one the bag holds under the same number on /<unit>/commands (text equal), and the computed
+summary must equal the live one of /line/summary field by field.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import tempfile
+from collections import defaultdict, deque
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+
+from fence_sorter.jsonsafe import json_safe
+from fence_sorter.line.line_file import load_line
+from fence_sorter.line.lockstep import (
+    Command,
+    Deliver,
+    Delivered,
+    Done,
+    Figures,
+    Links,
+    LockstepOwner,
+    Report,
+    Step,
+    Warmed,
+    WarmUp,
+    decode,
+    encode,
+)
+from fence_sorter.line.multi_unit import LineRunConfig
+from fence_sorter.recording.bagread import BagContents, read_bag
+from fence_sorter.recording.topics import LINE_SETUP, LINE_SUMMARY, line_unit_topics
+
+#: the summary's wall-clock fields: the live run's (the replay's own wall time is not the run's)
+WALL_FIELDS = ("wall_time_s", "real_time_factor")
+_SEQ = re.compile(r'^\{"_":"Command","seq":(\d+),')
+
+
+class LineBagError(ValueError):
+    """A bag that is no line bag, or misses what the replay needs (one line)."""
+
+
+@dataclass
+class LineBagReport:
+    summary: dict
+    live: dict | None  # /line/summary, the run's own
+    differences: dict[str, tuple]  # field -> (computed, live), wall-clock fields aside
+    commands_checked: int
+    commands_differing: list[str] = field(default_factory=list)  # "<unit> seq N", first ones
+    issues: list[str] = field(default_factory=list)  # the bag's own (bagread)
+
+    @property
+    def agrees_with_live(self) -> bool | None:
+        return None if self.live is None else not self.differences
+
+    @property
+    def ok(self) -> bool:
+        return (
+            not self.issues and not self.commands_differing and self.agrees_with_live is not False
+        )
+
+
+class BagLinks(Links):
+    """The units' side of a lockstep line as the bag recorded it: :meth:`wait` returns the
+    recorded reply to the command just sent (a Deliver's by parcel, a Step's by time), and
+    every command sent is compared with the recorded one of the same number."""
+
+    def __init__(self, names: list[str], commands: list[dict[int, str]], replies: list[list]):
+        self.names = names
+        self.commands = commands
+        self.seq = [0] * len(names)
+        self.expect: list[deque] = [deque() for _ in names]
+        self.delivered: list[dict[int, deque]] = [defaultdict(deque) for _ in names]
+        self.done: list[dict[float, Done]] = [{} for _ in names]
+        self.other: list[dict[type, deque]] = [defaultdict(deque) for _ in names]
+        for k, rs in enumerate(replies):
+            for r in rs:
+                if isinstance(r, Delivered):
+                    self.delivered[k][r.parcel_id].append(r)
+                elif isinstance(r, Done):
+                    self.done[k][r.t] = r
+                else:
+                    self.other[k][type(r)].append(r)
+        self.checked = 0
+        self.differing: list[str] = []
+
+    def send(self, k: int, body: object) -> None:
+        seq = self.seq[k]
+        self.seq[k] += 1
+        self.checked += 1
+        if self.commands[k].get(seq) != encode(Command(seq, body)) and len(self.differing) < 10:
+            self.differing.append(f"{self.names[k]} seq {seq}")
+        if isinstance(body, Deliver):
+            self.expect[k].append((Delivered, body.parcel_id, seq))
+        elif isinstance(body, Step):
+            self.expect[k].append((Done, body.t, seq))
+        elif isinstance(body, Report):
+            self.expect[k].append((Figures, None, seq))
+        elif isinstance(body, WarmUp):
+            self.expect[k].append((Warmed, None, seq))
+
+    def wait(self, k: int):
+        kind, key, seq = self.expect[k].popleft()
+        if kind is Delivered:
+            found = self.delivered[k].get(key)
+            reply = found.popleft() if found else None
+        elif kind is Done:
+            reply = self.done[k].pop(key, None)
+        else:
+            found = self.other[k].get(kind)
+            reply = found.popleft() if found else None
+        if reply is None:
+            raise LineBagError(
+                f"the bag has no reply of {self.names[k]} to its command {seq} "
+                f"({kind.__name__} missing on {line_unit_topics(self.names[k])[1]})"
+            )
+        return reply
+
+    def hand_off(self, h) -> None:
+        """The induction's hand-off: on /line/handoffs in the bag; the replay needs none."""
+
+
+def _texts(bag: BagContents, topic: str) -> list[str]:
+    return [str(m.msg.data) for m in bag.by_topic(topic)]
+
+
+def _config(d: dict) -> LineRunConfig:
+    known = {f.name for f in fields(LineRunConfig)}
+    return LineRunConfig(**{k: v for k, v in d.items() if k in known})
+
+
+def is_line_bag(bag: BagContents) -> bool:
+    return bool(bag.by_topic(LINE_SETUP))
+
+
+def replay_summary(bag: BagContents) -> tuple[dict, BagLinks]:
+    """The owner replayed on the bag's replies: its summary (wall-clock fields NaN) and the
+    links (with the command check). LineBagError names what is missing."""
+    setups = _texts(bag, LINE_SETUP)
+    if not setups:
+        raise LineBagError(f"{bag.path}: no {LINE_SETUP} in the bag: not a line's bag")
+    setup = json.loads(setups[-1])
+    with tempfile.TemporaryDirectory(prefix="fence_sorter_line_bag_") as tmp:
+        path = Path(tmp) / setup["line_file"]
+        path.write_text(setup["line_text"], encoding="utf-8")
+        line = load_line(path)
+    names = [u.name for u in line.units]
+    commands: list[dict[int, str]] = []
+    replies: list[list] = []
+    for n in names:
+        topic_cmd, topic_rep, _ = line_unit_topics(n)
+        cmds = {}
+        for text in _texts(bag, topic_cmd):
+            m = _SEQ.match(text)
+            if m:
+                cmds[int(m.group(1))] = text
+        commands.append(cmds)
+        replies.append([decode(t) for t in _texts(bag, topic_rep) if t.startswith("{")])
+    cfg = _config(setup["config"])
+    links = BagLinks(names, commands, replies)
+    owner = LockstepOwner(line, cfg, links)
+    if setup.get("warm_up", True):
+        owner.warm_up()
+    while owner.active() and owner.t < owner.limit():
+        owner.step()
+    owner.wall = 0.0
+    return owner.summary(), links
+
+
+def _json(v: object) -> object:
+    """A summary value as its JSON text reads back (NaN and inf as None, tuples as lists)."""
+    return json.loads(json.dumps(json_safe(v)))
+
+
+def _differences(computed: dict, live: dict) -> dict[str, tuple]:
+    out = {}
+    for k in sorted(set(computed) | set(live)):
+        if k in WALL_FIELDS:
+            continue
+        a, b = _json(computed.get(k)), _json(live.get(k))
+        if a != b:
+            out[k] = (a, b)
+    return out
+
+
+def analyze_line_bag(path: Path | str) -> LineBagReport:
+    """Read a line's bag and compute its line summary (see the module); BagReadError when
+    nothing can be read, LineBagError when it is no line bag or misses a reply."""
+    bag = read_bag(path)
+    summary, links = replay_summary(bag)
+    lives = _texts(bag, LINE_SUMMARY)
+    live = json.loads(lives[-1]) if lives else None
+    for k in WALL_FIELDS:
+        summary[k] = live.get(k, math.nan) if live is not None else math.nan
+    return LineBagReport(
+        summary=summary,
+        live=live,
+        differences=_differences(summary, live) if live is not None else {},
+        commands_checked=links.checked,
+        commands_differing=links.differing,
+        issues=[str(i) for i in bag.issues],
+    )
+
+
+def looks_like_line_bag(path: Path | str) -> bool:
+    """True if the bag holds a line's set-up (/line/setup): from metadata.yaml when the bag
+    is a directory with one, else from the storage file's messages."""
+    path = Path(path)
+    meta = path / "metadata.yaml"
+    if path.is_dir() and meta.is_file():
+        try:
+            return f"name: {LINE_SETUP}\n" in meta.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError):
+            return False
+    try:
+        return is_line_bag(read_bag(path, topics=[LINE_SETUP]))
+    except Exception:  # not a bag at all: the single-unit analysis says why
+        return False
