@@ -85,6 +85,19 @@ def to_line(
     return x + position, y, yaw
 
 
+def unit_origin(
+    position: float, mirrored: bool, width: float
+) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """A unit's frame in the line frame as a rigid transform: origin (x, y, z) [m] and
+    fixed-axis (roll, pitch, yaw) [rad]. A right unit's frame is the line's moved to the axis
+    (position, 0); a left one's is half a turn about X at (position, s): in the belt plane the
+    map of :func:`to_line` (Y = s - y, yaw negated), its z pointing down (a mirror is no
+    rotation; the turn is the rotation that agrees with it on the belt)."""
+    if mirrored:
+        return (position, width, 0.0), (math.pi, 0.0, 0.0)
+    return (position, 0.0, 0.0), (0.0, 0.0, 0.0)
+
+
 def convex_hull(points: list[tuple[float, float]]) -> list[tuple[float, float]]:
     """Convex hull, counter-clockwise (Andrew's monotone chain)."""
     pts = sorted(set(points))

@@ -54,6 +54,7 @@ from fence_sorter.nodes.line_record import (
 from fence_sorter.nodes.line_unit import END, INDUCTION_TOPIC, LINE_QOS, READY, handoff_topic
 from fence_sorter.nodes.parameters import LINE_OWNER_PARAMETERS
 from fence_sorter.nodes.qos import CLOCK_QOS
+from fence_sorter.nodes.tf_publisher import LineTfPublisher
 from fence_sorter.recording.topics import CLOCK
 from fence_sorter_msgs.msg import HandOff as HandOffMsg
 
@@ -106,6 +107,7 @@ class LineOwnerNode(FenceSorterNode, Links):
         self.recorder_gate = RecorderGate(self, names) if p["recorder"] else None
         self.summary_pub = summary_publisher(self)
         self.setup_pub = publish_setup(self, self.line.source_path, self.cfg, self.warm)
+        self.tf = LineTfPublisher(self, self.line)  # every unit's frames and URDF
 
     # -- rclpy callbacks (the spin thread) ------------------------------------------------------
     def _on_reply(self, k: int, msg: String) -> None:

@@ -7,6 +7,13 @@ std_msgs/String on /robot_description (reliable, transient local); the URDF's fi
 angle alpha_w of /joint_states) and one frame ``parcel_<id>`` per parcel on the belt at its
 C_s pose of /load_states, both stamped with the snapshot's sim time. Frames hang off the fixed
 frame (``frame_id``, default ``sorter``).
+
+A line over DDS (:class:`LineTfPublisher`, published by the line's owner): one URDF whose root
+link ``line`` is the line frame, each unit's sorter URDF (its scene's fence, the line's belt
+width) with every link and joint named ``<unit>/...`` and mounted on ``line`` by the fixed
+joint ``<unit>/mount`` at :func:`~fence_sorter.line.routing.unit_origin` (a left unit: half a
+turn about X); /tf_static holds every fixed joint of it. The units do not publish their fence
+angles, so the joints ``<unit>/fence_drive`` have no /tf.
 """
 
 from __future__ import annotations
@@ -18,7 +25,9 @@ from geometry_msgs.msg import TransformStamped
 from std_msgs.msg import String
 from tf2_msgs.msg import TFMessage
 
+from fence_sorter.line.line_file import LineSpec
 from fence_sorter.line.one_fence import LineConfig
+from fence_sorter.line.routing import unit_origin
 from fence_sorter.line.types import FenceSnapshot, LineSnapshot, ParcelSnapshot
 from fence_sorter.nodes.convert import FRAME_ID
 from fence_sorter.nodes.convert import _stamp as stamp_header  # the stamps of /load_states
@@ -28,6 +37,7 @@ from fence_sorter.recording import topics
 from fence_sorter.resources import data_path
 
 URDF_FILE = ("urdf", "fence_sorter.urdf")
+LINE_FRAME = "line"
 FENCE_JOINT = "fence_drive"
 FENCE_FRAME = "fence"
 PARCEL_FRAME = "parcel_{}"
@@ -155,3 +165,46 @@ class TfPublisher:
         transforms = [fence_transform(snap.fence, t, self.frame_id)]
         transforms += [parcel_transform(p, t, self.frame_id) for p in snap.parcels]
         self.pub_tf.publish(TFMessage(transforms=transforms))
+
+
+def line_description(line: LineSpec) -> str:
+    """The URDF of a line: root link ``line``, each unit's sorter (:func:`robot_description`
+    with its scene's fence length and height) prefixed ``<unit>/`` (links, joints, materials)
+    and mounted by the fixed joint ``<unit>/mount`` at the unit's origin."""
+    root = ET.Element("robot", name=line.name)
+    ET.SubElement(root, "link", name=LINE_FRAME)
+    for u in line.units:
+        sc = u.scenario
+        height = (sc.fence or FenceParams()).height
+        unit = ET.fromstring(robot_description(line.width, sc.length, height))
+        prefix = f"{u.name}/"
+        for e in unit.iter():
+            if e.tag in ("link", "joint", "material") and e.get("name"):
+                e.set("name", prefix + e.get("name"))
+            elif e.tag in ("parent", "child"):
+                e.set("link", prefix + e.get("link"))
+        xyz, rpy = unit_origin(u.position, u.mirrored, line.width)
+        mount = ET.SubElement(root, "joint", name=f"{prefix}mount", type="fixed")
+        ET.SubElement(mount, "parent", link=LINE_FRAME)
+        ET.SubElement(mount, "child", link=f"{prefix}{FRAME_ID}")
+        ET.SubElement(
+            mount, "origin", xyz=" ".join(f"{v:.9g}" for v in xyz),
+            rpy=" ".join(f"{v:.17g}" for v in rpy),
+        )  # fmt: skip
+        root.extend(list(unit))
+    return '<?xml version="1.0"?>\n' + ET.tostring(root, encoding="unicode")
+
+
+class LineTfPublisher:
+    """A line's /robot_description and /tf_static, once (transient local; sim time 0)."""
+
+    def __init__(self, node, line: LineSpec) -> None:
+        self.description = line_description(line)
+        self.pub_description = node.create_publisher(
+            String, topics.ROBOT_DESCRIPTION, topic_qos(topics.ROBOT_DESCRIPTION)
+        )
+        self.pub_static = node.create_publisher(
+            TFMessage, topics.TF_STATIC, topic_qos(topics.TF_STATIC)
+        )
+        self.pub_description.publish(String(data=self.description))
+        self.pub_static.publish(TFMessage(transforms=static_transforms(self.description, 0.0)))

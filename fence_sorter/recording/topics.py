@@ -105,6 +105,8 @@ TOPICS: dict[str, Topic] = {
         Topic(MARKERS, "visualization_msgs/msg/MarkerArray", CLOCK_QOS),
         Topic(DIAGNOSTICS, "diagnostic_msgs/msg/DiagnosticArray", EVENT_QOS),
         Topic(TF, "tf2_msgs/msg/TFMessage", TF_QOS),
+        Topic(TF_STATIC, "tf2_msgs/msg/TFMessage", LATCHED_QOS),
+        Topic(ROBOT_DESCRIPTION, "std_msgs/msg/String", LATCHED_QOS),
     )
 }
 #: topic -> (type, reliable), as the recorder and the bag tests look them up
@@ -164,7 +166,8 @@ def line_unit_topics(unit: str) -> tuple[str, str, str]:
 def line_topics(units: list[str] | tuple[str, ...]) -> dict[str, Topic]:
     """Every topic of a line over DDS with units named ``units``, in recording order: the
     line clock, the owner's set-up, the induction's hand-offs, each unit's commands, replies
-    and hand-offs, the owner's summary, and /diagnostics."""
+    and hand-offs, the static frames and model of every unit, the owner's summary, and
+    /diagnostics."""
     out = [
         Topic(CLOCK, "rosgraph_msgs/msg/Clock", CLOCK_QOS),
         Topic(LINE_SETUP, "std_msgs/msg/String", LINE_SUMMARY_QOS),
@@ -178,6 +181,8 @@ def line_topics(units: list[str] | tuple[str, ...]) -> dict[str, Topic]:
             Topic(handoffs, "fence_sorter_msgs/msg/HandOff", LINE_QOS),
         ]
     out += [
+        Topic(TF_STATIC, "tf2_msgs/msg/TFMessage", LATCHED_QOS),
+        Topic(ROBOT_DESCRIPTION, "std_msgs/msg/String", LATCHED_QOS),
         Topic(LINE_SUMMARY, "std_msgs/msg/String", LINE_SUMMARY_QOS),
         Topic(DIAGNOSTICS, "diagnostic_msgs/msg/DiagnosticArray", EVENT_QOS),
     ]

@@ -8,20 +8,27 @@ One run of two_units (10 parcels, seed 3) recorded, then:
   fields are the live run's, which the bag keeps on /line/summary: they are left out.
 - the bag read a second time with the ``mcap`` package and ``mcap_ros2`` (not rosbags, not our
   reader): the lockstep records it holds agree with the live summary.
+- /tf_static and /robot_description cover every unit: each unit's frame sits at its position
+  and side in the line frame (``routing.to_line``'s closed form).
 """
 
 from __future__ import annotations
 
 import json
+import math
+import xml.etree.ElementTree as ET
 from collections import Counter, defaultdict
 from pathlib import Path
 
+import numpy as np
 import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from processes import run_cli
 
 from fence_sorter.line.handoff import INDUCTION, RECIRCULATION, link_name
+from fence_sorter.line.line_file import load_line
+from fence_sorter.line.routing import to_line
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -83,6 +90,49 @@ def test_independent_reader_sees_the_run(recorded) -> None:
     assert setup["line_text"] == CONFIG.read_text(encoding="utf-8")
     (summary,) = [json.loads(m.data) for m in messages["/line/summary"]]
     assert summary["sorted"] == live["sorted"] and summary["units"] == live["units"]
+
+
+def _matrix(tf) -> np.ndarray:
+    """The 4x4 homogeneous matrix of a geometry_msgs/Transform."""
+    x, y, z, w = tf.rotation.x, tf.rotation.y, tf.rotation.z, tf.rotation.w
+    m = np.eye(4)
+    m[:3, :3] = [
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ]
+    m[:3, 3] = [tf.translation.x, tf.translation.y, tf.translation.z]
+    return m
+
+
+def test_tf_and_urdf_cover_every_unit(recorded) -> None:
+    """/tf_static: line -> <unit>/sorter carries a point and a heading of the unit's frame to
+    where ``to_line`` puts them (right: X = x + position, Y = y; left: Y = s - y, yaw
+    negated), and each unit's fixed frames (belt, chute, scan line) hang off it; the URDF has
+    every unit's links under its prefix, mounted on ``line``."""
+    _, _, messages = recorded
+    line = load_line(CONFIG)
+    (static,) = messages["/tf_static"]
+    tfs = {(t.header.frame_id, t.child_frame_id): t.transform for t in static.transforms}
+    for u in line.units:
+        m = _matrix(tfs[("line", f"{u.name}/sorter")])
+        for x, y, yaw in ((0.0, 0.0, 0.0), (0.8, 0.3, 0.4), (-2.0, 0.65, -1.1)):
+            got = m @ [x, y, 0.0, 1.0]
+            heading = m[:3, :3] @ [math.cos(yaw), math.sin(yaw), 0.0]
+            ex, ey, eyaw = to_line(u.position, u.mirrored, line.width, x, y, yaw)
+            closed = (x + u.position, line.width - y if u.mirrored else y)
+            assert got[:2] == pytest.approx(closed, abs=1e-12) and closed == (ex, ey)
+            assert got[2] == pytest.approx(0.0, abs=1e-12)
+            assert math.atan2(heading[1], heading[0]) == pytest.approx(eyaw, abs=1e-12)
+        for child in ("belt", "chute", "scan_line"):
+            assert (f"{u.name}/sorter", f"{u.name}/{child}") in tfs
+    (desc,) = messages["/robot_description"]
+    root = ET.fromstring(desc.data)
+    links = {e.get("name") for e in root.iter("link")}
+    for u in line.units:
+        assert {f"{u.name}/{n}" for n in ("sorter", "belt", "chute", "fence")} <= links
+        (mount,) = [j for j in root.iter("joint") if j.get("name") == f"{u.name}/mount"]
+        assert mount.find("parent").get("link") == "line"
 
 
 def test_line_bag_needs_the_owner_here() -> None:
