@@ -26,8 +26,10 @@ from collections import defaultdict, deque
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
+from fence_sorter.inputs import ParcelSpec
 from fence_sorter.jsonsafe import json_safe
-from fence_sorter.line.line_file import load_line
+from fence_sorter.line.handoff import HandOff
+from fence_sorter.line.line_file import LineSpec, load_line
 from fence_sorter.line.lockstep import (
     Command,
     Deliver,
@@ -38,14 +40,22 @@ from fence_sorter.line.lockstep import (
     LockstepOwner,
     Report,
     Step,
+    UnitSide,
     Warmed,
     WarmUp,
     decode,
     encode,
+    make_unit,
 )
 from fence_sorter.line.multi_unit import LineRunConfig
 from fence_sorter.recording.bagread import BagContents, read_bag
-from fence_sorter.recording.topics import LINE_SETUP, LINE_SUMMARY, line_unit_topics
+from fence_sorter.recording.topics import (
+    LINE_INDUCTION,
+    LINE_SETUP,
+    LINE_SUMMARY,
+    line_unit_topics,
+)
+from fence_sorter.stamps import time_to_sec
 
 #: the summary's wall-clock fields: the live run's (the replay's own wall time is not the run's)
 WALL_FIELDS = ("wall_time_s", "real_time_factor")
@@ -132,7 +142,7 @@ class BagLinks(Links):
             )
         return reply
 
-    def hand_off(self, h) -> None:
+    def hand_off(self, h: HandOff) -> None:
         """The induction's hand-off: on /line/handoffs in the bag; the replay needs none."""
 
 
@@ -149,9 +159,25 @@ def is_line_bag(bag: BagContents) -> bool:
     return bool(bag.by_topic(LINE_SETUP))
 
 
-def replay_summary(bag: BagContents) -> tuple[dict, BagLinks]:
-    """The owner replayed on the bag's replies: its summary (wall-clock fields NaN) and the
-    links (with the command check). LineBagError names what is missing."""
+@dataclass
+class LineRecords:
+    """What a line's bag holds for a replay: the line (from the recorded file text), the run's
+    configuration, each unit's recorded commands (by number) and replies (decoded)."""
+
+    line: LineSpec
+    cfg: LineRunConfig
+    warm_up: bool
+    commands: list[dict[int, str]]
+    replies: list[list]
+    upstream: list[list[HandOff]]  # the hand-offs recorded on each unit's upstream link
+
+    @property
+    def names(self) -> list[str]:
+        return [u.name for u in self.line.units]
+
+
+def line_records(bag: BagContents) -> LineRecords:
+    """The records of a line's bag; LineBagError when it holds no /line/setup."""
     setups = _texts(bag, LINE_SETUP)
     if not setups:
         raise LineBagError(f"{bag.path}: no {LINE_SETUP} in the bag: not a line's bag")
@@ -160,11 +186,13 @@ def replay_summary(bag: BagContents) -> tuple[dict, BagLinks]:
         path = Path(tmp) / setup["line_file"]
         path.write_text(setup["line_text"], encoding="utf-8")
         line = load_line(path)
-    names = [u.name for u in line.units]
     commands: list[dict[int, str]] = []
     replies: list[list] = []
-    for n in names:
-        topic_cmd, topic_rep, _ = line_unit_topics(n)
+    upstream: list[list[HandOff]] = []
+    for k, u in enumerate(line.units):
+        link = LINE_INDUCTION if k == 0 else line_unit_topics(line.units[k - 1].name)[2]
+        upstream.append([handoff_from_bag(m.msg) for m in bag.by_topic(link)])
+        topic_cmd, topic_rep, _ = line_unit_topics(u.name)
         cmds = {}
         for text in _texts(bag, topic_cmd):
             m = _SEQ.match(text)
@@ -172,15 +200,97 @@ def replay_summary(bag: BagContents) -> tuple[dict, BagLinks]:
                 cmds[int(m.group(1))] = text
         commands.append(cmds)
         replies.append([decode(t) for t in _texts(bag, topic_rep) if t.startswith("{")])
-    cfg = _config(setup["config"])
-    links = BagLinks(names, commands, replies)
-    owner = LockstepOwner(line, cfg, links)
-    if setup.get("warm_up", True):
+    return LineRecords(
+        line, _config(setup["config"]), bool(setup.get("warm_up", True)), commands, replies,
+        upstream,
+    )  # fmt: skip
+
+
+def handoff_from_bag(msg) -> HandOff:
+    """A recorded fence_sorter_msgs/HandOff (as rosbags decodes it) -> the line's HandOff
+    record, field for field as a unit takes it off the wire (``nodes.convert.handoff_from_msg``:
+    the parcel's arrival time does not travel)."""
+    p = msg.parcel
+    spec = ParcelSpec(
+        parcel_id=int(p.parcel_id), length_a=float(p.length_a), width_b=float(p.width_b),
+        height=float(p.height), mass=float(p.mass), cog_offset_x=float(p.cog_offset_x),
+        cog_offset_y=float(p.cog_offset_y), lateral_gap=float(p.lateral_gap),
+        yaw=float(p.yaw), mu_belt=float(p.mu_belt), mu_fence=float(p.mu_fence),
+        divert=bool(p.divert), scan_time=time_to_sec(p.scan_time),
+        scan_position_x=float(p.scan_position_x),
+    )  # fmt: skip
+    return HandOff(
+        parcel_id=spec.parcel_id, destination=str(p.destination), passes=int(p.passes),
+        spec=spec, x=float(msg.x), y=float(msg.y), yaw=float(msg.yaw), vx=float(msg.vx),
+        vy=float(msg.vy), yaw_rate=float(msg.yaw_rate), pose_time=float(msg.pose_time),
+        t=time_to_sec(msg.header.stamp), from_unit=int(msg.from_unit),
+        to_unit=int(msg.to_unit),
+    )  # fmt: skip
+
+
+class ResimLinks(BagLinks):
+    """:class:`BagLinks` that also feed every recorded command to a unit simulated here
+    (:class:`~fence_sorter.line.lockstep.UnitSide`), with the hand-offs recorded on its
+    upstream link, and compare each reply it makes with the recorded one (as text): the
+    units' states as the run had them, for a view."""
+
+    def __init__(self, records: LineRecords):
+        super().__init__(records.names, records.commands, records.replies)
+        cfg = records.cfg
+        self.sides = [UnitSide(make_unit(records.line, k, cfg)) for k in range(len(self.names))]
+        for side, handoffs in zip(self.sides, records.upstream, strict=True):
+            for h in handoffs:  # as they came on the unit's upstream link
+                side.on_handoff(h)
+        self.produced: list[deque] = [deque() for _ in self.names]
+        self.resim_checked = 0
+        self.resim_differing: list[str] = []
+
+    def send(self, k: int, body: object) -> None:
+        seq = self.seq[k]
+        super().send(k, body)
+        text = self.commands[k].get(seq)
+        self._route(k, self.sides[k].on_command(decode(text) if text else Command(seq, body)))
+
+    def _route(self, k: int, out: list) -> None:
+        """Unit k's replies kept for :meth:`wait`; its hand-offs are the recorded ones the
+        next unit already has."""
+        self.produced[k].extend(o for o in out if not isinstance(o, HandOff))
+
+    def wait(self, k: int):
+        reply = super().wait(k)
+        mine = self.produced[k].popleft() if self.produced[k] else None
+        self.resim_checked += 1
+        if (mine is None or encode(mine) != encode(reply)) and len(self.resim_differing) < 10:
+            self.resim_differing.append(f"{self.names[k]} {type(reply).__name__}")
+        return reply
+
+
+def replay(
+    records: LineRecords, links: BagLinks, observers: tuple = ()
+) -> tuple[dict, LockstepOwner]:
+    """The owner run to the drain on ``links``: its summary (wall-clock fields 0) and itself.
+    With :class:`ResimLinks` each unit stand-in gets ``line``, its simulated unit's
+    :class:`~fence_sorter.line.one_fence.SortingLine` (what a view samples)."""
+    owner = LockstepOwner(records.line, records.cfg, links)
+    if isinstance(links, ResimLinks):
+        for remote, side in zip(owner.units, links.sides, strict=True):
+            remote.line = side.unit.line
+    owner.observers.extend(observers)
+    if records.warm_up:
         owner.warm_up()
     while owner.active() and owner.t < owner.limit():
         owner.step()
     owner.wall = 0.0
-    return owner.summary(), links
+    return owner.summary(), owner
+
+
+def replay_summary(bag: BagContents) -> tuple[dict, BagLinks]:
+    """The owner replayed on the bag's replies: its summary (wall-clock fields 0) and the
+    links (with the command check). LineBagError names what is missing."""
+    records = line_records(bag)
+    links = BagLinks(records.names, records.commands, records.replies)
+    summary, _ = replay(records, links)
+    return summary, links
 
 
 def _json(v: object) -> object:

@@ -1,6 +1,10 @@
 """``fence-sorter rrd BAG [--out FILE]``: a recorded bag as a Rerun recording (.rrd).
 
-Exit codes: 0 written from a clean bag; 1 written from what was readable (problems named per
+A line's bag (``run --line --bag``): the line's view, its units simulated again from their
+recorded commands (:mod:`fence_sorter.visualisation.line_bag_view`).
+
+Exit codes: 0 written from a clean bag (a line's bag: every reply of the units simulated
+again equals the recorded one); 1 written from what was readable (problems named per
 file on stderr); 2 not a bag / nothing readable, or the output cannot be written.
 """
 
@@ -10,6 +14,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from fence_sorter.recording.topics import LINE_SETUP
 from fence_sorter.visualisation.frames import scene_from_bag
 from fence_sorter.visualisation.rerun_layout import open_recording
 from fence_sorter.visualisation.rerun_log import log_bag
@@ -45,6 +50,8 @@ def run(args: argparse.Namespace) -> int:
     if not out.parent.is_dir():
         print(f"fence-sorter rrd: error: --out {out}: no directory {out.parent}", file=sys.stderr)
         return 2
+    if contents.by_topic(LINE_SETUP):
+        return _line(contents, out, args.spawn)
     rec = open_recording(out, spawn=args.spawn, scene=scene_from_bag(contents))
     logger = log_bag(contents, rec)
     logger.close()
@@ -52,3 +59,28 @@ def run(args: argparse.Namespace) -> int:
     for issue in contents.issues:
         print(f"fence-sorter rrd: {issue}", file=sys.stderr)
     return 1 if contents.issues else 0
+
+
+def _line(contents, out: Path, spawn: bool) -> int:
+    """The line view of a line's bag; 1 if a reply of a unit simulated again differs from
+    the recorded one (named) or the bag has problems, or a reply is missing."""
+    # lazy: the line's units load Numba and the compiled kernel
+    from fence_sorter.analysis.line_bag import LineBagError
+    from fence_sorter.visualisation.line_bag_view import log_line_bag
+
+    try:
+        view = log_line_bag(contents, out, spawn=spawn)
+    except LineBagError as exc:
+        print(f"fence-sorter rrd: {exc}", file=sys.stderr)
+        return 1
+    print(
+        f"wrote {out} (the line view: {view.samples} samples; {view.replies_checked} replies "
+        f"of the units simulated again, {len(view.replies_differing)} differ from the "
+        f"recorded ones; {out.stat().st_size / 1e6:.2f} MB)"
+    )
+    for issue in contents.issues:
+        print(f"fence-sorter rrd: {issue}", file=sys.stderr)
+    if view.replies_differing:
+        print("fence-sorter rrd: replies differ from the recorded ones: "
+              + ", ".join(view.replies_differing), file=sys.stderr)  # fmt: skip
+    return 1 if contents.issues or view.replies_differing else 0

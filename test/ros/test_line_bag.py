@@ -8,6 +8,9 @@ One run of two_units (10 parcels, seed 3) recorded, then:
   fields are the live run's, which the bag keeps on /line/summary: they are left out.
 - the bag read a second time with the ``mcap`` package and ``mcap_ros2`` (not rosbags, not our
   reader): the lockstep records it holds agree with the live summary.
+- ``fence-sorter rrd`` of the bag (its units simulated again from their recorded commands)
+  writes the line view that ``line-sim --rrd`` writes of the same line, parcels and seed:
+  every entity's rows equal, read back with Rerun's own reader.
 - /tf_static and /robot_description cover every unit: each unit's frame sits at its position
   and side in the line frame (``routing.to_line``'s closed form).
 """
@@ -25,10 +28,13 @@ import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from processes import run_cli
+from rrd_read import read_rrd
 
 from fence_sorter.line.handoff import INDUCTION, RECIRCULATION, link_name
 from fence_sorter.line.line_file import load_line
+from fence_sorter.line.multi_unit import LinePlant, LineRunConfig
 from fence_sorter.line.routing import to_line
+from fence_sorter.visualisation.line_view import LineRerunLogger, line_blueprint, open_recording
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -90,6 +96,34 @@ def test_independent_reader_sees_the_run(recorded) -> None:
     assert setup["line_text"] == CONFIG.read_text(encoding="utf-8")
     (summary,) = [json.loads(m.data) for m in messages["/line/summary"]]
     assert summary["sorted"] == live["sorted"] and summary["units"] == live["units"]
+
+
+def test_rrd_of_the_bag_is_line_sims_view(recorded, tmp_path: Path) -> None:
+    """The line view from the bag: every reply of the units simulated again equals the
+    recorded one (exit 0), and each entity of the view (every unit's fence and alpha_w and N
+    plots, the parcels' footprints with their labels and colours) has the rows of line-sim's
+    view of two_units, 10 parcels, seed 3."""
+    bag, _, _ = recorded
+    out = tmp_path / "bag.rrd"
+    res = run_cli("rrd", str(bag), "--out", str(out))
+    assert res.returncode == 0, res.stderr
+    assert " 0 differ " in res.stdout, res.stdout
+    ref = tmp_path / "sim.rrd"
+    line = load_line(CONFIG)
+    plant = LinePlant(line, LineRunConfig(parcels=10, seed=3))  # line-sim --rrd, in process
+    plant.warm_up()
+    logger = LineRerunLogger(
+        open_recording(ref, layout=lambda paused: line_blueprint(line, paused)), line
+    )
+    plant.observers.append(logger.observe)
+    plant.run()
+    logger.close(plant)
+    got, want = read_rrd(out), read_rrd(ref)
+    entities = [e for e in want if e.startswith(("/top/", "/plots/"))]
+    assert {f"/top/units/{u}/fence" for u in UNITS} <= set(entities)
+    assert "/top/parcels" in entities
+    for e in entities:
+        assert got[e] == want[e], e
 
 
 def _matrix(tf) -> np.ndarray:
