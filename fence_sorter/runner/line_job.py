@@ -129,8 +129,16 @@ def _check(
     except (ParameterError, OSError) as exc:
         raise BadLineInput(str(exc)) from None
     units = parse_units(opts.units, [u.name for u in line.units])
-    if opts.bag is not None and not opts.owner:
-        raise BadLineInput("--bag records on the owner's host: it does not go with --no-owner")
+    if opts.bag is not None:
+        if not opts.owner:
+            raise BadLineInput("--bag records on the owner's host: it does not go with --no-owner")
+        try:
+            Path(opts.bag).mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise BadLineInput(
+                f"--bag must be a directory that exists or can be made, got {opts.bag} "
+                f"({exc.strerror})"
+            ) from None
     transport = None
     if (opts.interface is None) != (opts.peers is None):
         raise BadLineInput("--interface and --peers go together (this host's, the others')")
@@ -191,7 +199,6 @@ def _run(
             f"{opts.parcels} parcels, ROS domain {domain}{where}, logs {log_dir}"
         )
         if opts.bag is not None:
-            Path(opts.bag).mkdir(parents=True, exist_ok=True)
             rec_args = ["-p", f"output_dir:={Path(opts.bag).resolve()}", "-p",
                         "use_sim_time:=true", "-p",
                         f"line_units:={','.join(u.name for u in line.units)}"]  # fmt: skip

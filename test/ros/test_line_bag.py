@@ -169,9 +169,21 @@ def test_tf_and_urdf_cover_every_unit(recorded) -> None:
         assert mount.find("parent").get("link") == "line"
 
 
-def test_line_bag_needs_the_owner_here() -> None:
-    """--bag with --no-owner: exit 2, one line naming --bag, no process started."""
-    proc = run_cli("run", "--line", "two_units", "--no-owner", "--bag", "x")
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--no-owner", "--bag", "{tmp}/bag"], "--bag records on the owner's host"),
+        (["--bag", "{tmp}/file"], "--bag must be a directory"),
+    ],
+    ids=["no-owner", "a-file"],
+)
+def test_a_bad_bag_option_exits_2_with_one_line(tmp_path: Path, args, message) -> None:
+    """--bag with --no-owner, or on a file: exit 2, one line naming --bag, nothing started
+    and nothing written."""
+    (tmp_path / "file").write_text("")
+    args = [a.replace("{tmp}", str(tmp_path)) for a in args]
+    proc = run_cli("run", "--line", "two_units", *args)
     assert proc.returncode == 2, proc.stderr
     err = proc.stderr.strip().splitlines()
-    assert len(err) == 1 and "--bag" in err[0], proc.stderr
+    assert len(err) == 1 and message in err[0], proc.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]
