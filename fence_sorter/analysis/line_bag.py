@@ -313,7 +313,13 @@ def analyze_line_bag(path: Path | str) -> LineBagReport:
     """Read a line's bag and compute its line summary (see the module); BagReadError when
     nothing can be read, LineBagError when it is no line bag or misses a reply."""
     bag = read_bag(path)
-    summary, links = replay_summary(bag)
+    try:
+        summary, links = replay_summary(bag)
+    except LineBagError as exc:
+        if not bag.issues:
+            raise
+        more = f" and {len(bag.issues) - 1} more problems" if len(bag.issues) > 1 else ""
+        raise LineBagError(f"{exc}; the bag: {bag.issues[0]}{more}") from None
     lives = _texts(bag, LINE_SUMMARY)
     live = json.loads(lives[-1]) if lives else None
     for k in WALL_FIELDS:

@@ -72,6 +72,8 @@ def _line(contents, out: Path, spawn: bool) -> int:
         view = log_line_bag(contents, out, spawn=spawn)
     except LineBagError as exc:
         print(f"fence-sorter rrd: {exc}", file=sys.stderr)
+        for issue in contents.issues:
+            print(f"fence-sorter rrd: {issue}", file=sys.stderr)
         return 1
     print(
         f"wrote {out} (the line view: {view.samples} samples; {view.replies_checked} replies "

@@ -1,6 +1,7 @@
 """``fence-sorter run --line LINE --bag DIR`` and ``fence-sorter analyze`` on that bag.
 
-One run of two_units (10 parcels, seed 3) recorded, then:
+One run of two_units (10 parcels, seed 3) recorded (the run test_line_run.py checks against
+line-sim, ``conftest.py``), then:
 
 - ``analyze --json`` computes the line summary from the bag alone (the owner replayed on the
   recorded replies) and equals the live ``run --line --json`` summary field by field: counts
@@ -30,10 +31,12 @@ from mcap_ros2.decoder import DecoderFactory
 from processes import run_cli
 from rrd_read import read_rrd
 
+from fence_sorter.analysis.line_bag import LineBagError, replay_summary
 from fence_sorter.line.handoff import INDUCTION, RECIRCULATION, link_name
 from fence_sorter.line.line_file import load_line
 from fence_sorter.line.multi_unit import LinePlant, LineRunConfig
 from fence_sorter.line.routing import to_line
+from fence_sorter.recording.bagread import read_bag
 from fence_sorter.visualisation.line_view import LineRerunLogger, line_blueprint, open_recording
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
@@ -45,15 +48,13 @@ DT = 0.01  # the line clock's step (line_owner's default)
 
 
 @pytest.fixture(scope="module")
-def recorded(tmp_path_factory) -> tuple[Path, dict, dict[str, list]]:
-    """The bag, the live summary, every message of the bag decoded by mcap_ros2."""
-    bag = tmp_path_factory.mktemp("line_bag") / "bag"
-    proc = run_cli(
-        "run", "--line", "two_units", "--parcels", "10", "--seed", "3", "--json",
-        "--bag", str(bag), timeout=600,
-    )  # fmt: skip
+def recorded(line_run_two_units) -> tuple[Path, dict, dict[str, list]]:
+    """The bag of the run (conftest.py), its live summary, every message of the bag decoded
+    by mcap_ros2."""
+    bag, proc = line_run_two_units
     assert proc.returncode == 0, proc.stdout + proc.stderr
     live = json.loads(proc.stdout)
+    live.pop("log_dir", None)  # where the run kept its logs: not a figure of the line
     messages: dict[str, list] = defaultdict(list)
     segments = sorted(bag.glob("*.mcap"))
     assert segments
@@ -72,6 +73,21 @@ def test_analyze_gives_the_live_summary(recorded) -> None:
     got = json.loads(ana.stdout)
     assert {k: (v, got.get(k)) for k, v in live.items() if k not in WALL and got.get(k) != v} == {}
     assert set(got) == set(live)
+
+
+def test_a_missing_reply_is_named(recorded) -> None:
+    """The bag without unit_2's last step reply: the replay stops there with one line naming
+    the unit, the command and the topic."""
+    bag, _, _ = recorded
+    contents = read_bag(bag)
+    last = max(
+        i for i, m in enumerate(contents.messages)
+        if m.topic == "/unit_2/replies" and '"_":"Done"' in m.msg.data
+    )  # fmt: skip
+    del contents.messages[last]
+    with pytest.raises(LineBagError, match=r"^the bag has no reply of unit_2 to its command \d+ "
+                       r"\(Done missing on /unit_2/replies\)$"):  # fmt: skip
+        replay_summary(contents)
 
 
 def test_independent_reader_sees_the_run(recorded) -> None:

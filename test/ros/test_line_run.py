@@ -18,17 +18,15 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 WALL = ("wall_time_s", "real_time_factor")
 
 
-def test_run_line_equals_line_sim(tmp_path: Path) -> None:
-    """two_units, 10 parcels, seed 3: exit 0, the --json summary equals line-sim's, every
-    parcel inducted ends sorted or rejected (conservation exact), and on every link the
-    hand-offs received by the downstream process equal those its upstream one sent."""
+def test_run_line_equals_line_sim(line_run_two_units) -> None:
+    """two_units, 10 parcels, seed 3 (recorded: the run of conftest.py, its bag for
+    test_line_bag.py): exit 0, the --json summary equals line-sim's, every parcel inducted
+    ends sorted or rejected (conservation exact), and on every link the hand-offs received by
+    the downstream process equal those its upstream one sent."""
     sim = run_cli("line-sim", "two_units", "--parcels", "10", "--seed", "3", "--json")
     assert sim.returncode == 0, sim.stderr
     ref = json.loads(sim.stdout)
-    proc = run_cli(
-        "run", "--line", "two_units", "--parcels", "10", "--seed", "3", "--json",
-        "--log-dir", str(tmp_path / "logs"), timeout=600,
-    )  # fmt: skip
+    _, proc = line_run_two_units
     assert proc.returncode == 0, proc.stdout + proc.stderr
     got = json.loads(proc.stdout)
     assert {k: (v, got.get(k)) for k, v in ref.items() if k not in WALL and got.get(k) != v} == {}
