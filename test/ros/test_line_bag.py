@@ -66,11 +66,13 @@ def recorded(line_run_two_units) -> tuple[Path, dict, dict[str, list]]:
     return bag, live, messages
 
 
-def test_analyze_gives_the_live_summary(recorded) -> None:
+def test_analyze_gives_the_live_summary(recorded, tmp_path: Path) -> None:
+    """``analyze --json`` (and the ``line_summary.json`` of ``--out``) is the live summary."""
     bag, live, _ = recorded
-    ana = run_cli("analyze", str(bag), "--json")
+    ana = run_cli("analyze", str(bag), "--json", "--out", str(tmp_path))
     assert ana.returncode == 0, ana.stderr
     got = json.loads(ana.stdout)
+    assert json.loads((tmp_path / "line_summary.json").read_text()) == got
     assert {k: (v, got.get(k)) for k, v in live.items() if k not in WALL and got.get(k) != v} == {}
     assert set(got) == set(live)
 
