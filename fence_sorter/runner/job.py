@@ -150,6 +150,17 @@ class RunPlan:
     stream: dict[int, ParcelSpec] = field(default_factory=dict, repr=False)
 
 
+def make_bag_dir(bag: str) -> None:
+    """Make the bag directory ``--bag`` names (its parents too); a path that cannot be a
+    directory is a ValueError naming the option."""
+    try:
+        Path(bag).mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ValueError(
+            f"--bag must be a directory that exists or can be made, got {bag} ({exc.strerror})"
+        ) from None
+
+
 def prepare(opts: RunOptions) -> RunPlan:
     """Check every input before anything starts; BadInput names the option and the range."""
     if opts.parcels is not None and opts.parcels < 1:
@@ -164,6 +175,11 @@ def prepare(opts: RunOptions) -> RunPlan:
         rrd = Path(opts.rrd)
         if rrd.suffix != ".rrd" or not rrd.resolve().parent.is_dir():
             raise BadInput(f"--rrd must be a .rrd file in an existing directory, got {opts.rrd}")
+    if opts.bag:
+        try:
+            make_bag_dir(opts.bag)
+        except ValueError as exc:
+            raise BadInput(str(exc)) from None
     try:
         scene_path = resolve_scene(opts.scene).resolve()
         base = load_scene(scene_path).scenario
@@ -478,7 +494,6 @@ def _run(
                 ),
             )
         if opts.bag:
-            Path(opts.bag).mkdir(parents=True, exist_ok=True)
             rec_args = _recorder_args(plan, opts, log_dir)
             group.start(
                 "recorder",

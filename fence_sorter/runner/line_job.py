@@ -38,6 +38,7 @@ from fence_sorter.runner.job import (
     EXIT_OK,
     Interrupted,
     StopRequest,
+    make_bag_dir,
 )
 from fence_sorter.runner.processes import (
     FASTDDS_PROFILE,
@@ -133,12 +134,9 @@ def _check(
         if not opts.owner:
             raise BadLineInput("--bag records on the owner's host: it does not go with --no-owner")
         try:
-            Path(opts.bag).mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise BadLineInput(
-                f"--bag must be a directory that exists or can be made, got {opts.bag} "
-                f"({exc.strerror})"
-            ) from None
+            make_bag_dir(opts.bag)
+        except ValueError as exc:
+            raise BadLineInput(str(exc)) from None
     transport = None
     if (opts.interface is None) != (opts.peers is None):
         raise BadLineInput("--interface and --peers go together (this host's, the others')")

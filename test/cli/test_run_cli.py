@@ -25,6 +25,7 @@ from processes import run_cli, wait_until
         (["--stream", "nope"], "stream nope: file not found"),
         (["--rrd", "x.txt"], "--rrd must be a .rrd file in an existing directory, got x.txt"),
         (["--rrd", "/nonexistent/x.rrd"], "--rrd must be a .rrd file in an existing directory"),
+        (["--bag", "/dev/null/bag"], "--bag must be a directory that exists or can be made"),
         (
             ["--param", "controller.a_ndop=1"],
             "--param 'controller.a_ndop=1' must be NODE:KEY=VALUE",
