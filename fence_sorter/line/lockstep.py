@@ -28,24 +28,42 @@ commands, as long as nothing is lost.
 
 A transport carries the commands, replies and hand-offs (:class:`Links`): :class:`LocalLinks`
 in one process; the line's ROS 2 nodes over DDS.
+
+A unit that stops answering (its process or its host is gone: :meth:`Links.wait` raises
+:class:`UnitDown`) is down, and the line goes on without it: the parcels in its strokes are
+lost with it (``lost_with_unit``, each named with its unit); its stand-in takes the hand-offs
+meant for it, declines each ``unit_down`` and passes it on to the next unit on the unit's own
+link (:meth:`Links.forward`), so that its destinations recirculate. A new process of the unit
+(:meth:`Links.rejoining`) rejoins at the start of a step: its command stream starts again with
+a :class:`Snapshot` of the owner's traffic and clock, and it routes the parcels announced from
+then on (the stand-in keeps the ones announced before). The counts of a unit's earlier
+processes are kept from their replies, so that every link still balances.
 """
 
 from __future__ import annotations
 
 import json
 import math
-from collections.abc import Sequence
-from dataclasses import dataclass, field, fields, is_dataclass
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, fields, is_dataclass, replace
 
 from fence_sorter.inputs import ParcelSpec
-from fence_sorter.line.handoff import INDUCTION, RECIRCULATION, Failed, HandOff, Sorted
+from fence_sorter.line.handoff import (
+    INDUCTION,
+    RECIRCULATION,
+    REFUSALS,
+    Failed,
+    HandOff,
+    Sorted,
+)
 from fence_sorter.line.line_file import LineSpec
 from fence_sorter.line.multi_unit import LinePlant, LineRunConfig
-from fence_sorter.line.routing import Booking, Decision, Track
+from fence_sorter.line.routing import UNIT_DOWN, Booking, Decision, Track
 from fence_sorter.line.traffic import Announce, Hold, Left, TrafficView
 from fence_sorter.line.unit import LineUnit, Record, Traffic, UnitReply
 
 __all__ = [
+    "EXIT_OWNER_GONE",
     "Command",
     "Deliver",
     "Delivered",
@@ -57,9 +75,11 @@ __all__ = [
     "RemoteUnit",
     "Report",
     "Scan",
+    "Snapshot",
     "StartGate",
     "Step",
     "Tick",
+    "UnitDown",
     "UnitSide",
     "WarmUp",
     "Warmed",
@@ -67,6 +87,11 @@ __all__ = [
     "encode",
     "make_unit",
 ]
+
+
+#: the exit status of a unit's process (and of a runner without the owner) whose owner fell
+#: silent: no command for the unit's ``owner_timeout`` once the line ran
+EXIT_OWNER_GONE = 3
 
 
 # -- owner -> unit ---------------------------------------------------------------------------
@@ -122,11 +147,22 @@ class WarmUp:
 
 
 @dataclass(frozen=True)
+class Snapshot:
+    """A new process of a unit rejoins the line at ``t``: the owner's traffic (tracks, booked
+    strokes, parcels in a stroke) to start its view from, and its clock."""
+
+    t: float
+    tracks: tuple[Track, ...]
+    bookings: tuple[Booking, ...]
+    stroking: tuple[int, ...]
+
+
+@dataclass(frozen=True)
 class Command:
     """One command on a unit's ordered stream; ``seq`` counts from 0 per unit."""
 
     seq: int
-    body: object  # Scan | Tick | Deliver | Step | Report | a traffic record
+    body: object  # Scan | Tick | Deliver | Step | Report | WarmUp | Snapshot | a record
 
 
 # -- unit -> owner ---------------------------------------------------------------------------
@@ -180,7 +216,7 @@ def _kinds() -> dict[str, type]:
         for c in (
             Command, Scan, Tick, Deliver, Step, Report, Delivered, Done, Figures, Announce,
             Hold, Left, Booking, HandOff, Sorted, Failed, Track, ParcelSpec, Decision, WarmUp,
-            Warmed,
+            Warmed, Snapshot,
         )
     }  # fmt: skip
 
@@ -302,6 +338,12 @@ class UnitSide:
         if isinstance(body, WarmUp):
             loads = [sp.to_parcel_params() for sp in body.specs]
             return [Warmed(u.planner.warm_up(loads, time_budget=body.time_budget))]
+        if isinstance(body, Snapshot):  # a new process of the unit rejoins the line
+            self.view.tracks = {tr.parcel_id: replace(tr) for tr in body.tracks}
+            self.view.bookings = list(body.bookings)
+            self.view.stroking = set(body.stroking)
+            u.advance(body.t)  # an empty simulation: its clock jumps to the line's
+            return []
         if isinstance(body, Report):
             return [
                 Figures(
@@ -337,6 +379,28 @@ class Links:
     def hand_off(self, h: HandOff) -> None:
         raise NotImplementedError
 
+    def forward(self, h: HandOff) -> None:
+        """A hand-off on the downstream link of unit ``h.from_unit``, sent by the owner for
+        that unit while it is down."""
+        raise NotImplementedError
+
+    def rejoining(self) -> list[int]:
+        """The units that are down and whose new process is ready to rejoin (none by
+        default)."""
+        return []
+
+    def restart(self, k: int) -> None:
+        """Unit ``k``'s command stream starts again (from 0; replies still queued are
+        dropped)."""
+
+
+class UnitDown(RuntimeError):
+    """:meth:`Links.wait`: unit ``k`` stopped answering (its process or host is gone)."""
+
+    def __init__(self, k: int, why: str):
+        super().__init__(why)
+        self.k = k
+
 
 @dataclass
 class LocalLinks(Links):
@@ -344,30 +408,59 @@ class LocalLinks(Links):
     memory. ``recirculation`` collects the last unit's hand-offs (the owner's end of that
     link)."""
 
-    sides: list[UnitSide]
+    sides: list[UnitSide | None]
     seq: list[int] = field(default_factory=list)
     replies: list[list[Reply]] = field(default_factory=list)
     recirculation: list[HandOff] = field(default_factory=list)
+    #: new sides of killed units, waiting to rejoin (unit index -> side)
+    fresh: dict[int, UnitSide] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         self.seq = [0] * len(self.sides)
         self.replies = [[] for _ in self.sides]
 
+    def kill(self, k: int) -> None:
+        """Unit ``k``'s process is gone: what it was sent or owed is lost with it."""
+        self.sides[k] = None
+        self.replies[k].clear()
+
+    def start_again(self, k: int, side: UnitSide) -> None:
+        """A new process of unit ``k`` is ready: it rejoins at the owner's next step."""
+        self.fresh[k] = side
+
     def send(self, k: int, body: object) -> None:
         cmd = Command(self.seq[k], body)
         self.seq[k] += 1
-        self._route(k, self.sides[k].on_command(cmd))
+        side = self.sides[k]
+        if side is not None:
+            self._route(k, side.on_command(cmd))
 
     def wait(self, k: int) -> Reply:
         if not self.replies[k]:
-            raise RuntimeError(f"unit {k} owes no reply (blocked={self.sides[k].blocked})")
+            side = self.sides[k]
+            if side is None:
+                raise UnitDown(k, f"unit {k} is gone")
+            raise RuntimeError(f"unit {k} owes no reply (blocked={side.blocked})")
         return self.replies[k].pop(0)
 
     def hand_off(self, h: HandOff) -> None:
         if h.to_unit == RECIRCULATION:
             self.recirculation.append(h)
             return
-        self._route(h.to_unit, self.sides[h.to_unit].on_handoff(h))
+        side = self.sides[h.to_unit]
+        if side is not None:
+            self._route(h.to_unit, side.on_handoff(h))
+
+    def forward(self, h: HandOff) -> None:
+        self.hand_off(h)
+
+    def rejoining(self) -> list[int]:
+        return sorted(self.fresh)
+
+    def restart(self, k: int) -> None:
+        self.sides[k] = self.fresh.pop(k)
+        self.seq[k] = 0
+        self.replies[k].clear()
 
     def _route(self, k: int, out: list[object]) -> None:
         for o in out:
@@ -409,8 +502,28 @@ class StartGate:
         )
 
 
+@dataclass
+class _Tally:
+    """The link counts of one process of a unit, kept from its replies."""
+
+    handoffs_in: int = 0
+    handoffs_out: int = 0
+    handoffs_lost: int = 0
+    sorted: int = 0
+    refused: dict[str, int] = field(default_factory=lambda: dict.fromkeys(REFUSALS, 0))
+
+    def add(self, o: _Tally) -> None:
+        self.handoffs_in += o.handoffs_in
+        self.handoffs_out += o.handoffs_out
+        self.handoffs_lost += o.handoffs_lost
+        self.sorted += o.sorted
+        for k, v in o.refused.items():
+            self.refused[k] += v
+
+
 class RemoteUnit:
-    """The plant's stand-in for a unit on a side of its own: its calls become commands."""
+    """The plant's stand-in for a unit on a side of its own: its calls become commands; while
+    the unit is down it declines the unit's hand-offs ``unit_down`` and passes them on."""
 
     def __init__(self, unit: LineUnit, links: Links):
         self.links = links
@@ -419,32 +532,100 @@ class RemoteUnit:
         self.upstream = unit.upstream
         self.downstream = unit.downstream
         self.planner = unit.planner
+        self.blank = unit  # never used: the figures of a unit that is down at the end
         self._fig: Figures | None = None
+        self._t = 0.0
+        self.down = False
+        self.why = ""  # why it went down, the latest time
+        self.down_at = math.nan  # sim time it went down, the latest time [s]
+        self.downtime = 0.0  # sim time it was down, rejoins aside [s]
+        self.downs = 0
+        self.rejoins = 0
+        self.lost_parcels: list[int] = []  # parcels in its strokes when it went down
+        self.known: set[tuple[int, int]] | None = None  # (id, pass) announced to its process
+        self.tally = _Tally()  # its process's counts, from its replies
+        self.banked = _Tally()  # the counts of its earlier processes
+        self.stood_in = 0  # hand-offs the stand-in took and passed on for it
+        self.on_down: Callable[[RemoteUnit, str], None] = lambda u, why: None
 
     def announce(self, parcel_id: int, passes: int, spec=None, destination: str = "") -> None:
+        if self.down:
+            return
+        if self.known is not None:
+            self.known.add((parcel_id, passes))
         self.links.send(self.index, Scan(parcel_id, passes, spec, destination))
 
     def receive(self, h: HandOff, t: float, traffic: Traffic | None = None) -> UnitReply:
-        """The unit routes the hand-off with its own copy of the traffic (``traffic`` unused)."""
-        if h.from_unit == INDUCTION:
-            self.links.hand_off(h)
-        self.links.send(self.index, Deliver(h.parcel_id, h.passes, h.from_unit, t))
-        r = self.links.wait(self.index)
-        assert isinstance(r, Delivered) and r.parcel_id == h.parcel_id, r
-        return UnitReply(r.refusal, r.decision, r.booking, list(r.records))
+        """The unit routes the hand-off with its own copy of the traffic (``traffic`` unused);
+        while it is down, or for a parcel announced before its process rejoined, the
+        stand-in passes it on (:meth:`stand_in`)."""
+        if not self.down and (self.known is None or (h.parcel_id, h.passes) in self.known):
+            try:
+                if h.from_unit == INDUCTION:
+                    self.links.hand_off(h)
+                self.links.send(self.index, Deliver(h.parcel_id, h.passes, h.from_unit, t))
+                r = self.links.wait(self.index)
+            except UnitDown as exc:
+                self.on_down(self, str(exc))
+            else:
+                assert isinstance(r, Delivered) and r.parcel_id == h.parcel_id, r
+                self.count(r)
+                return UnitReply(r.refusal, r.decision, r.booking, list(r.records))
+        return self.stand_in(h, t)
+
+    def stand_in(self, h: HandOff, t: float) -> UnitReply:
+        """Take ``h`` for the unit, decline it ``unit_down`` and pass it on, as the unit
+        passes on a parcel it declines (the pose it came with), on the unit's own link."""
+        self.stood_in += 1
+        out = replace(h, t=t, from_unit=self.index, to_unit=self.downstream)
+        self.links.forward(out)
+        return UnitReply(decision=Decision(False, UNIT_DOWN), records=[out])
+
+    def count(self, r: object) -> None:
+        """Count a reply's hand-offs and sorts (what a process that dies takes with it)."""
+        c = self.tally
+        if isinstance(r, Delivered):
+            if r.refusal:
+                c.refused[r.refusal] += 1
+            else:
+                c.handoffs_in += 1
+            recs, late = r.records, ()
+        elif isinstance(r, Done):
+            recs, late = (*r.deadline_records, *r.advance_records), r.deadline_records
+        else:
+            return
+        c.handoffs_out += sum(isinstance(x, HandOff) for x in recs)
+        c.handoffs_lost += sum(isinstance(x, HandOff) for x in late)
+        c.sorted += sum(isinstance(x, Sorted) for x in recs)
 
     def report(self, t: float) -> None:
+        self._fig, self._t = None, t
+        if self.down:
+            return
         self.links.send(self.index, Report(t))
-        r = self.links.wait(self.index)
+        try:
+            r = self.links.wait(self.index)
+        except UnitDown as exc:
+            self.on_down(self, str(exc))
+            return
         assert isinstance(r, Figures), r
         self._fig = r
 
-    # what the plant's summary reads (after :meth:`report`)
+    # what the plant's summary reads (after :meth:`report`): the unit's process's figures,
+    # plus the counts of its earlier processes and of its stand-in
     def figures(self, t: float) -> dict:
-        return dict(self._fig.figures)
+        f = dict(self._fig.figures) if self._fig is not None else self.blank.figures(t)
+        b = self.banked
+        f["handoffs_in"] += b.handoffs_in + self.stood_in
+        f["handoffs_out"] += b.handoffs_out + self.stood_in
+        f["handoffs_lost"] += b.handoffs_lost
+        f["sorted"] += b.sorted
+        f["handoffs_refused"] = {k: v + b.refused[k] for k, v in f["handoffs_refused"].items()}
+        f["declined"] = {**f["declined"], UNIT_DOWN: f["declined"][UNIT_DOWN] + self.stood_in}
+        return f
 
     def _f(self, key: str):
-        return self._fig.figures[key]
+        return self.figures(self._t)[key]
 
     received = property(lambda self: self._f("handoffs_in"))
     sent = property(lambda self: self._f("handoffs_out"))
@@ -452,52 +633,100 @@ class RemoteUnit:
     refused_handoffs = property(lambda self: dict(self._f("handoffs_refused")))
     declined = property(lambda self: dict(self._f("declined")))
     intrusions = property(lambda self: self._f("swept_sector_intrusions"))
-    strokes = property(lambda self: list(self._fig.strokes))
-    max_impact_speed = property(lambda self: self._fig.max_impact_speed)
-    max_accel = property(lambda self: self._fig.max_accel)
+    strokes = property(lambda self: list(self._fig.strokes) if self._fig else [])
+    max_impact_speed = property(lambda self: self._fig.max_impact_speed if self._fig else 0.0)
+    max_accel = property(lambda self: self._fig.max_accel if self._fig else 0.0)
 
 
 class _SharedView(TrafficView):
-    """The owner's view: every record and tick it applies goes to every unit as well."""
+    """The owner's view: every record and tick it applies goes to every unit that is up."""
 
-    def __init__(self, speed: float, links: Links, n_units: int):
+    def __init__(self, speed: float, links: Links, units: list[RemoteUnit]):
         super().__init__(speed)
         self.links = links
-        self.n = n_units
+        self.units = units
 
     def apply(self, rec: object) -> None:
         super().apply(rec)
-        for k in range(self.n):
-            self.links.send(k, rec)
+        for u in self.units:
+            if not u.down:
+                self.links.send(u.index, rec)
 
     def tick(self, t: float) -> None:
         super().tick(t)
-        for k in range(self.n):
-            self.links.send(k, Tick(t))
+        for u in self.units:
+            if not u.down:
+                self.links.send(u.index, Tick(t))
 
 
 class LockstepOwner(LinePlant):
     """The induction, the recirculation and the clock of a line whose units run elsewhere
-    (behind ``links``); :meth:`run` to the drain gives ``LinePlant``'s summary."""
+    (behind ``links``); :meth:`run` to the drain gives ``LinePlant``'s summary, with the units
+    that went down (``units_down``) and the parcels lost with them (``lost_with_unit``)."""
 
     def __init__(self, line: LineSpec, cfg: LineRunConfig, links: Links):
         super().__init__(line, cfg)
         self.transport = links
         self.units = [RemoteUnit(u, links) for u in self.units]
-        self.view = _SharedView(self.v, links, len(self.units))
+        for u in self.units:
+            u.on_down = self._unit_down
+        self.view = _SharedView(self.v, links, self.units)
+
+    def _unit_down(self, u: RemoteUnit, why: str) -> None:
+        """Unit ``u`` is down: the parcels in its strokes are lost with it (each leaves every
+        other unit's traffic as a failed one), its counts so far are kept."""
+        if u.down:
+            return
+        u.down, u.why, u.down_at, u.downs = True, why, self.t, u.downs + 1
+        u.banked.add(u.tally)
+        u.tally = _Tally()
+        for p in self.live:
+            if p.stroke_unit != u.index or p.state != "belt":
+                continue
+            p.state, p.end = "lost", f"{UNIT_DOWN}:{u.spec.name}"
+            p.stroke_unit, p.track, p.pending = None, None, None
+            u.lost_parcels.append(p.pid)
+            self.bookings = [b for b in self.bookings if b.parcel_id != p.pid]
+            self.view.apply(Failed(p.pid, u.index, self.t, UNIT_DOWN))
+        self.live = [p for p in self.live if p.state != "lost"]
+
+    def _rejoin(self, u: RemoteUnit) -> None:
+        """A new process of ``u`` rejoins now, at the start of a step: its stream starts again
+        with the owner's traffic; it routes the parcels announced from now on."""
+        if not u.down:  # its new process says the old one is gone
+            self._unit_down(u, "a new process of it started")
+        self.transport.restart(u.index)
+        u.down, u.known = False, set()
+        u.downtime += self.t - u.down_at
+        u.rejoins += 1
+        v = self.view
+        snap = Snapshot(self.t, tuple(v.tracks.values()), tuple(v.bookings), tuple(v.stroking))
+        self.transport.send(u.index, snap)
+
+    def _wait(self, u: RemoteUnit, t: float) -> Done:
+        if not u.down:
+            try:
+                r = self.transport.wait(u.index)
+            except UnitDown as exc:
+                self._unit_down(u, str(exc))
+            else:
+                assert isinstance(r, Done) and r.t == t, r
+                u.count(r)
+                return r
+        return Done(t, (), ())
 
     def step(self) -> None:
+        for k in self.transport.rejoining():
+            self._rejoin(self.units[k])
         self._announce()
         self._merge()
         self._hand_offs()
         t_next = self.t + self.cfg.dt
+        t = self.t
         for u in self.units:
-            self.transport.send(u.index, Step(self.t, t_next))
-        done = []
-        for u in self.units:
-            r = self.transport.wait(u.index)
-            assert isinstance(r, Done) and r.t == self.t, r
-            done.append(r)
+            if not u.down:
+                self.transport.send(u.index, Step(t, t_next))
+        done = [self._wait(u, t) for u in self.units]
         for u, d in zip(self.units, done, strict=True):
             for rec in d.deadline_records:
                 self._on_record(u, rec)
@@ -516,10 +745,36 @@ class LockstepOwner(LinePlant):
         for u in self.units:
             self.transport.send(u.index, WarmUp(specs, time_budget))
         for u in self.units:
-            r = self.transport.wait(u.index)
+            try:
+                r = self.transport.wait(u.index)
+            except UnitDown as exc:
+                self._unit_down(u, str(exc))
+                continue
             assert isinstance(r, Warmed), r
 
     def summary(self) -> dict:
         for u in self.units:
             u.report(self.t)
-        return super().summary()
+        s = super().summary()
+        lost = [p for p in self.parcels if p.state == "lost"]
+        ended = s["sorted"] + s["rejected"] + s["solver_failures"] + s["still_on_line"]
+        s["lost_with_unit"] = len(lost)
+        s["conservation_ok"] = s["parcels_inducted"] == ended + len(lost)
+        s["units_down"] = {
+            u.spec.name: {
+                "downs": u.downs,
+                "rejoins": u.rejoins,
+                "down_at_end": u.down,
+                "why": u.why,
+                "downtime_s": u.downtime + (self.t - u.down_at if u.down else 0.0),
+                "lost_parcels": list(u.lost_parcels),
+                "handoffs_passed_on": u.stood_in,
+                # what its latest process (after the latest rejoin) sorted; None: down
+                "sorted_by_last_process": (
+                    u._fig.figures["sorted"] if u._fig is not None and u.rejoins else None
+                ),
+            }
+            for u in self.units
+            if u.downs
+        }
+        return s

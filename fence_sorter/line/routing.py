@@ -43,10 +43,14 @@ SECTOR_OCCUPIED = "sector_occupied"
 CHUTE_FULL = "chute_full"
 NO_READ = "no_read"
 NOT_SERVED = "not_served"
+#: the unit is down (its process or host is gone): the line's owner passes the parcel on for it
+UNIT_DOWN = "unit_down"
 #: after its stroke a parcel left on the belt rides at v again within this time [s] (the
 #: solve's settle time, 0.5 s by default, and a reserve)
 SETTLE_SLACK = 1.5
-REASONS = (NO_FEASIBLE_STROKE, FENCE_BUSY, SECTOR_OCCUPIED, CHUTE_FULL, NO_READ, NOT_SERVED)
+REASONS = (
+    NO_FEASIBLE_STROKE, FENCE_BUSY, SECTOR_OCCUPIED, CHUTE_FULL, NO_READ, NOT_SERVED, UNIT_DOWN,
+)  # fmt: skip
 
 
 def footprint(
