@@ -154,9 +154,19 @@ def format_summary(s: dict) -> str:
         + f"; refused {sum(sum(v['refused'].values()) for v in links.values())}"
         + f", lost {sum(v['lost'] for v in links.values())}"
     )
+    for name, d in s.get("units_down", {}).items():
+        lost = ", ".join(map(str, d["lost_parcels"])) or "none"
+        lines.append(
+            f"{name} went down {d['downs']}x ({d['why']}), down {d['downtime_s']:.2f} s of sim "
+            f"time, rejoined {d['rejoins']}x{', down at the end' if d['down_at_end'] else ''}, "
+            f"restarts {s.get('restarts', {}).get(name, 0)}; lost with it (in its strokes): "
+            f"{lost}; hand-offs passed on for it: {d['handoffs_passed_on']}"
+        )
+    lost = s.get("lost_with_unit", 0)
     lines.append(
         f"conservation: {s['parcels_inducted']} = sorted {s['sorted']} + rejected "
-        f"{s['rejected']} + failed {s['solver_failures']} + on the line {s['still_on_line']}: "
-        f"{'exact' if s['conservation_ok'] else 'VIOLATED'}"
+        f"{s['rejected']} + failed {s['solver_failures']} + on the line {s['still_on_line']}"
+        + (f" + lost with a unit {lost}" if lost else "")
+        + f": {'exact' if s['conservation_ok'] else 'VIOLATED'}"
     )
     return "\n".join(lines)

@@ -7,8 +7,13 @@ ready (its writers matched), then runs the line to the drain: each unit's comman
 hand-offs go on ``/line/handoffs`` and the last unit's come back on its ``handoffs`` topic (the
 recirculation's end of that link). Each step of the line clock is published on /clock. At the
 end it writes the line summary (``LinePlant.summary``, JSON) to ``summary`` (or stdout) and
-exits: 0 on a drained line whose hand-offs balance, 1 otherwise, 2 on a bad line file or
-parameter; 1 as well when a unit does not answer within ``reply_timeout``.
+exits: 0 on a drained line whose hand-offs balance and whose parcels are all accounted for, 1
+otherwise, 2 on a bad line file or parameter.
+
+A unit that does not answer within ``reply_timeout``, or whose new process says ``ready``
+(each process of a unit says it with a token of its own), is down: the line goes on without it
+(:class:`~fence_sorter.line.lockstep.LockstepOwner`); the owner passes its hand-offs on for it
+on the unit's own ``handoffs`` topic, and a new process of it rejoins at the next step.
 
 The plant's loop runs in the main thread; rclpy spins in a thread of its own and hands the
 replies over through one queue per unit.
@@ -39,6 +44,7 @@ from fence_sorter.line.lockstep import (
     Links,
     LockstepOwner,
     StartGate,
+    UnitDown,
     decode,
     encode,
 )
@@ -51,7 +57,14 @@ from fence_sorter.nodes.line_record import (
     publish_summary,
     summary_publisher,
 )
-from fence_sorter.nodes.line_unit import END, INDUCTION_TOPIC, LINE_QOS, READY, handoff_topic
+from fence_sorter.nodes.line_unit import (
+    COMMAND_QOS,
+    END,
+    INDUCTION_TOPIC,
+    LINE_QOS,
+    READY,
+    handoff_topic,
+)
 from fence_sorter.nodes.parameters import LINE_OWNER_PARAMETERS
 from fence_sorter.nodes.qos import CLOCK_QOS
 from fence_sorter.nodes.tf_publisher import LineTfPublisher
@@ -88,16 +101,24 @@ class LineOwnerNode(FenceSorterNode, Links):
         self.seq = [0] * len(names)
         self.inbox: list[queue.Queue] = [queue.Queue() for _ in names]
         self.gate = StartGate(names)
+        self.token: list[str | None] = [None] * len(names)  # the process each unit runs in
+        self.fresh: dict[int, str] = {}  # unit -> token of a new process of it, said ready
         self._poll = threading.Event()  # never set: a bounded wait between checks
         self.induction_published = 0
         self.recirculation_arrived = 0
         self.bad_messages = 0
-        self.commands = [self.create_publisher(String, f"/{n}/commands", LINE_QOS) for n in names]
+        self.commands = [
+            self.create_publisher(String, f"/{n}/commands", COMMAND_QOS) for n in names
+        ]
         for k, n in enumerate(names):
             self.create_subscription(
                 String, f"/{n}/replies", lambda m, k=k: self._on_reply(k, m), LINE_QOS
             )
         self.induction = self.create_publisher(HandOffMsg, INDUCTION_TOPIC, LINE_QOS)
+        # a unit's downstream link, for the hand-offs the owner passes on while it is down
+        self.stand_in = [
+            self.create_publisher(HandOffMsg, handoff_topic(n), LINE_QOS) for n in names
+        ]
         self.create_subscription(
             HandOffMsg, handoff_topic(names[-1]), self._on_recirculation, LINE_QOS
         )
@@ -111,8 +132,13 @@ class LineOwnerNode(FenceSorterNode, Links):
 
     # -- rclpy callbacks (the spin thread) ------------------------------------------------------
     def _on_reply(self, k: int, msg: String) -> None:
-        if msg.data == READY:
-            self.gate.say_ready(k)
+        if msg.data.startswith(READY):
+            token = msg.data[len(READY) :]
+            if self.token[k] is None:
+                self.token[k] = token
+                self.gate.say_ready(k)
+            elif token != self.token[k]:
+                self.fresh[k] = token
             return
         try:
             self.inbox[k].put(decode(msg.data))
@@ -131,18 +157,41 @@ class LineOwnerNode(FenceSorterNode, Links):
         self.seq[k] += 1
 
     def wait(self, k: int):
-        try:
-            return self.inbox[k].get(timeout=self.reply_timeout)
-        except queue.Empty:
-            name = self.line.units[k].name
-            raise UnitSilent(
-                f"line_owner: {name} did not answer command {self.seq[k] - 1} within "
-                f"reply_timeout {self.reply_timeout:g} s"
-            ) from None
+        """Unit k's next reply; UnitDown when none comes within ``reply_timeout`` or a new
+        process of the unit said ready (the one the owner waits for is gone)."""
+        name = self.line.units[k].name
+        end = time.monotonic() + self.reply_timeout
+        while True:
+            if k in self.fresh:
+                raise UnitDown(k, f"{name}: a new process of it started")
+            try:
+                return self.inbox[k].get(timeout=0.05)
+            except queue.Empty:
+                pass
+            if time.monotonic() >= end:
+                why = (
+                    f"{name} did not answer command {self.seq[k] - 1} within reply_timeout "
+                    f"{self.reply_timeout:g} s"
+                )
+                self.get_logger().error(f"{why}: the line goes on without it")
+                raise UnitDown(k, why)
 
     def hand_off(self, h: HandOff) -> None:
         self.induction.publish(handoff_to_msg(h))
         self.induction_published += 1
+
+    def forward(self, h: HandOff) -> None:
+        self.stand_in[h.from_unit].publish(handoff_to_msg(h))
+
+    def rejoining(self) -> list[int]:
+        return sorted(self.fresh)
+
+    def restart(self, k: int) -> None:
+        self.token[k] = self.fresh.pop(k)
+        self.seq[k] = 0
+        while not self.inbox[k].empty():
+            self.inbox[k].get_nowait()
+        self.get_logger().info(f"{self.line.units[k].name} rejoins the line")
 
     # -- the run --------------------------------------------------------------------------------
     def wait_ready(self) -> None:
@@ -167,13 +216,15 @@ class LineOwnerNode(FenceSorterNode, Links):
     def end_units(self, timeout: float = 10.0) -> None:
         """Tell every unit the line is over (each then exits 0), and wait, bounded, until each
         acknowledged it: a unit on another host ends with the line as well."""
-        for c in self.commands:
+        up = [c for u, c in zip(self.owner.units, self.commands, strict=True) if not u.down]
+        for c in up:
             c.publish(String(data=END))
-        for c in self.commands:
+        for c in up:
             c.wait_for_all_acked(Duration(seconds=timeout))
 
     def run_line(self) -> dict:
         owner = self.owner
+        self.get_logger().info("every unit is ready: the line runs")
         if self.warm:
             owner.warm_up()
         wall0 = time.perf_counter()
@@ -197,8 +248,9 @@ class LineOwnerNode(FenceSorterNode, Links):
 
 
 def line_ok(s: dict) -> bool:
-    """``line-sim``'s check: drained, conservation exact, no wrong destination, hand-offs
-    balanced, and (guard on) no swept-sector intrusion."""
+    """``line-sim``'s check: drained, conservation exact (the parcels lost with a unit that
+    went down counted), no wrong destination, hand-offs balanced, and (guard on) no
+    swept-sector intrusion."""
     return bool(
         s["drained"]
         and s["conservation_ok"]

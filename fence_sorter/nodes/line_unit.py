@@ -6,21 +6,29 @@ Started in the namespace ``/<unit name>`` (``/unit_1``, ...); its own topic name
   :class:`~fence_sorter.line.lockstep.Command` in the wire format of
   :func:`~fence_sorter.line.lockstep.encode`, then ``end`` once the line is over (the unit
   exits 0: a unit on another host ends with the line);
-- ``replies`` (std_msgs/String, out): ``ready`` until the first command comes, then the
-  answers (Delivered, Done, Figures) in the same format;
+- ``replies`` (std_msgs/String, out): ``ready<token>`` (a token of this process: the owner
+  tells a new process of the unit from the one it ran with) until the first command comes,
+  then the answers (Delivered, Done, Figures) in the same format;
 - ``handoffs`` (fence_sorter_msgs/HandOff, out): the hand-offs to the downstream unit, or to
   the recirculation after the last unit;
 - the upstream link (HandOff, in): ``/line/handoffs`` (the induction) for the first unit, else
   ``/<upstream unit name>/handoffs``.
 
-Every topic is reliable and keep-all: nothing is dropped silently. The heartbeat on
+Every topic is reliable and keep-all (``commands``: the latest 1000 kept, more than a unit is
+ever behind in lockstep): nothing is dropped silently. The heartbeat on
 /diagnostics counts the hand-offs at this end of both links: arrived on the upstream one,
 received (taken at the scan line), refused per reason and lost; published on the downstream one.
+
+A unit whose owner falls silent (no command for ``owner_timeout`` once the line runs: the
+owner's process or host is gone, or it took this unit for down) exits with
+:data:`EXIT_OWNER_GONE` and one line saying so.
 """
 
 from __future__ import annotations
 
 import sys
+import time
+import uuid
 from collections.abc import Sequence
 
 import rclpy
@@ -31,7 +39,7 @@ from std_msgs.msg import String
 
 from fence_sorter.line.handoff import HandOff
 from fence_sorter.line.line_file import load_line
-from fence_sorter.line.lockstep import UnitSide, decode, encode, make_unit
+from fence_sorter.line.lockstep import EXIT_OWNER_GONE, UnitSide, decode, encode, make_unit
 from fence_sorter.line.multi_unit import LineRunConfig
 from fence_sorter.nodes.base import FenceSorterNode, run_node
 from fence_sorter.nodes.convert import handoff_from_msg, handoff_to_msg
@@ -41,6 +49,14 @@ from fence_sorter_msgs.msg import HandOff as HandOffMsg
 #: the line's lockstep topics: reliable, keep-all (a writer blocks rather than drop)
 LINE_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_ALL, depth=1, reliability=ReliabilityPolicy.RELIABLE
+)
+#: the owner's commands to a unit: reliable, the latest COMMAND_DEPTH kept. In lockstep a live
+#: unit is never more than a step's commands behind (the owner waits for its replies every
+#: step); a dead process's reader, still matched until its participant's lease runs out, must
+#: not fill the writer's history (keep-all would then block the owner's publish)
+COMMAND_DEPTH = 1000
+COMMAND_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST, depth=COMMAND_DEPTH, reliability=ReliabilityPolicy.RELIABLE
 )
 #: the induction's hand-offs to the first unit (the owner's namespace is /line)
 INDUCTION_TOPIC = "/line/handoffs"
@@ -75,22 +91,49 @@ class LineUnitNode(FenceSorterNode):
         self.published = 0  # hand-offs published on the downstream link
         self.bad_messages = 0  # commands or hand-offs that could not be read (refused)
         self.started = False
+        self.token = uuid.uuid4().hex[:12]
+        self.upstream = upstream
+        self.owner_timeout = float(p["owner_timeout"])
+        self.last_command = time.monotonic()
+        self.owner_gone = ""  # the line said when no command came for owner_timeout
         self.replies = self.create_publisher(String, "replies", LINE_QOS)
         self.handoffs = self.create_publisher(HandOffMsg, "handoffs", LINE_QOS)
-        self.create_subscription(String, "commands", self._on_command, LINE_QOS)
+        self.create_subscription(String, "commands", self._on_command, COMMAND_QOS)
         self.create_subscription(HandOffMsg, upstream, self._on_handoff, LINE_QOS)
         self._ready_timer = self.create_timer(0.1, self._say_ready)
+        self._owner_timer = self.create_timer(0.5, self._check_owner)
 
     def _say_ready(self) -> None:
-        """``ready`` on replies while no command came, once both writers have matched."""
+        """``ready<token>`` on replies while no command came, once both writers have matched
+        and the owner's commands and the upstream link have a writer."""
         if self.started:
             self._ready_timer.cancel()
             return
-        if self.replies.get_subscription_count() and self.handoffs.get_subscription_count():
-            self.replies.publish(String(data=READY))
+        if (
+            self.replies.get_subscription_count()
+            and self.handoffs.get_subscription_count()
+            and self.count_publishers(self.resolve_topic_name("commands"))
+            and self.count_publishers(self.upstream)
+        ):
+            self.replies.publish(String(data=READY + self.token))
+
+    def _check_owner(self) -> None:
+        """Once the line runs: exit (EXIT_OWNER_GONE) when no command came for
+        ``owner_timeout``."""
+        if not self.started or self.owner_gone:
+            return
+        silent = time.monotonic() - self.last_command
+        if silent > self.owner_timeout:
+            self.owner_gone = (
+                f"line_unit: no command from the line's owner for {silent:.1f} s "
+                f"(owner_timeout {self.owner_timeout:g} s): its process or host is gone, or "
+                "it took this unit for down"
+            )
+            rclpy.try_shutdown()
 
     def _on_command(self, msg: String) -> None:
         self.started = True
+        self.last_command = time.monotonic()
         if msg.data == END:
             self.get_logger().info("the line is over")
             for pub in (self.replies, self.handoffs):  # every reader (a recorder) has them
@@ -134,13 +177,29 @@ class LineUnitNode(FenceSorterNode):
         return status
 
 
+class _Unit(LineUnitNode):
+    """The unit :func:`main` ran (kept to read why it ended)."""
+
+    last: LineUnitNode | None = None
+
+    def __init__(self, **kwargs: object) -> None:
+        super().__init__(**kwargs)
+        _Unit.last = self
+
+
 def main(args: Sequence[str] | None = None) -> int:
-    """Run one unit until Ctrl-C or SIGTERM; exit 2 with one line on a bad line file or index."""
+    """Run one unit until Ctrl-C, SIGTERM or the line's end; exit 2 with one line on a bad
+    line file or index, EXIT_OWNER_GONE with one line when the owner fell silent."""
     try:
-        return run_node(LineUnitNode, args)
+        code = run_node(_Unit, args)
     except ValueError as exc:
         print(f"line_unit: {exc}", file=sys.stderr)
         return 2
+    node = _Unit.last
+    if code == 0 and node is not None and node.owner_gone:
+        print(node.owner_gone, file=sys.stderr)
+        return EXIT_OWNER_GONE
+    return code
 
 
 if __name__ == "__main__":

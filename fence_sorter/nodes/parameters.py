@@ -649,6 +649,15 @@ LINE_UNIT_PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "dt", 0.01, "Step of the line clock [s] (the owner's; must match)", True, 0.001, 0.1
     ),
+    ParamSpec(
+        "owner_timeout",
+        30.0,
+        "Wall time without a command from the line's owner, once the line runs, after which "
+        "the unit takes the owner for gone and exits 3 [s]",
+        True,
+        1.0,
+        3600.0,
+    ),
 )
 
 #: the owner of a line over DDS: induction, recirculation, the lockstep clock
@@ -664,8 +673,9 @@ LINE_OWNER_PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("dt", 0.01, "Step of the line clock [s]", True, 0.001, 0.1),
     ParamSpec(
         "reply_timeout",
-        60.0,
-        "Wall time a unit may take to answer one command before the line stops [s]",
+        10.0,
+        "Wall time a unit may take to answer one command before the line takes it for down "
+        "and goes on without it [s]",
         True,
         0.1,
         3600.0,

@@ -12,10 +12,18 @@ start gate waits for every unit of the line, wherever it runs; a runner without 
 waits until its units end with the line (the owner's ``end``). ``--bag DIR``: a recorder
 takes every topic of the line (:func:`~fence_sorter.recording.topics.line_topics`: every
 unit's namespace and the owner's) into one bag; the owner's start gate waits until it matched
-them, and it is stopped last. Exit codes as ``line-sim``'s: 0 a drained line with every check
-met, 1 a check failed (unbalanced hand-offs, conservation, a wrong destination, an intrusion
-with the guard on) or a process failed, 2 bad input, 5 the recorder could not write the bag,
-130 interrupted.
+them, and it is stopped last.
+
+A unit's process that ends during the run (killed, or taken for down by the owner) is started
+again, up to :data:`MAX_RESTARTS` times per unit; the new process rejoins the line at a step
+of its clock (the owner goes on without the unit meanwhile, :mod:`fence_sorter.line.lockstep`).
+The summary counts the restarts per unit (``restarts``).
+
+Exit codes as ``line-sim``'s: 0 a drained line with every check met (every parcel accounted
+for, those lost with a unit that went down among them), 1 a check failed (unbalanced
+hand-offs, conservation, a wrong destination, an intrusion with the guard on) or a process
+failed, 2 bad input, 3 (a runner without the owner) the line's owner fell silent: its process
+or host is gone, 5 the recorder could not write the bag, 130 interrupted.
 """
 
 from __future__ import annotations
@@ -30,6 +38,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from fence_sorter.line.line_file import LineSpec, load_line, resolve_line
+from fence_sorter.line.lockstep import EXIT_OWNER_GONE
 from fence_sorter.physics.params import ParameterError
 from fence_sorter.runner.job import (
     EXIT_BAD_INPUT,
@@ -56,11 +65,24 @@ from fence_sorter.runner.transport import (
     write_profile,
 )
 
-__all__ = ["LineRunOptions", "LineRunResult", "parse_units", "run_line_job"]
+__all__ = [
+    "EXIT_OWNER_GONE",
+    "MAX_RESTARTS",
+    "LineRunOptions",
+    "LineRunResult",
+    "parse_units",
+    "run_line_job",
+]
 
 LOG_DIR_PREFIX = "fence_sorter_line_"
 OWNER = "line_owner"
 RECORDER = "recorder"
+#: a unit's process is started again at most this many times per run
+MAX_RESTARTS = 3
+
+
+class _OwnerGone(RuntimeError):
+    """A unit of a runner without the owner exited EXIT_OWNER_GONE (one line)."""
 
 
 @dataclass(frozen=True)
@@ -233,9 +255,7 @@ def _run(
 
         while running():
             stop.check()
-            failed = [n.name for n in group.dead() if n.name != OWNER and n.proc.returncode != 0]
-            if failed:
-                raise RuntimeError(f"{', '.join(failed)} ended during the run")
+            _restart_ended(group, owner is None, say)
             if time.monotonic() > end:
                 raise RuntimeError(f"the line did not drain within --timeout {opts.timeout:g} s")
             alive = [n for n in group.nodes.values() if n.proc.poll() is None]
@@ -256,8 +276,11 @@ def _run(
                 code, message = EXIT_FAILED, "a check of the line failed (see the summary)"
             else:
                 code, message = EXIT_FAILED, f"line_owner exited {rc}: {owner.tail(3)}"
+        summary["restarts"] = {n: group.restarts.get(n, 0) for n in here}
     except Interrupted as exc:
         code, message = EXIT_INTERRUPTED, f"interrupted ({exc})"
+    except _OwnerGone as exc:
+        code, message = EXIT_OWNER_GONE, str(exc)
     except RuntimeError as exc:
         code, message = EXIT_FAILED, str(exc)
     finally:
@@ -271,3 +294,25 @@ def _run(
     else:
         summary["log_dir"] = str(log_dir)
     return LineRunResult(code, message, summary)
+
+
+def _restart_ended(group: ProcessGroup, no_owner: bool, say: Callable[[str], None]) -> None:
+    """Start again every unit's process that ended with a failure, up to MAX_RESTARTS times
+    per unit (RuntimeError beyond); without the owner here, a unit that found the owner gone
+    ends the run (_OwnerGone)."""
+    for n in group.dead():
+        rc = n.proc.returncode
+        if n.name == OWNER or rc == 0:
+            continue
+        if no_owner and rc == EXIT_OWNER_GONE:
+            lines = [x for x in n.tail(5).splitlines() if "no command from the line's owner" in x]
+            raise _OwnerGone(lines[-1] if lines else f"{n.name}: the line's owner is gone")
+        done = group.restarts.get(n.name, 0)
+        if done >= MAX_RESTARTS:
+            raise RuntimeError(
+                f"{n.name} ended during the run (exit {rc}) after {done} restarts "
+                f"(at most {MAX_RESTARTS})"
+            )
+        say(f"{n.name} ended during the run (exit {rc}); starting it again ({done + 1} of "
+            f"at most {MAX_RESTARTS})")  # fmt: skip
+        group.restart(n.name)
