@@ -107,6 +107,7 @@ class LineOwnerNode(FenceSorterNode, Links):
         self.induction_published = 0
         self.recirculation_arrived = 0
         self.bad_messages = 0
+        self.reply_wait_max = 0.0  # the longest wait for a unit's reply [s, wall]
         self.commands = [
             self.create_publisher(String, f"/{n}/commands", COMMAND_QOS) for n in names
         ]
@@ -160,14 +161,18 @@ class LineOwnerNode(FenceSorterNode, Links):
         """Unit k's next reply; UnitDown when none comes within ``reply_timeout`` or a new
         process of the unit said ready (the one the owner waits for is gone)."""
         name = self.line.units[k].name
-        end = time.monotonic() + self.reply_timeout
+        t0 = time.monotonic()
+        end = t0 + self.reply_timeout
         while True:
             if k in self.fresh:
                 raise UnitDown(k, f"{name}: a new process of it started")
             try:
-                return self.inbox[k].get(timeout=0.05)
+                r = self.inbox[k].get(timeout=0.05)
             except queue.Empty:
                 pass
+            else:
+                self.reply_wait_max = max(self.reply_wait_max, time.monotonic() - t0)
+                return r
             if time.monotonic() >= end:
                 why = (
                     f"{name} did not answer command {self.seq[k] - 1} within reply_timeout "
@@ -232,7 +237,7 @@ class LineOwnerNode(FenceSorterNode, Links):
             owner.step()
             self.clock.publish(Clock(clock=_stamp(owner.t)))
         owner.wall = time.perf_counter() - wall0
-        return owner.summary()
+        return {**owner.summary(), "reply_wait_max_s": self.reply_wait_max}
 
     def heartbeat_status(self) -> DiagnosticStatus:
         status = super().heartbeat_status()

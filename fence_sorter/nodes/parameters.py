@@ -651,7 +651,7 @@ LINE_UNIT_PARAMETERS: tuple[ParamSpec, ...] = (
     ),
     ParamSpec(
         "owner_timeout",
-        30.0,
+        20.0,
         "Wall time without a command from the line's owner, once the line runs, after which "
         "the unit takes the owner for gone and exits 3 [s]",
         True,

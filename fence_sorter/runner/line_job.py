@@ -253,9 +253,11 @@ def _run(
                 return owner.proc.poll() is None
             return len(group.dead()) < len(group.nodes)
 
-        while running():
+        while True:
             stop.check()
             _restart_ended(group, owner is None, say)
+            if not running():
+                break
             if time.monotonic() > end:
                 raise RuntimeError(f"the line did not drain within --timeout {opts.timeout:g} s")
             alive = [n for n in group.nodes.values() if n.proc.poll() is None]
