@@ -22,6 +22,9 @@ Cases:
 - **freezes**: a run whose pacing loop or controller is stopped (SIGSTOP) for 3 s, and one
   recording into a full file system (a small tmpfs); the stop must show in the figures, the
   full disk be reported when it happens (exit status 5).
+- **line**: ``fence-sorter run --line two_units`` with its link cut for 2 s between two
+  network namespaces, a unit's process killed, a whole host's processes killed
+  (:mod:`benchmarks.faults_line`); every parcel must be accounted for.
 """
 
 from __future__ import annotations
@@ -40,6 +43,7 @@ from benchmarks.faults_cli import cli_cases, run_cli_case
 from benchmarks.faults_floods import command_msg, flood_main, flood_trial, parcel_msg
 from benchmarks.faults_freezes import FREEZE_SPACING, FREEZES, freeze_met, freeze_trial
 from benchmarks.faults_interrupts import interrupt_trial
+from benchmarks.faults_line import LINE_CASES, line_met, line_sim_reference, line_trial
 from benchmarks.faults_report import (
     SECTIONS,
     cli_row,
@@ -125,6 +129,17 @@ def campaign(
         for r in rows:
             progress(f"freeze {r['case']}: exit {r.get('exit_code')}, met {freeze_met(r)}")
         data["freezes"] = {"rows": rows, "meta": meta("freezes", wall0)}
+    if "line" in which:
+        wall0 = time.monotonic()
+        ref = line_sim_reference()
+        rows = []
+        for case in LINE_CASES:
+            r = line_trial(case, workdir)
+            r["met"] = line_met(r, ref)
+            rows.append(r)
+            why = f" ({r['not_run']})" if "not_run" in r else ""
+            progress(f"line  {case}: met {r['met']}{why}")
+        data["line"] = {"rows": rows, "reference": ref, "meta": meta("line", wall0)}
     if "interrupts" in which:
         wall0 = time.monotonic()
         rows = []

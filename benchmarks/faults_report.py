@@ -277,6 +277,63 @@ def _freezes_md(sec: dict) -> list[str]:
     return [*L, ""]
 
 
+def _line_md(sec: dict) -> list[str]:
+    ref = sec["reference"]
+    L = [
+        "## A line's link, unit and host faults",
+        "",
+        *_meta_lines(sec["meta"]),
+        f"`fence-sorter run --line two_units --parcels {ref['parcels_inducted']} --seed 3` "
+        "(benchmarks/faults_line.py). Link cut and host kills: the line split over two network "
+        "namespaces joined by a veth pair (host A: the owner and unit_1, host B: unit_2); 1 s "
+        "after the owner's log says the line runs, A's end of the veth goes down for 2 s "
+        "(`ip link set ... down`, then `up`), or every process of host B, or of host A, is "
+        "killed (SIGKILL). Unit kill: the line on one host, unit_2's process killed (SIGKILL). "
+        "Targets: link cut, both hosts exit 0 and the summary equals `line-sim`'s for the seed; "
+        "unit kill, exit 0, every parcel accounted for, unit_2 restarted once and rejoined; "
+        "host B killed, A exits 0 with every parcel accounted for and unit_2 down at the end; "
+        "host A killed, B exits 3 with one line.",
+        "",
+        "| case | exit A / B | sim [s] / wall [s] | longest reply wait [s] | sorted / rejected "
+        "/ lost with a unit | hand-offs sent / received / lost | unit_2 down | restarts | "
+        "result |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for r in sec["rows"]:
+        if "not_run" in r:
+            L.append(f"| {r['case']} | not run: {r['not_run']} | | | | | | | FAILED |")
+            continue
+        a, b = r["a"], r.get("b", {})
+        s = a["summary"]
+        links = s.get("links", {}).values()
+        down = s.get("units_down", {}).get("unit_2")
+        down_text = (
+            f"{down['why']}; passed on {down['handoffs_passed_on']}, lost "
+            f"{down['lost_parcels'] or 'none'}, rejoined {down['rejoins']}x"
+            if down
+            else "-"
+        )
+        fig = f"{s['sim_time_s']:.1f} / {s['wall_time_s']:.1f}" if "sim_time_s" in s else "-"
+        wait = f"{s['reply_wait_max_s']:.2f}" if "reply_wait_max_s" in s else "-"
+        counts = (
+            f"{s['sorted']} / {s['rejected']} / {s['lost_with_unit']}" if "sorted" in s else "-"
+        )
+        hand = (
+            f"{sum(v['sent'] for v in links)} / {sum(v['received'] for v in links)} / "
+            f"{sum(v['lost'] for v in links)}"
+            if links
+            else "-"
+        )
+        exits = f"{a['exit_code']} / {b.get('exit_code', '-')}"
+        if r["case"] == "owner host kill":
+            down_text = b.get("last_line", "").replace("|", "\\|")
+        L.append(
+            f"| {r['case']} | {exits} | {fig} | {wait} | {counts} | {hand} | {down_text} | "
+            f"{s.get('restarts', {}).get('unit_2', '-')} | {'ok' if r['met'] else 'FAILED'} |"
+        )
+    return [*L, ""]
+
+
 SECTIONS = {
     "interrupts": _interrupts_md,
     "floods": _floods_md,
@@ -284,6 +341,7 @@ SECTIONS = {
     "wire": _wire_md,
     "cli": _cli_md,
     "freezes": _freezes_md,
+    "line": _line_md,
 }
 
 
@@ -333,6 +391,8 @@ def verdicts(data: dict) -> dict[str, bool]:
         out["insiders"] = all(insiders.row_ok(r) for r in data["insiders"]["rows"])
     if "freezes" in data:
         out["freezes"] = all(freeze_met(r) for r in data["freezes"]["rows"])
+    if "line" in data:
+        out["line"] = all(r["met"] for r in data["line"]["rows"])
     if "floods" in data:
         out["floods"] = all(
             not f["summary"].get("divert_without_outcome") and f["leftovers"] == 0

@@ -3,7 +3,8 @@ docs/reports/reliability.md.
 
 Repeated Ctrl-C, floods on /parcels and /fence_commands, insiders with the run's own id
 (forged duplicates, a flood, a second /clock), hostile and malformed messages, bad files,
-scenes, streams and parameters (:mod:`benchmarks.faults`). Exit codes:
+scenes, streams and parameters; a line's link cut, unit kill and host kill
+(:mod:`benchmarks.faults`). Exit codes:
 0 every case met its target, 1 some did not (named), 2 bad arguments.
 """
 
@@ -15,14 +16,14 @@ from pathlib import Path
 
 from benchmarks.faults import campaign
 
-CASES = ("wire", "cli", "floods", "insiders", "interrupts", "freezes")
+CASES = ("wire", "cli", "floods", "insiders", "interrupts", "freezes", "line")
 
 
 def register(parser: argparse.ArgumentParser) -> None:
     parser.description = (
         "Inject the faults of the reliability campaign (repeated Ctrl-C, floods, "
-        "hostile messages, bad input), count what the suite refused, dropped and sorted, and "
-        "write the report."
+        "hostile messages, bad input, a line's link, unit and host faults), count what the "
+        "suite refused, dropped and sorted, and write the report."
     )
     parser.add_argument(
         "--out",
