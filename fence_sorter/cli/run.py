@@ -200,7 +200,7 @@ def _run_line(args: argparse.Namespace) -> int:
         return 2
     if args.json:
         print(json.dumps(json_safe(result.summary)))
-    elif result.summary.get("units_here"):
+    elif result.summary.get("units_here") and result.code == 0:
         print(f"line {result.summary['line']}: {', '.join(result.summary['units_here'])} "
               "ended with the line (the line summary: on the owner's host)")  # fmt: skip
     elif result.summary.get("line"):

@@ -73,7 +73,7 @@ from fence_sorter_msgs.msg import HandOff as HandOffMsg
 
 
 class UnitSilent(RuntimeError):
-    """A unit did not answer in time (one line)."""
+    """Not every unit of the line said ready within ``start_timeout`` (one line)."""
 
 
 class LineOwnerNode(FenceSorterNode, Links):
@@ -246,6 +246,7 @@ class LineOwnerNode(FenceSorterNode, Links):
             "induction_handoffs_published": self.induction_published,
             "recirculation_handoffs_arrived": self.recirculation_arrived,
             "units_ready": len(self.gate.ready),
+            "units_down": sum(u.down for u in self.owner.units),
             "bad_messages": self.bad_messages,
         }
         status.values.extend(KeyValue(key=k, value=str(v)) for k, v in values.items())

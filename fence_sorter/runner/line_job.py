@@ -283,6 +283,7 @@ def _run(
         code, message = EXIT_INTERRUPTED, f"interrupted ({exc})"
     except _OwnerGone as exc:
         code, message = EXIT_OWNER_GONE, str(exc)
+        summary = {"line": line.name, "units_here": here, "owner": "gone"}
     except RuntimeError as exc:
         code, message = EXIT_FAILED, str(exc)
     finally:
