@@ -10,7 +10,7 @@ link, unit or host fails mid-run.
 - **unit kill**: ``fence-sorter run --line two_units`` on one host; once the line runs,
   unit_2's process is killed (SIGKILL). The runner starts it again, the owner takes it for
   down (the new process says ready with a token of its own), passes its hand-offs on and lets
-  the new process rejoin; every parcel must be accounted for.
+  the new process rejoin; every parcel must be accounted for, and the new process sort again.
 - **host kill**: as the link cut, but every process of host B is killed (SIGKILL): host A's
   owner goes on without unit_2 (it does not answer within ``reply_timeout``) and says what was
   lost; and every process of host A killed instead: host B's runner, without its owner, ends
@@ -288,7 +288,7 @@ def line_met(row: dict, ref: dict | None = None) -> bool:
         down = s.get("units_down", {}).get("unit_2", {})
         return (
             a["exit_code"] == 0 and accounted(s) and s.get("restarts", {}).get("unit_2") == 1
-            and down.get("rejoins") == 1
+            and down.get("rejoins") == 1 and (down.get("sorted_by_last_process") or 0) > 0
         )  # fmt: skip
     if row["case"] == "host kill":
         down = s.get("units_down", {}).get("unit_2", {})

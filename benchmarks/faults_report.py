@@ -290,7 +290,8 @@ def _line_md(sec: dict) -> list[str]:
         "(`ip link set ... down`, then `up`), or every process of host B, or of host A, is "
         "killed (SIGKILL). Unit kill: the line on one host, unit_2's process killed (SIGKILL). "
         "Targets: link cut, both hosts exit 0 and the summary equals `line-sim`'s for the seed; "
-        "unit kill, exit 0, every parcel accounted for, unit_2 restarted once and rejoined; "
+        "unit kill, exit 0, every parcel accounted for, unit_2 restarted once, rejoined and "
+        "sorting again; "
         "host B killed, A exits 0 with every parcel accounted for and unit_2 down at the end; "
         "host A killed, B exits 3 with one line.",
         "",
@@ -310,6 +311,11 @@ def _line_md(sec: dict) -> list[str]:
         down_text = (
             f"{down['why']}; passed on {down['handoffs_passed_on']}, lost "
             f"{down['lost_parcels'] or 'none'}, rejoined {down['rejoins']}x"
+            + (
+                f", its new process sorted {down['sorted_by_last_process']}"
+                if down.get("sorted_by_last_process") is not None
+                else ""
+            )
             if down
             else "-"
         )

@@ -5,7 +5,7 @@ The line must go on: the runner starts the unit again (counted in ``restarts``),
 takes the old process for down when the new one says ready with its own token, passes the
 unit's hand-offs on meanwhile and lets the new process rejoin at a step. Checked: exit 0,
 conservation exact with the parcels lost with the unit counted and named, every link
-balanced at both ends, the unit down once and back once.
+balanced at both ends, the unit down once and back once, its new process sorting again.
 """
 
 from __future__ import annotations
@@ -42,4 +42,6 @@ def test_a_killed_unit_is_restarted_and_rejoins_and_nothing_is_silently_lost(
         assert v["sent"] == v["received"] + sum(v["refused"].values()) + v["lost"], link
     # the stand-in's hand-offs are the unit's declines `unit_down`
     assert s["units"]["unit_2"]["declined"]["unit_down"] == down["handoffs_passed_on"]
+    # the new process routed the parcels announced after it rejoined and sorted again
+    assert down["sorted_by_last_process"] > 0
     assert line_met(row)
