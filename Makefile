@@ -29,7 +29,7 @@ format: bootstrap
 	$(ENV) && ruff check --fix $(LINT_PATHS) && ruff format $(LINT_PATHS)
 
 test: bootstrap
-	$(ENV) && ruff check $(LINT_PATHS) && ruff format --check $(LINT_PATHS) && pytest -q test/
+	$(ENV) && ruff check $(LINT_PATHS) && ruff format --check $(LINT_PATHS) && pytest -q test/ --durations=40
 
 # every generated report of docs/reports/, each with the arguments its committed version was
 # made with and its output named (the package writes nowhere by default but the current
