@@ -216,7 +216,7 @@ _STATE_ATTRIBUTES = tuple(
 def _loop_state(n: int, m: int, n_el: int, propagators: tuple, cols: int) -> tuple:
     """A ``kernel.LoopState`` for a model of n states, m modes and n_el elements, with the
     modal propagator cache ``propagators`` and a record of ``cols`` columns."""
-    s = K.N_STATES
+    s = K.N_ROWS
     return K.LoopState(
         np.zeros(1, K.COUNTERS),
         np.zeros(1, K.FIGURES),

@@ -107,7 +107,7 @@ def test_generalized_alpha_damps_the_top_fence_mode_by_rho_inf(rho_inf):
     s.states[i, 6:] = 0.0
     s.states[i, 6] = 1e-3  # mode 1
     s.states[i, 6 + m - 1] = 1e-6  # top mode
-    K.loop._accelerations(s.loop_model, s._loop_arrays()[1], i, 0.0)
+    K.loop._accelerations(s.loop_model, K.loop.loop_rows(s._loop_arrays()[1]).trial[i], 0.0)
     t0 = s.t
     amp1, top = [], []
     for _ in range(40):

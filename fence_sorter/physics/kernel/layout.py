@@ -2,16 +2,24 @@
 :func:`pack`) and solver settings (:data:`SETTINGS`) and of the loop's counters
 (:data:`COUNTERS`) and float state (:data:`FIGURES`); an evaluation's contact slots
 (:data:`CONTACT`) and resultants (:data:`RESULT`), a recorded point (:data:`RECORDED`), and the
-solve loop's arrays (:data:`LoopModel`, :data:`LoopState`): state rows ``S_*``, diagnoses
-``DIAG_*``. The state rows stay row numbers: they index the rows of arrays whose width is the
-model's (n states, m modes), which a record of fixed fields cannot hold.
+solve loop's arrays (:data:`LoopModel`, :data:`LoopState`) and their named rows (:data:`Row`,
+:data:`Rows`), diagnoses ``DIAG_*``.
 
 A record travels as an array of one element (``params[0].mass``, ``counters[0].n_steps``):
 Numba compiles a field of it to the same load or store at a fixed offset as an index into a
 flat array (the same machine code, compared with ``inspect_asm``), and the loop's arguments
 stay arrays, which the ahead-of-time entry (``aot``) exports. Numba's structref and
 named tuples were not taken: a structref is reference counted (the kernel runs without
-Numba's reference counting) and a named tuple cannot be written in place."""
+Numba's reference counting) and a named tuple cannot be written in place.
+
+The state rows are named, not numbered: the arrays of a :data:`LoopState` that hold one row
+per state (times, states, accelerations, belt wrenches, contact slots, resultants, modal
+forces; their widths are the model's: n states, m modes) have :data:`N_ROWS` rows, and
+``loop.loop_rows`` hands the loop one :data:`Row` of views per row (no copies), bundled as
+:data:`Rows`: the two trial rows that alternate (``rows.trial[counters[0].cur]`` is the
+accepted point, ``rows.trial[counters[0].trial]`` the step being tried), ``located``,
+``before``, ``alpha`` and ``previous``. The rows' order in the arrays is the fields' order of
+:data:`Rows`, the trial pair first, and only ``loop_rows`` relies on it."""
 
 from __future__ import annotations
 
@@ -161,15 +169,32 @@ def zero_result() -> np.ndarray:
 
 
 # -- the solve loop's arrays ---------------------------------------------------------------
-# state rows of times, states, belt_wrench, contacts, resultants, modal_forces, accelerations;
-# cur and trial swap, loc and before are fixed; the generalized-alpha step's state at its
-# alpha point goes in states[S_ALPHA] (scratch); modal_forces[S_PREV]: the modal force at
-# the accepted point before cur (the modes' quadratic force)
-S_LOC = 2
-S_BEFORE = 3
-S_ALPHA = 4
-S_PREV = 5
-N_STATES = 6
+# One state row of the loop: views of row i of the LoopState arrays that have a row per state
+# (``loop.loop_rows`` builds them once per solve call)
+Row = namedtuple(
+    "Row",
+    [
+        "time",  # t [s]: a view of one element (``row.time[0]``)
+        "state",  # the state vector (n)
+        "acceleration",  # accelerations (3 + m)
+        "belt",  # belt friction (F_x, F_y, M_z)
+        "contacts",  # N_SLOTS CONTACT records
+        "resultant",  # one RESULT record
+        "modal",  # modal force (m)
+    ],
+)
+# The loop's state rows by role
+Rows = namedtuple(
+    "Rows",
+    [
+        "trial",  # the two rows that alternate: counters[0].cur (accepted) and .trial (tried)
+        "located",  # the trial step of an event location
+        "before",  # the last located step that ended before a slide-off
+        "alpha",  # the generalized-alpha step's state at its alpha point (scratch)
+        "previous",  # the accepted point before cur (its modal force: the modes' quadratic force)
+    ],
+)
+N_ROWS = 6  # rows of each such array: trial[0], trial[1], located, before, alpha, previous
 
 # the solver settings of one event (read only)
 SETTINGS = _record(
@@ -205,7 +230,7 @@ SETTINGS = _record(
 # the integer state of the loop
 COUNTERS = _record(
     [
-        ("cur", "i8"),  # the state rows of the accepted point and of the trial step
+        ("cur", "i8"),  # which of rows.trial holds the accepted point, which the trial
         ("trial", "i8"),
         ("started", "i8"),
         ("done", "i8"),
@@ -346,7 +371,7 @@ LoopState = namedtuple(
     [
         "counters",  # one COUNTERS record: rows in use, steps, events, diagnosis
         "figures",  # one FIGURES record: step sizes, history, peaks, energy audit
-        "times",  # t of the state rows S_* [s]
+        "times",  # t of the state rows (N_ROWS, named by Rows) [s]
         "states",  # state vectors of the rows
         "belt_wrench",  # belt friction (F_x, F_y, M_z) of the rows
         "contacts",  # contact slots (CONTACT) of the rows
@@ -375,5 +400,15 @@ __all__ = [
     for n in tuple(globals())
     if n.isupper()
     or n
-    in ("ForceModel", "Evaluation", "LoopModel", "LoopState", "pack", "zero_slots", "zero_result")
+    in (
+        "ForceModel",
+        "Evaluation",
+        "LoopModel",
+        "LoopState",
+        "Row",
+        "Rows",
+        "pack",
+        "zero_slots",
+        "zero_result",
+    )
 ]

@@ -27,11 +27,9 @@ from .layout import (
     DIAG_MIN_DT,
     DIAG_NONE,
     N_SLOTS,
-    S_ALPHA,
-    S_BEFORE,
-    S_LOC,
-    S_PREV,
     Evaluation,
+    Row,
+    Rows,
 )
 from .observer import diverged, observe
 from .steps import (
@@ -57,38 +55,53 @@ SOLVE_GROW = 2  # an output buffer is full
 SOLVE_REACHED = 3  # the accepted time reached t_target
 
 
-@njit(cache=True, _nrt=False)
-def _copy_row(rows, dst, src):
-    for k in range(rows.shape[1]):
-        rows[dst, k] = rows[src, k]
-
-
-@njit(cache=True, _nrt=False)
-def _copy_state(state, dst, src):
-    """Copy state row src (time, state, forces, contacts) into row dst."""
-    times, states, belt_wrench = state.times, state.states, state.belt_wrench
-    contacts, resultants = state.contacts, state.resultants
-    modal_forces, accelerations = state.modal_forces, state.accelerations
-    times[dst] = times[src]
-    _copy_row(states, dst, src)
-    _copy_row(belt_wrench, dst, src)
-    for k in range(N_SLOTS):
-        contacts[dst, k] = contacts[src, k]
-    _copy_row(resultants, dst, src)
-    _copy_row(modal_forces, dst, src)
-    _copy_row(accelerations, dst, src)
+@njit(cache=True, _nrt=True, inline="always")
+def _row(state, i):
+    """The :data:`Row` of views of row i of the loop state's arrays."""
+    s = state
+    return Row(
+        s.times[i : i + 1], s.states[i], s.accelerations[i], s.belt_wrench[i], s.contacts[i],
+        s.resultants[i], s.modal_forces[i],
+    )  # fmt: skip
 
 
 @njit(cache=True, _nrt=True, inline="always")
-def _row(state, i):
-    """The :data:`Evaluation` of state row i (its contacts, resultant, modal force and belt
-    wrench, with the shared scratch arrays). Inlined into its callers, it compiles with their
-    flags; on its own (the loop's source run as Python) it needs Numba's reference counting to
-    hand Python the row views (without it the whole arrays come back)."""
+def loop_rows(state):
+    """The loop's state rows by role (:data:`Rows`), views of ``state``'s arrays built once per
+    solve call. Inlined into its callers, it compiles with their flags (views of arguments need
+    no reference counting inside compiled code); called from Python it needs Numba's reference
+    counting to hand Python the views (without it the whole arrays come back)."""
+    return Rows(
+        (_row(state, 0), _row(state, 1)), _row(state, 2), _row(state, 3), _row(state, 4),
+        _row(state, 5),
+    )  # fmt: skip
+
+
+@njit(cache=True, _nrt=False)
+def _copy_row(dst, src):
+    """Copy state row src (time, state, accelerations, forces, contacts) into row dst."""
+    dst.time[0] = src.time[0]
+    for k in range(src.state.shape[0]):
+        dst.state[k] = src.state[k]
+    for k in range(3):
+        dst.belt[k] = src.belt[k]
+    for k in range(N_SLOTS):
+        dst.contacts[k] = src.contacts[k]
+    dst.resultant[0] = src.resultant[0]
+    for k in range(src.modal.shape[0]):
+        dst.modal[k] = src.modal[k]
+    for k in range(src.acceleration.shape[0]):
+        dst.acceleration[k] = src.acceleration[k]
+
+
+@njit(cache=True, _nrt=True, inline="always")
+def _evaluation(state, row):
+    """The :data:`Evaluation` of a state row (its contacts, resultant, modal force and belt
+    wrench, with the shared scratch arrays)."""
     s = state
     return Evaluation(
-        s.contacts[i], s.resultants[i], s.modal_forces[i], s.deflection, s.deflection_rate,
-        s.nodes, s.friction_prev, s.belt_wrench[i],
+        row.contacts, row.resultant, row.modal, s.deflection, s.deflection_rate, s.nodes,
+        s.friction_prev, row.belt,
     )  # fmt: skip
 
 
@@ -131,68 +144,68 @@ def _snap(h_nom, h):
 
 
 @njit(cache=True, _nrt=False, inline="always")
-def _load_accelerations(params, state, i):
-    """The load's accelerations of state row i from its contact resultant and belt wrench."""
-    res, belt, acc = state.resultants[i, 0], state.belt_wrench[i], state.accelerations[i]
+def _load_accelerations(params, row):
+    """The load's accelerations of a state row from its contact resultant and belt wrench."""
+    res, belt, acc = row.resultant[0], row.belt, row.acceleration
     acc[0] = (res.fx + belt[0]) / params[0].mass
     acc[1] = (res.fy + belt[1]) / params[0].mass
     acc[2] = (res.mz + belt[2]) / params[0].inertia
 
 
 @njit(cache=True, _nrt=False)
-def _trap(model, state, h, h_prev, a, b, jump, on_belt, force):
-    """One trapezoidal step from state row a into row b (exact modal maps for step h;
-    ``h_prev``: the step before a, 0 without history)."""
+def _trap(model, state, h, h_prev, start, end, previous, jump, on_belt, force):
+    """One trapezoidal step from state row ``start`` into row ``end`` (exact modal maps for
+    step h; ``h_prev``: the step before start, 0 without history; ``previous``: the modal force
+    at the accepted point before start)."""
     s = state
     k = _propagator_slot(model, state, h)
     props = (s.propagators[k], s.propagator_g0[k], s.propagator_g1[k])
     status = trapezoidal_step(
-        model, props, h, h_prev, s.times[a], s.states[a], _row(state, a), s.modal_forces[S_PREV],
-        jump, on_belt, force, s.states[b], _row(state, b), s.work,
+        model, props, h, h_prev, start.time[0], start.state, _evaluation(state, start), previous,
+        jump, on_belt, force, end.state, _evaluation(state, end), s.work,
     )  # fmt: skip
     if status != STEP_REJECTED:
-        _load_accelerations(model.params, state, b)
-    s.times[b] = s.times[a] + h
+        _load_accelerations(model.params, end)
+    end.time[0] = start.time[0] + h
     return status
 
 
 @njit(cache=True, _nrt=False)
-def _alpha(model, state, h, a, b, on_belt, force):
-    """One generalized-alpha step from state row a into row b (``settings[0].gen_alpha``; the
-    loop calls it where the other schemes call :func:`_trap`)."""
-    s = state
+def _alpha(model, state, h, start, end, alpha, on_belt, force):
+    """One generalized-alpha step from state row ``start`` into row ``end`` (``alpha``: the
+    state at the step's alpha point, scratch; ``settings[0].gen_alpha``; the loop calls it
+    where the other schemes call :func:`_trap`)."""
     status = generalized_alpha_step(
-        model, h, s.times[a], s.states[a], s.accelerations[a], _row(state, a), on_belt, force,
-        s.states[b], s.accelerations[b], _row(state, b), s.states[S_ALPHA],
+        model, h, start.time[0], start.state, start.acceleration, _evaluation(state, start),
+        on_belt, force, end.state, end.acceleration, _evaluation(state, end), alpha,
     )  # fmt: skip
-    s.times[b] = s.times[a] + h
+    end.time[0] = start.time[0] + h
     return status
 
 
 @njit(cache=True, _nrt=False, inline="always")
-def _attempt(model, state, h, h_hist, a, b, on_belt, force):
-    """One step of the event's scheme from state row a into row b: generalized-alpha
-    (``settings[0].gen_alpha``) or trapezoidal (``h_hist``: the step before a, 0 without
-    history); returns its status."""
+def _attempt(model, state, rows, h, h_hist, start, end, on_belt, force):
+    """One step of the event's scheme from state row ``start`` into row ``end`` (of ``rows``):
+    generalized-alpha (``settings[0].gen_alpha``) or trapezoidal (``h_hist``: the step before
+    start, 0 without history); returns its status."""
     if model.settings[0].gen_alpha != 0.0:
-        return _alpha(model, state, h, a, b, on_belt, force)
-    jump = _jump_at(model.params, state.times[a])
-    return _trap(model, state, h, h_hist, a, b, jump, on_belt, force)
+        return _alpha(model, state, h, start, end, rows.alpha.state, on_belt, force)
+    jump = _jump_at(model.params, start.time[0])
+    return _trap(model, state, h, h_hist, start, end, rows.previous.modal, jump, on_belt, force)
 
 
 @njit(cache=True, _nrt=False)
-def _accelerations(model, state, i, jump):
-    """Accelerations of state row i consistent with its forces (the start, and
+def _accelerations(model, row, jump):
+    """Accelerations of a state row consistent with its forces (the start, and
     generalized-alpha's restart after an event or a drive breakpoint; ``jump``: the drive's
     acceleration jump at 2 t1, which the forces at the breakpoint do not contain yet)."""
     rigid_modal, omega, zeta = model.rigid_modal, model.omega, model.zeta
-    modal_forces, accelerations = state.modal_forces, state.accelerations
+    modal, acc, y = row.modal, row.acceleration, row.state
     m = omega.shape[0]
-    y = state.states[i]
-    _load_accelerations(model.params, state, i)
+    _load_accelerations(model.params, row)
     for j in range(m):
-        accelerations[i, 3 + j] = (
-            modal_forces[i, j]
+        acc[3 + j] = (
+            modal[j]
             - rigid_modal[j] * jump
             - omega[j] ** 2 * y[6 + j]
             - 2.0 * zeta[j] * omega[j] * y[6 + m + j]
@@ -200,18 +213,16 @@ def _accelerations(model, state, i, jump):
 
 
 @njit(cache=True, _nrt=False)
-def _locate(model, state, h, h_prev, on_belt, slot, kind, g0, g1):
+def _locate(model, state, rows, start, end, h, h_prev, on_belt, slot, kind, g0, g1):
     """Shorten the step to end just past the sign change of ``slot``'s event function (or the
     sort crossing): Illinois regula falsi until an onset step ends within EVENT_TOL of D = 0
     (so w_n is read at the onset), a slide-off or sort crossing step ends within the iteration
     tolerance of its line, or the bracket is below 1e-7 of the step. A corner sliding off the
     tip ends one step just before the slide-off (the force there is the peak the step would
-    otherwise skip) and the next just past it. The located trial is left in the trial row;
-    returns the step taken."""
-    params, settings = model.params, model.settings
-    counters, states, contacts = state.counters, state.states, state.contacts
-    a = counters[0].cur
-    trial = counters[0].trial
+    otherwise skip) and the next just past it. Steps from row ``start``; the located trial is
+    left in row ``end`` (the trial row); returns the step taken."""
+    params, settings, counters = model.params, model.settings, state.counters
+    located, before = rows.located, rows.before
     onset = kind == EVENT_ONSET
     sign0 = g0 > 0.0
     lo = 0.0
@@ -223,7 +234,7 @@ def _locate(model, state, h, h_prev, on_belt, slot, kind, g0, g1):
     cross = kind == EVENT_SLIDE_OFF and not keep_before
     sort = kind == EVENT_SORT
     g_lo = g0
-    before = 0.0
+    h_before = 0.0
     have_before = False
     f_lo, f_hi, last = g0, g1, 0
     lo_prev, g_lo_prev = 0.0, g0  # the lo end before the last (the secant on the smooth side)
@@ -241,13 +252,13 @@ def _locate(model, state, h, h_prev, on_belt, slot, kind, g0, g1):
             h_sec = lo + (g_lo - 0.5 * tol) * (lo - lo_prev) / (g_lo_prev - g_lo)
             if lo < h_sec < hi:
                 h_loc = h_sec
-        st = _attempt(model, state, h_loc, h_prev, a, S_LOC, on_belt, False)
+        st = _attempt(model, state, rows, h_loc, h_prev, start, located, on_belt, False)
         if st == STEP_REJECTED:
             break
         if kind == EVENT_SORT:
-            g = settings[0].width - states[S_LOC, 1]
+            g = settings[0].width - located.state[1]
         else:
-            g = event_value(params, contacts[S_LOC], slot, kind)
+            g = event_value(params, located.contacts, slot, kind)
         if math.isnan(g):
             break
         if (g > 0.0) != sign0:
@@ -257,7 +268,7 @@ def _locate(model, state, h, h_prev, on_belt, slot, kind, g0, g1):
             last = 1
             best = h_loc
             have_best = True
-            _copy_state(state, trial, S_LOC)
+            _copy_row(end, located)
         else:
             lo_prev, g_lo_prev = lo, g_lo
             lo, g_lo, f_lo = h_loc, g, g
@@ -265,13 +276,13 @@ def _locate(model, state, h, h_prev, on_belt, slot, kind, g0, g1):
                 f_hi *= 0.5
             last = -1
             if keep_before:
-                before = h_loc
+                h_before = h_loc
                 have_before = True
-                _copy_state(state, S_BEFORE, S_LOC)
+                _copy_row(before, located)
     counters[0].n_events += 1
     if have_before:
-        _copy_state(state, trial, S_BEFORE)
-        return before
+        _copy_row(end, before)
+        return h_before
     return best if have_best else h
 
 
@@ -294,10 +305,11 @@ def solve(model, state, max_attempts, t_target):
     (:data:`LoopState`) left it: until it ends (SOLVE_DONE, the diagnosis in counters[0].diag),
     ``max_attempts`` step attempts (SOLVE_PAUSED; 1: at most one accepted step), an output
     buffer (impacts, stages rows; recorded points) without a
-    free entry (SOLVE_GROW) or the accepted time reaching ``t_target`` (SOLVE_REACHED). Row 0 of
-    the states holds the initial state on the first call, which zeroes the other state rows and
-    the scratch arrays, evaluates the forces there and observes it (``max_attempts`` 0: only
-    that)."""
+    free entry (SOLVE_GROW) or the accepted time reaching ``t_target`` (SOLVE_REACHED). The
+    state rows are named (``rows``, :func:`loop_rows`); the accepted one,
+    ``rows.trial[counters[0].cur]``, holds the initial state on the first call, which zeroes
+    the other state rows and the scratch arrays, evaluates the forces there and observes it
+    (``max_attempts`` 0: only that)."""
     (
         params, corners, normals, mode_shapes, rigid_modal, omega, zeta, settings, breakpoints,
     ) = model  # fmt: skip
@@ -316,6 +328,7 @@ def solve(model, state, max_attempts, t_target):
     # default rtol a stiff fence's stick is resolved (control.resolves_stick)
     tol_scale = tolerance_scale(settings[0].rtol)
     friction_events = resolves_stick(settings, m)
+    rows = loop_rows(state)
     if counters[0].started == 0:
         # forces at t = 0, belt wrench by Karnopp, consistent accelerations
         counters[0].started = 1
@@ -337,19 +350,20 @@ def solve(model, state, max_attempts, t_target):
         work[:, :] = 0.0
         for k in range(N_SLOTS):
             friction_prev[k] = math.nan
-        evaluate(model, times[a], 0.0, states[a], belt_wrench[a], 0.0, _row(state, a))
-        y, r = states[a], resultants[a]
+        cur = rows.trial[a]
+        evaluate(model, cur.time[0], 0.0, cur.state, cur.belt, 0.0, _evaluation(state, cur))
+        y, r, belt = cur.state, cur.resultant, cur.belt
         bx, by, bz = karnopp_belt(
             params, y[3] - params[0].belt, y[4], y[5], r[0].fx, r[0].fy, r[0].mz
         )
-        belt_wrench[a, 0], belt_wrench[a, 1], belt_wrench[a, 2] = bx, by, bz
+        belt[0], belt[1], belt[2] = bx, by, bz
         if (
             math.hypot(y[3] - params[0].belt, y[4]) <= settings[0].v_min
             and abs(y[5]) <= settings[0].phidot_min
         ):
             bx, by, bz = stick_wrench(params, r[0].fx, r[0].fy, r[0].mz)
-            belt_wrench[a, 0], belt_wrench[a, 1], belt_wrench[a, 2] = bx, by, bz
-        _accelerations(model, state, a, 0.0)
+            belt[0], belt[1], belt[2] = bx, by, bz
+        _accelerations(model, cur, 0.0)
         _observe(model, state, a, True)
         figures[0].h = h_nom if not adaptive else min(h_nom, settings[0].dt)
         figures[0].h_cap = h_nom
@@ -358,10 +372,12 @@ def solve(model, state, max_attempts, t_target):
     while True:
         a = counters[0].cur
         b = counters[0].trial
-        if counters[0].stop != 0 or not times[a] < settings[0].t_end - 1e-12:
+        cur, trial = rows.trial[a], rows.trial[b]
+        t = cur.time[0]
+        if counters[0].stop != 0 or not t < settings[0].t_end - 1e-12:
             counters[0].done = 1
             return SOLVE_DONE
-        if times[a] >= t_target - 1e-12:
+        if t >= t_target - 1e-12:
             return SOLVE_REACHED
         if attempts >= max_attempts:
             return SOLVE_PAUSED
@@ -374,25 +390,25 @@ def solve(model, state, max_attempts, t_target):
         attempts += 1
         on_belt = counters[0].on_belt != 0
         nb = counters[0].next_break
-        while breakpoints[nb] <= times[a] + 1e-12:
+        while breakpoints[nb] <= t + 1e-12:
             nb += 1
         counters[0].next_break = nb
-        to_break = breakpoints[nb] - times[a]
+        to_break = breakpoints[nb] - t
         h_try = min(figures[0].h, to_break)
         if adaptive:
             cap = min(
-                time_to_contact(contacts[a]),
-                oscillation_step(params, contacts[a], settings[0].rtol),
+                time_to_contact(cur.contacts),
+                oscillation_step(params, cur.contacts, settings[0].rtol),
             )
             if m > 0:
-                cap = min(cap, flexible_contact_step(contacts[a], h_nom, tol_scale))
+                cap = min(cap, flexible_contact_step(cur.contacts, h_nom, tol_scale))
             h_try = min(h_try, max(cap, 10.0 * min_dt))
             tiny = h_try <= 4.0 * min_dt
         else:
             tiny = h_try <= 1e-3 * h_nom
         # the modes' force is quadratic through the previous point (adaptive)
         h_hist = figures[0].h_prev if adaptive else 0.0
-        status = _attempt(model, state, h_try, h_hist, a, b, on_belt, tiny)
+        status = _attempt(model, state, rows, h_try, h_hist, cur, trial, on_belt, tiny)
         if status == STEP_REJECTED:
             counters[0].n_rejected += 1
             figures[0].h = h_try / 2.0
@@ -400,25 +416,28 @@ def solve(model, state, max_attempts, t_target):
             counters[0].clean = 0
             if figures[0].h < min_dt:
                 counters[0].diag = DIAG_MIN_DT
-                figures[0].diag_t = times[a]
+                figures[0].diag_t = t
                 counters[0].done = 1
                 return SOLVE_DONE
             continue
         if status == STEP_FORCED:
             counters[0].n_forced += 1
         h_taken = h_try
-        slot, kind, g0, g1 = first_event(params, contacts[a], contacts[b], friction_events)
-        if slot < 0 and on_belt and states[a, 1] < width <= states[b, 1]:
-            slot, kind, g0, g1 = -1, EVENT_SORT, width - states[a, 1], width - states[b, 1]
+        slot, kind, g0, g1 = first_event(params, cur.contacts, trial.contacts, friction_events)
+        y0, y1 = cur.state[1], trial.state[1]
+        if slot < 0 and on_belt and y0 < width <= y1:
+            slot, kind, g0, g1 = -1, EVENT_SORT, width - y0, width - y1
         located = False
         if (slot >= 0 or kind == EVENT_SORT) and h_try > 1e-9:
-            h_taken = _locate(model, state, h_try, h_hist, on_belt, slot, kind, g0, g1)
+            h_taken = _locate(
+                model, state, rows, cur, trial, h_try, h_hist, on_belt, slot, kind, g0, g1
+            )
             located = True
         if adaptive:
             h_prev = figures[0].h_prev
             r = h_taken / h_prev if h_prev > 0.0 else 0.0
             err = milne_error(
-                states[a], accelerations[a], states[b], figures[0].prev_v,
+                cur.state, cur.acceleration, trial.state, figures[0].prev_v,
                 figures[0].prev_a, r, h_taken, tol_scale * settings[0].atol,
                 tol_scale * settings[0].rtol, settings[0].v_ref, settings[0].om_ref,
             )  # fmt: skip
@@ -459,23 +478,22 @@ def solve(model, state, max_attempts, t_target):
             figures[0].h = min(h_nom, 2.0 * figures[0].h)
         # accept
         for k in range(3):
-            figures[0].prev_v[k] = states[a, 3 + k]
-            figures[0].prev_a[k] = accelerations[a, k]
+            figures[0].prev_v[k] = cur.state[3 + k]
+            figures[0].prev_a[k] = cur.acceleration[k]
         for j in range(m):
-            modal_forces[S_PREV, j] = modal_forces[a, j]
+            rows.previous.modal[j] = cur.modal[j]
         figures[0].h_prev = h_taken
-        if located or abs(times[a] + h_taken - breakpoints[nb]) <= 1e-12:
+        if located or abs(t + h_taken - breakpoints[nb]) <= 1e-12:
             figures[0].h_prev = 0.0
             if settings[0].gen_alpha != 0.0:
                 # restart from consistent accelerations after an event or a drive breakpoint
-                jump = _jump_at(params, times[b])
-                _accelerations(model, state, b, jump)
+                jump = _jump_at(params, trial.time[0])
+                _accelerations(model, trial, jump)
         counters[0].cur = b
         counters[0].trial = a
-        a = b
         counters[0].n_steps += 1
-        _observe(model, state, a, on_belt)
-        diag = diverged(params, settings, figures, times[a], states[a], resultants[a])
+        _observe(model, state, b, on_belt)
+        diag = diverged(params, settings, figures, trial.time[0], trial.state, trial.resultant)
         if diag != DIAG_NONE:
             counters[0].diag = diag
             counters[0].done = 1
