@@ -177,6 +177,38 @@ def test_a_reused_workspace_gives_the_same_solve() -> None:
         np.testing.assert_array_equal(again.series[k], v, err_msg=k)
 
 
+def test_the_named_rows_are_views_of_each_state_row_once() -> None:
+    """``loop.loop_rows`` names every row of the loop state's per-row arrays once (the trial
+    pair, located, before, alpha, previous), as views: after a value per Row is written
+    through it, each row of each array holds its own Row's value."""
+    s = Stepper(SortingModel(load_scene("impact_flexible").scenario))
+    _, state = s._loop_arrays()
+    rows = K.loop.loop_rows(state)
+    named = [*rows.trial, rows.located, rows.before, rows.alpha, rows.previous]
+    assert len(named) == K.N_ROWS == state.states.shape[0]
+    fields = {
+        "time": "times",
+        "state": "states",
+        "acceleration": "accelerations",
+        "belt": "belt_wrench",
+        "contacts": "contacts",
+        "resultant": "resultants",
+        "modal": "modal_forces",
+    }
+    assert set(fields) == set(K.Row._fields)
+    for name in fields.values():
+        getattr(state, name).view(np.uint8)[...] = 0
+    for i, row in enumerate(named):
+        for field in fields:
+            view = getattr(row, field).view(np.uint8)
+            assert view.size > 0, field
+            view[...] = 1 + i
+    for name in fields.values():
+        whole = getattr(state, name)
+        for i in range(K.N_ROWS):
+            assert np.all(whole[i : i + 1].view(np.uint8) == 1 + i), (name, i)
+
+
 def _fresh(sc) -> object:
     """``simulate(sc)`` with nothing cached per scenario (packed model, loop settings)."""
     M._packed.cache_clear()

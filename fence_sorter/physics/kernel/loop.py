@@ -70,7 +70,9 @@ def loop_rows(state):
     """The loop's state rows by role (:data:`Rows`), views of ``state``'s arrays built once per
     solve call. Inlined into its callers, it compiles with their flags (views of arguments need
     no reference counting inside compiled code); called from Python it needs Numba's reference
-    counting to hand Python the views (without it the whole arrays come back)."""
+    counting to hand Python the views (without it the whole arrays come back), whose record
+    fields Python reads by key (``row.resultant[0]["fx"]``), Numba's boxing dropping NumPy's
+    ``np.record`` type."""
     return Rows(
         (_row(state, 0), _row(state, 1)), _row(state, 2), _row(state, 3), _row(state, 4),
         _row(state, 5),
@@ -213,6 +215,21 @@ def _accelerations(model, row, jump):
 
 
 @njit(cache=True, _nrt=False)
+def _initial_belt(params, settings, row):
+    """The belt wrench of the initial state row from its resultant: Karnopp's, or the stick
+    wrench when the load rides at belt speed."""
+    y, r, belt = row.state, row.resultant, row.belt
+    bx, by, bz = karnopp_belt(params, y[3] - params[0].belt, y[4], y[5], r[0].fx, r[0].fy, r[0].mz)
+    belt[0], belt[1], belt[2] = bx, by, bz
+    if (
+        math.hypot(y[3] - params[0].belt, y[4]) <= settings[0].v_min
+        and abs(y[5]) <= settings[0].phidot_min
+    ):
+        bx, by, bz = stick_wrench(params, r[0].fx, r[0].fy, r[0].mz)
+        belt[0], belt[1], belt[2] = bx, by, bz
+
+
+@njit(cache=True, _nrt=False)
 def _locate(model, state, rows, start, end, h, h_prev, on_belt, slot, kind, g0, g1):
     """Shorten the step to end just past the sign change of ``slot``'s event function (or the
     sort crossing): Illinois regula falsi until an onset step ends within EVENT_TOL of D = 0
@@ -352,17 +369,7 @@ def solve(model, state, max_attempts, t_target):
             friction_prev[k] = math.nan
         cur = rows.trial[a]
         evaluate(model, cur.time[0], 0.0, cur.state, cur.belt, 0.0, _evaluation(state, cur))
-        y, r, belt = cur.state, cur.resultant, cur.belt
-        bx, by, bz = karnopp_belt(
-            params, y[3] - params[0].belt, y[4], y[5], r[0].fx, r[0].fy, r[0].mz
-        )
-        belt[0], belt[1], belt[2] = bx, by, bz
-        if (
-            math.hypot(y[3] - params[0].belt, y[4]) <= settings[0].v_min
-            and abs(y[5]) <= settings[0].phidot_min
-        ):
-            bx, by, bz = stick_wrench(params, r[0].fx, r[0].fy, r[0].mz)
-            belt[0], belt[1], belt[2] = bx, by, bz
+        _initial_belt(params, settings, cur)
         _accelerations(model, cur, 0.0)
         _observe(model, state, a, True)
         figures[0].h = h_nom if not adaptive else min(h_nom, settings[0].dt)
