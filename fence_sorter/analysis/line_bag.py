@@ -8,7 +8,8 @@ after the drain, and every input of that state is on the wire: the owner's set-u
 reply of every unit (/<unit>/replies). :func:`analyze_line_bag` replays the owner on the
 recorded replies (:class:`BagLinks`): the same code the live owner ran, fed the same answers,
 so it computes the same summary, every count and float bit for bit. The wall-clock fields
-(``wall_time_s``, ``real_time_factor``, ``reply_wait_max_s``) are the live run's, read from
+(``wall_time_s``, ``real_time_factor``, ``reply_wait_max_s``, ``pacing``: the paced clock's
+deadline counts, and ``handoff_latency``: the hand-offs' transit) are the live run's, read from
 /line/summary (NaN when the bag has no summary).
 
 Two checks say that the bag holds the whole run: each command the replayed owner sends must be
@@ -58,7 +59,13 @@ from fence_sorter.recording.topics import (
 from fence_sorter.stamps import time_to_sec
 
 #: the summary's wall-clock fields: the live run's (the replay's own wall time is not the run's)
-WALL_FIELDS = ("wall_time_s", "real_time_factor", "reply_wait_max_s")
+WALL_FIELDS = (
+    "wall_time_s",
+    "real_time_factor",
+    "reply_wait_max_s",
+    "pacing",
+    "handoff_latency",
+)
 _SEQ = re.compile(r'^\{"_":"Command","seq":(\d+),')
 
 

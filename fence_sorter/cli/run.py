@@ -31,9 +31,21 @@ def register(parser: argparse.ArgumentParser) -> None:
         "--line",
         metavar="LINE",
         help="run a line of fence units instead (a file or a name in config/lines): one "
-        "process per unit and the line's owner, in lockstep; with --parcels, --seed, --json, "
-        "--bag, --domain, --timeout, --log-dir, --keep-logs, --units, --no-owner, "
-        "--interface, --peers (docs/guide/line.md)",
+        "process per unit and the line's owner, in lockstep; with --parcels or --duration, "
+        "--rate, --no-guard, --rtf (default 0 with --line: unpaced), --seed, --json, --bag, "
+        "--domain, --timeout, --log-dir, --keep-logs, --units, --no-owner, --interface, "
+        "--peers (docs/guide/line.md)",
+    )
+    parser.add_argument(
+        "--rate",
+        type=float,
+        metavar="PCS_H",
+        help="with --line: induction rate [pcs/h] (default: the line's stream's)",
+    )
+    parser.add_argument(
+        "--no-guard",
+        action="store_true",
+        help="with --line: the units' swept-sector guard off (the intrusions are counted)",
     )
     parser.add_argument(
         "--units",
@@ -50,7 +62,9 @@ def register(parser: argparse.ArgumentParser) -> None:
     amount.add_argument("--parcels", type=int, help="parcels to inject (default 20)")
     amount.add_argument("--duration", type=float, help="inject the parcels arriving within S s")
     parser.add_argument(
-        "--rtf", type=float, default=1.0, help="real-time factor (0: as fast as it can)"
+        "--rtf",
+        type=float,
+        help="real-time factor (0: as fast as it can; default 1, with --line 0)",
     )
     parser.add_argument("--bag", metavar="DIR", help="record the run (rosbag2 MCAP) into DIR")
     parser.add_argument(
@@ -120,15 +134,20 @@ def add_param_option(parser: argparse.ArgumentParser, help: str) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.line is not None:
         return _run_line(args)
-    if args.units is not None or args.no_owner:
-        opt = "--units" if args.units is not None else "--no-owner"
-        print(f"fence-sorter: error: {opt} goes with --line only", file=sys.stderr)
-        return 2
+    for opt, given in (
+        ("--units", args.units is not None),
+        ("--no-owner", args.no_owner),
+        ("--rate", args.rate is not None),
+        ("--no-guard", args.no_guard),
+    ):
+        if given:
+            print(f"fence-sorter: error: {opt} goes with --line only", file=sys.stderr)
+            return 2
     opts = RunOptions(
         scene=args.scene,
         parcels=args.parcels,
         duration=args.duration,
-        rtf=args.rtf,
+        rtf=1.0 if args.rtf is None else args.rtf,
         bag=args.bag,
         rrd=args.rrd,
         stream=args.stream,
@@ -158,7 +177,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 #: the options of a single-unit run that a line run does not take
-_NOT_FOR_LINE = ("duration", "rrd", "sensors", "foxglove")
+_NOT_FOR_LINE = ("rrd", "sensors", "foxglove")
 
 
 def _run_line(args: argparse.Namespace) -> int:
@@ -170,13 +189,17 @@ def _run_line(args: argparse.Namespace) -> int:
             opt = "--" + name.replace("_", "-")
             print(f"fence-sorter: error: {opt} does not go with --line", file=sys.stderr)
             return 2
-    if args.params or args.rtf != 1.0 or args.stream != "default":
-        print("fence-sorter: error: --param, --rtf and --stream do not go with --line "
+    if args.params or args.stream != "default":
+        print("fence-sorter: error: --param and --stream do not go with --line "
               "(the line file names its stream)", file=sys.stderr)  # fmt: skip
         return 2
     opts = LineRunOptions(
         line=args.line,
         parcels=10 if args.parcels is None else args.parcels,
+        duration=args.duration,
+        rate=args.rate,
+        guard=not args.no_guard,
+        rtf=0.0 if args.rtf is None else args.rtf,
         seed=args.seed,
         domain=args.domain,
         log_dir=args.log_dir,
@@ -205,9 +228,22 @@ def _run_line(args: argparse.Namespace) -> int:
               "ended with the line (the line summary: on the owner's host)")  # fmt: skip
     elif result.summary.get("line"):
         print(line_summary(result.summary))
+        if "pacing" in result.summary:
+            print(pacing_line(result.summary["pacing"]))
     if result.code != 0:
         print(f"fence-sorter run --line: {result.message}", file=sys.stderr)
     return result.code
+
+
+def pacing_line(p: dict) -> str:
+    """One line on the line clock's pacing (the owner's ``PacedSteps`` figures)."""
+    if not p["real_time_factor_target"]:
+        return f"line clock: unpaced, {p['steps']} steps"
+    return (
+        f"line clock: rtf {p['real_time_factor_target']:g}, {p['steps']} steps, deadline "
+        f"misses {p['deadline_misses']} of {p['cycles']} ({p['deadline_miss_share']:.2%}), "
+        f"slips {p['catch_up_slips']}, lateness p99 {p['lateness_p99_ms']:.2f} ms"
+    )
 
 
 def _run_and_report(args: argparse.Namespace, opts, say, stop) -> int:

@@ -202,3 +202,73 @@ class CycleTrace:
 
     def save(self, path: str) -> None:
         np.savez_compressed(path, **self.arrays())
+
+
+class PacedSteps:
+    """Fixed steps of ``dt`` sim seconds paced on a :class:`Pacer` grid of period ``dt / rtf``
+    wall seconds (``rtf`` 0: unpaced, one step per cycle as fast as the steps go).
+
+    Each cycle runs the steps that bring sim time up to the tick's sim time: one on time,
+    several after a late wake (the catch-up, up to the pacer's ``max_catch_up``; beyond it the
+    grid slips). The steps themselves never change size, so pacing changes no physics figure,
+    only when the steps happen. Counted as the simulator's loop counts: every deadline of the
+    grid is a cycle; a deadline that passed while the loop did not run is a miss, and so is a
+    cycle whose steps end after its deadline plus one period."""
+
+    def __init__(
+        self,
+        dt: float,
+        rtf: float,
+        sim0: float = 0.0,
+        max_catch_up: float = 0.1,
+        clock: Callable[[], float] = time.perf_counter,
+        sleep: Callable[[float], None] = time.sleep,
+    ):
+        if not dt > 0.0 or not rtf >= 0.0:
+            raise ValueError("dt must be > 0 and rtf >= 0")
+        self.dt, self.rtf, self.clock = dt, rtf, clock
+        self.period = dt / rtf if rtf > 0.0 else dt
+        self.pacer = Pacer(
+            self.period, rtf, sim0, max_catch_up, unpaced_step=dt, clock=clock, sleep=sleep
+        )
+        self.cycles = self.misses = self.steps = 0
+        self.lateness, self.work = LatenessHistogram(), LatenessHistogram()
+
+    def run(self, active: Callable[[], bool], step: Callable[[], float]) -> None:
+        """Call ``step`` (one step of ``dt``; it returns the new sim time) while ``active()``."""
+        t = self.pacer.sim0
+        half = 0.5 * self.dt
+        while active():
+            tick = self.pacer.wait()
+            while t < tick.t_sim - half and active():
+                t = step()
+                self.steps += 1
+            self.cycles += 1 + tick.skipped
+            self.misses += tick.skipped
+            if self.rtf > 0.0:
+                wake = tick.deadline + tick.lateness
+                done = self.clock()
+                self.lateness.add(tick.lateness)
+                self.work.add(done - wake)
+                if done > tick.deadline + self.period:
+                    self.misses += 1
+
+    def figures(self) -> dict:
+        """The paced clock's counts for a summary (ms; NaN where unpaced)."""
+        l50, l99 = self.lateness.percentiles((50, 99))
+        w50, w99 = self.work.percentiles((50, 99))
+        return {
+            "real_time_factor_target": self.rtf,
+            "period_s": self.period,
+            "steps": self.steps,
+            "cycles": self.cycles,
+            "deadline_misses": self.misses,
+            "deadline_miss_share": self.misses / self.cycles if self.cycles else math.nan,
+            "catch_up_slips": self.pacer.slips,
+            "lateness_p50_ms": 1e3 * l50,
+            "lateness_p99_ms": 1e3 * l99,
+            "lateness_max_ms": 1e3 * self.lateness.max if self.lateness.n else math.nan,
+            "cycle_work_p50_ms": 1e3 * w50,
+            "cycle_work_p99_ms": 1e3 * w99,
+            "cycle_work_max_ms": 1e3 * self.work.max if self.work.n else math.nan,
+        }

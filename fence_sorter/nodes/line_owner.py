@@ -28,6 +28,7 @@ import threading
 import time
 from collections.abc import Sequence
 
+import numpy as np
 import rclpy
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
@@ -49,6 +50,7 @@ from fence_sorter.line.lockstep import (
     encode,
 )
 from fence_sorter.line.multi_unit import LineRunConfig
+from fence_sorter.line.pacing import PacedSteps
 from fence_sorter.nodes.base import FenceSorterNode
 from fence_sorter.nodes.convert import handoff_from_msg, handoff_to_msg
 from fence_sorter.nodes.line_record import (
@@ -63,7 +65,11 @@ from fence_sorter.nodes.line_unit import (
     INDUCTION_TOPIC,
     LINE_QOS,
     READY,
+    TRANSIT,
+    TRANSIT_QOS,
+    handoff_latency_ns,
     handoff_topic,
+    with_info,
 )
 from fence_sorter.nodes.parameters import LINE_OWNER_PARAMETERS
 from fence_sorter.nodes.qos import CLOCK_QOS
@@ -87,12 +93,14 @@ class LineOwnerNode(FenceSorterNode, Links):
         p = self.parameter_values()
         self.line = load_line(p["line"])
         self.cfg = LineRunConfig(
-            parcels=int(p["parcels"]),
+            parcels=int(p["parcels"]) if float(p["duration"]) == 0.0 else None,
+            duration=float(p["duration"]) or None,
             rate_pcs_h=float(p["rate"]) or None,
             seed=None if int(p["seed"]) < 0 else int(p["seed"]),
             guard=bool(p["guard"]),
             dt=float(p["dt"]),
         )
+        self.rtf = float(p["real_time_factor"])
         self.reply_timeout = float(p["reply_timeout"])
         self.start_timeout = float(p["start_timeout"])
         self.summary_path = str(p["summary"])
@@ -108,6 +116,10 @@ class LineOwnerNode(FenceSorterNode, Links):
         self.recirculation_arrived = 0
         self.bad_messages = 0
         self.reply_wait_max = 0.0  # the longest wait for a unit's reply [s, wall]
+        # hand-off transit times [ns]: each unit's upstream link (on /<unit>/transit at the
+        # end), the recirculation's (measured here)
+        self.latency_ns: list[list[int] | None] = [None] * len(names)
+        self.recirculation_latency_ns: list[int] = []
         self.commands = [
             self.create_publisher(String, f"/{n}/commands", COMMAND_QOS) for n in names
         ]
@@ -115,13 +127,16 @@ class LineOwnerNode(FenceSorterNode, Links):
             self.create_subscription(
                 String, f"/{n}/replies", lambda m, k=k: self._on_reply(k, m), LINE_QOS
             )
+            self.create_subscription(
+                String, f"/{n}/{TRANSIT}", lambda m, k=k: self._on_transit(k, m), TRANSIT_QOS
+            )
         self.induction = self.create_publisher(HandOffMsg, INDUCTION_TOPIC, LINE_QOS)
         # a unit's downstream link, for the hand-offs the owner passes on while it is down
         self.stand_in = [
             self.create_publisher(HandOffMsg, handoff_topic(n), LINE_QOS) for n in names
         ]
         self.create_subscription(
-            HandOffMsg, handoff_topic(names[-1]), self._on_recirculation, LINE_QOS
+            HandOffMsg, handoff_topic(names[-1]), with_info(self._on_recirculation), LINE_QOS
         )
         self.clock = self.create_publisher(Clock, CLOCK, CLOCK_QOS)
         self.owner = LockstepOwner(self.line, self.cfg, self)
@@ -146,7 +161,14 @@ class LineOwnerNode(FenceSorterNode, Links):
         except (KeyError, TypeError, ValueError):
             self.bad_messages += 1
 
-    def _on_recirculation(self, msg: HandOffMsg) -> None:
+    def _on_transit(self, k: int, msg: String) -> None:
+        try:
+            self.latency_ns[k] = [int(v) for v in json.loads(msg.data)]
+        except (TypeError, ValueError):
+            self.bad_messages += 1
+
+    def _on_recirculation(self, msg: HandOffMsg, info) -> None:
+        self.recirculation_latency_ns.append(handoff_latency_ns(info))
         if handoff_from_msg(msg).to_unit == RECIRCULATION:
             self.recirculation_arrived += 1
         else:
@@ -226,18 +248,44 @@ class LineOwnerNode(FenceSorterNode, Links):
             c.publish(String(data=END))
         for c in up:
             c.wait_for_all_acked(Duration(seconds=timeout))
+        end = time.monotonic() + timeout
+        units = self.owner.units
+        while time.monotonic() < end and any(
+            self.latency_ns[k] is None for k, u in enumerate(units) if not u.down
+        ):
+            self._poll.wait(0.05)  # each unit's hand-offs' transit times, sent on end
+
+    def handoff_latency(self) -> dict:
+        """Transit of the hand-offs per link (DDS source timestamp -> reception), in ms."""
+        names = [u.name for u in self.line.units]
+        links = [f"induction>{names[0]}"]
+        links += [f"{a}>{b}" for a, b in zip(names, names[1:], strict=False)]
+        samples = dict(zip(links, self.latency_ns, strict=True))
+        samples[f"{names[-1]}>recirculation"] = self.recirculation_latency_ns
+        out = {link: latency_figures(v) for link, v in samples.items()}
+        out["all"] = latency_figures([x for v in samples.values() for x in v or []])
+        return out
 
     def run_line(self) -> dict:
         owner = self.owner
         self.get_logger().info("every unit is ready: the line runs")
         if self.warm:
             owner.warm_up()
-        wall0 = time.perf_counter()
-        while owner.active() and owner.t < owner.limit():
+        pace = PacedSteps(self.cfg.dt, self.rtf, owner.t)
+
+        def step() -> float:
             owner.step()
             self.clock.publish(Clock(clock=_stamp(owner.t)))
+            return owner.t
+
+        wall0 = time.perf_counter()
+        pace.run(lambda: owner.active() and owner.t < owner.limit(), step)
         owner.wall = time.perf_counter() - wall0
-        return {**owner.summary(), "reply_wait_max_s": self.reply_wait_max}
+        return {
+            **owner.summary(),
+            "reply_wait_max_s": self.reply_wait_max,
+            "pacing": pace.figures(),
+        }
 
     def heartbeat_status(self) -> DiagnosticStatus:
         status = super().heartbeat_status()
@@ -251,6 +299,18 @@ class LineOwnerNode(FenceSorterNode, Links):
         }
         status.values.extend(KeyValue(key=k, value=str(v)) for k, v in values.items())
         return status
+
+
+def latency_figures(ns: list[int] | None) -> dict:
+    """Count, median, p99 and max [ms] of transit times [ns] (negative: not measured);
+    ``None``: the unit's figures did not arrive."""
+    if ns is None:
+        return {"n": 0, "missing": True}
+    v = np.array([x for x in ns if x >= 0], dtype=float) * 1e-6
+    if not len(v):
+        return {"n": 0}
+    p50, p99 = np.percentile(v, (50, 99))
+    return {"n": len(v), "p50_ms": float(p50), "p99_ms": float(p99), "max_ms": float(v.max())}
 
 
 def line_ok(s: dict) -> bool:
@@ -287,8 +347,9 @@ def main(args: Sequence[str] | None = None) -> int:
         spin.start()
         node.wait_ready()
         summary = node.run_line()
-        publish_summary(node.summary_pub, summary)
         node.end_units()
+        summary["handoff_latency"] = node.handoff_latency()
+        publish_summary(node.summary_pub, summary)
         text = json.dumps(json_safe(summary))
         if node.summary_path:
             with open(node.summary_path, "w", encoding="utf-8") as f:

@@ -12,10 +12,12 @@ Started in the namespace ``/<unit name>`` (``/unit_1``, ...); its own topic name
 - ``handoffs`` (fence_sorter_msgs/HandOff, out): the hand-offs to the downstream unit, or to
   the recirculation after the last unit;
 - the upstream link (HandOff, in): ``/line/handoffs`` (the induction) for the first unit, else
-  ``/<upstream unit name>/handoffs``.
+  ``/<upstream unit name>/handoffs``;
+- ``transit`` (std_msgs/String, out): once, at ``end``, the transit time of every hand-off
+  that arrived on the upstream link (DDS source timestamp to reception, ns; JSON list).
 
-Every topic is reliable and keep-all (``commands``: the latest 1000 kept, more than a unit is
-ever behind in lockstep): nothing is dropped silently. The heartbeat on
+Every lockstep topic is reliable and keep-all (``commands``: the latest 1000 kept, more than a
+unit is ever behind in lockstep): nothing is dropped silently. The heartbeat on
 /diagnostics counts the hand-offs at this end of both links: arrived on the upstream one,
 received (taken at the scan line), refused per reason and lost; published on the downstream one.
 
@@ -26,15 +28,17 @@ owner's process or host is gone, or it took this unit for down) exits with
 
 from __future__ import annotations
 
+import inspect
+import json
 import sys
 import time
 import uuid
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rclpy.duration import Duration
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
 from fence_sorter.line.handoff import HandOff
@@ -63,6 +67,41 @@ INDUCTION_TOPIC = "/line/handoffs"
 READY = "ready"
 #: the owner's last message on ``commands``: the line is over, the unit exits 0
 END = "end"
+_MSG_AND_INFO = inspect.Signature(
+    [inspect.Parameter(n, inspect.Parameter.POSITIONAL_ONLY) for n in ("msg", "info")]
+)
+#: a unit's hand-offs' transit times [ns] as a JSON list, published once when the line ends
+#: (relative: ``/<unit>/transit``); kept for a late reader, outside the lockstep streams
+TRANSIT = "transit"
+TRANSIT_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
+
+
+def handoff_latency_ns(info) -> int:
+    """A hand-off's transit: the middleware's reception minus its writer's source timestamp
+    (rclpy's message info, ns on the system clock: one clock on one host, synchronised
+    clocks across hosts); -1 where either is missing."""
+    try:
+        return int(info["received_timestamp"]) - int(info["source_timestamp"])
+    except (TypeError, KeyError, ValueError):
+        return -1
+
+
+def with_info(callback: Callable[[object, object], None]) -> Callable[..., None]:
+    """``callback(msg, info)`` as a subscription callback: rclpy passes the message info to a
+    callback of two arguments (its SingleThreadedExecutor calls ``(msg, info)``, its
+    EventsExecutor passes the pair as one argument)."""
+
+    def call(*args) -> None:
+        msg, info = args if len(args) == 2 else args[0]
+        callback(msg, info)
+
+    call.__signature__ = _MSG_AND_INFO
+    return call
 
 
 def handoff_topic(unit_name: str) -> str:
@@ -99,7 +138,9 @@ class LineUnitNode(FenceSorterNode):
         self.replies = self.create_publisher(String, "replies", LINE_QOS)
         self.handoffs = self.create_publisher(HandOffMsg, "handoffs", LINE_QOS)
         self.create_subscription(String, "commands", self._on_command, COMMAND_QOS)
-        self.create_subscription(HandOffMsg, upstream, self._on_handoff, LINE_QOS)
+        self.create_subscription(HandOffMsg, upstream, with_info(self._on_handoff), LINE_QOS)
+        self.latency_ns: list[int] = []  # per hand-off arrived: DDS source -> received [ns]
+        self.transit = self.create_publisher(String, TRANSIT, TRANSIT_QOS)
         self._ready_timer = self.create_timer(0.1, self._say_ready)
         self._owner_timer = self.create_timer(0.5, self._check_owner)
 
@@ -136,6 +177,8 @@ class LineUnitNode(FenceSorterNode):
         self.last_command = time.monotonic()
         if msg.data == END:
             self.get_logger().info("the line is over")
+            self.transit.publish(String(data=json.dumps(self.latency_ns)))
+            self.transit.wait_for_all_acked(Duration(seconds=10.0))
             for pub in (self.replies, self.handoffs):  # every reader (a recorder) has them
                 pub.wait_for_all_acked(Duration(seconds=10.0))
             rclpy.try_shutdown()  # ends the spin: run_node returns 0
@@ -148,7 +191,8 @@ class LineUnitNode(FenceSorterNode):
             return
         self._put(self.side.on_command(cmd))
 
-    def _on_handoff(self, msg: HandOffMsg) -> None:
+    def _on_handoff(self, msg: HandOffMsg, info) -> None:
+        self.latency_ns.append(handoff_latency_ns(info))
         self._put(self.side.on_handoff(handoff_from_msg(msg)))
 
     def _put(self, out: list[object]) -> None:

@@ -669,8 +669,26 @@ LINE_OWNER_PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "rate", 0.0, "Induction rate [pcs/h]; 0: the stream file's own", True, 0.0, 100_000.0
     ),
+    ParamSpec(
+        "duration",
+        0.0,
+        "Induct the stream's parcels arriving within this sim time [s] instead of `parcels`; "
+        "0: `parcels`",
+        True,
+        0.0,
+        1e6,
+    ),
     ParamSpec("guard", True, "The units' swept-sector guard (must match the units')", True),
     ParamSpec("dt", 0.01, "Step of the line clock [s]", True, 0.001, 0.1),
+    ParamSpec(
+        "real_time_factor",
+        0.0,
+        "Pace the line clock at this real-time factor (Pacer deadlines every dt / rtf of wall "
+        "time); 0: unpaced, as fast as the units answer",
+        True,
+        0.0,
+        100.0,
+    ),
     ParamSpec(
         "reply_timeout",
         10.0,

@@ -92,6 +92,8 @@ class LineRunOptions:
     seed: int | None = None
     rate: float | None = None
     guard: bool = True
+    duration: float | None = None  # --duration: induct for S s of sim time instead of --parcels
+    rtf: float = 0.0  # --rtf: the owner paces the line clock at this real-time factor (0: unpaced)
     domain: int | None = None
     log_dir: str | None = None
     keep_logs: bool = False
@@ -146,6 +148,10 @@ def _check(
         raise BadLineInput(f"--rate must be in [1, 100000] pcs/h, got {opts.rate}")
     if opts.seed is not None and not 0 <= opts.seed < 2**31:
         raise BadLineInput(f"--seed must be in [0, 2147483647], got {opts.seed}")
+    if opts.duration is not None and not 0.0 < opts.duration <= 1e6:
+        raise BadLineInput(f"--duration must be in (0, 1e6] s, got {opts.duration}")
+    if not 0.0 <= opts.rtf <= 100.0:  # NaN fails too
+        raise BadLineInput(f"--rtf must be in [0, 100] (0: unpaced), got {opts.rtf}")
     try:
         line = load_line(opts.line)
         path = resolve_line(opts.line)
@@ -213,10 +219,14 @@ def _run(
     try:
         stop.check()
         where = "" if transport is None else f", UDP on {transport.address}"
+        amount = f"{opts.parcels} parcels"
+        if opts.duration is not None:
+            amount = f"{opts.duration:g} s of induction"
+        pace = "unpaced" if opts.rtf == 0.0 else f"rtf {opts.rtf:g}"
         say(
             f"fence-sorter run --line: {line.name}, units {', '.join(here)} of "
             f"{len(line.units)}{'' if opts.owner else ' (the owner on another host)'}, "
-            f"{opts.parcels} parcels, ROS domain {domain}{where}, logs {log_dir}"
+            f"{amount}, {pace}, ROS domain {domain}{where}, logs {log_dir}"
         )
         if opts.bag is not None:
             rec_args = ["-p", f"output_dir:={Path(opts.bag).resolve()}", "-p",
@@ -243,6 +253,9 @@ def _run(
                 args += ["-p", f"rate:={float(opts.rate)!r}"]
             if opts.bag is not None:
                 args += ["-p", "recorder:=true"]
+            if opts.duration is not None:
+                args += ["-p", f"duration:={float(opts.duration)!r}"]
+            args += ["-p", f"real_time_factor:={float(opts.rtf)!r}"]
             owner = group.start(OWNER, node_command(OWNER, args))
         end = time.monotonic() + opts.timeout
 

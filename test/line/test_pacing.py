@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from fence_sorter.line.pacing import MIN_MARGIN, LatenessHistogram, Pacer
+from fence_sorter.line.pacing import MIN_MARGIN, LatenessHistogram, PacedSteps, Pacer
 
 
 class FakeClock:
@@ -155,3 +155,72 @@ def test_histogram_percentiles_in_one_pass_match_one_at_a_time():
     c = h.copy()
     h.add(0.05)
     assert c.n == h.n - 1 and c.max < 0.05 and c.percentiles(qs) != h.percentiles(qs)
+
+
+class Steps:
+    """A line of fixed steps on the fake clock: each step costs ``cost[j]`` wall seconds
+    (0 when not given) and advances sim time by dt."""
+
+    def __init__(self, clock: FakeClock, dt: float, n: int, cost: dict[int, float] | None = None):
+        self.clock, self.dt, self.n, self.cost = clock, dt, n, cost or {}
+        self.t = 0.0
+        self.times: list[float] = []  # sim time at the start of each step
+
+    def active(self) -> bool:
+        return len(self.times) < self.n
+
+    def step(self) -> float:
+        self.times.append(self.t)
+        self.clock.now += self.cost.get(len(self.times), 0.0)
+        self.t += self.dt
+        return self.t
+
+
+def paced(clock: FakeClock, rtf: float, **kw) -> PacedSteps:
+    return PacedSteps(0.01, rtf, 0.0, clock=clock, sleep=clock.sleep, **kw)
+
+
+def test_paced_steps_are_the_unpaced_steps_and_a_late_one_is_counted():
+    """rtf 2 (period 5 ms): step 5 costs 3.5 periods. Its cycle ends 2.5 periods after its
+    deadline's period (a miss); the next wake finds 2 more deadlines past (2 misses) and runs
+    3 steps to catch up, ending more than a period late as well (a miss): 4 misses of 20
+    cycles, no slip, and the same 20 steps of 10 ms as unpaced, in the same order."""
+    free = Steps(FakeClock(), 0.01, 20)
+    unpaced = paced(FakeClock(), 0.0)
+    unpaced.run(free.active, free.step)
+    assert unpaced.steps == unpaced.cycles == 20 and unpaced.figures()["deadline_misses"] == 0
+    assert math.isnan(unpaced.figures()["lateness_p99_ms"])
+
+    clock = FakeClock()
+    line = Steps(clock, 0.01, 20, {5: 3.5 * 5e-3})
+    p = paced(clock, 2.0)
+    t0 = clock.now
+    p.run(line.active, line.step)
+    assert line.times == free.times  # pacing changes when, never what
+    f = p.figures()
+    assert (f["steps"], f["cycles"], f["deadline_misses"], f["catch_up_slips"]) == (20, 20, 4, 0)
+    assert f["deadline_miss_share"] == pytest.approx(0.2)
+    assert f["period_s"] == pytest.approx(5e-3)
+    # locked to wall time: 20 cycles of 5 ms (the last one's deadline)
+    assert clock.now - t0 == pytest.approx(20 * 5e-3, abs=1e-4)
+
+
+def test_paced_steps_slip_beyond_the_catch_up_cap_without_dropping_a_step():
+    """rtf 1: step 3 stalls 0.5 s (50 periods); the cap (0.1 s) keeps 10 steps of catch-up
+    and slips the rest: 1 slip, 49 deadlines past counted missed, every step still 10 ms."""
+    clock = FakeClock()
+    line = Steps(clock, 0.01, 40, {3: 0.5})
+    p = paced(clock, 1.0)
+    p.run(line.active, line.step)
+    f = p.figures()
+    assert f["catch_up_slips"] == 1 and f["steps"] == 40
+    assert np.allclose(np.diff(line.times), 0.01)
+    assert f["deadline_misses"] == 1 + 49 + 1  # the stalled cycle, the deadlines past, catch-up
+    assert f["cycles"] == f["steps"] + 49 - 10  # the slipped deadlines were cycles not run
+
+
+def test_paced_steps_refuse_a_bad_rate():
+    with pytest.raises(ValueError):
+        PacedSteps(0.01, -1.0)
+    with pytest.raises(ValueError):
+        PacedSteps(0.0, 1.0)
