@@ -49,6 +49,8 @@ reports: bootstrap
 			--json docs/reports/calibration.json --doc docs/reports/calibration.md \
 		&& nice -n 10 python -m benchmarks line-bench four_units --parcels 100 \
 			--rates 2000,3000,4000,6000,8000,12000 --out docs/reports/line-bench.md \
+		&& python -m benchmarks line-scale --units 1,2,4,8 --parcels 8 --seed 3 --rtf 1 \
+			--out docs/reports/line-scale.md \
 		&& nice -n 10 python -m benchmarks.startup --rounds 5 --runs 3 --load 4 \
 			--out docs/reports/startup \
 		&& nice -n 10 python -m benchmarks.convergence \

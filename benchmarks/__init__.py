@@ -13,6 +13,8 @@ checkout (``source scripts/env.sh`` first):
 - ``python -m benchmarks calibrate-bench``: interval coverage, identifiability and wall time of
   the calibration -> docs/reports/calibration.md (:mod:`benchmarks.calibrate_bench`);
 - ``python -m benchmarks line-bench``: a line's saturation curve -> docs/reports/line-bench.md;
+- ``python -m benchmarks line-scale``: the line over DDS against its number of units (speed,
+  paced deadline misses, hand-off transit) -> docs/reports/line-scale.md and ``.json``;
 - ``python -m benchmarks paper-sweep NAME``: the optimisation sweeps of the paper's Figs. 3-10
   and the controller's decision table -> docs/reports/paper/ (:mod:`benchmarks.paper`);
 - ``python -m benchmarks.startup``: a process's start-up, part by part -> docs/reports/startup/;

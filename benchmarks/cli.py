@@ -18,6 +18,7 @@ CAMPAIGNS = {
     "calibrate-bench": "calibration benchmark: interval coverage, identifiability, wall time",
     "paper-sweep": "the optimisation sweeps of the paper's Figs. 3-10 and the decision table",
     "line-bench": "saturation curve of a line: sort rate and throughput against induction rate",
+    "line-scale": "the line over DDS against its units: speed, paced misses, hand-off transit",
 }
 BENCHMARKS = fence_sorter_cli.CommandLine(
     "python -m benchmarks",
