@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import signal
 import sys
 import threading
@@ -133,10 +134,16 @@ def _interrupt_once(signum: int, frame: object) -> None:
     raise KeyboardInterrupt(signal.Signals(signum).name)
 
 
+#: exit status when stdout's reader went away (128 + SIGPIPE, as a shell reports it)
+EXIT_BROKEN_PIPE = 141
+
+
 def main(argv: Sequence[str] | None = None, cli: CommandLine = FENCE_SORTER) -> int:
     """Parse the command line and run the chosen subcommand; return its exit code. As the
     process's own command (``argv`` None) it also owns the signals: Ctrl-C during start-up is
-    exit 130 in one line, and none after the command is done changes the exit status."""
+    exit 130 in one line, and none after the command is done changes the exit status. Output
+    whose reader has gone (``fence-sorter line-sim LINE | head``) ends the command quietly
+    with 141, the status of a process a broken pipe stops."""
     own = argv is None and threading.current_thread() is threading.main_thread()
     if own:
         signal.signal(signal.SIGINT, _interrupt_once)
@@ -151,9 +158,16 @@ def main(argv: Sequence[str] | None = None, cli: CommandLine = FENCE_SORTER) -> 
             code = 2
         else:
             code = int(func(args) or 0)
+        if own:
+            sys.stdout.flush()  # here, where a reader gone is caught, not at the exit
     except KeyboardInterrupt:
         print(f"{cli.prog}: interrupted", file=sys.stderr)
         code = 130
+    except BrokenPipeError:
+        # the reader of stdout is gone: nothing more can be said there, and the interpreter's
+        # own flush at exit must not fail again on it
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        code = EXIT_BROKEN_PIPE
     if own:  # the interpreter's exit resets Python-level handlers to default, not SIG_IGN
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -189,3 +190,26 @@ def test_demo_roundtrip(env: dict[str, str]) -> None:
     count = len(list(msg_dir.glob("*.msg")))
     assert count >= 6
     assert f"all {count} message types made the round trip" in result.stdout
+
+
+@pytest.mark.parametrize("args", [["line-sim", "two_units", "--parcels", "2"]])
+def test_output_whose_reader_is_gone_ends_quietly_with_141(
+    args: list[str], env: dict[str, str]
+) -> None:
+    """``fence-sorter ... | head``: stdout's reader is gone before the command writes; the
+    command ends with 141 (128 + SIGPIPE) and no traceback."""
+    read, write = os.pipe()
+    os.close(read)
+    try:
+        proc = subprocess.run(
+            [venv_executable("fence-sorter"), *args],
+            stdout=write,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=env,
+            timeout=300,
+        )
+    finally:
+        os.close(write)
+    assert proc.returncode == 141, proc.stderr
+    assert proc.stderr == ""
