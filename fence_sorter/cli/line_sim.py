@@ -124,15 +124,30 @@ def _recorder(line, path: str, period: float):
     return LineRerunLogger(rec, line, period=period)
 
 
+def _steady_line(s: dict) -> str:
+    """Throughput in and out over the steady window (:meth:`LinePlant.steady_window`)."""
+    w = s["steady_window"]
+    if w is None:
+        return "throughput: no steady window (the induction ran no longer than a loop cycle)"
+    return (
+        f"throughput over the steady window [{w['start_s']:.1f}, {w['end_s']:.1f}) s: in "
+        f"{s['throughput_in_pcs_h']:.0f} pcs/h ({w['first_inductions']} first inductions), out "
+        f"{s['throughput_out_pcs_h']:.0f} pcs/h ({w['sorts']} sorts = "
+        f"{w['first_inductions']} - {w['still_on_line']} still on the line - "
+        f"{w['ended_unsorted']} rejected or failed + {w['from_before']} from before)"
+    )
+
+
 def format_summary(s: dict) -> str:
     lines = [
         f"line {s['line']}  guard {'on' if s['guard'] else 'off'}  "
         f"sim {s['sim_time_s']:.1f} s in {s['wall_time_s']:.1f} s wall "
         f"({s['real_time_factor']:.1f}x real time)",
-        f"inducted {s['parcels_inducted']} ({s['throughput_in_pcs_h']:.0f} pcs/h), sorted "
-        f"{s['sorted']} ({s['sort_rate']:.1%}, {s['throughput_out_pcs_h']:.0f} pcs/h), "
+        f"inducted {s['parcels_inducted']} ({s['induction_rate_pcs_h']:.0f} pcs/h), sorted "
+        f"{s['sorted']} ({s['sort_rate']:.1%}), "
         f"wrong destination {s['sorted_wrong_destination']}, rejected {s['rejected']}, "
         f"no-read {s['no_read']}",
+        _steady_line(s),
         f"recirculated {s['recirculated']} ({s['recirculation_share']:.1%}), passes per parcel "
         f"{s['passes_per_parcel']:.2f}, swept-sector intrusions {s['swept_sector_intrusions']}",
         "per destination: "

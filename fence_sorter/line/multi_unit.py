@@ -74,9 +74,9 @@ class _LP:
     spec: ParcelSpec  # sizes, mass; cog_offset_y, yaw, lateral_gap in the line frame
     destination: str
     arrival: float  # the stream's first induction [s], before any hold
-    inducted_at: float = math.nan  # its first induction [s], after the holds
+    inducted_at: float = math.nan  # its first induction: its front crossed X = 0 [s]
     sorted_at: float = math.nan  # when its stroke's outcome said sorted [s]
-    inducted_last: float = math.nan  # its latest induction [s]
+    ended_at: float = math.nan  # when it was sorted, rejected or failed [s]
     passes: int = 0  # completed passes
     no_read: bool = False  # this pass
     ever_no_read: bool = False
@@ -190,9 +190,6 @@ class LinePlant:
         p.next_unit = 0
         p.no_read = bool(self.rng.random() < self.spec.no_read_share)
         p.ever_no_read |= p.no_read
-        if math.isnan(p.inducted_at):
-            p.inducted_at = t
-        p.inducted_last = t
         self.inductions += 1
         for u in self.units:
             u.announce(p.pid, p.passes, p.spec, "" if p.no_read else p.destination)
@@ -331,6 +328,8 @@ class LinePlant:
                 and self._front(p.track, self.t) >= 0.0
             ):
                 p.state = "belt"
+                if p.passes == 0:  # its front crossed X = 0 at t_ref (after every hold)
+                    p.inducted_at = p.track.t_ref
             if p.state != "belt" or p.stroke_unit is not None:
                 continue
             while p.next_unit < len(self.units):
@@ -361,11 +360,12 @@ class LinePlant:
             self.bookings = [b for b in self.bookings if b.parcel_id != p.pid]
         if isinstance(rec, Sorted):
             p.state = "sorted"
-            p.sorted_at = rec.t
+            p.sorted_at = p.ended_at = rec.t
             p.end = rec.chute
             p.track = None
         elif isinstance(rec, Failed):
             p.state = "failed"
+            p.ended_at = rec.t
             p.track = None
         else:  # rides on from the pose it left the unit with
             p.track = track_of(rec, self.v)
@@ -387,6 +387,7 @@ class LinePlant:
             p.track = None
             if p.passes >= self.spec.max_passes:
                 p.state = "rejected"
+                p.ended_at = self.t
                 p.end = self.spec.reject_chute
             else:
                 p.state = "loop"
@@ -454,23 +455,14 @@ class LinePlant:
         span = (ps[-1].arrival - ps[0].arrival) if n > 1 else 0.0
         window = span + (span / (n - 1) if n > 1 else 0.0)
         rate = (lambda k: 3600.0 * k / window) if window > 0 else (lambda k: math.nan)
-        # throughput in: parcels per hour over the span of their first inductions (after the
-        # holds for returning parcels), widened by one mean pitch; out: sorts per hour while
-        # the induction ran, that window shifted by the median induction-to-sort time of the
-        # sorted parcels (a finite stream's recirculated tail, sorted
-        # after the induction stopped, is left out: in steady state it is sorted in the
-        # window as well); the induction-to-sort time is the sorting pass's
         firsts = [p.inducted_at for p in ps if not math.isnan(p.inducted_at)]
-        throughput_in = _per_hour(firsts)
-        delays = sorted(p.sorted_at - p.inducted_last for p in ps if p.state == "sorted")
-        if delays and len(firsts) > 1 and throughput_in > 0:
-            lag = delays[len(delays) // 2]
-            window = len(firsts) * 3600.0 / throughput_in
-            w0 = min(firsts) + lag
-            out = sum(w0 <= p.sorted_at < w0 + window for p in ps if p.state == "sorted")
-            throughput_out = 3600.0 * out / window
+        steady = self.steady_window()
+        if steady is None:
+            throughput_in = throughput_out = math.nan
         else:
-            throughput_out = math.nan
+            hours = (steady["end_s"] - steady["start_s"]) / 3600.0
+            throughput_in = steady["first_inductions"] / hours
+            throughput_out = steady["sorts"] / hours
         prof = self.spec.planner.profile
         units = {}
         for u in self.units:
@@ -505,8 +497,10 @@ class LinePlant:
             "links": self.links().table(),
             "handoffs_balanced": self.links().balanced(),
             "declined": {r: sum(u.declined[r] for u in self.units) for r in REASONS},
+            "induction_rate_pcs_h": _per_hour(firsts),
             "throughput_in_pcs_h": throughput_in,
             "throughput_out_pcs_h": throughput_out,
+            "steady_window": steady,
             "merge_wait_mean_s": self.merges_waited / max(self.inductions - n, 1),
             "induction_hold_s": self.hold,
             "still_on_line": on_line,
@@ -517,6 +511,49 @@ class LinePlant:
             "wall_time_s": self.wall,
             "real_time_factor": self.t / self.wall if self.wall > 0 else math.nan,
             "units": units,
+        }
+
+    def loop_cycle(self) -> float:
+        """One loop cycle [s]: a parcel's ride along the belt (length / v) and the loop back."""
+        return self.spec.length / self.v + self.spec.transit_time
+
+    def steady_window(self) -> dict | None:
+        """The steady-state window of the run and its counts, as users of sortation lines
+        measure throughput: from one loop cycle after the first parcel's first induction (the
+        fill: until then no parcel has come back from the loop) to the last parcel's first
+        induction (after it the line drains). ``first_inductions``: new parcels whose front
+        crossed the induction scan line X = 0 in the window (start <= t < end; a returning
+        parcel's second pass is not counted again); ``sorts``: parcels sorted to a chute in
+        it, whenever they were inducted. They differ by exact counts:
+        ``sorts = first_inductions - still_on_line - ended_unsorted + from_before``, where
+        ``still_on_line``: parcels first inducted in the window and not ended by its end;
+        ``ended_unsorted``: first inducted in it, rejected or failed in it; ``from_before``:
+        first inducted before it, sorted in it. None when the induction ran no longer than a
+        loop cycle (no steady state)."""
+        firsts = [p.inducted_at for p in self.parcels if not math.isnan(p.inducted_at)]
+        if len(firsts) < 2:
+            return None
+        fill = self.loop_cycle()
+        start, end = min(firsts) + fill, max(firsts)
+        if end <= start:
+            return None
+
+        def inside(t: float) -> bool:
+            return start <= t < end
+
+        new = [p for p in self.parcels if inside(p.inducted_at)]
+        sorts = sum(inside(p.sorted_at) for p in self.parcels)
+        return {
+            "start_s": start,
+            "end_s": end,
+            "fill_s": fill,
+            "first_inductions": len(new),
+            "sorts": sorts,
+            "still_on_line": sum(not p.ended_at < end for p in new),
+            "ended_unsorted": sum(p.state != "sorted" and p.ended_at < end for p in new),
+            "from_before": sum(
+                p.inducted_at < start and inside(p.sorted_at) for p in self.parcels
+            ),
         }
 
     def links(self) -> LinkCounts:

@@ -31,7 +31,10 @@ TWO = load_line("two_units")
 #: main's LinePlant at 6dd615c (before the split into LineUnit objects): the fields below of
 #: ``LinePlant(load_line(LINE), LineRunConfig(**CONFIG)).run()`` for each case of CASES, with
 #: that commit's module (``git show 6dd615c:fence_sorter/line/multi_unit.py``, written to a
-#: file of its own and loaded by path with importlib beside the current package)
+#: file of its own and loaded by path with importlib beside the current package); the
+#: throughput in and out are not among them: they are counted over the steady window
+#: (``LinePlant.steady_window``), which these 40-parcel runs, shorter than a loop cycle of
+#: induction, do not have
 MAIN = {
     "four": {
         "sorted": 40, "sorted_per_destination": {"D1": 4, "D2": 3, "D3": 6, "D4": 6, "D5": 2,
@@ -39,8 +42,7 @@ MAIN = {
         "no_read": 1, "handoffs": 200,
         "declined": {"no_read": 4, "not_served": 134, "sector_occupied": 20},
         "swept_sector_intrusions": 0, "induction_hold_s": 19.10030866772516,
-        "sim_time_s": 147.310000000011, "throughput_in_pcs_h": 3887.0099724661036,
-        "throughput_out_pcs_h": 1846.3297369213992,
+        "sim_time_s": 147.310000000011,
         "units": {
             "unit_1": {"strokes": 9, "sorted": 7, "missed": 2, "late_handoffs": 0,
                        "declined": {"no_read": 1, "not_served": 50, "sector_occupied": 3},
@@ -70,8 +72,7 @@ MAIN = {
         "declined": {"no_feasible_stroke": 4, "no_read": 8, "not_served": 40,
                      "sector_occupied": 40},
         "swept_sector_intrusions": 0, "induction_hold_s": 28.019556944229304,
-        "sim_time_s": 108.94000000001883, "throughput_in_pcs_h": 1897.0522969864571,
-        "throughput_out_pcs_h": 995.95245591789,
+        "sim_time_s": 108.94000000001883,
         "units": {
             "unit_1": {"strokes": 13, "sorted": 13, "missed": 0, "late_handoffs": 0,
                        "declined": {"no_feasible_stroke": 4, "no_read": 4, "not_served": 28,
@@ -92,8 +93,7 @@ MAIN = {
         "declined": {"fence_busy": 12, "no_feasible_stroke": 6, "no_read": 4,
                      "not_served": 29},
         "swept_sector_intrusions": 24, "induction_hold_s": 15.217665569177278,
-        "sim_time_s": 98.42000000001345, "throughput_in_pcs_h": 2377.2613149229996,
-        "throughput_out_pcs_h": 1901.8090519383998,
+        "sim_time_s": 98.42000000001345,
         "units": {
             "unit_1": {"strokes": 18, "sorted": 17, "missed": 1, "late_handoffs": 0,
                        "declined": {"fence_busy": 4, "no_feasible_stroke": 6, "no_read": 2,

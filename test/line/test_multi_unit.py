@@ -11,6 +11,7 @@ from dataclasses import replace
 
 import pytest
 
+from fence_sorter.line.handoff import Failed, Sorted
 from fence_sorter.line.line_file import load_line
 from fence_sorter.line.multi_unit import LinePlant, LineRunConfig
 from fence_sorter.line.routing import NO_READ, REASONS
@@ -182,7 +183,7 @@ def test_a_returning_parcel_merges_with_its_gap_and_the_stream_keeps_its_order()
     drawn = [p.arrival for p in plant.parcels]
     for i in range(1, len(firsts)):
         assert firsts[i] - firsts[i - 1] >= drawn[i] - drawn[i - 1] - 1e-9
-    assert s["throughput_in_pcs_h"] < 3000.0  # the holds took induction capacity
+    assert s["induction_rate_pcs_h"] < 3000.0  # the holds took induction capacity
 
 
 @pytest.mark.slow
@@ -222,5 +223,59 @@ def test_a_gapping_induction_meters_a_dense_stream_to_its_gap():
     firsts = [p.inducted_at for p in plant.parcels]
     assert firsts == sorted(firsts)
     longest = max(p.spec.length_a for p in plant.parcels)  # pitch <= longest parcel + gap
-    assert s["throughput_in_pcs_h"] < 6000.0 * 0.9
-    assert s["throughput_in_pcs_h"] >= 3600.0 * LINE.speed / (longest + 1.5) * 0.5
+    assert s["induction_rate_pcs_h"] < 6000.0 * 0.9
+    assert s["induction_rate_pcs_h"] >= 3600.0 * LINE.speed / (longest + 1.5) * 0.5
+
+
+@pytest.mark.slow
+def test_over_the_steady_window_sorts_are_first_inductions_less_open_ones_plus_earlier():
+    """two_units, 60 s of induction at 2000 pcs/h: the steady window starts one loop cycle
+    (belt length / v + transit time) after the first parcel's first induction and ends at the
+    last one's; the summary's counts over it equal those read off the run by an observer of
+    the units' records and the parcels' states, and obey, exactly, sorts = first inductions -
+    still on the line at its end - rejected or failed in it + sorted in it from before it."""
+    plant = LinePlant(LINE, LineRunConfig(duration=60.0, rate_pcs_h=2000.0, seed=3))
+    first: dict[int, float] = {}  # the time its front crossed X = 0, from its track
+    sorted_at: dict[int, float] = {}
+    ended: dict[int, float] = {}
+
+    def observe(pl: LinePlant, records: list) -> None:
+        for rec in records:
+            if isinstance(rec, Sorted | Failed):
+                ended[rec.parcel_id] = rec.t
+            if isinstance(rec, Sorted):
+                sorted_at[rec.parcel_id] = rec.t
+        for p in pl.parcels:
+            if p.state == "rejected" and p.pid not in ended:
+                ended[p.pid] = pl.t
+            if p.passes == 0 and p.state == "belt" and p.pid not in first:
+                tr = p.track
+                first[p.pid] = tr.t_ref - pl._front(tr, tr.t_ref) / tr.v
+
+    plant.observers.append(observe)
+    s = plant.run()
+    check_books(plant, s)
+    assert plant.records_ignored == 0
+    w = s["steady_window"]
+    assert w["fill_s"] == LINE.length / LINE.speed + LINE.transit_time
+    assert w["start_s"] == pytest.approx(min(first.values()) + w["fill_s"], abs=1e-9)
+    assert w["end_s"] == pytest.approx(max(first.values()), abs=1e-9)
+    a, b = w["start_s"], w["end_s"]
+    new = [pid for pid, t in first.items() if a <= t < b]
+    seen = {
+        "first_inductions": len(new),
+        "sorts": sum(a <= t < b for t in sorted_at.values()),
+        "still_on_line": sum(ended.get(pid, math.inf) >= b for pid in new),
+        "ended_unsorted": sum(
+            pid not in sorted_at and ended.get(pid, math.inf) < b for pid in new
+        ),
+        "from_before": sum(first[pid] < a and a <= t < b for pid, t in sorted_at.items()),
+    }
+    assert {k: w[k] for k in seen} == seen
+    assert seen["first_inductions"] > 10 and seen["from_before"] > 0 and seen["still_on_line"] > 0
+    assert w["sorts"] == (
+        w["first_inductions"] - w["still_on_line"] - w["ended_unsorted"] + w["from_before"]
+    )
+    hours = (b - a) / 3600.0
+    assert s["throughput_in_pcs_h"] == w["first_inductions"] / hours
+    assert s["throughput_out_pcs_h"] == w["sorts"] / hours
