@@ -34,6 +34,14 @@ from .types import (
 #: index of the first extra of a :class:`_Tap` point that is held between points, not
 #: interpolated (the stage, then the current impact's N_stiff)
 HELD = 8
+#: positions of the fields :class:`_Tap` reads in a RESULT record and a CONTACT slot
+_R_ALPHA, _R_RATE, _R_ACCEL, _R_FENCE_N, _R_MAX_D, _R_TIP_W, _R_ACTIVE_MASK = (
+    K.RESULT.names.index(f)
+    for f in ("alpha", "rate", "accel", "fence_n", "max_d", "tip_w", "active_mask")
+)
+_C_ACTIVE, _C_N, _C_PX, _C_PY, _C_DDOT = (
+    K.CONTACT.names.index(f) for f in ("active", "n", "px", "py", "ddot")
+)
 
 
 class _Tap:
@@ -65,22 +73,28 @@ class _Tap:
     def add(self, stepper: SolveStepper) -> bool:
         """Keep the stepper's last accepted point; True if C_s crossed y0 = s at it."""
         t, y = stepper.t, stepper.y.copy()
-        res, slots = stepper.resultants[0], stepper.contacts
-        active = np.flatnonzero(slots["active"][: K.SLOT_BORDER])
-        if len(active):
-            slot = slots[active[np.argmax(slots["n"][active])]]
-            px, py, ddot = slot["px"], slot["py"], slot["ddot"]
+        # the records as Python floats, read once (a numpy record's field access costs more
+        # than the whole row's tolist)
+        res = stepper.resultants.tolist()[0]
+        best = None  # the active border slot with the largest n (the first of equals)
+        for slot in stepper.contacts[: K.SLOT_BORDER].tolist():
+            if slot[_C_ACTIVE] and (
+                best is None or (best[_C_N] == best[_C_N] and not slot[_C_N] <= best[_C_N])
+            ):  # np.argmax's choice: the first largest, a NaN before any number
+                best = slot
+        if best is not None:
+            px, py, ddot = best[_C_PX], best[_C_PY], best[_C_DDOT]
         else:
             px = py = math.nan
             ddot = 0.0
         impacts = stepper.impacts
         extra = np.array(
             [
-                res["alpha"],
-                res["rate"],
-                res["accel"],
-                res["fence_n"],
-                res["max_d"],
+                res[_R_ALPHA],
+                res[_R_RATE],
+                res[_R_ACCEL],
+                res[_R_FENCE_N],
+                res[_R_MAX_D],
                 ddot,
                 px,
                 py,
@@ -94,8 +108,8 @@ class _Tap:
         self.ts.append(t)
         self.points.append((y, extra))
         self.trace.append((
-            t, extra[HELD], res["active_mask"], res["fence_n"], res["max_d"], ddot,
-            res["tip_w"], res["alpha"], y[0], y[1], y[2], y[3], y[4], y[5],
+            t, extra[HELD], res[_R_ACTIVE_MASK], res[_R_FENCE_N], res[_R_MAX_D], ddot,
+            res[_R_TIP_W], res[_R_ALPHA], y[0], y[1], y[2], y[3], y[4], y[5],
         ))  # fmt: skip
         if stepper.sorted and self.t_sorted is None:
             t0, y0 = (prev[0], prev[1][1]) if prev is not None else (t, 0.0)
