@@ -2,11 +2,13 @@
 induction).
 
 For each induction rate (default 2000 to 12000 pcs/h) one ROS-free run of the line
-(:mod:`fence_sorter.line.multi_unit`, guard on) to the drain: throughput in and out, sort rate,
-recirculation share, rejects, intrusions and conservation, with each unit's capacity bound
-W_t (1)-(2) of its median stroke beside them. Prints a Markdown table and
-writes it with the command and commit to ``--out`` (docs/reports/line-bench.md by default;
-``--out ''`` writes nothing).
+(:mod:`fence_sorter.line.multi_unit`, guard on) of a stream drawn over ``--duration`` (600 s)
+at that rate (or of ``--parcels``), to the drain: throughput in and out over the run's steady
+window (:meth:`~fence_sorter.line.multi_unit.LinePlant.steady_window`), out against in less
+the parcels no pass could read, sort rate, recirculation share, rejects, intrusions and
+conservation, with each unit's capacity bound W_t (1)-(2) of its median stroke beside them.
+Prints a Markdown table and writes it with the command and commit to ``--out``
+(docs/reports/line-bench.md by default; ``--out ''`` writes nothing).
 """
 
 from __future__ import annotations
@@ -24,7 +26,13 @@ from fence_sorter.verification.machine import git_revision
 def register(parser: argparse.ArgumentParser) -> None:
     parser.description = "Saturation curve of a line: sort rate and throughput against rate."
     parser.add_argument("line", nargs="?", default="four_units", metavar="LINE")
-    parser.add_argument("--parcels", type=int, default=200, metavar="N", help="per rate")
+    parser.add_argument(
+        "--duration", type=float, default=600.0, metavar="S",
+        help="seconds of the stream drawn per rate (default 600)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--parcels", type=int, default=None, metavar="N", help="per rate, instead of --duration"
+    )
     parser.add_argument(
         "--rates", default="2000,3000,4000,6000,8000,12000", metavar="R1,R2,...",
         help="induction rates [pcs/h]",
@@ -46,8 +54,10 @@ def run(args: argparse.Namespace) -> int:
         return _error(f"--rates must be numbers separated by commas, got {args.rates!r}")
     if not rates or not all(1.0 <= r <= 1e5 for r in rates):
         return _error(f"--rates must be in [1, 100000] pcs/h, got {args.rates!r}")
-    if not 1 <= args.parcels <= 10**6:
+    if args.parcels is not None and not 1 <= args.parcels <= 10**6:
         return _error(f"--parcels must be in [1, 1000000], got {args.parcels}")
+    if not 1.0 <= args.duration <= 1e5:
+        return _error(f"--duration must be in [1, 100000] s, got {args.duration:g}")
     # lazy: the line's physics loads Numba and the compiled kernel
     from fence_sorter.line.line_file import load_line
     from fence_sorter.line.multi_unit import LinePlant, LineRunConfig
@@ -56,17 +66,25 @@ def run(args: argparse.Namespace) -> int:
         line = load_line(args.line)
     except (ParameterError, OSError) as exc:
         return _error(str(exc))
+    # the share of parcels no pass reads: a no-read goes round and is scanned again, so only
+    # a parcel unread on each of its max_passes passes is lost to the no-reads
+    unread = line.no_read_share**line.max_passes
     head = (
-        "| rate set [pcs/h] | in [pcs/h] | out [pcs/h] | sort rate | recirculated | rejected "
-        "| intrusions | conservation | W_t per unit [pcs/h] | sim/wall |"
+        "| rate set [pcs/h] | in [pcs/h] | out [pcs/h] | out / (in (1 - p^k)) | sort rate "
+        "| recirculated | rejected | intrusions | conservation | W_t per unit [pcs/h] "
+        "| window [s] | sim/wall |"
     )
-    rows = [head, "|" + " --- |" * 10]
+    rows = [head, "|" + " --- |" * 12]
     print(head, flush=True)
     ok = True
     for rate in rates:
-        plant = LinePlant(
-            line, LineRunConfig(parcels=args.parcels, rate_pcs_h=rate, seed=args.seed)
-        )
+        cfg = (
+            LineRunConfig(parcels=args.parcels, rate_pcs_h=rate, seed=args.seed)
+            if args.parcels is not None
+            else LineRunConfig(parcels=None, duration=args.duration, rate_pcs_h=rate,
+                               seed=args.seed)
+        )  # fmt: skip
+        plant = LinePlant(line, cfg)
         plant.warm_up()
         s = plant.run()
         ok &= s["conservation_ok"] and s["swept_sector_intrusions"] == 0
@@ -74,28 +92,44 @@ def run(args: argparse.Namespace) -> int:
             "-" if math.isnan(u["capacity_bound_pcs_h"]) else f"{u['capacity_bound_pcs_h']:.0f}"
             for u in s["units"].values()
         )
+        w = s["steady_window"]
+        ratio = s["throughput_out_pcs_h"] / (s["throughput_in_pcs_h"] * (1.0 - unread))
         row = (
             f"| {rate:.0f} | {s['throughput_in_pcs_h']:.0f} | {s['throughput_out_pcs_h']:.0f} "
-            f"| {s['sort_rate']:.1%} | {s['recirculation_share']:.1%} | {s['rejected']} "
-            f"| {s['swept_sector_intrusions']} | {'exact' if s['conservation_ok'] else 'NO'} "
-            f"| {wt} | {s['real_time_factor']:.0f}x |"
+            f"| {ratio:.3f} | {s['sort_rate']:.1%} | {s['recirculation_share']:.1%} "
+            f"| {s['rejected']} | {s['swept_sector_intrusions']} "
+            f"| {'exact' if s['conservation_ok'] else 'NO'} | {wt} "
+            + ("| - " if w is None else f"| {w['start_s']:.0f}-{w['end_s']:.0f} ")
+            + f"| {s['real_time_factor']:.0f}x |"
         )
         rows.append(row)
         print(row, flush=True)
     when = time.strftime("%Y-%m-%d", time.gmtime())
+    size = f"--parcels {args.parcels}" if args.parcels is not None else (
+        f"--duration {args.duration:g}"
+    )  # fmt: skip
+    p, k = line.no_read_share, line.max_passes
     text = (
         f"# Line saturation curve ({line.name})\n\n"
-        f"`python -m benchmarks line-bench {args.line} --parcels {args.parcels} "
-        f"--rates {args.rates}` "
-        f"at commit {git_revision()}, {when}, on this 2-core machine under load "
-        "(sim/wall is the speed of the whole ROS-free line, planning included).\n\n"
-        "Each row: one stream of the given rate run to the drain with the guard on. `in`:\n"
-        "first inductions per hour, after the induction held new parcels for returning ones\n"
-        "and (induction.min_gap) to the line's gap, so it stays below the rate set once the\n"
-        "line is saturated; `out`: sorts per hour while the induction ran (that window\n"
-        "shifted by the median induction-to-sort time); recirculated: share of parcels that\n"
-        "went round the loop at least once; W_t: each unit's capacity (1)-(2) for its median\n"
-        "stroke (by scraping time t_z) and the median parcel length (`-`: no stroke).\n\n"
+        f"`python -m benchmarks line-bench {args.line} {size} --rates {args.rates}"
+        + ("" if args.seed is None else f" --seed {args.seed}")
+        + f"` at commit {git_revision()}, {when}, on this 2-core machine under load "
+        "(sim/wall is the speed of the whole ROS-free line, planning included, while other "
+        "work ran: not a speed benchmark; that is `python -m benchmarks line-speed`).\n\n"
+        "Each row: one stream of the given rate run to the drain with the guard on. `in` and\n"
+        "`out` are counted over the run's steady window (`window`, sim time): from one loop\n"
+        "cycle (belt length / v + transit time) after the first parcel's first induction to\n"
+        "the last parcel's first induction, so the fill at the start and the drain at the end\n"
+        "are left out. `in`: new parcels per hour whose front crossed the induction scan line\n"
+        "in the window (after the induction held them for returning parcels and, with\n"
+        "induction.min_gap, to the line's gap, so it stays below the rate set once the line\n"
+        "is saturated; a returning parcel is not counted again); `out`: parcels per hour\n"
+        "sorted to a chute in the window, whenever they were inducted. A no-read parcel goes\n"
+        f"round the loop and is scanned again: only p^k = {p:g}^{k} = {unread:.1e} of the\n"
+        f"parcels stay unread on all k = {k} passes, so in steady state with every readable\n"
+        "parcel sorted, out = in (1 - p^k). Recirculated: share of parcels that went round\n"
+        "the loop at least once; W_t: each unit's capacity (1)-(2) for its median stroke\n"
+        "(by scraping time t_z) and the median parcel length (`-`: no stroke).\n\n"
         + "\n".join(rows)
         + "\n"
     )
