@@ -66,6 +66,7 @@ def run(args: argparse.Namespace) -> int:
         line = load_line(args.line)
     except (ParameterError, OSError) as exc:
         return _error(str(exc))
+    commit = git_revision()  # the code the runs below use, whatever changes meanwhile
     # the share of parcels no pass reads: a no-read goes round and is scanned again, so only
     # a parcel unread on each of its max_passes passes is lost to the no-reads
     unread = line.no_read_share**line.max_passes
@@ -113,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
         f"# Line saturation curve ({line.name})\n\n"
         f"`python -m benchmarks line-bench {args.line} {size} --rates {args.rates}"
         + ("" if args.seed is None else f" --seed {args.seed}")
-        + f"` at commit {git_revision()}, {when}, on this 2-core machine under load "
+        + f"` at commit {commit}, {when}, on this 2-core machine under load "
         "(sim/wall is the speed of the whole ROS-free line, planning included, while other "
         "work ran: not a speed benchmark; that is `python -m benchmarks line-speed`).\n\n"
         "Each row: one stream of the given rate run to the drain with the guard on. `in` and\n"
