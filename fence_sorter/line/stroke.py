@@ -39,6 +39,7 @@ _R_ALPHA, _R_RATE, _R_ACCEL, _R_FENCE_N, _R_MAX_D, _R_TIP_W, _R_ACTIVE_MASK = (
     K.RESULT.names.index(f)
     for f in ("alpha", "rate", "accel", "fence_n", "max_d", "tip_w", "active_mask")
 )
+_BORDER_BITS = (1 << K.SLOT_BORDER) - 1  # the border slots' bits of active_mask
 _C_ACTIVE, _C_N, _C_PX, _C_PY, _C_DDOT = (
     K.CONTACT.names.index(f) for f in ("active", "n", "px", "py", "ddot")
 )
@@ -77,39 +78,35 @@ class _Tap:
         # than the whole row's tolist)
         res = stepper.resultants.tolist()[0]
         best = None  # the active border slot with the largest n (the first of equals)
-        for slot in stepper.contacts[: K.SLOT_BORDER].tolist():
-            if slot[_C_ACTIVE] and (
-                best is None or (best[_C_N] == best[_C_N] and not slot[_C_N] <= best[_C_N])
-            ):  # np.argmax's choice: the first largest, a NaN before any number
-                best = slot
+        # bit k of active_mask is set with slot k's active flag (kernel.forces): the slots
+        # are read only when a border slot carries a force
+        if int(res[_R_ACTIVE_MASK]) & _BORDER_BITS:
+            for slot in stepper.contacts[: K.SLOT_BORDER].tolist():
+                if slot[_C_ACTIVE] and (
+                    best is None or (best[_C_N] == best[_C_N] and not slot[_C_N] <= best[_C_N])
+                ):  # np.argmax's choice: the first largest, a NaN before any number
+                    best = slot
         if best is not None:
             px, py, ddot = best[_C_PX], best[_C_PY], best[_C_DDOT]
         else:
             px = py = math.nan
             ddot = 0.0
         impacts = stepper.impacts
+        # held, not interpolated (:meth:`at`): the stage and the current impact's N_stiff at
+        # this point, as the solve's reductions had them there
+        stage = float(stepper.stage.value)
         extra = np.array(
             [
-                res[_R_ALPHA],
-                res[_R_RATE],
-                res[_R_ACCEL],
-                res[_R_FENCE_N],
-                res[_R_MAX_D],
-                ddot,
-                px,
-                py,
-                # held, not interpolated (:meth:`at`): the stage and the current impact's
-                # N_stiff at this point, as the solve's reductions had them there
-                stepper.stage.value,
-                impacts[-1][2] if impacts else 0.0,
+                res[_R_ALPHA], res[_R_RATE], res[_R_ACCEL], res[_R_FENCE_N], res[_R_MAX_D],
+                ddot, px, py, stage, impacts[-1][2] if impacts else 0.0,
             ]
-        )
+        )  # fmt: skip
         prev = (self.ts[-1], self.points[-1][0]) if self.ts else None
         self.ts.append(t)
         self.points.append((y, extra))
         self.trace.append((
-            t, extra[HELD], res[_R_ACTIVE_MASK], res[_R_FENCE_N], res[_R_MAX_D], ddot,
-            res[_R_TIP_W], res[_R_ALPHA], y[0], y[1], y[2], y[3], y[4], y[5],
+            t, stage, res[_R_ACTIVE_MASK], res[_R_FENCE_N], res[_R_MAX_D], ddot,
+            res[_R_TIP_W], res[_R_ALPHA], *y[:6].tolist(),
         ))  # fmt: skip
         if stepper.sorted and self.t_sorted is None:
             t0, y0 = (prev[0], prev[1][1]) if prev is not None else (t, 0.0)
