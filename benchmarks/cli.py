@@ -19,6 +19,7 @@ CAMPAIGNS = {
     "paper-sweep": "the optimisation sweeps of the paper's Figs. 3-10 and the decision table",
     "line-bench": "saturation curve of a line: sort rate and throughput against induction rate",
     "line-scale": "the line over DDS against its units: speed, paced misses, hand-off transit",
+    "line-speed": "speed of the ROS-free line: sim time / wall time, median of a few runs",
 }
 BENCHMARKS = fence_sorter_cli.CommandLine(
     "python -m benchmarks",
