@@ -47,8 +47,10 @@ reports: bootstrap
 		&& nice -n 10 python -m benchmarks calibrate-bench --seeds 200 --parcels 8 \
 			--fresh-noise 105,106,112,117 --draws 100 --timing-parcels 50 \
 			--json docs/reports/calibration.json --doc docs/reports/calibration.md \
-		&& nice -n 10 python -m benchmarks line-bench four_units --parcels 100 \
+		&& nice -n 10 python -m benchmarks line-bench four_units --duration 600 \
 			--rates 2000,3000,4000,6000,8000,12000 --out docs/reports/line-bench.md \
+		&& nice -n 10 python -m benchmarks line-speed four_units --runs 3 \
+			--out docs/reports/line-speed.md --json docs/reports/line-speed.json \
 		&& python -m benchmarks line-scale --units 1,2,4,8 --parcels 8 --seed 3 --rtf 1 \
 			--out docs/reports/line-scale.md \
 		&& nice -n 10 python -m benchmarks.startup --rounds 5 --runs 3 --load 4 \

@@ -401,6 +401,7 @@ REPORTS = {
     "docs/reports/reliability.md": "python -m benchmarks faults --out docs/reports/reliability.md",
     "docs/reports/calibration.md": "python -m benchmarks calibrate-bench",
     "docs/reports/line-bench.md": "--out docs/reports/line-bench.md",
+    "docs/reports/line-speed.json": "--json docs/reports/line-speed.json",
     "docs/reports/startup/README.md": "python -m benchmarks.startup",
     "docs/reports/convergence.json": "python -m benchmarks.convergence",
     "docs/reports/imports.json": "python -m benchmarks.imports",
