@@ -14,6 +14,8 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import tempfile
+from pathlib import Path
 
 from fence_sorter.cli.line_sim import format_summary as line_summary
 from fence_sorter.jsonsafe import json_safe
@@ -70,7 +72,8 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--rrd",
         metavar="FILE",
-        help="save a Rerun recording of the run (the simulator logs it live; view: rerun FILE)",
+        help="save a Rerun recording of the run (the simulator logs it live; with --line: the "
+        "line view, written from the run's bag at its end; view: rerun FILE)",
     )
     parser.add_argument(
         "--sensors",
@@ -177,13 +180,10 @@ def run(args: argparse.Namespace) -> int:
 
 
 #: the options of a single-unit run that a line run does not take
-_NOT_FOR_LINE = ("rrd", "sensors", "foxglove")
+_NOT_FOR_LINE = ("sensors", "foxglove")
 
 
 def _run_line(args: argparse.Namespace) -> int:
-    # lazy: the line's runner loads the line's physics (Numba) for the line file's check
-    from fence_sorter.runner.line_job import LineRunOptions, run_line_job
-
     for name in _NOT_FOR_LINE:
         if getattr(args, name) is not None:
             opt = "--" + name.replace("_", "-")
@@ -193,6 +193,25 @@ def _run_line(args: argparse.Namespace) -> int:
         print("fence-sorter: error: --param and --stream do not go with --line "
               "(the line file names its stream)", file=sys.stderr)  # fmt: skip
         return 2
+    rrd = Path(args.rrd) if args.rrd is not None else None
+    if rrd is not None and (rrd.suffix != ".rrd" or not rrd.resolve().parent.is_dir()):
+        print(f"fence-sorter: error: --rrd must be a .rrd file in an existing directory, got "
+              f"{args.rrd}", file=sys.stderr)  # fmt: skip
+        return 2
+    if rrd is not None and args.no_owner:
+        print("fence-sorter: error: --rrd is written on the owner's host: it does not go with "
+              "--no-owner", file=sys.stderr)  # fmt: skip
+        return 2
+    with tempfile.TemporaryDirectory(prefix="fence_sorter_line_bag_") as scratch:
+        # --rrd without --bag: the view is written from a bag of the run all the same
+        bag = args.bag if args.bag is not None or rrd is None else str(Path(scratch) / "bag")
+        return _run_line_job(args, bag, rrd)
+
+
+def _run_line_job(args: argparse.Namespace, bag: str | None, rrd: Path | None) -> int:
+    # lazy: the line's runner loads the line's physics (Numba) for the line file's check
+    from fence_sorter.runner.line_job import LineRunOptions, run_line_job
+
     opts = LineRunOptions(
         line=args.line,
         parcels=10 if args.parcels is None else args.parcels,
@@ -209,7 +228,7 @@ def _run_line(args: argparse.Namespace) -> int:
         owner=not args.no_owner,
         interface=args.interface,
         peers=args.peers,
-        bag=args.bag,
+        bag=bag,
     )
     say = (lambda s: print(s, file=sys.stderr)) if args.json else print
     stop = StopRequest()
@@ -232,7 +251,26 @@ def _run_line(args: argparse.Namespace) -> int:
             print(pacing_line(result.summary["pacing"]))
     if result.code != 0:
         print(f"fence-sorter run --line: {result.message}", file=sys.stderr)
+    if rrd is not None and result.summary.get("line") and bag is not None:
+        view = _line_view(Path(bag), rrd, say)
+        return result.code or view
     return result.code
+
+
+def _line_view(bag: Path, rrd: Path, say) -> int:
+    """--rrd of a line run: the line view written from the run's bag (the units' fences are
+    not on the wire: each unit is simulated again from its recorded commands and every reply
+    checked against the recorded one, as ``fence-sorter rrd BAG`` does)."""
+    # lazy: rosbags and the line's units (Numba) load only for --rrd
+    from fence_sorter.cli.rrd import write_line_view
+    from fence_sorter.recording.bagread import BagReadError, read_bag
+
+    try:
+        contents = read_bag(bag)
+    except BagReadError as exc:
+        print(f"fence-sorter run --line: --rrd: {exc}", file=sys.stderr)
+        return 1
+    return write_line_view(contents, rrd, say=say)  # say: stderr with --json
 
 
 def pacing_line(p: dict) -> str:

@@ -122,7 +122,8 @@ def test_rrd_of_the_bag_is_line_sims_view(recorded, tmp_path: Path) -> None:
     """The line view from the bag: every reply of the units simulated again equals the
     recorded one (exit 0), and each entity of the view (every unit's fence and alpha_w and N
     plots, the parcels' footprints with their labels and colours) has the rows of line-sim's
-    view of two_units, 10 parcels, seed 3."""
+    view of two_units, 10 parcels, seed 3; so has the view ``run --line --rrd`` wrote from
+    its bag."""
     bag, _, _ = recorded
     out = tmp_path / "bag.rrd"
     res = run_cli("rrd", str(bag), "--out", str(out))
@@ -142,8 +143,10 @@ def test_rrd_of_the_bag_is_line_sims_view(recorded, tmp_path: Path) -> None:
     entities = [e for e in want if e.startswith(("/top/", "/plots/"))]
     assert {f"/top/units/{u}/fence" for u in UNITS} <= set(entities)
     assert "/top/parcels" in entities
+    run = read_rrd(bag.with_suffix(".rrd"))
     for e in entities:
         assert got[e] == want[e], e
+        assert run[e] == want[e], e
 
 
 def _matrix(tf) -> np.ndarray:

@@ -79,7 +79,9 @@ def test_run_line_refuses_a_bad_line_file(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("args", "option"),
     [
-        (["--rrd", "x.rrd"], "--rrd"),
+        (["--sensors", "camera60"], "--sensors does not go with --line"),
+        (["--rrd", "x.txt"], "--rrd must be a .rrd file in an existing directory"),
+        (["--rrd", "x.rrd", "--no-owner"], "--rrd is written on the owner's host"),
         (["--stream", "x"], "--stream"),
         (["--parcels", "0"], "--parcels"),
     ],
