@@ -8,6 +8,11 @@ commands exit 0, B's ends with the line; A's --json summary equals ``fence-sorte
 the same line, parcels and seed (the lockstep makes them equal exactly, the wall-clock fields
 aside), conservation is exact and the hand-offs unit_1 sent on the link equal those unit_2
 received.
+
+Four units with the recorder: host A runs units 1-2 of four_units without the owner, host B
+the owner, units 3-4 and the recorder (``--bag``); the link unit_2 -> unit_3 crosses the
+veth. Checked as above, and the bag is complete: ``fence-sorter analyze`` of it gives B's
+summary field by field.
 """
 
 from __future__ import annotations
@@ -28,10 +33,10 @@ PARCELS, SEED = 10, 3
 WALL = ("wall_time_s", "real_time_factor")
 
 
-def _line(ns: str, *args: str, cwd: Path) -> subprocess.Popen:
+def _line(ns: str, *args: str, cwd: Path, line: str = "two_units", parcels: int = PARCELS):
     return subprocess.Popen(
         ["ip", "netns", "exec", ns, sys.executable, "-m", "fence_sorter.cli.main", "run",
-         "--line", "two_units", "--parcels", str(PARCELS), "--seed", str(SEED), "--json",
+         "--line", line, "--parcels", str(parcels), "--seed", str(SEED), "--json",
          "--timeout", "600", *args],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=cwd,
     )  # fmt: skip
@@ -49,14 +54,7 @@ def test_a_line_over_two_hosts_equals_line_sim(two_hosts, tmp_path: Path) -> Non
                    "--peers", addr_a, cwd=tmp_path)  # fmt: skip
     side_a = _line(a, "--units", "1", "--domain", domain, "--interface", addr_a,
                    "--peers", addr_b, cwd=tmp_path)  # fmt: skip
-    try:
-        out_a, err_a = side_a.communicate(timeout=660)
-        out_b, err_b = side_b.communicate(timeout=60)
-    finally:
-        for p in (side_a, side_b):
-            if p.poll() is None:
-                p.kill()
-                p.wait()
+    out_a, err_a, out_b, err_b = _ends(side_a, side_b)
     assert side_a.returncode == 0, err_a[-3000:]
     assert side_b.returncode == 0, err_b[-3000:]
     got = json.loads(out_a)
@@ -70,3 +68,48 @@ def test_a_line_over_two_hosts_equals_line_sim(two_hosts, tmp_path: Path) -> Non
     # B's runner ran unit_2 only and ended with the line
     b_says = json.loads(out_b)
     assert b_says["units_here"] == ["unit_2"] and b_says["line"] == got["line"]
+
+
+def _ends(first: subprocess.Popen, second: subprocess.Popen) -> tuple[str, str, str, str]:
+    """Both commands' (stdout, stderr), the first waited for long; neither left running."""
+    try:
+        out_1, err_1 = first.communicate(timeout=660)
+        out_2, err_2 = second.communicate(timeout=60)
+    finally:
+        for p in (first, second):
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+    return out_1, err_1, out_2, err_2
+
+
+def test_four_units_over_two_hosts_with_the_recorder(two_hosts, tmp_path: Path) -> None:
+    a, addr_a, b, addr_b = two_hosts
+    domain = str(150 + int(uuid.uuid4().hex[:4], 16) % 50)
+    parcels = 6
+    sim = run_cli("line-sim", "four_units", "--parcels", str(parcels), "--seed", str(SEED),
+                  "--json")  # fmt: skip
+    assert sim.returncode == 0, sim.stderr
+    ref = json.loads(sim.stdout)
+    side_a = _line(a, "--units", "1,2", "--no-owner", "--domain", domain, "--interface",
+                   addr_a, "--peers", addr_b, cwd=tmp_path, line="four_units",
+                   parcels=parcels)  # fmt: skip
+    bag = tmp_path / "bag"
+    side_b = _line(b, "--units", "3,4", "--bag", str(bag), "--domain", domain, "--interface",
+                   addr_b, "--peers", addr_a, cwd=tmp_path, line="four_units",
+                   parcels=parcels)  # fmt: skip
+    out_b, err_b, out_a, err_a = _ends(side_b, side_a)
+    assert side_b.returncode == 0, err_b[-3000:]
+    assert side_a.returncode == 0, err_a[-3000:]
+    got = json.loads(out_b)
+    assert {k: (v, got.get(k)) for k, v in ref.items() if k not in WALL and got.get(k) != v} == {}
+    assert parcels == got["parcels_inducted"] == got["sorted"] + got["rejected"]
+    assert got["conservation_ok"] and got["drained"] and got["handoffs_balanced"]
+    across = got["links"]["unit_2>unit_3"]  # sent on host A, received on host B
+    assert across["sent"] == across["received"] > 0 and across["lost"] == 0, across
+    assert json.loads(out_a)["units_here"] == ["unit_1", "unit_2"]
+    ana = run_cli("analyze", str(bag), "--json")
+    assert ana.returncode == 0, ana.stderr
+    from_bag = json.loads(ana.stdout)
+    for k in ("sorted", "rejected", "sorted_per_destination", "declined", "links", "units"):
+        assert from_bag[k] == got[k], k
