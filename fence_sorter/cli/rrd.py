@@ -51,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"fence-sorter rrd: error: --out {out}: no directory {out.parent}", file=sys.stderr)
         return 2
     if contents.by_topic(LINE_SETUP):
-        return write_line_view(contents, out, args.spawn)
+        return _line(contents, out, args.spawn)
     rec = open_recording(out, spawn=args.spawn, scene=scene_from_bag(contents))
     logger = log_bag(contents, rec)
     logger.close()
@@ -61,29 +61,12 @@ def run(args: argparse.Namespace) -> int:
     return 1 if contents.issues else 0
 
 
-def write_line_view(contents, out: Path, spawn: bool = False, say=print) -> int:
-    """Write the line view of a line's bag to ``out`` and say so; 1 if a reply of a unit
-    simulated again differs from the recorded one (named) or the bag has problems, or a reply
-    is missing (``rrd BAG`` and ``run --line --rrd``)."""
+def _line(contents, out: Path, spawn: bool) -> int:
     # lazy: the line's units load Numba and the compiled kernel
-    from fence_sorter.analysis.line_bag import LineBagError
-    from fence_sorter.visualisation.line_bag_view import log_line_bag
+    from fence_sorter.visualisation.line_bag_view import write_line_view
 
-    try:
-        view = log_line_bag(contents, out, spawn=spawn)
-    except LineBagError as exc:
-        print(f"fence-sorter rrd: {exc}", file=sys.stderr)
-        for issue in contents.issues:
-            print(f"fence-sorter rrd: {issue}", file=sys.stderr)
-        return 1
-    say(
-        f"wrote {out} (the line view: {view.samples} samples; {view.replies_checked} replies "
-        f"of the units simulated again, {len(view.replies_differing)} differ from the "
-        f"recorded ones; {out.stat().st_size / 1e6:.2f} MB)"
-    )
-    for issue in contents.issues:
-        print(f"fence-sorter rrd: {issue}", file=sys.stderr)
-    if view.replies_differing:
-        print("fence-sorter rrd: replies differ from the recorded ones: "
-              + ", ".join(view.replies_differing), file=sys.stderr)  # fmt: skip
-    return 1 if contents.issues or view.replies_differing else 0
+    return write_line_view(contents, out, spawn, say=print, warn=_warn)
+
+
+def _warn(line: str) -> None:
+    print(f"fence-sorter rrd: {line}", file=sys.stderr)

@@ -262,15 +262,19 @@ def _line_view(bag: Path, rrd: Path, say) -> int:
     not on the wire: each unit is simulated again from its recorded commands and every reply
     checked against the recorded one, as ``fence-sorter rrd BAG`` does)."""
     # lazy: rosbags and the line's units (Numba) load only for --rrd
-    from fence_sorter.cli.rrd import write_line_view
     from fence_sorter.recording.bagread import BagReadError, read_bag
+    from fence_sorter.visualisation.line_bag_view import write_line_view
 
     try:
         contents = read_bag(bag)
     except BagReadError as exc:
         print(f"fence-sorter run --line: --rrd: {exc}", file=sys.stderr)
         return 1
-    return write_line_view(contents, rrd, say=say)  # say: stderr with --json
+    return write_line_view(contents, rrd, say=say, warn=_warn)  # say: stderr with --json
+
+
+def _warn(line: str) -> None:
+    print(f"fence-sorter run --line: {line}", file=sys.stderr)
 
 
 def pacing_line(p: dict) -> str:

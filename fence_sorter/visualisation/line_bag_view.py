@@ -13,10 +13,11 @@ the run's).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from fence_sorter.analysis.line_bag import ResimLinks, line_records, replay
+from fence_sorter.analysis.line_bag import LineBagError, ResimLinks, line_records, replay
 from fence_sorter.recording.bagread import BagContents
 from fence_sorter.visualisation.line_view import LineRerunLogger, line_blueprint, open_recording
 
@@ -49,3 +50,34 @@ def log_line_bag(
     finally:
         logger.close(owner)
     return LineBagView(logger.samples, links.resim_checked, tuple(links.resim_differing), summary)
+
+
+def write_line_view(
+    bag: BagContents,
+    out: Path,
+    spawn: bool = False,
+    *,
+    say: Callable[[str], None],
+    warn: Callable[[str], None],
+) -> int:
+    """Write the line view of ``bag`` to ``out``, ``say`` what was written and ``warn`` of
+    each problem; the exit status of ``rrd BAG`` and ``run --line --rrd``: 0 the run's view,
+    1 a reply of a unit simulated again differs from the recorded one (named), a reply is
+    missing or the bag has problems."""
+    try:
+        view = log_line_bag(bag, out, spawn=spawn)
+    except LineBagError as exc:
+        warn(str(exc))
+        for issue in bag.issues:
+            warn(issue)
+        return 1
+    say(
+        f"wrote {out} (the line view: {view.samples} samples; {view.replies_checked} replies "
+        f"of the units simulated again, {len(view.replies_differing)} differ from the "
+        f"recorded ones; {out.stat().st_size / 1e6:.2f} MB)"
+    )
+    for issue in bag.issues:
+        warn(issue)
+    if view.replies_differing:
+        warn("replies differ from the recorded ones: " + ", ".join(view.replies_differing))
+    return 1 if bag.issues or view.replies_differing else 0
