@@ -202,10 +202,11 @@ def _run_line(args: argparse.Namespace) -> int:
         print("fence-sorter: error: --rrd is written on the owner's host: it does not go with "
               "--no-owner", file=sys.stderr)  # fmt: skip
         return 2
+    if rrd is None or args.bag is not None:
+        return _run_line_job(args, args.bag, rrd)
+    # --rrd without --bag: the view is written from a bag of the run all the same
     with tempfile.TemporaryDirectory(prefix="fence_sorter_line_bag_") as scratch:
-        # --rrd without --bag: the view is written from a bag of the run all the same
-        bag = args.bag if args.bag is not None or rrd is None else str(Path(scratch) / "bag")
-        return _run_line_job(args, bag, rrd)
+        return _run_line_job(args, str(Path(scratch) / "bag"), rrd)
 
 
 def _run_line_job(args: argparse.Namespace, bag: str | None, rrd: Path | None) -> int:
