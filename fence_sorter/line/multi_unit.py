@@ -528,8 +528,10 @@ class LinePlant:
         ``sorts = first_inductions - still_on_line - ended_unsorted + from_before``, where
         ``still_on_line``: parcels first inducted in the window and not ended by its end;
         ``ended_unsorted``: first inducted in it, rejected or failed in it; ``from_before``:
-        first inducted before it, sorted in it. None when the induction ran no longer than a
-        loop cycle (no steady state)."""
+        first inducted before it, sorted in it. ``cohort_sorted``: first inducted in it and
+        sorted, whenever (after the drain: the fate of the parcels the steady state took in,
+        free of the fill and of the parcels left on the line at its end). None when the
+        induction ran no longer than a loop cycle (no steady state)."""
         firsts = [p.inducted_at for p in self.parcels if not math.isnan(p.inducted_at)]
         if len(firsts) < 2:
             return None
@@ -554,6 +556,7 @@ class LinePlant:
             "from_before": sum(
                 p.inducted_at < start and inside(p.sorted_at) for p in self.parcels
             ),
+            "cohort_sorted": sum(p.state == "sorted" for p in new),
         }
 
     def links(self) -> LinkCounts:

@@ -233,7 +233,8 @@ def test_over_the_steady_window_sorts_are_first_inductions_less_open_ones_plus_e
     (belt length / v + transit time) after the first parcel's first induction and ends at the
     last one's; the summary's counts over it equal those read off the run by an observer of
     the units' records and the parcels' states, and obey, exactly, sorts = first inductions -
-    still on the line at its end - rejected or failed in it + sorted in it from before it."""
+    still on the line at its end - rejected or failed in it + sorted in it from before it; the
+    window's parcels sorted by the end of the run are counted as the records say."""
     plant = LinePlant(LINE, LineRunConfig(duration=60.0, rate_pcs_h=2000.0, seed=3))
     first: dict[int, float] = {}  # the time its front crossed X = 0, from its track
     sorted_at: dict[int, float] = {}
@@ -270,6 +271,7 @@ def test_over_the_steady_window_sorts_are_first_inductions_less_open_ones_plus_e
             pid not in sorted_at and ended.get(pid, math.inf) < b for pid in new
         ),
         "from_before": sum(first[pid] < a and a <= t < b for pid, t in sorted_at.items()),
+        "cohort_sorted": sum(pid in sorted_at for pid in new),  # after the drain
     }
     assert {k: w[k] for k in seen} == seen
     assert seen["first_inductions"] > 10 and seen["from_before"] > 0 and seen["still_on_line"] > 0
