@@ -53,7 +53,9 @@ from fence_sorter.line.routing import (
 )
 from fence_sorter.line.types import Outcome, OverlapWarning, StrokeStarted
 
-__all__ = ["ID_STRIDE", "LineUnit", "Record", "Traffic", "UnitReply", "track_of"]
+__all__ = [
+    "ID_STRIDE", "LineUnit", "Record", "Traffic", "UnitReply", "local_offsets", "track_of"
+]  # fmt: skip
 
 #: a parcel's id in a unit's simulation: line id * ID_STRIDE + pass (ids stay unique per unit)
 ID_STRIDE = 16
@@ -98,6 +100,22 @@ class _Held:
     handoff: HandOff
     local_id: int
     stroke: tuple[float, float] | None = None  # (R_s, t1) commanded
+
+
+def local_offsets(
+    mirrored: bool, yaw: float, cog_x: float, cog_y: float
+) -> tuple[float, float, float]:
+    """A parcel's yaw (already in the unit's frame) and its C_s offsets (line frame) as the
+    unit's simulation takes them: the offsets in the unit's frame, and a turned parcel as the
+    same rectangle with yaw in [-pi/2, pi/2] (the C_s offsets flip)."""
+    cx, cy = cog_x, (-cog_y if mirrored else cog_y)
+    while yaw > 0.5 * math.pi:
+        yaw -= math.pi
+        cx, cy = -cx, -cy
+    while yaw < -0.5 * math.pi:
+        yaw += math.pi
+        cx, cy = -cx, -cy
+    return yaw, cx, cy
 
 
 class LineUnit:
@@ -265,14 +283,7 @@ class LineUnit:
         u = self.spec
         x, y, yaw = to_local(u.position, u.mirrored, self.width, tr.x + self.v * (t - tr.t_ref),
                              tr.y, tr.yaw)  # fmt: skip
-        cx, cy = tr.cog_x, (-tr.cog_y if u.mirrored else tr.cog_y)
-        # a turned parcel: the same rectangle with yaw in [-pi/2, pi/2] (C_s offsets flip)
-        while yaw > 0.5 * math.pi:
-            yaw -= math.pi
-            cx, cy = -cx, -cy
-        while yaw < -0.5 * math.pi:
-            yaw += math.pi
-            cx, cy = -cx, -cy
+        yaw, cx, cy = local_offsets(u.mirrored, yaw, tr.cog_x, tr.cog_y)
         pts = footprint(tr.length_a, tr.width_b, cx, cy, x, y, yaw)
         front = max(c[0] for c in pts)
         fw = max(c[1] for c in pts) - min(c[1] for c in pts)

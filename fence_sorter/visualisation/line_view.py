@@ -49,8 +49,11 @@ __all__ = [
     "LineRerunLogger",
     "UNIT_COLORS",
     "chute_box",
+    "fence_strip",
     "line_blueprint",
     "open_recording",
+    "parcel_frame",
+    "parcel_label",
 ]
 
 #: destination colours (in the order of the line file's destinations, then again): none is
@@ -116,6 +119,31 @@ def line_blueprint(line, paused: bool = False):
     if paused:
         parts.append(rrb.TimePanel(timeline=TIMELINE, play_state="paused", state="collapsed"))
     return rrb.Blueprint(*parts, collapse_panels=True)
+
+
+def parcel_label(pid: int, destination: str) -> str:
+    """A parcel's label in the view: ``<line id> <destination>``."""
+    return f"{pid} {destination}"
+
+
+def fence_strip(us, width: float, node_x, node_y) -> np.ndarray:
+    """A unit's fence (its nodes in the unit's frame) as a strip in the top view's
+    coordinates (X, -Y of the line frame)."""
+    x, y, _ = to_line(us.position, us.mirrored, width, np.asarray(node_x), np.asarray(node_y),
+                      0.0)  # fmt: skip
+    return np.column_stack((x, -y))
+
+
+def parcel_frame(us, width: float, pid: int, spec, x: float, y: float, yaw: float) -> ParcelFrame:
+    """A parcel at C_s (x, y, yaw) in unit ``us``'s frame as a ParcelFrame in the line frame
+    (its box centre from the C_s offsets of ``spec``, a ParcelSpec as the unit's simulation
+    has it: sizes, ``cog_offset_x``/``_y`` in the unit's frame)."""
+    c, sn = math.cos(yaw), math.sin(yaw)
+    cx = x - c * spec.cog_offset_x + sn * spec.cog_offset_y
+    cy = y - sn * spec.cog_offset_x - c * spec.cog_offset_y
+    lx, ly, lyaw = to_line(us.position, us.mirrored, width, cx, cy, yaw)
+    return ParcelFrame(pid, lx, ly, lyaw, 0.0, 0.0, lx, ly, spec.length_a, spec.width_b,
+                       spec.height)  # fmt: skip
 
 
 class LineRerunLogger:
@@ -274,7 +302,7 @@ class LineRerunLogger:
         risk = damage_risk(out.impact_normal_speed, out.peak_normal_accel, self.profile)
         margin = min(risk.impact_speed_margin, risk.accel_margin)
         colour = margin_color(margin) if math.isfinite(margin) else self.dest_color[p.destination]
-        self._sorted[p.pid] = (out.t, frame, f"{p.pid} {p.destination}", colour)
+        self._sorted[p.pid] = (out.t, frame, parcel_label(p.pid, p.destination), colour)
         if math.isfinite(out.peak_normal_force):
             self.rec.set_time(TIMELINE, duration=float(out.t))
             self.rec.log(
@@ -283,30 +311,19 @@ class LineRerunLogger:
             )
 
     def _frame(self, pid: int, us, spec, x: float, y: float, yaw: float) -> ParcelFrame:
-        """A parcel at C_s (x, y, yaw) in unit ``us``'s frame as a ParcelFrame in the line
-        frame (its box centre from the C_s offsets)."""
-        c, sn = math.cos(yaw), math.sin(yaw)
-        cx = x - c * spec.cog_offset_x + sn * spec.cog_offset_y
-        cy = y - sn * spec.cog_offset_x - c * spec.cog_offset_y
-        lx, ly, lyaw = to_line(us.position, us.mirrored, self.line.width, cx, cy, yaw)
-        return ParcelFrame(pid, lx, ly, lyaw, 0.0, 0.0, lx, ly, spec.length_a, spec.width_b,
-                           spec.height)  # fmt: skip
+        return parcel_frame(us, self.line.width, pid, spec, x, y, yaw)
 
     def sample(self, plant) -> None:
         """The line at the plant's time: fences, parcels, per-unit alpha_w and N."""
-        t = self._last = plant.t
-        self._t.append(t)
-        s = self.line.width
+        t = plant.t
+        fences, alphas, forces = [], [], []
         in_stroke: dict[int, ParcelFrame] = {}
         for k, u in enumerate(plant.units):
             snap = u.line.snapshot()
             f = snap.fence
-            x, y, _ = to_line(u.spec.position, u.spec.mirrored, s, np.asarray(f.node_x),
-                              np.asarray(f.node_y), 0.0)  # fmt: skip
-            self._fences[k].append(np.column_stack((x, -y)))
-            self._alpha[k].append(float(f.drive_angle))
-            n = max((q.contact_normal_force for q in snap.parcels), default=0.0)
-            self._force[k].append(float(n) / FORCE_PLOT_UNIT)
+            fences.append(fence_strip(u.spec, self.line.width, f.node_x, f.node_y))
+            alphas.append(float(f.drive_angle))
+            forces.append(max((q.contact_normal_force for q in snap.parcels), default=0.0))
             for q in snap.parcels:
                 p = plant.by_id.get(q.parcel_id // ID_STRIDE)
                 if p is None or p.stroke_unit != k or q.parcel_id % ID_STRIDE != p.passes:
@@ -327,8 +344,33 @@ class LineRerunLogger:
                 fr = ParcelFrame(p.pid, cx, cy, tr.yaw, 0.0, 0.0, cx, cy, tr.length_a,
                                  tr.width_b, p.spec.height)  # fmt: skip
             frames.append(fr)
-            labels.append(f"{p.pid} {p.destination}")
+            labels.append(parcel_label(p.pid, p.destination))
             colors.append(self.dest_color[p.destination])
+        self.add(t, fences, alphas, forces, frames, labels, colors)
+
+    def add(
+        self,
+        t: float,
+        fences: list[np.ndarray],
+        alphas: list[float],
+        forces: list[float],
+        frames: list[ParcelFrame],
+        labels: list[str],
+        colors: list[tuple],
+    ) -> None:
+        """One sample of the line at sim time ``t``, whoever took it (a LinePlant's
+        :meth:`sample`, or the live view of a line over DDS): per unit in the line's order its
+        fence (:func:`fence_strip`), alpha_w [rad] and largest contact force N [N]; the
+        parcels on the belt or in a stroke as frames in the line frame (:func:`parcel_frame`)
+        with their labels and colours. The sorted parcels noted within SORTED_SHOWN are
+        added here."""
+        self._last = t
+        self._t.append(t)
+        for k in range(len(self.line.units)):
+            self._fences[k].append(fences[k])
+            self._alpha[k].append(float(alphas[k]))
+            self._force[k].append(float(forces[k]) / FORCE_PLOT_UNIT)
+        frames, labels, colors = list(frames), list(labels), list(colors)
         for pid, (ts, fr, label, colour) in list(self._sorted.items()):
             if t - ts > SORTED_SHOWN:
                 del self._sorted[pid]
