@@ -14,7 +14,12 @@ Started in the namespace ``/<unit name>`` (``/unit_1``, ...); its own topic name
 - the upstream link (HandOff, in): ``/line/handoffs`` (the induction) for the first unit, else
   ``/<upstream unit name>/handoffs``;
 - ``transit`` (std_msgs/String, out): once, at ``end``, the transit time of every hand-off
-  that arrived on the upstream link (DDS source timestamp to reception, ns; JSON list).
+  that arrived on the upstream link (DDS source timestamp to reception, ns; JSON list);
+- ``load_states`` (fence_sorter_msgs/LoadState, out) and ``fence_state`` (FenceState, out):
+  with ``view_period`` > 0, the unit's view every ``view_period`` of sim time, after the step
+  that reaches it: each parcel in its simulation, then its fence (the last message of a
+  sample), in its frame ``<unit>/sorter``, stamped with the sim time; best effort, as the
+  single-unit simulator publishes them (the line's live view, ``nodes/line_viewer.py``).
 
 Every lockstep topic is reliable and keep-all (``commands``: the latest 1000 kept, more than a
 unit is ever behind in lockstep): nothing is dropped silently. The heartbeat on
@@ -30,6 +35,7 @@ from __future__ import annotations
 
 import inspect
 import json
+import math
 import sys
 import time
 import uuid
@@ -46,8 +52,15 @@ from fence_sorter.line.line_file import load_line
 from fence_sorter.line.lockstep import EXIT_OWNER_GONE, UnitSide, decode, encode, make_unit
 from fence_sorter.line.multi_unit import LineRunConfig
 from fence_sorter.nodes.base import FenceSorterNode, run_node
-from fence_sorter.nodes.convert import handoff_from_msg, handoff_to_msg
+from fence_sorter.nodes.convert import (
+    fill_fence_state,
+    fill_load_state,
+    handoff_from_msg,
+    handoff_to_msg,
+)
 from fence_sorter.nodes.parameters import LINE_UNIT_PARAMETERS
+from fence_sorter.nodes.qos import SENSOR_QOS
+from fence_sorter_msgs.msg import FenceState, LoadState
 from fence_sorter_msgs.msg import HandOff as HandOffMsg
 
 #: the line's lockstep topics: reliable, keep-all (a writer blocks rather than drop)
@@ -79,6 +92,14 @@ TRANSIT_QOS = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
+
+
+#: a unit's view (relative topics: ``/<unit>/fence_state``, ``/<unit>/load_states``)
+VIEW_FENCE = "fence_state"
+VIEW_LOADS = "load_states"
+#: slack on the view's sample times (the line view's rule: a sample at the first step
+#: reaching each multiple of the period) [s]
+VIEW_EPS = 1e-9
 
 
 def handoff_latency_ns(info) -> int:
@@ -143,10 +164,51 @@ class LineUnitNode(FenceSorterNode):
         self.transit = self.create_publisher(String, TRANSIT, TRANSIT_QOS)
         self._ready_timer = self.create_timer(0.1, self._say_ready)
         self._owner_timer = self.create_timer(0.5, self._check_owner)
+        self._view_setup(float(p["view_period"]), f"{line.units[k].name}/sorter")
+
+    # -- the unit's view (view_period > 0) ------------------------------------------------------
+    def _view_setup(self, period: float, frame_id: str) -> None:
+        self.view_period = period
+        self.view_samples = 0
+        self._view_next = period
+        self._view_frame = frame_id
+        if period <= 0.0:
+            return
+        self._view_fence = self.create_publisher(FenceState, VIEW_FENCE, SENSOR_QOS)
+        self._view_loads = self.create_publisher(LoadState, VIEW_LOADS, SENSOR_QOS)
+        self._fence_msg, self._load_msg = FenceState(), LoadState()
+
+    def _view_matched(self) -> bool:
+        """With a view: its reader (the line's live view) has matched both view writers, so
+        that it gets the samples from the line's start."""
+        if self.view_period <= 0.0:
+            return True
+        return bool(
+            self._view_fence.get_subscription_count() and self._view_loads.get_subscription_count()
+        )
+
+    def _view(self) -> None:
+        """Publish the unit's view when its simulation (after a Step) has reached the next
+        view sample time: each parcel in it on ``load_states``, then the fence."""
+        if self.view_period <= 0.0:
+            return
+        sim = self.side.unit.line
+        t = sim.t
+        if t + VIEW_EPS < self._view_next:
+            return
+        late = math.floor((t + VIEW_EPS - self._view_next) / self.view_period) + 1
+        self._view_next += self.view_period * max(1, late)
+        snap = sim.snapshot()
+        frame = self._view_frame
+        for q in snap.parcels:
+            self._view_loads.publish(fill_load_state(self._load_msg, q, snap.t, frame))
+        self._view_fence.publish(fill_fence_state(self._fence_msg, snap.fence, snap.t, frame))
+        self.view_samples += 1
 
     def _say_ready(self) -> None:
         """``ready<token>`` on replies while no command came, once both writers have matched
-        and the owner's commands and the upstream link have a writer."""
+        and the owner's commands and the upstream link have a writer (with a view, once its
+        writers have matched the live view's reader too)."""
         if self.started:
             self._ready_timer.cancel()
             return
@@ -155,6 +217,7 @@ class LineUnitNode(FenceSorterNode):
             and self.handoffs.get_subscription_count()
             and self.count_publishers(self.resolve_topic_name("commands"))
             and self.count_publishers(self.upstream)
+            and self._view_matched()
         ):
             self.replies.publish(String(data=READY + self.token))
 
@@ -202,6 +265,7 @@ class LineUnitNode(FenceSorterNode):
                 self.published += 1
             else:
                 self.replies.publish(String(data=encode(o)))
+        self._view()
 
     def heartbeat_status(self) -> DiagnosticStatus:
         status = super().heartbeat_status()
@@ -216,6 +280,7 @@ class LineUnitNode(FenceSorterNode):
             "handoffs_foreign": self.side.foreign,
             "commands_applied": self.side.next_seq,
             "bad_messages": self.bad_messages,
+            "view_samples": self.view_samples,
         }
         status.values.extend(KeyValue(key=k, value=str(v)) for k, v in values.items())
         return status

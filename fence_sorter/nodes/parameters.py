@@ -658,6 +658,46 @@ LINE_UNIT_PARAMETERS: tuple[ParamSpec, ...] = (
         1.0,
         3600.0,
     ),
+    ParamSpec(
+        "view_period",
+        0.0,
+        "Sim time between the unit's view samples on fence_state and load_states (for the "
+        "line's live view) [s]; 0: none published",
+        True,
+        0.0,
+        10.0,
+    ),
+)
+
+#: the live Rerun view of a line over DDS (fence_sorter.nodes.line_viewer, namespace /line)
+LINE_VIEWER_PARAMETERS: tuple[ParamSpec, ...] = (
+    ParamSpec("line", "two_units", "Line file (name in config/lines or YAML path)", True),
+    ParamSpec("rrd", "", "Save the live view to this .rrd file ('': no file)", True),
+    ParamSpec(
+        "url",
+        "",
+        "Stream the live view to the Rerun viewer listening at this URL, e.g. "
+        "rerun+http://127.0.0.1:9876/proxy ('': no viewer)",
+        True,
+    ),
+    ParamSpec(
+        "flush_every",
+        5,
+        "Samples buffered before they are sent to the sinks (a viewer follows in steps of "
+        "this many view periods)",
+        True,
+        1,
+        10_000,
+    ),
+    ParamSpec(
+        "drain_time",
+        0.5,
+        "Once the line's summary came: wall time without a view message after which the "
+        "view is closed and the node exits 0 [s]",
+        True,
+        0.05,
+        60.0,
+    ),
 )
 
 #: the owner of a line over DDS: induction, recirculation, the lockstep clock
