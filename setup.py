@@ -61,6 +61,7 @@ setup(
             "foxglove_bridge = fence_sorter.nodes.foxglove_bridge:main",
             "line_unit = fence_sorter.nodes.line_unit:main",
             "line_owner = fence_sorter.nodes.line_owner:main",
+            "line_viewer = fence_sorter.nodes.line_viewer:main",
             "fence-sorter = fence_sorter.cli.main:main",
         ],
     },

@@ -35,8 +35,8 @@ def register(parser: argparse.ArgumentParser) -> None:
         help="run a line of fence units instead (a file or a name in config/lines): one "
         "process per unit and the line's owner, in lockstep; with --parcels or --duration, "
         "--rate, --no-guard, --rtf (default 0 with --line: unpaced), --seed, --json, --bag, "
-        "--domain, --timeout, --log-dir, --keep-logs, --units, --no-owner, --interface, "
-        "--peers (docs/guide/line.md)",
+        "--rrd, --rerun-url, --live-rrd, --view-period, --domain, --timeout, --log-dir, "
+        "--keep-logs, --units, --no-owner, --interface, --peers (docs/guide/line.md)",
     )
     parser.add_argument(
         "--rate",
@@ -60,6 +60,26 @@ def register(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="with --line: another host runs the line's owner (induction, recirculation, clock)",
     )
+    parser.add_argument(
+        "--rerun-url",
+        metavar="URL",
+        help="with --line: stream the line's live view to the Rerun viewer listening at URL "
+        "(e.g. rerun+http://127.0.0.1:9876/proxy, the viewer started with `rerun`); the "
+        "units put their view on the wire every --view-period of sim time",
+    )
+    parser.add_argument(
+        "--live-rrd",
+        metavar="FILE",
+        help="with --line: save the line's live view (as --rerun-url streams it) to FILE",
+    )
+    parser.add_argument(
+        "--view-period",
+        type=float,
+        metavar="S",
+        help="with --line: sim time between the units' view samples [s] (default 0.05 with "
+        "--rerun-url or --live-rrd, else 0: none; a --no-owner host's units need it for the "
+        "owner's live view)",
+    )
     amount = parser.add_mutually_exclusive_group()
     amount.add_argument("--parcels", type=int, help="parcels to inject (default 20)")
     amount.add_argument("--duration", type=float, help="inject the parcels arriving within S s")
@@ -73,7 +93,8 @@ def register(parser: argparse.ArgumentParser) -> None:
         "--rrd",
         metavar="FILE",
         help="save a Rerun recording of the run (the simulator logs it live; with --line: the "
-        "line view, written from the run's bag at its end; view: rerun FILE)",
+        "line view, written from the run's bag at its end, every parcel and sorted parcels' "
+        "damage margins; live: --rerun-url, --live-rrd; view: rerun FILE)",
     )
     parser.add_argument(
         "--sensors",
@@ -142,6 +163,9 @@ def run(args: argparse.Namespace) -> int:
         ("--no-owner", args.no_owner),
         ("--rate", args.rate is not None),
         ("--no-guard", args.no_guard),
+        ("--rerun-url", args.rerun_url is not None),
+        ("--live-rrd", args.live_rrd is not None),
+        ("--view-period", args.view_period is not None),
     ):
         if given:
             print(f"fence-sorter: error: {opt} goes with --line only", file=sys.stderr)
@@ -230,6 +254,9 @@ def _run_line_job(args: argparse.Namespace, bag: str | None, rrd: Path | None) -
         interface=args.interface,
         peers=args.peers,
         bag=bag,
+        live_rrd=args.live_rrd,
+        rerun_url=args.rerun_url,
+        view_period=args.view_period,
     )
     say = (lambda s: print(s, file=sys.stderr)) if args.json else print
     stop = StopRequest()

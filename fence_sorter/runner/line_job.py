@@ -12,7 +12,10 @@ start gate waits for every unit of the line, wherever it runs; a runner without 
 waits until its units end with the line (the owner's ``end``). ``--bag DIR``: a recorder
 takes every topic of the line (:func:`~fence_sorter.recording.topics.line_topics`: every
 unit's namespace and the owner's) into one bag; the owner's start gate waits until it matched
-them, and it is stopped last.
+them, and it is stopped last. ``--rerun-url``/``--live-rrd``: the units put their view on the
+wire every ``view_period`` of sim time and a ``line_viewer`` beside the owner logs the line's
+live Rerun view (:mod:`fence_sorter.nodes.line_viewer`); it ends by itself after the owner's
+summary, and the runner waits for it (bounded) before it stops the others.
 
 A unit's process that ends during the run (killed, or taken for down by the owner) is started
 again, up to :data:`MAX_RESTARTS` times per unit; the new process rejoins the line at a step
@@ -77,6 +80,11 @@ __all__ = [
 LOG_DIR_PREFIX = "fence_sorter_line_"
 OWNER = "line_owner"
 RECORDER = "recorder"
+VIEWER = "line_viewer"
+#: sim time between the units' view samples when a live view is asked for [s]
+VIEW_PERIOD = 0.05
+#: wall time the runner gives the live view to end by itself after the owner [s]
+VIEWER_END = 30.0
 #: a unit's process is started again at most this many times per run
 MAX_RESTARTS = 3
 
@@ -103,6 +111,21 @@ class LineRunOptions:
     interface: str | None = None  # IPv4 address: the line talks to other hosts on it
     peers: str | None = None  # the other hosts' IPv4 addresses (comma-separated)
     bag: str | None = None  # --bag: record every topic of the line into this bag directory
+    live_rrd: str | None = None  # --live-rrd: the live view saved to this .rrd
+    rerun_url: str | None = None  # --rerun-url: the live view streamed to this Rerun viewer
+    view_period: float | None = None  # --view-period: the units' view [s of sim time]
+
+    @property
+    def live_view(self) -> bool:
+        return self.live_rrd is not None or self.rerun_url is not None
+
+    @property
+    def unit_view_period(self) -> float:
+        """What the units publish their view at: --view-period, else VIEW_PERIOD with a live
+        view here, else 0 (none)."""
+        if self.view_period is not None:
+            return self.view_period
+        return VIEW_PERIOD if self.live_view else 0.0
 
 
 @dataclass
@@ -158,6 +181,23 @@ def _check(
     except (ParameterError, OSError) as exc:
         raise BadLineInput(str(exc)) from None
     units = parse_units(opts.units, [u.name for u in line.units])
+    if opts.view_period is not None and not 0.0 <= opts.view_period <= 10.0:  # NaN fails too
+        raise BadLineInput(
+            f"--view-period must be in [0, 10] s (0: no view), got {opts.view_period}"
+        )
+    if opts.live_view and not opts.owner:
+        raise BadLineInput(
+            "--rerun-url and --live-rrd run the live view on the owner's host: they do not go "
+            "with --no-owner (give that host's units --view-period)"
+        )
+    if opts.live_view and opts.view_period == 0.0:
+        raise BadLineInput("--view-period 0 publishes no view: the live view needs one > 0")
+    if opts.live_rrd is not None:
+        rrd = Path(opts.live_rrd)
+        if rrd.suffix != ".rrd" or not rrd.resolve().parent.is_dir():
+            raise BadLineInput(
+                f"--live-rrd must be a .rrd file in an existing directory, got {opts.live_rrd}"
+            )
     if opts.bag is not None:
         if not opts.owner:
             raise BadLineInput("--bag records on the owner's host: it does not go with --no-owner")
@@ -233,6 +273,14 @@ def _run(
                         "use_sim_time:=true", "-p",
                         f"line_units:={','.join(u.name for u in line.units)}"]  # fmt: skip
             group.start(RECORDER, node_command(RECORDER, rec_args))
+        if opts.live_view:  # before the units: subscribed when their first samples go out
+            view_args = ["-r", "__ns:=/line", "-p", f"line:={path}"]
+            if opts.live_rrd is not None:
+                view_args += ["-p", f"rrd:={Path(opts.live_rrd).resolve()}"]
+            if opts.rerun_url is not None:
+                view_args += ["-p", f"url:={opts.rerun_url}"]
+            group.start(VIEWER, node_command(VIEWER, view_args))
+        view_period = opts.unit_view_period
         for k in units:
             u = line.units[k]
             group.start(
@@ -240,7 +288,7 @@ def _run(
                 node_command(
                     "line_unit",
                     ["-r", f"__ns:=/{u.name}", "-p", f"line:={path}", "-p", f"unit_index:={k}",
-                     "-p", f"guard:={guard}"],
+                     "-p", f"guard:={guard}", "-p", f"view_period:={float(view_period)!r}"],
                 ),
             )  # fmt: skip
         owner = None
@@ -278,6 +326,12 @@ def _run(
                 (owner or alive[0]).proc.wait(timeout=0.2)
             except subprocess.TimeoutExpired:
                 pass
+        viewer = group.nodes.get(VIEWER)
+        if viewer is not None:  # it ends by itself once the owner's summary is out
+            try:
+                viewer.proc.wait(timeout=VIEWER_END)
+            except subprocess.TimeoutExpired:
+                say(f"{VIEWER} did not end within {VIEWER_END:g} s of the owner: stopping it")
         if owner is None:
             code, message = EXIT_OK, "done"
             summary = {"line": line.name, "units_here": here, "owner": "another host"}
@@ -302,9 +356,11 @@ def _run(
     finally:
         stop.stopping()
         # the recorder last: it takes the others' last messages
-        codes = group.stop(order=[OWNER, *here], urgent=stop.urgent)
+        codes = group.stop(order=[OWNER, *here, VIEWER], urgent=stop.urgent)
     if opts.bag is not None and code == EXIT_OK and codes.get(RECORDER) not in (0, None):
         code, message = EXIT_RECORDING, f"the recorder could not write the bag {opts.bag}"
+    if opts.live_view and code == EXIT_OK and codes.get(VIEWER) not in (0, None):
+        code, message = EXIT_FAILED, f"the live view ({VIEWER}) failed: exit {codes.get(VIEWER)}"
     if code == EXIT_OK and not opts.keep_logs and opts.log_dir is None:
         shutil.rmtree(log_dir, ignore_errors=True)
     else:
@@ -318,7 +374,7 @@ def _restart_ended(group: ProcessGroup, no_owner: bool, say: Callable[[str], Non
     ends the run (_OwnerGone)."""
     for n in group.dead():
         rc = n.proc.returncode
-        if n.name == OWNER or rc == 0:
+        if n.name in (OWNER, VIEWER) or rc == 0:
             continue
         if no_owner and rc == EXIT_OWNER_GONE:
             lines = [x for x in n.tail(5).splitlines() if "no command from the line's owner" in x]

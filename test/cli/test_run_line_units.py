@@ -50,6 +50,16 @@ def test_a_bad_units_list_names_the_option_and_the_allowed_values(text: str, why
          "--interface"),
         (["--units", "1"], "--units"),
         (["--no-owner"], "--no-owner"),
+        (["--line", "two_units", "--view-period", "-1"], "--view-period"),
+        (["--line", "two_units", "--view-period", "nan"], "--view-period"),
+        (["--line", "two_units", "--live-rrd", "/tmp/x.txt"], "--live-rrd"),
+        (["--line", "two_units", "--live-rrd", "/nonexistent_dir/x.rrd"], "--live-rrd"),
+        (["--line", "two_units", "--units", "2", "--no-owner", "--rerun-url",
+          "rerun+http://127.0.0.1:9876/proxy"], "--rerun-url"),
+        (["--line", "two_units", "--live-rrd", "/tmp/x.rrd", "--view-period", "0"],
+         "--view-period"),
+        (["--rerun-url", "rerun+http://127.0.0.1:9876/proxy"], "--rerun-url"),
+        (["--view-period", "0.05"], "--view-period"),
     ],
 )  # fmt: skip
 def test_run_refuses_bad_partial_line_options(args: list[str], option: str) -> None:
