@@ -26,7 +26,7 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 CONFIG = Path(__file__).resolve().parents[2] / "config" / "lines" / "two_units.yaml"
 UNITS = ["unit_1", "unit_2"]
-PARCELS, SEED, PERIOD = 4, 3, 0.05
+PARCELS, SEED, PERIOD = 3, 3, 0.05
 TOL = 1e-9  # [m]: the same floats, the parcels' yaw through a quaternion
 
 
