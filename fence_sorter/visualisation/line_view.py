@@ -19,6 +19,10 @@ Entity paths:
   sample [kN]; an impact lasts a few ms, so the samples miss most peaks) in the unit's colour,
   and ``plots/contact/<name>/peak``: each sorted parcel's peak N from its solve, at its
   outcome.
+
+A sample is one call of :meth:`LineRerunLogger.add` (fences, plots and parcel frames in the
+line frame): :meth:`LineRerunLogger.sample` takes it from a LinePlant, the live view of a line
+over DDS (``nodes/line_viewer.py``) from the units' view messages.
 """
 
 from __future__ import annotations
