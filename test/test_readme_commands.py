@@ -133,6 +133,10 @@ NOT_HERE: dict[str, str] = {
     "pytest test/ros test/cli": "a part of the suite itself (make test runs all of it)",
     'pytest -m "not slow"': "a part of the suite itself (make test runs all of it)",
     "rerun bags/example_4_parcels.rrd": "opens a viewer window",
+    "fence-sorter run --line two_units --rtf 1 --rerun-url rerun+http://127.0.0.1:9876/proxy": (
+        "streams to a viewer window listening at the url (the same live view to a file: "
+        "test/ros/test_line_live_view.py)"
+    ),
     "mkdir -p ~/ws/src && cd ~/ws/src && git clone <this repository> fence_sorter": (
         "a full ROS 2 install (colcon workspace)"
     ),

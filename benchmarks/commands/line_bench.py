@@ -139,9 +139,7 @@ def run(args: argparse.Namespace) -> int:
         "sorted by the end of the run, the steady state's out / in. Recirculated: share of\n"
         "parcels that went round the loop at least once; W_t: each unit's capacity (1)-(2)\n"
         "for its median stroke (by scraping time t_z) and the median parcel length (`-`: no\n"
-        "stroke).\n\n"
-        + "\n".join(rows)
-        + "\n"
+        "stroke).\n\n" + "\n".join(rows) + "\n"
     )
     if args.out:
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
