@@ -15,6 +15,7 @@ import argparse
 import json
 import sys
 import tempfile
+from dataclasses import replace
 from pathlib import Path
 
 from fence_sorter.cli.line_sim import format_summary as line_summary
@@ -36,7 +37,8 @@ def register(parser: argparse.ArgumentParser) -> None:
         "process per unit and the line's owner, in lockstep; with --parcels or --duration, "
         "--rate, --no-guard, --rtf (default 0 with --line: unpaced), --seed, --json, --bag, "
         "--rrd, --rerun-url, --live-rrd, --view-period, --domain, --timeout, --log-dir, "
-        "--keep-logs, --units, --no-owner, --interface, --peers (docs/guide/line.md)",
+        "--keep-logs, --units, --no-owner, --interface, --peers, --reply-timeout, "
+        "--owner-timeout (docs/guide/line.md)",
     )
     parser.add_argument(
         "--rate",
@@ -79,6 +81,21 @@ def register(parser: argparse.ArgumentParser) -> None:
         help="with --line: sim time between the units' view samples [s] (default 0.05 with "
         "--rerun-url or --live-rrd, else 0: none; a --no-owner host's units need it for the "
         "owner's live view)",
+    )
+    parser.add_argument(
+        "--reply-timeout",
+        type=float,
+        metavar="S",
+        help="with --line: the owner takes a unit that does not answer a command within S s "
+        "of wall time for down and goes on without it (default 10)",
+    )
+    parser.add_argument(
+        "--owner-timeout",
+        type=float,
+        metavar="S",
+        help="with --line: a unit (and a runner with --no-owner) exits 3 once no command "
+        "came from the line's owner for S s of wall time (default 20; above the owner's "
+        "--reply-timeout)",
     )
     amount = parser.add_mutually_exclusive_group()
     amount.add_argument("--parcels", type=int, help="parcels to inject (default 20)")
@@ -166,6 +183,8 @@ def run(args: argparse.Namespace) -> int:
         ("--rerun-url", args.rerun_url is not None),
         ("--live-rrd", args.live_rrd is not None),
         ("--view-period", args.view_period is not None),
+        ("--reply-timeout", args.reply_timeout is not None),
+        ("--owner-timeout", args.owner_timeout is not None),
     ):
         if given:
             print(f"fence-sorter: error: {opt} goes with --line only", file=sys.stderr)
@@ -226,6 +245,10 @@ def _run_line(args: argparse.Namespace) -> int:
         print("fence-sorter: error: --rrd is written on the owner's host: it does not go with "
               "--no-owner", file=sys.stderr)  # fmt: skip
         return 2
+    if args.reply_timeout is not None and args.no_owner:
+        print("fence-sorter: error: --reply-timeout is the owner's: it does not go with "
+              "--no-owner", file=sys.stderr)  # fmt: skip
+        return 2
     if rrd is None or args.bag is not None:
         return _run_line_job(args, args.bag, rrd)
     # --rrd without --bag: the view is written from a bag of the run all the same
@@ -258,6 +281,10 @@ def _run_line_job(args: argparse.Namespace, bag: str | None, rrd: Path | None) -
         rerun_url=args.rerun_url,
         view_period=args.view_period,
     )
+    if args.reply_timeout is not None:
+        opts = replace(opts, reply_timeout=args.reply_timeout)
+    if args.owner_timeout is not None:
+        opts = replace(opts, owner_timeout=args.owner_timeout)
     say = (lambda s: print(s, file=sys.stderr)) if args.json else print
     stop = StopRequest()
     stop.install()

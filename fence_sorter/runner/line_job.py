@@ -87,6 +87,9 @@ VIEW_PERIOD = 0.05
 VIEWER_END = 30.0
 #: a unit's process is started again at most this many times per run
 MAX_RESTARTS = 3
+#: --reply-timeout, --owner-timeout: defaults and allowed ranges [s] (wall time)
+REPLY_TIMEOUT, REPLY_TIMEOUT_RANGE = 10.0, (1.0, 3600.0)
+OWNER_TIMEOUT, OWNER_TIMEOUT_RANGE = 20.0, (1.0, 3600.0)
 
 
 class _OwnerGone(RuntimeError):
@@ -114,6 +117,8 @@ class LineRunOptions:
     live_rrd: str | None = None  # --live-rrd: the live view saved to this .rrd
     rerun_url: str | None = None  # --rerun-url: the live view streamed to this Rerun viewer
     view_period: float | None = None  # --view-period: the units' view [s of sim time]
+    reply_timeout: float = REPLY_TIMEOUT  # --reply-timeout: the owner's wait for a reply [s]
+    owner_timeout: float = OWNER_TIMEOUT  # --owner-timeout: a unit's wait for a command [s]
 
     @property
     def live_view(self) -> bool:
@@ -175,6 +180,7 @@ def _check(
         raise BadLineInput(f"--duration must be in (0, 1e6] s, got {opts.duration}")
     if not 0.0 <= opts.rtf <= 100.0:  # NaN fails too
         raise BadLineInput(f"--rtf must be in [0, 100] (0: unpaced), got {opts.rtf}")
+    _check_timeouts(opts)
     try:
         line = load_line(opts.line)
         path = resolve_line(opts.line)
@@ -214,6 +220,29 @@ def _check(
         except TransportError as exc:
             raise BadLineInput(str(exc)) from None
     return line, path, units, transport
+
+
+def _check_timeouts(opts: LineRunOptions) -> None:
+    """--reply-timeout and --owner-timeout: each within its range; with the owner here, the
+    units' wait for a command longer than the owner's wait for a reply (while the owner waits
+    for one unit, the others get no command)."""
+    lo, hi = REPLY_TIMEOUT_RANGE
+    if not lo <= opts.reply_timeout <= hi:
+        raise BadLineInput(
+            f"--reply-timeout must be in [{lo:g}, {hi:g}] s, got {opts.reply_timeout:g}"
+        )
+    lo, hi = OWNER_TIMEOUT_RANGE
+    if opts.owner:
+        lo = max(lo, opts.reply_timeout)
+        if not lo < opts.owner_timeout <= hi:
+            raise BadLineInput(
+                f"--owner-timeout must be in ({lo:g}, {hi:g}] s (above --reply-timeout), got "
+                f"{opts.owner_timeout:g}"
+            )
+    elif not lo <= opts.owner_timeout <= hi:
+        raise BadLineInput(
+            f"--owner-timeout must be in [{lo:g}, {hi:g}] s, got {opts.owner_timeout:g}"
+        )
 
 
 def run_line_job(
@@ -288,7 +317,8 @@ def _run(
                 node_command(
                     "line_unit",
                     ["-r", f"__ns:=/{u.name}", "-p", f"line:={path}", "-p", f"unit_index:={k}",
-                     "-p", f"guard:={guard}", "-p", f"view_period:={float(view_period)!r}"],
+                     "-p", f"guard:={guard}", "-p", f"view_period:={float(view_period)!r}",
+                     "-p", f"owner_timeout:={float(opts.owner_timeout)!r}"],
                 ),
             )  # fmt: skip
         owner = None
@@ -304,6 +334,7 @@ def _run(
             if opts.duration is not None:
                 args += ["-p", f"duration:={float(opts.duration)!r}"]
             args += ["-p", f"real_time_factor:={float(opts.rtf)!r}"]
+            args += ["-p", f"reply_timeout:={float(opts.reply_timeout)!r}"]
             owner = group.start(OWNER, node_command(OWNER, args))
         end = time.monotonic() + opts.timeout
 
