@@ -9,8 +9,9 @@ reply of every unit (/<unit>/replies). :func:`analyze_line_bag` replays the owne
 recorded replies (:class:`BagLinks`): the same code the live owner ran, fed the same answers,
 so it computes the same summary, every count and float bit for bit. The wall-clock fields
 (``wall_time_s``, ``real_time_factor``, ``reply_wait_max_s``, ``pacing``: the paced clock's
-deadline counts, and ``handoff_latency``: the hand-offs' transit) are the live run's, read from
-/line/summary (NaN when the bag has no summary).
+deadline counts, ``handoff_latency``: the hand-offs' transit, and each unit's
+``units_down.<unit>.downtime_wall_s``) are the live run's, read from /line/summary (NaN when the
+bag has no summary).
 
 Two checks say that the bag holds the whole run: each command the replayed owner sends must be
 the one the bag holds under the same number on /<unit>/commands (text equal), and the computed
@@ -58,13 +59,15 @@ from fence_sorter.recording.topics import (
 )
 from fence_sorter.stamps import time_to_sec
 
-#: the summary's wall-clock fields: the live run's (the replay's own wall time is not the run's)
+#: the summary's wall-clock fields: the live run's (the replay's own wall time is not the run's);
+#: a field inside a field as its keys joined by dots, ``*`` for every key at that level
 WALL_FIELDS = (
     "wall_time_s",
     "real_time_factor",
     "reply_wait_max_s",
     "pacing",
     "handoff_latency",
+    "units_down.*.downtime_wall_s",
 )
 _SEQ = re.compile(r'^\{"_":"Command","seq":(\d+),')
 
@@ -305,12 +308,58 @@ def _json(v: object) -> object:
     return json.loads(json.dumps(json_safe(v)))
 
 
-def _differences(computed: dict, live: dict) -> dict[str, tuple]:
+def wall_paths(summary: dict) -> list[tuple[str, ...]]:
+    """The keys to every wall-clock field (WALL_FIELDS) that ``summary`` holds, or, at its
+    top level, could hold."""
+    out: list[tuple[str, ...]] = []
+    for name in WALL_FIELDS:
+        *head, last = name.split(".")
+        level: list[tuple[tuple[str, ...], dict]] = [((), summary)]
+        for part in head:
+            level = [
+                ((*keys, k), v[k])
+                for keys, v in level
+                for k in (list(v) if part == "*" else [part])
+                if isinstance(v.get(k), dict)
+            ]
+        out += [(*keys, last) for keys, v in level if not head or last in v]
+    return out
+
+
+def _at(d: dict, keys: tuple[str, ...], default: object = math.nan) -> object:
+    for k in keys:
+        if not isinstance(d, dict) or k not in d:
+            return default
+        d = d[k]
+    return d
+
+
+def _without_wall(summary: dict) -> dict:
+    """A JSON copy of ``summary`` without its wall-clock fields."""
+    out = _json(summary)
+    for keys in wall_paths(out):
+        parent = _at(out, keys[:-1], None)
+        if isinstance(parent, dict):
+            parent.pop(keys[-1], None)
+    return out
+
+
+def with_live_wall(summary: dict, live: dict | None) -> dict:
+    """``summary`` (changed in place) with each of its wall-clock fields set to the live run's
+    (NaN where the live summary has none, or there is none)."""
+    for keys in wall_paths(summary):
+        value = _at(live, keys) if live is not None else math.nan
+        _at(summary, keys[:-1])[keys[-1]] = value
+    return summary
+
+
+def differences(computed: dict, live: dict) -> dict[str, tuple]:
+    """Top-level field -> (computed, live) of every field whose JSON differs, the wall-clock
+    fields (WALL_FIELDS, at any depth) left out."""
+    a_all, b_all = _without_wall(computed), _without_wall(live)
     out = {}
-    for k in sorted(set(computed) | set(live)):
-        if k in WALL_FIELDS:
-            continue
-        a, b = _json(computed.get(k)), _json(live.get(k))
+    for k in sorted(set(a_all) | set(b_all)):
+        a, b = a_all.get(k), b_all.get(k)
         if a != b:
             out[k] = (a, b)
     return out
@@ -329,12 +378,10 @@ def analyze_line_bag(path: Path | str) -> LineBagReport:
         raise LineBagError(f"{exc}; the bag: {bag.issues[0]}{more}") from None
     lives = _texts(bag, LINE_SUMMARY)
     live = json.loads(lives[-1]) if lives else None
-    for k in WALL_FIELDS:
-        summary[k] = live.get(k, math.nan) if live is not None else math.nan
     return LineBagReport(
-        summary=summary,
+        summary=with_live_wall(summary, live),
         live=live,
-        differences=_differences(summary, live) if live is not None else {},
+        differences=differences(summary, live) if live is not None else {},
         commands_checked=links.checked,
         commands_differing=links.differing,
         issues=[str(i) for i in bag.issues],

@@ -173,7 +173,8 @@ def format_summary(s: dict) -> str:
         lost = ", ".join(map(str, d["lost_parcels"])) or "none"
         lines.append(
             f"{name} went down {d['downs']}x ({d['why']}), down {d['downtime_s']:.2f} s of sim "
-            f"time, rejoined {d['rejoins']}x{', down at the end' if d['down_at_end'] else ''}, "
+            f"time, {_seconds(d.get('downtime_wall_s'))} of wall time, rejoined "
+            f"{d['rejoins']}x{', down at the end' if d['down_at_end'] else ''}, "
             f"restarts {s.get('restarts', {}).get(name, 0)}; lost with it (in its strokes): "
             f"{lost}; hand-offs passed on for it: {d['handoffs_passed_on']}"
         )
@@ -185,3 +186,8 @@ def format_summary(s: dict) -> str:
         + f": {'exact' if s['conservation_ok'] else 'VIOLATED'}"
     )
     return "\n".join(lines)
+
+
+def _seconds(v: object) -> str:
+    """A wall time [s] of a summary (None: not known, as JSON writes NaN)."""
+    return f"{v:.2f} s" if isinstance(v, int | float) else "unknown s"

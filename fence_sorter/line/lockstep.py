@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import json
 import math
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, fields, is_dataclass, replace
 
@@ -395,11 +396,13 @@ class Links:
 
 
 class UnitDown(RuntimeError):
-    """:meth:`Links.wait`: unit ``k`` stopped answering (its process or host is gone)."""
+    """:meth:`Links.wait`: unit ``k`` stopped answering (its process or host is gone);
+    ``waited``: the wall time [s] the links waited for its reply before giving up."""
 
-    def __init__(self, k: int, why: str):
+    def __init__(self, k: int, why: str, waited: float = 0.0):
         super().__init__(why)
         self.k = k
+        self.waited = waited
 
 
 @dataclass
@@ -539,6 +542,10 @@ class RemoteUnit:
         self.why = ""  # why it went down, the latest time
         self.down_at = math.nan  # sim time it went down, the latest time [s]
         self.downtime = 0.0  # sim time it was down, rejoins aside [s]
+        # wall time [s, the owner's wall_clock] from the start of the wait for the reply it
+        # never gave, the latest time; and its wall time down, rejoins aside
+        self.down_wall_at = math.nan
+        self.downtime_wall = 0.0
         self.downs = 0
         self.rejoins = 0
         self.lost_parcels: list[int] = []  # parcels in its strokes when it went down
@@ -546,7 +553,7 @@ class RemoteUnit:
         self.tally = _Tally()  # its process's counts, from its replies
         self.banked = _Tally()  # the counts of its earlier processes
         self.stood_in = 0  # hand-offs the stand-in took and passed on for it
-        self.on_down: Callable[[RemoteUnit, str], None] = lambda u, why: None
+        self.on_down: Callable[[RemoteUnit, str, float], None] = lambda u, why, waited: None
 
     def announce(self, parcel_id: int, passes: int, spec=None, destination: str = "") -> None:
         if self.down:
@@ -566,7 +573,7 @@ class RemoteUnit:
                 self.links.send(self.index, Deliver(h.parcel_id, h.passes, h.from_unit, t))
                 r = self.links.wait(self.index)
             except UnitDown as exc:
-                self.on_down(self, str(exc))
+                self.on_down(self, str(exc), exc.waited)
             else:
                 assert isinstance(r, Delivered) and r.parcel_id == h.parcel_id, r
                 self.count(r)
@@ -606,7 +613,7 @@ class RemoteUnit:
         try:
             r = self.links.wait(self.index)
         except UnitDown as exc:
-            self.on_down(self, str(exc))
+            self.on_down(self, str(exc), exc.waited)
             return
         assert isinstance(r, Figures), r
         self._fig = r
@@ -662,22 +669,32 @@ class _SharedView(TrafficView):
 class LockstepOwner(LinePlant):
     """The induction, the recirculation and the clock of a line whose units run elsewhere
     (behind ``links``); :meth:`run` to the drain gives ``LinePlant``'s summary, with the units
-    that went down (``units_down``) and the parcels lost with them (``lost_with_unit``)."""
+    that went down (``units_down``) and the parcels lost with them (``lost_with_unit``).
+    ``wall_clock`` [s] times how long a unit was down on the wall (``downtime_wall_s``)."""
 
-    def __init__(self, line: LineSpec, cfg: LineRunConfig, links: Links):
+    def __init__(
+        self,
+        line: LineSpec,
+        cfg: LineRunConfig,
+        links: Links,
+        wall_clock: Callable[[], float] = time.monotonic,
+    ):
         super().__init__(line, cfg)
         self.transport = links
+        self.wall_clock = wall_clock
         self.units = [RemoteUnit(u, links) for u in self.units]
         for u in self.units:
             u.on_down = self._unit_down
         self.view = _SharedView(self.v, links, self.units)
 
-    def _unit_down(self, u: RemoteUnit, why: str) -> None:
+    def _unit_down(self, u: RemoteUnit, why: str, waited: float = 0.0) -> None:
         """Unit ``u`` is down: the parcels in its strokes are lost with it (each leaves every
-        other unit's traffic as a failed one), its counts so far are kept."""
+        other unit's traffic as a failed one), its counts so far are kept. Its wall downtime
+        counts from the start of the wait for the reply it never gave (``waited`` [s] ago)."""
         if u.down:
             return
         u.down, u.why, u.down_at, u.downs = True, why, self.t, u.downs + 1
+        u.down_wall_at = self.wall_clock() - waited
         u.banked.add(u.tally)
         u.tally = _Tally()
         for p in self.live:
@@ -698,6 +715,7 @@ class LockstepOwner(LinePlant):
         self.transport.restart(u.index)
         u.down, u.known = False, set()
         u.downtime += self.t - u.down_at
+        u.downtime_wall += self.wall_clock() - u.down_wall_at
         u.rejoins += 1
         v = self.view
         snap = Snapshot(self.t, tuple(v.tracks.values()), tuple(v.bookings), tuple(v.stroking))
@@ -708,7 +726,7 @@ class LockstepOwner(LinePlant):
             try:
                 r = self.transport.wait(u.index)
             except UnitDown as exc:
-                self._unit_down(u, str(exc))
+                self._unit_down(u, str(exc), exc.waited)
             else:
                 assert isinstance(r, Done) and r.t == t, r
                 u.count(r)
@@ -748,7 +766,7 @@ class LockstepOwner(LinePlant):
             try:
                 r = self.transport.wait(u.index)
             except UnitDown as exc:
-                self._unit_down(u, str(exc))
+                self._unit_down(u, str(exc), exc.waited)
                 continue
             assert isinstance(r, Warmed), r
 
@@ -760,13 +778,19 @@ class LockstepOwner(LinePlant):
         ended = s["sorted"] + s["rejected"] + s["solver_failures"] + s["still_on_line"]
         s["lost_with_unit"] = len(lost)
         s["conservation_ok"] = s["parcels_inducted"] == ended + len(lost)
+        now = self.wall_clock()
         s["units_down"] = {
             u.spec.name: {
                 "downs": u.downs,
                 "rejoins": u.rejoins,
                 "down_at_end": u.down,
                 "why": u.why,
+                # down in sim time: small after a restart, the clock waits for the unit's
+                # reply until its new process says ready
                 "downtime_s": u.downtime + (self.t - u.down_at if u.down else 0.0),
+                # down in wall time: from the start of the owner's wait for the reply it never
+                # gave to its new process's rejoin (or to the end of the run)
+                "downtime_wall_s": u.downtime_wall + (now - u.down_wall_at if u.down else 0.0),
                 "lost_parcels": list(u.lost_parcels),
                 "handoffs_passed_on": u.stood_in,
                 # what its latest process (after the latest rejoin) sorted; None: down

@@ -187,7 +187,8 @@ class LineOwnerNode(FenceSorterNode, Links):
         end = t0 + self.reply_timeout
         while True:
             if k in self.fresh:
-                raise UnitDown(k, f"{name}: a new process of it started")
+                waited = time.monotonic() - t0
+                raise UnitDown(k, f"{name}: a new process of it started", waited)
             try:
                 r = self.inbox[k].get(timeout=0.05)
             except queue.Empty:
@@ -201,7 +202,7 @@ class LineOwnerNode(FenceSorterNode, Links):
                     f"{self.reply_timeout:g} s"
                 )
                 self.get_logger().error(f"{why}: the line goes on without it")
-                raise UnitDown(k, why)
+                raise UnitDown(k, why, time.monotonic() - t0)
 
     def hand_off(self, h: HandOff) -> None:
         self.induction.publish(handoff_to_msg(h))
