@@ -171,19 +171,34 @@ def line_sim_reference() -> dict:
     return json.loads(out.stdout)
 
 
-def _two_host_trial(case: str, workdir: Path) -> dict:
+def _timeouts(reply: float | None, owner: float | None, owner_here: bool) -> list[str]:
+    """The options of ``run --line`` for the owner's wait for a reply and the units' wait for
+    a command (None: the default)."""
+    args = []
+    if reply is not None and owner_here:
+        args += ["--reply-timeout", repr(reply)]
+    if owner is not None:
+        args += ["--owner-timeout", repr(owner)]
+    return args
+
+
+def _two_host_trial(
+    case: str, workdir: Path, reply: float | None = None, owner: float | None = None
+) -> dict:
     row: dict = {"case": case}
     d = Path(tempfile.mkdtemp(prefix="line-fault-", dir=workdir))
     domain = str(150 + int(uuid.uuid4().hex[:4], 16) % 50)
     with two_hosts() as h:
         side_b, err_b = _start(
             _line_cmd(h.b, "--units", "2", "--no-owner", "--domain", domain,
-                      "--interface", h.addr_b, "--peers", h.addr_a),
+                      "--interface", h.addr_b, "--peers", h.addr_a,
+                      *_timeouts(reply, owner, False)),
             d, "b",
         )  # fmt: skip
         side_a, err_a = _start(
             _line_cmd(h.a, "--units", "1", "--domain", domain, "--interface", h.addr_a,
-                      "--peers", h.addr_b, "--log-dir", str(d / "logs_a")),
+                      "--peers", h.addr_b, "--log-dir", str(d / "logs_a"),
+                      *_timeouts(reply, owner, True)),
             d, "a",
         )  # fmt: skip
         try:
@@ -256,13 +271,20 @@ def _descends(pid: int, root: int) -> bool:
     return False
 
 
-def line_trial(case: str, workdir: Path) -> dict:
+def line_trial(
+    case: str,
+    workdir: Path,
+    reply_timeout: float | None = None,
+    owner_timeout: float | None = None,
+) -> dict:
     """One trial of ``case`` (one of LINE_CASES); a row ``not_run`` with the reason where it
-    cannot run here."""
+    cannot run here. ``reply_timeout``, ``owner_timeout``: ``run --line``'s
+    ``--reply-timeout`` (the owner's host) and ``--owner-timeout`` (both hosts) of a
+    two-host trial (None: the defaults)."""
     try:
         if case == "unit kill":
             return _unit_kill_trial(workdir)
-        return _two_host_trial(case, workdir)
+        return _two_host_trial(case, workdir, reply_timeout, owner_timeout)
     except NotRunnable as exc:
         return {"case": case, "not_run": str(exc)}
 

@@ -1,47 +1,209 @@
-"""A unit's process of ``fence-sorter run --line`` killed mid-run (SIGKILL): the fault case
-"unit kill" of the campaign (benchmarks/faults_line.py).
+"""A unit's process of ``fence-sorter run --line`` killed (SIGKILL) while one of its strokes
+runs, the moment chosen from what is on the wire.
 
-The line must go on: the runner starts the unit again (counted in ``restarts``), the owner
-takes the old process for down when the new one says ready with its own token, passes the
-unit's hand-offs on meanwhile and lets the new process rejoin at a step. Checked: exit 0,
-conservation exact with the parcels lost with the unit counted and named, every link
-balanced at both ends, the unit down once and back once, its new process sorting again.
+``run --line two_units`` runs as the user starts it (its own processes on a domain it chose,
+the line clock paced at ``RTF``); a subscriber in the test reads ``/unit_2/replies`` and, as
+soon as a reply books a stroke on unit_2 (a ``Delivered`` with a booking), SIGKILLs unit_2's
+process. The line clock is then still well before the stroke's end: the owner needs unit_2's
+answer to every step, and on this stream the stroke booked first on unit_2 ends 4.2 s of sim
+time after its booking (``line-sim``), at least 1 s of wall time at ``RTF``. The line must go
+on: the runner starts the unit
+again (``restarts``), the owner takes the old process for down when the new one says ready
+with its own token, passes the unit's hand-offs on meanwhile and lets the new process rejoin
+at a step. Checked: the parcel in that stroke is lost with the unit and named, conservation is
+exact with it counted, every link balances at both ends, exit 0, the unit down once and back
+once after one step of sim time, its new process sorting again.
 """
 
 from __future__ import annotations
 
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import uuid
 from pathlib import Path
 
 import pytest
+from processes import stop_process, wait_until
 
-from benchmarks.faults_line import PARCELS, line_met, line_trial
+from fence_sorter.line.lockstep import Delivered, decode
+from fence_sorter.runner.processes import tagged
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.faults]
 
+REPO = Path(__file__).resolve().parents[2]
+TAG = "FENCE_SORTER_TEST_LINE_KILL"
+#: the line, its stream and the pace of its clock (real-time factor): parcel 6 is the first
+#: unit_2 books a stroke for; parcels announced after its new process rejoined go to it
+LINE, PARCELS, SEED, RATE, RTF = "two_units", 6, 3, 4000, 4
+DT = 0.01  # the line clock's step [s]
 
-def test_a_killed_unit_is_restarted_and_rejoins_and_nothing_is_silently_lost(
-    tmp_path: Path,
+
+def _pid(tag: str, *words: str) -> int | None:
+    """The pid of the run's process whose command line holds every one of ``words`` (None:
+    none yet)."""
+    for pid in tagged(TAG, tag):
+        try:
+            cmd = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
+        except OSError:
+            continue
+        if all(w.encode() in cmd for w in words):
+            return pid
+    return None
+
+
+class _Killer:
+    """A subscriber on ``/unit_2/replies`` in the test process (a context of its own): kills
+    unit_2's process ``pid`` when a reply first books a stroke on it."""
+
+    def __init__(self, domain: int, pid: int):
+        import rclpy  # lazy: rclpy only for the ROS tests
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.signals import SignalHandlerOptions
+        from std_msgs.msg import String
+
+        from fence_sorter.nodes.line_unit import LINE_QOS, READY
+
+        self.rclpy, self.pid, self.ready = rclpy, pid, READY
+        self.context = rclpy.Context()
+        rclpy.init(
+            context=self.context, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO
+        )
+        self.node = rclpy.create_node("line_kill_listener", context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.tokens: list[str] = []  # the ready tokens of unit_2's processes, in order
+        self.booking = None  # the booking unit_2's first process was killed in
+        self.sub = self.node.create_subscription(
+            String, "/unit_2/replies", self._on_reply, LINE_QOS
+        )
+
+    def _on_reply(self, msg) -> None:
+        if msg.data.startswith(self.ready):
+            token = msg.data[len(self.ready) :]
+            if token not in self.tokens:
+                self.tokens.append(token)
+            return
+        if self.booking is not None:
+            return
+        r = decode(msg.data)
+        if isinstance(r, Delivered) and r.booking is not None:
+            os.kill(self.pid, signal.SIGKILL)
+            self.booking = r.booking
+
+    def spin(self) -> None:
+        self.executor.spin_once(timeout_sec=0.05)
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.rclpy.try_shutdown(context=self.context)
+
+
+def test_a_unit_killed_in_a_stroke_loses_that_parcel_and_rejoins(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    row = line_trial("unit kill", tmp_path)
-    assert row["fault_mid_run"], row
-    a = row["a"]
-    assert a["exit_code"] == 0 and not a["traceback"], a["last_line"]
-    s = a["summary"]
-    assert s["drained"] and s["conservation_ok"] and s["handoffs_balanced"], s
-    assert (
-        PARCELS
-        == s["parcels_inducted"]
-        == (s["sorted"] + s["rejected"] + s["solver_failures"] + s["lost_with_unit"])
-    )
+    monkeypatch.setenv("ROS_LOG_DIR", str(tmp_path / "ros_log_listener"))
+    tag = uuid.uuid4().hex
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH")]))
+    env[TAG] = tag
+    cmd = [sys.executable, "-m", "fence_sorter.cli.main", "run", "--line", LINE, "--parcels",
+           str(PARCELS), "--seed", str(SEED), "--rate", str(RATE), "--rtf", str(RTF), "--json",
+           "--log-dir", str(tmp_path / "logs")]  # fmt: skip
+    # the owner's clock waits for the killed unit's new process, however slow its start on a
+    # loaded machine, and the other unit waits for the owner as long
+    cmd += ["--reply-timeout", "60", "--owner-timeout", "90"]
+    err_file = tmp_path / "stderr.txt"
+    killer, held = None, None
+    with err_file.open("w") as err_out:
+        proc = subprocess.Popen(
+            cmd, stdout=subprocess.PIPE, stderr=err_out, text=True, cwd=REPO, env=env,
+            start_new_session=True,
+        )  # fmt: skip
+        try:
+            # the runner says its domain once it checked that no other participant uses it
+            found = wait_until(
+                lambda: (
+                    re.search(r"ROS domain (\d+)", err_file.read_text()) or proc.poll() is not None
+                ),
+                120.0,
+                "the runner's domain",
+            )
+            assert proc.poll() is None, err_file.read_text()
+            # the owner held (SIGSTOP) until the subscriber here has matched unit_2's replies:
+            # it sees the line's every reply (the runner starts the units, then the owner)
+            owner = wait_until(
+                lambda: _pid(tag, "fence_sorter.nodes.line_owner"), 60.0, "the owner's process"
+            )
+            os.kill(owner, signal.SIGSTOP)
+            held = owner
+            unit_2 = _pid(tag, "fence_sorter.nodes.line_unit", "unit_index:=1")
+            assert unit_2 is not None
+            killer = _Killer(int(found.group(1)), unit_2)
+            wait_until(
+                lambda: killer.sub.get_publisher_count() > 0,
+                120.0,
+                "unit_2's replies matched",
+                poll=killer.spin,
+            )
+            os.kill(owner, signal.SIGCONT)
+            held = None
+            wait_until(
+                lambda: killer.booking is not None or proc.poll() is not None,
+                240.0,
+                "a stroke booked on unit_2",
+                poll=killer.spin,
+            )
+            assert killer.booking is not None, err_file.read_text()
+            # its new process says ready with a token of its own
+            wait_until(
+                lambda: len(killer.tokens) >= 2 or proc.poll() is not None,
+                240.0,
+                "unit_2's new process",
+                poll=killer.spin,
+            )
+            out, _ = proc.communicate(timeout=300)
+        finally:
+            if held is not None:
+                os.kill(held, signal.SIGCONT)
+            if killer is not None:
+                killer.close()
+            stop_process(proc)
+    err = err_file.read_text()
+    b = killer.booking
+    assert b.unit == 1 and b.t_start < b.t_end, b
+    assert proc.returncode == 0 and "Traceback" not in err, err
+    assert "unit_2 ended during the run (exit -9); starting it again (1 of at most 3)" in err
+    # on the wire: unit_2's two processes, each said ready with a token of its own
+    assert len(killer.tokens) == 2, killer.tokens
+    s = json.loads(out)
     assert s["restarts"] == {"unit_1": 0, "unit_2": 1}
     down = s["units_down"]["unit_2"]
     assert down["downs"] == 1 == down["rejoins"] and not down["down_at_end"], down
-    assert len(down["lost_parcels"]) == s["lost_with_unit"] and "unit_1" not in s["units_down"]
+    assert "a new process of it started" in down["why"]
+    assert "unit_1" not in s["units_down"]
+    # the parcel of the stroke the kill cut, and only it, is lost with the unit, named with it
+    assert down["lost_parcels"] == [b.parcel_id] and s["lost_with_unit"] == 1
+    # conservation exact: every parcel inducted ended, or was lost with the unit
+    assert s["drained"] and s["conservation_ok"] and s["handoffs_balanced"], s
+    assert s["still_on_line"] == 0
+    assert (
+        PARCELS
+        == s["parcels_inducted"]
+        == s["sorted"] + s["rejected"] + s["solver_failures"] + s["lost_with_unit"]
+    )
     # every hand-off on every link counted at both ends (the dead process's counts kept)
     for link, v in s["links"].items():
         assert v["sent"] == v["received"] + sum(v["refused"].values()) + v["lost"], link
     # the stand-in's hand-offs are the unit's declines `unit_down`
     assert s["units"]["unit_2"]["declined"]["unit_down"] == down["handoffs_passed_on"]
+    # the clock waited for the new process: down one step of sim time (its wall time is the
+    # restart's, beside it)
+    assert down["downtime_s"] == pytest.approx(DT, abs=1e-9)
+    assert down["downtime_wall_s"] >= 0.0
     # the new process routed the parcels announced after it rejoined and sorted again
     assert down["sorted_by_last_process"] > 0
-    assert line_met(row)
