@@ -25,19 +25,16 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import signal
 import subprocess
 import sys
 import tempfile
 import time
 import uuid
-from collections.abc import Iterator
-from contextlib import contextmanager
-from dataclasses import dataclass
 from pathlib import Path
 
 from benchmarks.faults_processes import fence_sorter_cmd
+from benchmarks.netns import NotRunnable, in_ns, ip, ns_pids, two_hosts
 
 #: the line, stream and seed of every trial
 LINE, PARCELS, SEED = "two_units", 12, 3
@@ -52,59 +49,9 @@ WALL = ("wall_time_s", "real_time_factor", "restarts", "log_dir")
 RUNS = "every unit is ready: the line runs"
 
 
-class NotRunnable(RuntimeError):
-    """The trial cannot run here (one line: why)."""
-
-
-@dataclass(frozen=True)
-class Hosts:
-    a: str  # network namespace of host A
-    addr_a: str
-    dev_a: str  # A's end of the veth pair
-    b: str
-    addr_b: str
-
-
-def _ip(*args: str) -> None:
-    subprocess.run(["ip", *args], check=True, capture_output=True, text=True)
-
-
-@contextmanager
-def two_hosts() -> Iterator[Hosts]:
-    """Two network namespaces joined by a veth pair (root and ``ip``), removed afterwards."""
-    if os.geteuid() != 0 or shutil.which("ip") is None:
-        raise NotRunnable("two hosts need root and the ip command (network namespaces, veth)")
-    tag = uuid.uuid4().hex[:6]
-    a, b = f"fs{tag}a", f"fs{tag}b"
-    net = 100 + int(tag, 16) % 150
-    h = Hosts(a, f"10.{net}.78.1", f"v{tag}a", b, f"10.{net}.78.2")
-    try:
-        try:
-            _ip("netns", "add", a)
-            _ip("netns", "add", b)
-            _ip("link", "add", h.dev_a, "type", "veth", "peer", "name", f"v{tag}b")
-            for ns, dev, addr in ((a, h.dev_a, h.addr_a), (b, f"v{tag}b", h.addr_b)):
-                _ip("link", "set", dev, "netns", ns)
-                _ip("-n", ns, "addr", "add", f"{addr}/24", "dev", dev)
-                _ip("-n", ns, "link", "set", dev, "up")
-                _ip("-n", ns, "link", "set", "lo", "up")
-        except subprocess.CalledProcessError as exc:
-            why = exc.stderr.strip()
-            raise NotRunnable(f"network namespaces not available here: {why}") from None
-        yield h
-    finally:
-        for ns in (a, b):
-            subprocess.run(["ip", "netns", "del", ns], capture_output=True)
-
-
-def _ns_pids(ns: str) -> list[int]:
-    out = subprocess.run(["ip", "netns", "pids", ns], capture_output=True, text=True).stdout
-    return [int(x) for x in out.split()]
-
-
 def _kill_ns(ns: str) -> int:
     """SIGKILL every process of a namespace (a host that dies at once); how many."""
-    pids = _ns_pids(ns)
+    pids = ns_pids(ns)
     for pid in pids:
         try:
             os.kill(pid, signal.SIGKILL)
@@ -118,7 +65,7 @@ def _line_cmd(ns: str | None, *args: str) -> list[str]:
         "run", "--line", LINE, "--parcels", str(PARCELS), "--seed", str(SEED), "--json",
         "--timeout", "600", *args,
     )  # fmt: skip
-    return cmd if ns is None else ["ip", "netns", "exec", ns, *cmd]
+    return cmd if ns is None else in_ns(ns, cmd)
 
 
 def _start(cmd: list[str], workdir: Path, name: str) -> tuple[subprocess.Popen, Path]:
@@ -207,9 +154,9 @@ def _two_host_trial(
             if running:
                 time.sleep(FAULT_AFTER_S)
                 if case == "link cut":
-                    _ip("-n", h.a, "link", "set", h.dev_a, "down")
+                    ip("-n", h.a, "link", "set", h.dev_a, "down")
                     time.sleep(CUT_S)
-                    _ip("-n", h.a, "link", "set", h.dev_a, "up")
+                    ip("-n", h.a, "link", "set", h.dev_a, "up")
                     row["fault_mid_run"] = side_a.poll() is None
                 elif case == "host kill":
                     row["fault_mid_run"] = side_a.poll() is None

@@ -43,7 +43,7 @@ def _line(ns: str, *args: str, cwd: Path, line: str = "two_units", parcels: int 
 
 
 def test_a_line_over_two_hosts_equals_line_sim(two_hosts, tmp_path: Path) -> None:
-    a, addr_a, b, addr_b = two_hosts
+    a, addr_a, b, addr_b = two_hosts.a, two_hosts.addr_a, two_hosts.b, two_hosts.addr_b
     domain = str(150 + int(uuid.uuid4().hex[:4], 16) % 50)
     sim = run_cli("line-sim", "two_units", "--parcels", str(PARCELS), "--seed", str(SEED),
                   "--json")  # fmt: skip
@@ -84,7 +84,7 @@ def _ends(first: subprocess.Popen, second: subprocess.Popen) -> tuple[str, str, 
 
 
 def test_four_units_over_two_hosts_with_the_recorder(two_hosts, tmp_path: Path) -> None:
-    a, addr_a, b, addr_b = two_hosts
+    a, addr_a, b, addr_b = two_hosts.a, two_hosts.addr_a, two_hosts.b, two_hosts.addr_b
     domain = str(150 + int(uuid.uuid4().hex[:4], 16) % 50)
     parcels = 6
     sim = run_cli("line-sim", "four_units", "--parcels", str(parcels), "--seed", str(SEED),

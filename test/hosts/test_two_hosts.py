@@ -39,7 +39,7 @@ def _udp_binds(ns: str, pids: set[int] | None = None) -> set[str]:
 
 
 def test_a_run_on_one_host_is_seen_whole_from_another(two_hosts, tmp_path: Path) -> None:
-    a, addr_a, b, addr_b = two_hosts
+    a, addr_a, b, addr_b = two_hosts.a, two_hosts.addr_a, two_hosts.b, two_hosts.addr_b
     domain = 150 + int(uuid.uuid4().hex[:4], 16) % 50
     listener = subprocess.Popen(
         ["ip", "netns", "exec", a, sys.executable, str(LISTENER), "--domain", str(domain),
