@@ -89,6 +89,31 @@ def ns_pids(ns: str) -> list[int]:
     return [int(x) for x in out.split()]
 
 
+def fastdds_shm(ns: str) -> set[str]:
+    """The Fast DDS files under /dev/shm (``fastrtps_*``) that the processes of the network
+    namespace ``ns`` map or hold open now."""
+    found: set[str] = set()
+    for pid in ns_pids(ns):
+        try:
+            with open(f"/proc/{pid}/maps") as f:
+                found.update(w for line in f for w in line.split()[5:] if _fastdds_file(w))
+            fds = os.listdir(f"/proc/{pid}/fd")
+        except OSError:  # the process ended meanwhile
+            continue
+        for fd in fds:
+            try:
+                target = os.readlink(f"/proc/{pid}/fd/{fd}")
+            except OSError:
+                continue
+            if _fastdds_file(target):
+                found.add(target)
+    return found
+
+
+def _fastdds_file(path: str) -> bool:
+    return path.startswith("/dev/shm/fastrtps_")
+
+
 def link_counters(ns: str, dev: str) -> dict[str, int]:
     """The kernel's counters of ``dev`` in ``ns``: ``rx_bytes``, ``rx_packets``, ``tx_bytes``,
     ``tx_packets`` (bytes of the Ethernet frames, headers included)."""

@@ -2,11 +2,15 @@
 
 A run on one host keeps to shared memory and loopback UDP (``config/fastdds_localhost.xml``).
 With ``--interface ADDRESS --peers A[,B...]`` it talks to the other hosts of a line instead:
-shared memory within this host (Fast DDS uses it only between participants of one host), and
 UDPv4 on the one interface that holds ADDRESS; discovery by unicast to ADDRESS and the peers'
-addresses (Fast DDS's initial peers), so no multicast is needed on the link. Every socket of
-the run is bound to ADDRESS (docs/design/security.md). The profile is written into the run's
-log directory and handed to every process of the run, as the localhost one is.
+addresses (Fast DDS's initial peers), so no multicast is needed on the link. The profile names
+every participant's locators (UDP at ADDRESS), so Fast DDS announces no shared-memory locator:
+its SHM transport is registered but carries nothing, and the participants of one host reach
+each other by UDP at ADDRESS as well (delivered by the kernel on the host, never on the link).
+Nothing passes between two hosts through /dev/shm, not even between two network namespaces of
+one machine, which share it (docs/design/security.md). Every socket of the run is bound to
+ADDRESS. The profile is written into the run's log directory and handed to every process of
+the run, as the localhost one is.
 """
 
 from __future__ import annotations
@@ -69,8 +73,9 @@ def hosts_profile(t: HostsTransport) -> str:
     # this host's address too: its other participants (the run's nodes) are found the same way
     peers = "\n".join(f"            {_locator(p)}" for p in (t.address, *t.peers))
     return f"""<?xml version="1.0" encoding="UTF-8"?>
-<!-- fence_sorter run across hosts (fence_sorter/runner/transport.py): shared memory within
-     this host, UDPv4 on {t.address} only, discovery by unicast to the peers. -->
+<!-- fence_sorter run across hosts (fence_sorter/runner/transport.py): UDPv4 on {t.address}
+     only, within this host as well (the locators are UDP ones: the SHM transport carries
+     nothing), discovery by unicast to the peers. -->
 <dds xmlns="http://www.eprosima.com">
   <profiles>
     <transport_descriptors>

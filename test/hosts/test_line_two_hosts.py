@@ -14,7 +14,9 @@ the owner, units 3-4 and the recorder (``--bag``); the link unit_2 -> unit_3 cro
 veth. Checked as above, and the bag is complete: ``fence-sorter analyze`` of it gives B's
 summary field by field. And the traffic crossed the veth, not /dev/shm (which the two
 namespaces share): each veth end's kernel counters grew by at least what the messages that
-must cross carry, counted from the summary (:func:`_least_on_the_link`).
+must cross carry, counted from the summary (:func:`_least_on_the_link`), and no Fast DDS file
+of /dev/shm was open in both namespaces during the run (each namespace's participants map
+segments of their own).
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import threading
 import uuid
 from pathlib import Path
 
@@ -30,7 +33,7 @@ from processes import run_cli
 from rclpy.serialization import serialize_message
 from std_msgs.msg import String
 
-from benchmarks.netns import grown, link_counters
+from benchmarks.netns import fastdds_shm, grown, link_counters
 from fence_sorter.line.lockstep import Command, Done, Step, encode
 from fence_sorter.nodes.parameters import LINE_OWNER_PARAMETERS
 from fence_sorter_msgs.msg import HandOff
@@ -115,7 +118,21 @@ def test_four_units_over_two_hosts_with_the_recorder(two_hosts, tmp_path: Path) 
     side_b = _line(b, "--units", "3,4", "--bag", str(bag), "--domain", domain, "--interface",
                    addr_b, "--peers", addr_a, cwd=tmp_path, line="four_units",
                    parcels=parcels)  # fmt: skip
-    out_b, err_b, out_a, err_a = _ends(side_b, side_a)
+    shm: tuple[set[str], set[str]] = (set(), set())
+    done = threading.Event()
+
+    def watch() -> None:
+        while not done.wait(1.0):
+            shm[0].update(fastdds_shm(a))
+            shm[1].update(fastdds_shm(b))
+
+    watcher = threading.Thread(target=watch, daemon=True)
+    watcher.start()
+    try:
+        out_b, err_b, out_a, err_a = _ends(side_b, side_a)
+    finally:
+        done.set()
+        watcher.join()
     into_a = grown(before[0], link_counters(a, two_hosts.dev_a))
     into_b = grown(before[1], link_counters(b, two_hosts.dev_b))
     assert side_b.returncode == 0, err_b[-3000:]
@@ -127,6 +144,8 @@ def test_four_units_over_two_hosts_with_the_recorder(two_hosts, tmp_path: Path) 
     across = got["links"]["unit_2>unit_3"]  # sent on host A, received on host B
     assert across["sent"] == across["received"] > 0 and across["lost"] == 0, across
     assert json.loads(out_a)["units_here"] == ["unit_1", "unit_2"]
+    # no shared memory between the hosts: each side's Fast DDS files are its own
+    assert shm[0] and shm[1] and not shm[0] & shm[1], shm
     # the veth carried the line's traffic between the hosts: each way at least what crosses
     assert got["units_down"] == {}  # units 1-2 answered every step
     least_b_to_a, least_a_to_b = _least_on_the_link(got)
