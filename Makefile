@@ -53,6 +53,8 @@ reports: bootstrap
 			--out docs/reports/line-speed.md --json docs/reports/line-speed.json \
 		&& python -m benchmarks line-scale --units 1,2,4,8 --parcels 8 --seed 3 --rtf 1 \
 			--out docs/reports/line-scale.md \
+		&& python -m benchmarks line-scale --units 2,4,8 --parcels 8 --seed 3 --hosts 2 \
+			--out docs/reports/line-scale.md \
 		&& nice -n 10 python -m benchmarks.startup --rounds 5 --runs 3 --load 4 \
 			--out docs/reports/startup \
 		&& nice -n 10 python -m benchmarks.convergence \
