@@ -48,6 +48,7 @@ from fence_sorter.line.lockstep import (
     decode,
     encode,
     make_unit,
+    split_batch,
 )
 from fence_sorter.line.multi_unit import LineRunConfig
 from fence_sorter.recording.bagread import BagContents, read_bag
@@ -204,7 +205,7 @@ def line_records(bag: BagContents) -> LineRecords:
         upstream.append([handoff_from_bag(m.msg) for m in bag.by_topic(link)])
         topic_cmd, topic_rep, _ = line_unit_topics(u.name)
         cmds = {}
-        for text in _texts(bag, topic_cmd):
+        for text in (t for msg in _texts(bag, topic_cmd) for t in split_batch(msg)):
             m = _SEQ.match(text)
             if m:
                 cmds[int(m.group(1))] = text

@@ -84,8 +84,11 @@ __all__ = [
     "UnitSide",
     "WarmUp",
     "Warmed",
+    "answered",
     "decode",
     "encode",
+    "join_batch",
+    "split_batch",
     "make_unit",
 ]
 
@@ -259,7 +262,29 @@ def encode(o: object) -> str:
 
 def decode(text: str) -> object:
     """The object :func:`encode` wrote (KeyError or TypeError on text it did not write)."""
-    return _dec(json.loads(text), _kinds())
+    return _dec(json.loads(text), _KINDS)
+
+
+_KINDS = _kinds()
+
+
+def answered(body: object) -> bool:
+    """True for a command the unit answers (the owner then waits for the reply): a transport
+    may hold a unit's other commands back and send them in one batch with the next one it
+    answers, which keeps their order and changes nothing the unit does (it applies them in
+    sequence order, and only a command it answers makes it put anything out)."""
+    return isinstance(body, Deliver | Step | Report | WarmUp)
+
+
+def join_batch(texts: Sequence[str]) -> str:
+    """Encoded commands in one message, in order, one a line (:func:`encode` writes no raw
+    newline)."""
+    return "\n".join(texts)
+
+
+def split_batch(text: str) -> list[str]:
+    """The encoded commands of a message :func:`join_batch` wrote (one command: itself)."""
+    return text.split("\n")
 
 
 # -- a unit's side ---------------------------------------------------------------------------

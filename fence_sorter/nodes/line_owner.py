@@ -3,7 +3,8 @@
 A :class:`~fence_sorter.line.lockstep.LockstepOwner` whose units are ``line_unit`` nodes (one
 per namespace ``/<unit name>``, on this host or another). It waits until every unit says it is
 ready (its writers matched), then runs the line to the drain: each unit's commands go on
-``/<unit name>/commands``, its answers come on ``/<unit name>/replies``, the induction's
+``/<unit name>/commands`` (in batches: the commands up to one the unit answers in one
+message), its answers come on ``/<unit name>/replies``, the induction's
 hand-offs go on ``/line/handoffs`` and the last unit's come back on its ``handoffs`` topic (the
 recirculation's end of that link). Each step of the line clock is published on /clock. At the
 end it writes the line summary (``LinePlant.summary``, JSON) to ``summary`` (or stdout) and
@@ -46,8 +47,10 @@ from fence_sorter.line.lockstep import (
     LockstepOwner,
     StartGate,
     UnitDown,
+    answered,
     decode,
     encode,
+    join_batch,
 )
 from fence_sorter.line.multi_unit import LineRunConfig
 from fence_sorter.line.pacing import PacedSteps
@@ -107,6 +110,9 @@ class LineOwnerNode(FenceSorterNode, Links):
         self.warm = bool(p["warm_up"])
         names = [u.name for u in self.line.units]
         self.seq = [0] * len(names)
+        # each unit's encoded commands not sent yet: they go in one message with the next
+        # command the unit answers (lockstep.answered)
+        self.batch: list[list[str]] = [[] for _ in names]
         self.inbox: list[queue.Queue] = [queue.Queue() for _ in names]
         self.gate = StartGate(names)
         self.token: list[str | None] = [None] * len(names)  # the process each unit runs in
@@ -176,12 +182,22 @@ class LineOwnerNode(FenceSorterNode, Links):
 
     # -- Links (the plant's thread) -------------------------------------------------------------
     def send(self, k: int, body: object) -> None:
-        self.commands[k].publish(String(data=encode(Command(self.seq[k], body))))
+        """Unit k's next command; held back until the next one it answers, with which it goes
+        in one message (a step's Tick, traffic records and Step: one message, not three)."""
+        self.batch[k].append(encode(Command(self.seq[k], body)))
         self.seq[k] += 1
+        if answered(body):
+            self._flush(k)
+
+    def _flush(self, k: int) -> None:
+        if self.batch[k]:
+            self.commands[k].publish(String(data=join_batch(self.batch[k])))
+            self.batch[k].clear()
 
     def wait(self, k: int):
         """Unit k's next reply; UnitDown when none comes within ``reply_timeout`` or a new
         process of the unit said ready (the one the owner waits for is gone)."""
+        self._flush(k)
         name = self.line.units[k].name
         t0 = time.monotonic()
         end = t0 + self.reply_timeout
@@ -217,6 +233,7 @@ class LineOwnerNode(FenceSorterNode, Links):
     def restart(self, k: int) -> None:
         self.token[k] = self.fresh.pop(k)
         self.seq[k] = 0
+        self.batch[k].clear()  # the earlier process's commands
         while not self.inbox[k].empty():
             self.inbox[k].get_nowait()
         self.get_logger().info(f"{self.line.units[k].name} rejoins the line")
@@ -244,6 +261,9 @@ class LineOwnerNode(FenceSorterNode, Links):
     def end_units(self, timeout: float = 10.0) -> None:
         """Tell every unit the line is over (each then exits 0), and wait, bounded, until each
         acknowledged it: a unit on another host ends with the line as well."""
+        for k, u in enumerate(self.owner.units):
+            if not u.down:
+                self._flush(k)
         up = [c for u, c in zip(self.owner.units, self.commands, strict=True) if not u.down]
         for c in up:
             c.publish(String(data=END))

@@ -2,10 +2,11 @@
 
 Started in the namespace ``/<unit name>`` (``/unit_1``, ...); its own topic names are relative:
 
-- ``commands`` (std_msgs/String, in): the line owner's numbered command stream, each message a
-  :class:`~fence_sorter.line.lockstep.Command` in the wire format of
-  :func:`~fence_sorter.line.lockstep.encode`, then ``end`` once the line is over (the unit
-  exits 0: a unit on another host ends with the line);
+- ``commands`` (std_msgs/String, in): the line owner's numbered command stream, each message
+  one or more :class:`~fence_sorter.line.lockstep.Command` in the wire format of
+  :func:`~fence_sorter.line.lockstep.encode`, one a line (the owner sends the commands up to
+  one the unit answers in one message), then ``end`` once the line is over (the unit exits
+  0: a unit on another host ends with the line);
 - ``replies`` (std_msgs/String, out): ``ready<token>`` (a token of this process: the owner
   tells a new process of the unit from the one it ran with) until the first command comes,
   then the answers (Delivered, Done, Figures) in the same format;
@@ -49,7 +50,14 @@ from std_msgs.msg import String
 
 from fence_sorter.line.handoff import HandOff
 from fence_sorter.line.line_file import load_line
-from fence_sorter.line.lockstep import EXIT_OWNER_GONE, UnitSide, decode, encode, make_unit
+from fence_sorter.line.lockstep import (
+    EXIT_OWNER_GONE,
+    UnitSide,
+    decode,
+    encode,
+    make_unit,
+    split_batch,
+)
 from fence_sorter.line.multi_unit import LineRunConfig
 from fence_sorter.nodes.base import FenceSorterNode, run_node
 from fence_sorter.nodes.convert import (
@@ -246,13 +254,14 @@ class LineUnitNode(FenceSorterNode):
                 pub.wait_for_all_acked(Duration(seconds=10.0))
             rclpy.try_shutdown()  # ends the spin: run_node returns 0
             return
-        try:
-            cmd = decode(msg.data)
-        except (KeyError, TypeError, ValueError) as exc:
-            self.bad_messages += 1
-            self.get_logger().error(f"command refused: {type(exc).__name__}: {exc}")
-            return
-        self._put(self.side.on_command(cmd))
+        for text in split_batch(msg.data):
+            try:
+                cmd = decode(text)
+            except (KeyError, TypeError, ValueError) as exc:
+                self.bad_messages += 1
+                self.get_logger().error(f"command refused: {type(exc).__name__}: {exc}")
+                continue
+            self._put(self.side.on_command(cmd))
 
     def _on_handoff(self, msg: HandOffMsg, info) -> None:
         self.latency_ns.append(handoff_latency_ns(info))

@@ -26,9 +26,12 @@ from fence_sorter.line.lockstep import (
     Scan,
     Step,
     UnitSide,
+    answered,
     decode,
     encode,
+    join_batch,
     make_unit,
+    split_batch,
 )
 from fence_sorter.line.multi_unit import LinePlant, LineRunConfig
 from fence_sorter.line.traffic import Announce, Hold
@@ -193,6 +196,58 @@ def test_the_line_through_its_wire_format_gives_the_same_figures():
     ref = LinePlant(TWO, cfg).run()
     owner, _, _ = _line(cfg, WireLinks)
     assert _same(ref, owner.run()) == {}
+
+
+class BatchLinks(LocalLinks):
+    """What the line's owner node does: a unit's commands held back until one it answers, then
+    all of them in one message (join_batch), which the unit splits and reads one by one."""
+
+    def __init__(self, sides):
+        super().__init__(sides)
+        self.held = [[] for _ in sides]
+        self.messages = [[] for _ in sides]  # each message: the bodies it carried
+
+    def send(self, k, body):
+        self.held[k].append(encode(Command(self.seq[k], body)))
+        self.seq[k] += 1
+        if answered(body):
+            text = join_batch(self.held[k])
+            self.held[k] = []
+            cmds = [decode(t) for t in split_batch(text)]
+            self.messages[k].append([c.body for c in cmds])
+            for cmd in cmds:
+                self._route(k, self.sides[k].on_command(cmd))
+
+
+@pytest.mark.slow
+def test_commands_batched_up_to_the_one_answered_give_the_same_figures():
+    """A unit's commands sent in batches, each ending with a command it answers (a step's
+    Tick, traffic records and Step in one message): the summary equals LinePlant's exactly,
+    every message ends with its only answered command, and no command is left unsent."""
+    cfg = LineRunConfig(parcels=12, rate_pcs_h=2000.0, seed=3)
+    ref = LinePlant(TWO, cfg).run()
+    owner, _, links = _line(cfg, BatchLinks)
+    assert _same(ref, owner.run()) == {}
+    for k, msgs in enumerate(links.messages):
+        assert [sum(map(answered, m)) for m in msgs] == [1] * len(msgs)
+        assert all(answered(m[-1]) for m in msgs)
+        assert sum(map(len, msgs)) == links.seq[k] and links.held[k] == []
+        # a step of the clock is one message, not one per command: Ticks ride with Steps
+        steps = sum(isinstance(b, Step) for m in msgs for b in m)
+        assert len(msgs) < sum(map(len, msgs)) and steps <= len(msgs)
+
+
+def test_a_batch_splits_into_the_commands_it_joined():
+    """Texts with newlines escaped by JSON (a destination named with one) come back whole."""
+    plant = LinePlant(TWO, LineRunConfig(parcels=1, seed=4))
+    p = plant.parcels[0]
+    texts = [
+        encode(Command(0, Scan(p.pid, 0, p.spec, "A\nB"))),
+        encode(Command(1, Step(0.0, 0.01))),
+    ]
+    assert split_batch(join_batch(texts)) == texts
+    assert decode(split_batch(join_batch(texts))[0]).body.destination == "A\nB"
+    assert split_batch(texts[1]) == [texts[1]]
 
 
 def test_the_wire_format_reads_back_bit_for_bit():
