@@ -225,9 +225,24 @@ def _kinds() -> dict[str, type]:
     }  # fmt: skip
 
 
+#: a dataclass's field names, and which of them are tuples, per class (read once: encode and
+#: decode run for every command and reply of every step)
+_FIELDS: dict[type, tuple[tuple[str, bool], ...]] = {}
+_PLAIN = (float, int, str, bool, type(None))
+
+
+def _fields(cls: type) -> tuple[tuple[str, bool], ...]:
+    f = _FIELDS.get(cls)
+    if f is None:
+        f = _FIELDS[cls] = tuple((x.name, str(x.type).startswith("tuple")) for x in fields(cls))
+    return f
+
+
 def _enc(o: object) -> object:
+    if type(o) in _PLAIN:
+        return o
     if is_dataclass(o) and not isinstance(o, type):
-        return {"_": type(o).__name__, **{f.name: _enc(getattr(o, f.name)) for f in fields(o)}}
+        return {"_": type(o).__name__, **{n: _enc(getattr(o, n)) for n, _ in _fields(type(o))}}
     if isinstance(o, list | tuple):
         return [_enc(v) for v in o]
     if isinstance(o, dict):
@@ -248,9 +263,9 @@ def _dec(o: object, kinds: dict[str, type]) -> object:
         return {k: _dec(v, kinds) for k, v in o.items()}
     cls = kinds[o["_"]]
     args = {}
-    for f in fields(cls):
-        v = _dec(o[f.name], kinds)
-        args[f.name] = _tuples(v) if str(f.type).startswith("tuple") else v
+    for name, is_tuple in _fields(cls):
+        v = _dec(o[name], kinds)
+        args[name] = _tuples(v) if is_tuple else v
     return cls(**args)
 
 
