@@ -262,6 +262,9 @@ class LineUnitNode(FenceSorterNode):
                 self.get_logger().error(f"command refused: {type(exc).__name__}: {exc}")
                 continue
             self._put(self.side.on_command(cmd))
+        # the owner's silence counts from the unit's answer: a long command (the warm-up)
+        # is the unit's own time, not the owner's
+        self.last_command = time.monotonic()
 
     def _on_handoff(self, msg: HandOffMsg, info) -> None:
         self.latency_ns.append(handoff_latency_ns(info))
