@@ -128,3 +128,20 @@ def link_counters(ns: str, dev: str) -> dict[str, int]:
 def grown(before: dict[str, int], after: dict[str, int]) -> dict[str, int]:
     """How much each counter of :func:`link_counters` grew from ``before`` to ``after``."""
     return {k: after[k] - before[k] for k in before}
+
+
+def wait_both(
+    first: subprocess.Popen, second: subprocess.Popen, first_timeout: float, second_timeout: float
+) -> tuple[str, str, str, str]:
+    """Both hosts' commands' (stdout, stderr): the first waited for up to ``first_timeout``,
+    then the second (which ends with the line) up to ``second_timeout`` [s]; neither is left
+    running."""
+    try:
+        out_1, err_1 = first.communicate(timeout=first_timeout)
+        out_2, err_2 = second.communicate(timeout=second_timeout)
+    finally:
+        for p in (first, second):
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+    return out_1, err_1, out_2, err_2

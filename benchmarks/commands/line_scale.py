@@ -45,7 +45,15 @@ from pathlib import Path
 
 import yaml
 
-from benchmarks.netns import NotRunnable, grown, in_ns, link_counters, two_hosts, why_not
+from benchmarks.netns import (
+    NotRunnable,
+    grown,
+    in_ns,
+    link_counters,
+    two_hosts,
+    wait_both,
+    why_not,
+)
 from fence_sorter.verification.machine import git_revision
 
 REPO = Path(__file__).resolve().parents[2]
@@ -182,7 +190,7 @@ def run_line_two_hosts(path: Path, n: int, parcels: int, seed: int) -> dict:
         cpu0 = resource.getrusage(resource.RUSAGE_CHILDREN)
         # B first: A's owner then waits at its start gate for B's units across the link
         procs = [_popen(b_cmd, tmp), _popen(a_cmd, tmp)]
-        out_a, err_a, out_b, err_b = _ends(procs[1], procs[0])
+        out_a, err_a, out_b, err_b = wait_both(procs[1], procs[0], 3600, 120)
         wall = time.perf_counter() - t0
         cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
         c1 = {"a": link_counters(h.a, h.dev_a), "b": link_counters(h.b, h.dev_b)}
@@ -221,19 +229,6 @@ def run_line_two_hosts(path: Path, n: int, parcels: int, seed: int) -> dict:
 def _popen(cmd: list[str], cwd: str) -> subprocess.Popen:
     return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             cwd=cwd)  # fmt: skip
-
-
-def _ends(first: subprocess.Popen, second: subprocess.Popen) -> tuple[str, str, str, str]:
-    """Both commands' (stdout, stderr), the first waited for long; neither left running."""
-    try:
-        out_1, err_1 = first.communicate(timeout=3600)
-        out_2, err_2 = second.communicate(timeout=120)
-    finally:
-        for p in (first, second):
-            if p.poll() is None:
-                p.kill()
-                p.wait()
-    return out_1, err_1, out_2, err_2
 
 
 def _counts(args: argparse.Namespace) -> list[int] | str:

@@ -33,7 +33,7 @@ from processes import run_cli
 from rclpy.serialization import serialize_message
 from std_msgs.msg import String
 
-from benchmarks.netns import fastdds_shm, grown, link_counters
+from benchmarks.netns import fastdds_shm, grown, link_counters, wait_both
 from fence_sorter.line.lockstep import Command, Done, Step, encode
 from fence_sorter.nodes.parameters import LINE_OWNER_PARAMETERS
 from fence_sorter_msgs.msg import HandOff
@@ -73,7 +73,7 @@ def test_a_line_over_two_hosts_equals_line_sim(two_hosts, tmp_path: Path) -> Non
                    "--peers", addr_a, cwd=tmp_path)  # fmt: skip
     side_a = _line(a, "--units", "1", "--domain", domain, "--interface", addr_a,
                    "--peers", addr_b, cwd=tmp_path)  # fmt: skip
-    out_a, err_a, out_b, err_b = _ends(side_a, side_b)
+    out_a, err_a, out_b, err_b = wait_both(side_a, side_b, 660, 60)
     assert side_a.returncode == 0, err_a[-3000:]
     assert side_b.returncode == 0, err_b[-3000:]
     got = json.loads(out_a)
@@ -87,19 +87,6 @@ def test_a_line_over_two_hosts_equals_line_sim(two_hosts, tmp_path: Path) -> Non
     # B's runner ran unit_2 only and ended with the line
     b_says = json.loads(out_b)
     assert b_says["units_here"] == ["unit_2"] and b_says["line"] == got["line"]
-
-
-def _ends(first: subprocess.Popen, second: subprocess.Popen) -> tuple[str, str, str, str]:
-    """Both commands' (stdout, stderr), the first waited for long; neither left running."""
-    try:
-        out_1, err_1 = first.communicate(timeout=660)
-        out_2, err_2 = second.communicate(timeout=60)
-    finally:
-        for p in (first, second):
-            if p.poll() is None:
-                p.kill()
-                p.wait()
-    return out_1, err_1, out_2, err_2
 
 
 def test_four_units_over_two_hosts_with_the_recorder(two_hosts, tmp_path: Path) -> None:
@@ -129,7 +116,7 @@ def test_four_units_over_two_hosts_with_the_recorder(two_hosts, tmp_path: Path) 
     watcher = threading.Thread(target=watch, daemon=True)
     watcher.start()
     try:
-        out_b, err_b, out_a, err_a = _ends(side_b, side_a)
+        out_b, err_b, out_a, err_a = wait_both(side_b, side_a, 660, 60)
     finally:
         done.set()
         watcher.join()
