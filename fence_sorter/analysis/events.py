@@ -169,8 +169,10 @@ def risk_of(outcome: dict) -> dict:
 
 def risk_summary(rows: list[dict], worst: int = 3) -> dict:
     """Share of the parcels with an impact over each limit, and the worst parcels (smallest
-    margin of the two)."""
-    hit = [r for r in rows if math.isfinite(r.get("impact_speed_margin", NAN))]
+    margin of the two); failed events (``failed`` rows) are not physics and left out."""
+    hit = [
+        r for r in rows if not r.get("failed") and math.isfinite(r.get("impact_speed_margin", NAN))
+    ]
     over_w = [r["parcel_id"] for r in hit if r["impact_speed_margin"] < 0.0]
     over_a = [r["parcel_id"] for r in hit if r["accel_margin"] < 0.0]
     ranked = sorted(hit, key=lambda r: min(r["impact_speed_margin"], r["accel_margin"]))

@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from fence_sorter.analysis.run import TABLE_COLUMNS, load_run, parcel_table, stream_summary
+from fence_sorter.capacity.delivered import describe
 from fence_sorter.jsonsafe import json_safe
 from fence_sorter.recording import topics
 from fence_sorter.recording.bagread import BagIssue, read_bag
@@ -68,7 +69,7 @@ def analyze_bag(bag: Path | str, out_dir: Path | str | None = None, plots: bool 
         writer = csv.DictWriter(f, fieldnames=TABLE_COLUMNS)
         writer.writeheader()
         for row in rows:
-            writer.writerow({k: _csv(row[k]) for k in TABLE_COLUMNS})
+            writer.writerow({k: _csv(row.get(k, "")) for k in TABLE_COLUMNS})
     report.files["parcels.csv"] = str(csv_path)
     if plots:
         from fence_sorter.analysis.plots import (  # lazy: loads Matplotlib, rosbags
@@ -98,6 +99,8 @@ def analyze_bag(bag: Path | str, out_dir: Path | str | None = None, plots: bool 
 
 
 def _csv(value):
+    if isinstance(value, list):
+        return ";".join(str(v) for v in value)
     if isinstance(value, float):
         return "" if not math.isfinite(value) else f"{value:.6g}"
     return value
@@ -150,6 +153,32 @@ def format_report(report: AnalysisReport) -> str:
         f"pcs/h, sorted {f(s['sorted_pcs_h'], '.0f')} pcs/h, planned capacity (min) "
         f"{f(s['planned_capacity_pcs_h_min'], '.0f')} pcs/h",
     ]
+    strokes = [r for r in report.rows if "r_s_m" in r]
+    if strokes:
+        head = (
+            f"{'id':>4} {'m':>5} {'A':>5} {'B':>5} {'R_s':>5} {'t1':>5} {'w_n plan/got':>13} "
+            f"{'a_N plan/got':>13} {'ydot plan/got':>13}  over"
+        )
+        lines += ["", head, "-" * len(head)]
+        for r in strokes:
+            lines.append(
+                f"{r['parcel_id']:>4} {f(r['mass_kg'], '.1f'):>5} "
+                f"{f(r['length_a_m'], '.2f'):>5} {f(r['width_b_m'], '.2f'):>5} "
+                f"{f(r['r_s_m'], '.2f'):>5} {f(r['t1_s'], '.2f'):>5} "
+                f"{f(r['planned_impact_speed_mps'], '.2f'):>6}/"
+                f"{f(r['delivered_impact_speed_mps'], '.2f'):<6} "
+                f"{f(r['planned_accel_mps2'], '.0f'):>6}/{f(r['delivered_accel_mps2'], '.0f'):<6} "
+                f"{f(r['planned_exit_speed_mps'], '.2f'):>6}/"
+                f"{f(r['delivered_exit_speed_mps'], '.2f'):<6}  "
+                + (",".join(f"({c})" for c in r["over_limits"]) or "-")
+                + ("  FAILED EVENT" if r["failed"] else "")
+            )
+        lines.append(
+            "m mass [kg], A, B sizes [m], R_s [m], t1 [s]: the stroke; plan/got: the "
+            "controller's prediction and what the plant delivered; over: limits a sorted "
+            "parcel went over"
+        )
+    lines.append(f"limits: {describe(s['limits'])}")
     risk = s["damage_risk"]
     if risk["parcels_with_impact"]:
         worst = ", ".join(

@@ -27,6 +27,8 @@ from fence_sorter.analysis.events import (
     risk_of,
     risk_summary,
 )
+from fence_sorter.capacity.constraints import ConstraintProfile
+from fence_sorter.capacity.delivered import ROW_COLUMNS, delivered_row, limits_verdict
 from fence_sorter.codes import OutcomeCode, Stage, code_name
 from fence_sorter.recording import topics
 from fence_sorter.recording.bagread import BagContents
@@ -263,12 +265,35 @@ TABLE_COLUMNS = [
     "event_impact_speed_mps", "event_peak_N", "event_peak_N_stiff", "event_peak_accel_mps2",
     "w_dop_mps", "a_ndop_mps2", "impact_speed_margin", "accel_margin", "drop_height_m",
     "agrees", "disagreements",
+    *[c for c in ROW_COLUMNS if c not in ("parcel_id", "sorted")],
 ]  # fmt: skip
+
+
+def run_limits(run: RecordedRun) -> ConstraintProfile:
+    """The limits the run's controller planned for (its /diagnostics ``limits.*``); a bag
+    without them: the outcomes' w_dop and a_Ndop, the paper's ydot_dop, every constraint."""
+    diag = run.diagnostics.get("fence_sorter/controller") or {}
+    if "limits.w_dop" in diag:
+        active = tuple(int(c) for c in diag.get("limits.active", "").split(",") if c.strip())
+        return ConstraintProfile(
+            float(diag["limits.w_dop"]),
+            float(diag["limits.a_ndop"]),
+            float(diag["limits.ydot_dop"]),
+            active or ConstraintProfile().active,
+        )
+    any_outcome = next(iter(run.outcomes.values()), {})
+    w_dop, a_ndop = any_outcome.get("w_dop", NAN), any_outcome.get("a_ndop", NAN)
+    default = ConstraintProfile()
+    return ConstraintProfile(
+        w_dop if _num(w_dop) and w_dop > 0 else default.w_dop,
+        a_ndop if _num(a_ndop) and a_ndop > 0 else default.a_ndop,
+    )
 
 
 def parcel_table(run: RecordedRun) -> list[dict]:
     """One row per parcel seen in the bag (scanned, with states or with an outcome)."""
     ids = sorted(set(run.parcels) | set(run.outcomes) | set(run.series))
+    profile = run_limits(run)
     rows = []
     for pid in ids:
         o = run.outcomes.get(pid)
@@ -322,6 +347,9 @@ def parcel_table(run: RecordedRun) -> list[dict]:
             problems += check_risk(o, risk)
         row["agrees"] = not problems if o is not None else None
         row["disagreements"] = "; ".join(problems)
+        if o is not None:
+            d = delivered_row(pid, o, run.commands.get(pid), spec, profile, run.belt_speed)
+            row.update({k: v for k, v in d.items() if k not in ("parcel_id", "sorted")})
         rows.append(row)
     return rows
 
@@ -417,5 +445,6 @@ def stream_summary(run: RecordedRun, rows: list[dict]) -> dict:
         "parcels_without_outcome": [r["parcel_id"] for r in rows if r["agrees"] is None],
         "sort_events": len(run.events),
         "damage_risk": risk_summary(rows),
+        "limits": limits_verdict([r for r in rows if "over_limits" in r], run_limits(run)),
         **incomplete_records(run),
     }

@@ -10,7 +10,9 @@ line's bag: the computed summary equals the live one and the recorded commands a
 replayed ones); 1 analysed what was readable but the bag has problems (named per file), the
 states disagree, or an outcome or command is in the bag without its parcel's /parcels message
 (a line's bag: a unit's reply is missing, or the summaries or commands differ); 2 not a bag /
-nothing readable.
+nothing readable; 7 the bag agrees with itself, but a sorted parcel went over a limit of the
+paper ((7), (10)-(12) as the run's controller had them) or an event's simulation failed (the
+parcels are named).
 """
 
 from __future__ import annotations
@@ -20,8 +22,12 @@ import json
 import sys
 from pathlib import Path
 
+from fence_sorter.capacity.delivered import describe
 from fence_sorter.cli.line_sim import format_summary
 from fence_sorter.jsonsafe import json_safe
+
+#: a clean bag whose sorted parcels went over a limit, or whose events failed
+EXIT_LIMITS = 7
 
 
 def register(parser: argparse.ArgumentParser) -> None:
@@ -65,6 +71,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"fence-sorter analyze: {problem}", file=sys.stderr)
     if report.issues or missing or report.summary["agrees_with_live"] is False:
         return 1
+    limits = report.summary["limits"]
+    if not limits["clean"]:
+        print(f"fence-sorter analyze: not within the limits: {describe(limits)}", file=sys.stderr)
+        return EXIT_LIMITS
     return 0
 
 

@@ -299,6 +299,12 @@ class ControllerNode(FenceSorterNode):
         # this subscription is lost to it (volatile QoS), whatever "listening" says
         values["parcel_publishers"] = str(self._sub.get_publisher_count() if self._sub else 0)
         values["real_time_factor_seen"] = f"{self.rtf.value:.3f}"
+        # the limits its strokes are planned for: what analyze judges a bag's outcomes by
+        prof = self.planner.config.profile
+        values["limits.w_dop"] = repr(prof.w_dop)
+        values["limits.a_ndop"] = repr(prof.a_ndop)
+        values["limits.ydot_dop"] = repr(prof.ydot_dop)
+        values["limits.active"] = ",".join(str(c) for c in prof.active)
         values.update(self.parcel_intake.values())
         values.update(self.registry.values())
         status.values.extend(KeyValue(key=k, value=v) for k, v in values.items())

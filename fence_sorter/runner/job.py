@@ -20,6 +20,7 @@ from pathlib import Path
 import yaml
 
 from fence_sorter.calibration.sensors import load_sensors, resolve_sensors
+from fence_sorter.capacity.constraints import ConstraintProfile
 from fence_sorter.inputs import ParcelSpec
 from fence_sorter.nodes.parameters import (
     NODE_PARAMETERS,
@@ -148,6 +149,24 @@ class RunPlan:
     run_key: str = field(default_factory=new_run_key, repr=False)
     #: the stream the run's scanner publishes, by parcel id (what the summary covers)
     stream: dict[int, ParcelSpec] = field(default_factory=dict, repr=False)
+    #: the limits (10)-(12) and active constraints the controller plans with: what every
+    #: sorted parcel's delivered figures are judged against
+    limits: ConstraintProfile = field(default_factory=ConstraintProfile)
+
+
+def controller_limits(overrides: dict[str, ParamValue]) -> ConstraintProfile:
+    """The controller's limits (10)-(12) and active constraints: config/controller.yaml with
+    the run's ``--param controller.KEY=VALUE`` over it. BadInput names a bad value."""
+    doc = yaml.safe_load(data_path("config", "controller.yaml").read_text()) or {}
+    values = {**((doc.get("controller") or {}).get("ros__parameters") or {}), **overrides}
+    data = {k: values[k] for k in ("w_dop", "a_ndop", "ydot_dop") if k in values}
+    if "active_constraints" in values:
+        data["active"] = list(values["active_constraints"])
+    try:
+        return ConstraintProfile.from_mapping(data, "controller")
+    except ParameterError as exc:
+        msg = str(exc).replace("controller.active", "controller.active_constraints")
+        raise BadInput(msg) from None
 
 
 def make_bag_dir(bag: str) -> None:
@@ -251,6 +270,7 @@ def prepare(opts: RunOptions) -> RunPlan:
         stream={s.parcel_id: s for s in stream},
         foxglove=foxglove,
         transport=transport,
+        limits=controller_limits(node_params.get("controller", {})),
     )
 
 
@@ -700,7 +720,9 @@ def _run(
             message = f"interrupted ({signal.Signals(stop.signals[0]).name}) while stopping"
         left = leftovers(group.pgids)
         records = monitor.records if monitor is not None else Records()
-        summary = summarise(records, plan.belt_speed, plan.expected_ids, plan.divert_ids)
+        summary = summarise(
+            records, plan.belt_speed, plan.expected_ids, plan.divert_ids, plan.limits
+        )
         if monitor is not None:
             monitor.close()
     bad_exit = {n: c for n, c in exit_codes.items() if c not in (0, None)}

@@ -158,6 +158,8 @@ class Monitor:
                 "scan_position_x": msg.scan_position_x,
                 "divert": bool(msg.divert),
                 "length_a": msg.length_a,
+                "width_b": msg.width_b,
+                "yaw": msg.yaw,
                 "mass": msg.mass,
                 "wall": time.monotonic(),
                 "received_sim": r.sim_time,
@@ -185,6 +187,8 @@ class Monitor:
                 "wall": time.monotonic(),
                 "predicted_capacity_pcs_h": msg.predicted_capacity_pcs_h,
                 "predicted_peak_accel": msg.predicted_peak_accel,
+                "predicted_impact_speed": msg.predicted_impact_speed,
+                "predicted_exit_speed": msg.predicted_exit_speed,
             },
         )
 

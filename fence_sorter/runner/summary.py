@@ -6,6 +6,9 @@ from __future__ import annotations
 import math
 from collections import Counter
 
+from fence_sorter.capacity.constraints import ConstraintProfile
+from fence_sorter.capacity.delivered import delivered_row, describe, limits_verdict, peak
+
 #: exit status: a divert parcel of the run's own stream got no outcome
 EXIT_INCOMPLETE = 3
 #: exit status: every divert parcel has its outcome, but foreign traffic (parcels or commands
@@ -19,6 +22,10 @@ EXIT_DISPUTED = 6
 #: exit status: the recorder could not write the bag (a full disk, any write error): the run
 #: went on unrecorded from the time the summary names (docs/guide/recording.md)
 EXIT_RECORDING = 5
+#: exit status: the run's own stream was handled, but a sorted parcel went over a limit of the
+#: paper ((7), (10)-(12), delivered on the plant), an event's simulation failed, or a stroke
+#: swept another parcel (a swept-sector intrusion): the run is not clean, the summary names them
+EXIT_LIMITS = 7
 #: the diagnostics counters of messages a node dropped or refused (where, and why): intake
 #: refusals (foreign run or source, rate), middleware losses, duplicates and conflicts of a
 #: parcel id, and every validation refusal by its reason (the dotted per-reason keys; their
@@ -47,11 +54,6 @@ def _num(text: str | None) -> float:
 def _count(text: str | None) -> int:
     n = _num(text)
     return int(n) if math.isfinite(n) else 0
-
-
-def _max(values) -> float:
-    vals = [v for v in values if isinstance(v, (int, float)) and math.isfinite(v)]
-    return max(vals) if vals else math.nan
 
 
 def pick(values: dict[str, str] | None, *needles: str) -> dict[str, str]:
@@ -139,11 +141,38 @@ def recording_failure(diagnostics: dict[str, dict[str, str]]) -> dict | None:
     }
 
 
-def summarise(records, belt_speed: float, expected_ids=None, divert_ids=None) -> dict:
+def delivered_rows(records, outcomes: dict, profile: ConstraintProfile, belt_speed: float):
+    """Per parcel with an outcome: its stroke, the parcel and what the stroke delivered
+    against each limit (:func:`fence_sorter.capacity.delivered.delivered_row`)."""
+    return [
+        delivered_row(
+            pid, o, records.commands.get(pid), records.parcels.get(pid), profile, belt_speed
+        )
+        for pid, o in sorted(outcomes.items())
+    ]
+
+
+def intrusions(diagnostics: dict[str, dict[str, str]]) -> int:
+    """Swept-sector intrusions the simulator saw: a parcel entering the sector of another
+    parcel's stroke while it ran."""
+    sim = diagnostics.get("fence_sorter/simulator") or {}
+    return _count(sim.get("swept_sector_intrusions", sim.get("overlap_warnings")))
+
+
+def summarise(
+    records,
+    belt_speed: float,
+    expected_ids=None,
+    divert_ids=None,
+    profile: ConstraintProfile | None = None,
+) -> dict:
     """Summary of a run: parcels, outcomes by reason, capacity, peaks, timing, node figures,
     foreign traffic and dropped messages. ``expected_ids``/``divert_ids``: the run's stream;
     with them the figures cover that stream only (an outcome for another id is counted apart),
-    and every parcel of it is listed with its outcome."""
+    and every parcel of it is listed with its outcome. ``profile``: the limits the run is
+    judged against (the controller's; paper values by default); failed events are counted
+    apart and never enter the peak figures."""
+    profile = profile if profile is not None else ConstraintProfile()
     outcomes = records.outcomes
     if expected_ids is not None:
         outcomes = {pid: o for pid, o in outcomes.items() if pid in set(expected_ids)}
@@ -182,7 +211,11 @@ def summarise(records, belt_speed: float, expected_ids=None, divert_ids=None) ->
         for pid in sorted(divert)
         if not (pid in outcomes and outcomes[pid]["sorted"])
     ]
+    rows = delivered_rows(records, outcomes, profile, belt_speed)
     return {
+        "limits": limits_verdict(rows, profile),
+        "delivered": rows,
+        "swept_sector_intrusions": intrusions(records.diagnostics),
         "parcels_expected": len(expected) if expected is not None else None,
         "parcels_seen": len(records.parcels),
         "parcel_messages": records.parcel_messages,
@@ -221,11 +254,11 @@ def summarise(records, belt_speed: float, expected_ids=None, divert_ids=None) ->
         },
         "throughput_pcs_h": throughput,
         "sorted_pcs_h": sorted_rate,
-        "peak_force_N": _max(o["peak_normal_force"] for o in outcomes.values()),
-        "peak_force_stiff_N": _max(o["peak_normal_force_stiff"] for o in outcomes.values()),
-        "peak_accel_mps2": _max(o["peak_normal_accel"] for o in outcomes.values()),
-        "peak_impact_speed_mps": _max(o["impact_normal_speed"] for o in outcomes.values()),
-        "peak_exit_speed_mps": _max(o["exit_speed_y"] for o in outcomes.values()),
+        "peak_force_N": peak(_with_failed(outcomes, rows), "peak_normal_force"),
+        "peak_force_stiff_N": peak(_with_failed(outcomes, rows), "peak_normal_force_stiff"),
+        "peak_accel_mps2": peak(_with_failed(outcomes, rows), "peak_normal_accel"),
+        "peak_impact_speed_mps": peak(_with_failed(outcomes, rows), "impact_normal_speed"),
+        "peak_exit_speed_mps": peak(_with_failed(outcomes, rows), "exit_speed_y"),
         "commands": len(records.commands),
         "command_messages": records.command_messages,
         "infeasible_commands": sum(1 for c in records.commands.values() if not c["feasible"]),
@@ -240,6 +273,12 @@ def summarise(records, belt_speed: float, expected_ids=None, divert_ids=None) ->
         "sim_time_s": records.sim_time,
         "recording_failed": recording_failure(records.diagnostics),
     }
+
+
+def _with_failed(outcomes: dict, rows: list[dict]) -> list[dict]:
+    """The outcomes with the ``failed`` flag of their delivered row (peaks skip those)."""
+    failed = {r["parcel_id"] for r in rows if r["failed"]}
+    return [{**o, "failed": pid in failed} for pid, o in outcomes.items()]
 
 
 def foreign_traffic(s: dict) -> list[str]:
@@ -300,6 +339,13 @@ def verdict(s: dict) -> tuple[int, str] | None:
             f"foreign traffic on the run's domain (refused, not in the figures): "
             f"{'; '.join(foreign)}; {_lost(s)}"
         )
+    limits = s.get("limits")
+    swept = s.get("swept_sector_intrusions", 0)
+    if (limits is not None and not limits["clean"]) or swept:
+        parts = [] if limits is None or limits["clean"] else [describe(limits)]
+        if swept:
+            parts.append(f"{swept} swept-sector intrusions (a stroke swept another parcel)")
+        return EXIT_LIMITS, "not within the limits: " + "; ".join(parts)
     return None
 
 
@@ -351,6 +397,14 @@ def format_summary(s: dict) -> str:
     deadline = pick(sim, "deadline") or pick(sim, "miss")
     lateness = pick(sim, "late")
     rtf = pick(sim, "rtf") or pick(sim, "real_time")
+    limits = s.get("limits")
+    if limits is not None:
+        lines.append(f"limits            {describe(limits)}")
+    if s.get("swept_sector_intrusions"):
+        lines.append(
+            f"swept sector      {s['swept_sector_intrusions']} intrusions (a parcel in the "
+            "sector of another's stroke)"
+        )
     lines += [
         f"capacity          {f(s['throughput_pcs_h'], '.0f', 'pcs/h')} through, "
         f"{f(s['sorted_pcs_h'], '.0f', 'pcs/h')} sorted",
