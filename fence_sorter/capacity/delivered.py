@@ -58,6 +58,17 @@ def limit_value(profile: ConstraintProfile, c: int) -> float:
     return {10: profile.w_dop, 11: profile.a_ndop, 12: profile.ydot_dop}[c]
 
 
+def over_plant_limits(figures: Mapping, profile: ConstraintProfile) -> list[int]:
+    """The active limits of (10)-(12) that an outcome's delivered ``figures`` (the SortOutcome
+    field names: ``impact_normal_speed``, ``peak_normal_accel``, ``exit_speed_y``) go over."""
+    out = []
+    for c, (got, _, _) in FIGURES.items():
+        value = _f(figures.get(got))
+        if c in profile.active and math.isfinite(value) and value > limit_value(profile, c):
+            out.append(c)
+    return out
+
+
 def delivered_row(
     parcel_id: int,
     outcome: Mapping,
@@ -195,5 +206,6 @@ __all__ = [
     "describe",
     "limit_value",
     "limits_verdict",
+    "over_plant_limits",
     "peak",
 ]

@@ -4,8 +4,9 @@ Loads a line file (``config/lines/``), draws the induction stream, runs the line
 (:mod:`fence_sorter.line.multi_unit`) and prints the line summary (``--json``: one JSON object).
 ``--rrd FILE`` also writes a Rerun recording of the whole line, sampled as sim time passes
 (:mod:`fence_sorter.visualisation.line_view`). Exit codes: 0 a drained run with conservation
-exact, 0 wrong destinations, every hand-off received at the other end of its link and, with
-the guard, 0 swept-sector intrusions; 1 otherwise; 2 a bad line file or option (one line
+exact, 0 wrong destinations, every hand-off received at the other end of its link, with the
+guard 0 swept-sector intrusions, 0 failed events and no sorted parcel over a limit of
+(10)-(12); 1 otherwise (each problem named on stderr); 2 a bad line file or option (one line
 naming it).
 """
 
@@ -71,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
         return _error(f"--rrd-period must be in [0.01, 10] s, got {args.rrd_period}")
     # lazy: the line's physics loads Numba and the compiled kernel
     from fence_sorter.line.line_file import load_line
-    from fence_sorter.line.multi_unit import LinePlant, LineRunConfig
+    from fence_sorter.line.multi_unit import LinePlant, LineRunConfig, line_problems
 
     try:
         line = load_line(args.line)
@@ -97,18 +98,14 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if logger is not None:
             logger.close(plant)
-    ok = (
-        s["drained"]
-        and s["conservation_ok"]
-        and s["sorted_wrong_destination"] == 0
-        and s["handoffs_balanced"]
-        and (not s["guard"] or s["swept_sector_intrusions"] == 0)
-    )
+    problems = line_problems(s)
     if args.json:
         print(json.dumps(json_safe(s)))
     else:
         print(format_summary(s))
-    return EXIT_OK if ok else EXIT_CHECK
+    for problem in problems:
+        print(f"fence-sorter line-sim: {problem}", file=sys.stderr)
+    return EXIT_CHECK if problems else EXIT_OK
 
 
 def _recorder(line, path: str, period: float):
@@ -150,6 +147,16 @@ def format_summary(s: dict) -> str:
         _steady_line(s),
         f"recirculated {s['recirculated']} ({s['recirculation_share']:.1%}), passes per parcel "
         f"{s['passes_per_parcel']:.2f}, swept-sector intrusions {s['swept_sector_intrusions']}",
+        "limits: "
+        + (
+            "; ".join(
+                f"({c}) {len(ids)} sorted parcels over it {ids[:20]}"
+                for c, ids in s.get("parcels_over_limits", {}).items()
+                if ids
+            )
+            or "every sorted parcel within (10)-(12)"
+        )
+        + f"; failed events {s['solver_failures']}",
         "per destination: "
         + ", ".join(f"{d} {n}" for d, n in s["sorted_per_destination"].items()),
     ]

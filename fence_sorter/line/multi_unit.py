@@ -493,6 +493,7 @@ class LinePlant:
             "no_read": sum(p.ever_no_read for p in ps),
             "solver_failures": count["failed"],
             "swept_sector_intrusions": sum(u.intrusions for u in self.units),
+            "parcels_over_limits": over_limits(units.values()),
             "handoffs": self.handoffs,
             "links": self.links().table(),
             "handoffs_balanced": self.links().balanced(),
@@ -585,6 +586,39 @@ class LinePlant:
         r_s, t1 = tz[len(tz) // 2]
         a = float(np.median([p.spec.length_a for p in self.parcels]))
         return stroke_capacity(self.v, t1, r_s, a, self.spec.planner.pitch_gap)
+
+
+def line_problems(s: dict) -> list[str]:
+    """What keeps a line summary from being clean, one phrase each (empty: clean): not
+    drained, conservation violated, a wrong destination, hand-offs unbalanced, (guard on) a
+    swept-sector intrusion, a failed event, a sorted parcel over a limit of (10)-(12)."""
+    out = []
+    if not s["drained"]:
+        out.append(f"{s['still_on_line']} parcels still on the line")
+    if not s["conservation_ok"]:
+        out.append("conservation violated")
+    if s["sorted_wrong_destination"]:
+        out.append(f"{s['sorted_wrong_destination']} parcels sorted to a wrong destination")
+    if not s["handoffs_balanced"]:
+        out.append("hand-offs sent and received differ")
+    if s["guard"] and s["swept_sector_intrusions"]:
+        out.append(f"{s['swept_sector_intrusions']} swept-sector intrusions")
+    if s["solver_failures"]:
+        out.append(f"{s['solver_failures']} failed events")
+    for c, ids in s.get("parcels_over_limits", {}).items():
+        if ids:
+            out.append(f"({c}) {len(ids)} sorted parcels over it {ids[:20]}")
+    return out
+
+
+def over_limits(units) -> dict[str, list[int]]:
+    """Per active limit of (10)-(12): the parcels sorted over it, on any unit (the units'
+    ``over_limits`` figures merged)."""
+    out: dict[str, set[int]] = {}
+    for u in units:
+        for c, ids in u["over_limits"].items():
+            out.setdefault(c, set()).update(ids)
+    return {c: sorted(ids) for c, ids in sorted(out.items(), key=lambda kv: int(kv[0]))}
 
 
 def _per_hour(times: list[float]) -> float:

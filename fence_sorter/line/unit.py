@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 
+from fence_sorter.capacity.delivered import over_plant_limits
 from fence_sorter.capacity.planner import LoadRequest, Planner, PlannerConfig
 from fence_sorter.codes import OutcomeCode, StartMode
 from fence_sorter.inputs import ParcelSpec, StrokeCommand
@@ -163,6 +164,11 @@ class LineUnit:
         self.max_accel = 0.0
         self.late_handoffs = 0
         self.late_past_axis = 0
+        self.profile = planner.profile
+        # per active limit of (10)-(12): the parcels this unit sorted over it
+        self.over_limits: dict[str, list[int]] = {
+            str(c): [] for c in (10, 11, 12) if c in planner.profile.active
+        }
 
     # -- records in ------------------------------------------------------------------------
     def announce(
@@ -382,6 +388,13 @@ class LineUnit:
             self.max_impact_speed = max(self.max_impact_speed, ev.impact_normal_speed)
             self.max_accel = max(self.max_accel, ev.peak_normal_accel)
         if ev.code is OutcomeCode.SORTED:
+            figures = {
+                "impact_normal_speed": ev.impact_normal_speed,
+                "peak_normal_accel": ev.peak_normal_accel,
+                "exit_speed_y": ev.exit_speed_y,
+            }
+            for c in over_plant_limits(figures, self.profile):
+                self.over_limits[str(c)].append(h.parcel_id)
             self.sorted += 1
             self.chute += 1
             ok = h.destination in self.spec.destinations
@@ -440,6 +453,7 @@ class LineUnit:
             "peak_normal_force_stiff_N": self.peak_force_stiff,
             "max_impact_speed_m_s": self.max_impact_speed,
             "max_normal_accel_m_s2": self.max_accel,
+            "over_limits": {c: list(ids) for c, ids in self.over_limits.items()},
         }
 
     def in_stroke(self, parcel_id: int) -> bool:

@@ -52,7 +52,7 @@ from fence_sorter.line.lockstep import (
     encode,
     join_batch,
 )
-from fence_sorter.line.multi_unit import LineRunConfig
+from fence_sorter.line.multi_unit import LineRunConfig, line_problems
 from fence_sorter.line.pacing import PacedSteps
 from fence_sorter.nodes.base import FenceSorterNode
 from fence_sorter.nodes.convert import handoff_from_msg, handoff_to_msg
@@ -335,16 +335,10 @@ def latency_figures(ns: list[int] | None) -> dict:
 
 
 def line_ok(s: dict) -> bool:
-    """``line-sim``'s check: drained, conservation exact (the parcels lost with a unit that
-    went down counted), no wrong destination, hand-offs balanced, and (guard on) no
-    swept-sector intrusion."""
-    return bool(
-        s["drained"]
-        and s["conservation_ok"]
-        and s["sorted_wrong_destination"] == 0
-        and s["handoffs_balanced"]
-        and (not s["guard"] or s["swept_sector_intrusions"] == 0)
-    )
+    """``line-sim``'s check (:func:`fence_sorter.line.multi_unit.line_problems`: drained,
+    conservation exact, no wrong destination, hand-offs balanced, no intrusion with the guard,
+    no failed event, no sorted parcel over a limit)."""
+    return not line_problems(s)
 
 
 def _stamp(t: float) -> Time:

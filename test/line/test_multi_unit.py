@@ -281,3 +281,46 @@ def test_over_the_steady_window_sorts_are_first_inductions_less_open_ones_plus_e
     hours = (b - a) / 3600.0
     assert s["throughput_in_pcs_h"] == w["first_inductions"] / hours
     assert s["throughput_out_pcs_h"] == w["sorts"] / hours
+
+
+@pytest.mark.slow
+def test_each_unit_names_the_sorted_parcels_over_a_limit_and_the_line_is_not_clean():
+    """The units judge what each stroke delivered (w_n, a_N, ydot of its outcome) against the
+    limits (10)-(12): here judged against tighter limits than planned for, so that some sorted
+    parcels go over; the lists equal the outcomes' own figures, and the line is not clean."""
+    from fence_sorter.capacity.constraints import ConstraintProfile
+    from fence_sorter.line.multi_unit import line_problems
+    from fence_sorter.line.types import Outcome
+
+    plant = LinePlant(LINE, LineRunConfig(parcels=12, seed=3))
+    judged = ConstraintProfile(w_dop=1.8, a_ndop=120.0, ydot_dop=1.2)
+    seen: list[Outcome] = []
+    for u in plant.units:
+        u.profile = judged
+        advance = u.line.advance
+
+        def spy(t, advance=advance):
+            events = advance(t)
+            seen.extend(e for e in events if isinstance(e, Outcome))
+            return events
+
+        u.line.advance = spy
+    s = plant.run()
+    check_books(plant, s)
+    by_local = {e.parcel_id: e for e in seen if e.code.name == "SORTED"}
+    assert len(by_local) == s["sorted"] > 0
+    expected = {"10": set(), "11": set(), "12": set()}
+    for e in by_local.values():
+        for c, value, limit in (
+            ("10", e.impact_normal_speed, judged.w_dop),
+            ("11", e.peak_normal_accel, judged.a_ndop),
+            ("12", e.exit_speed_y, judged.ydot_dop),
+        ):
+            if value > limit:
+                expected[c].add(e.parcel_id)
+    got = {c: set(ids) for c, ids in s["parcels_over_limits"].items()}
+    assert {c: len(ids) for c, ids in got.items()} == {c: len(v) for c, v in expected.items()}
+    assert any(got.values())
+    assert sum(len(u["over_limits"]["10"]) for u in s["units"].values()) == len(got["10"])
+    problems = line_problems(s)
+    assert [p for p in problems if "sorted parcels over it" in p]
