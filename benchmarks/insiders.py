@@ -9,7 +9,10 @@ first real parcel and then, in a process of its own:
 - **flood**: publishes parcels with the run's id and new ids at ``rate`` per second for
   ``seconds`` s;
 - **clock**: publishes /clock jumping ``jump`` s ahead of the run's sim time at 1 kHz for
-  ``seconds`` s.
+  ``seconds`` s;
+- **outcomes**: answers each parcel it sees on /parcels at once with a SORTED outcome of the
+  run's id (peak force 1 N, impact 0.01 m/s) and a /diagnostics status in the simulator's
+  name with figures of its own, ``count`` parcels long.
 
 What the suite must do (docs/design/security.md, docs/reports/reliability.md): refuse every
 forgery as ``foreign_source`` (it has no tag under the run's key), sort every real divert parcel as
@@ -34,7 +37,7 @@ from benchmarks import REPO
 from benchmarks.runs import finish, last_json
 from fence_sorter.inputs import ParcelSpec
 
-KINDS = ("duplicates", "flood", "clock")
+KINDS = ("duplicates", "flood", "clock", "outcomes")
 #: ids of the flood's parcels start here (far above any stream of the suite)
 FLOOD_FIRST_ID = 1_000_000
 #: a parcel with the run's id but another spec: bigger, heavier, not to divert
@@ -104,6 +107,8 @@ def insider_main(argv: list[str]) -> int:
         rclpy.try_shutdown(context=ctx)
         return 1
     run_id = int(seen["run_id"])
+    if a.kind == "outcomes":
+        return _forge_outcomes(node, executor, ctx, a, seen, report)
     if a.kind == "clock":
         # until the run's simulator and this process have found each other: a clock no node
         # has discovered reaches nobody and cannot be named
@@ -159,6 +164,45 @@ def insider_main(argv: list[str]) -> int:
                 report["sent"] += 1
             report["wall_s"] = time.monotonic() - t0
         report["all_acked"] = pub.wait_for_all_acked(Duration(seconds=30))
+    print(json.dumps(report))
+    node.destroy_node()
+    rclpy.try_shutdown(context=ctx)
+    return 0
+
+
+def _forge_outcomes(node, executor, ctx, a, seen: dict, report: dict) -> int:
+    """The ``outcomes`` insider: a SORTED outcome for each parcel as soon as it is scanned and
+    a simulator status of its own, ``a.count`` parcels long."""
+    import rclpy  # lazy: rclpy
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue  # lazy: ROS
+    from rclpy.duration import Duration  # lazy: rclpy
+
+    from fence_sorter.nodes.qos import topic_qos  # lazy: rclpy
+    from fence_sorter_msgs.msg import SortOutcome  # lazy: ROS message
+
+    outcomes = node.create_publisher(SortOutcome, "/sort_outcomes", topic_qos("/sort_outcomes"))
+    diagnostics = node.create_publisher(DiagnosticArray, "/diagnostics", topic_qos("/diagnostics"))
+    answered: set[int] = set()
+    end = time.monotonic() + a.timeout
+    report["forged_ids"] = []
+    while len(answered) < a.count and time.monotonic() < end:
+        executor.spin_once(timeout_sec=0.01)
+        for pid in range(1, int(seen["last_id"]) + 1):
+            if pid in answered:
+                continue
+            answered.add(pid)
+            msg = SortOutcome(parcel_id=pid, run_id=int(seen["run_id"]), sorted=True)
+            msg.reason = "sorted"
+            msg.peak_normal_force = msg.peak_normal_force_stiff = 1.0
+            msg.impact_normal_speed, msg.peak_normal_accel, msg.exit_speed_y = 0.01, 0.1, 0.5
+            outcomes.publish(msg)
+            report["sent"] += 1
+            report["forged_ids"].append(pid)
+            status = DiagnosticStatus(name="fence_sorter/simulator", message="ok")
+            status.values = [KeyValue(key="overlap_warnings", value="0")]
+            diagnostics.publish(DiagnosticArray(status=[status]))
+            report["statuses"] = report.get("statuses", 0) + 1
+    report["all_acked"] = outcomes.wait_for_all_acked(Duration(seconds=30))
     print(json.dumps(report))
     node.destroy_node()
     rclpy.try_shutdown(context=ctx)
@@ -260,7 +304,7 @@ def row_ok(row: dict) -> bool:
 
 
 def section(workdir: Path, progress=print) -> dict:
-    """The three trials as the campaign's ``insiders`` section."""
+    """The trials of :data:`KINDS` as the campaign's ``insiders`` section."""
     rows = []
     for kind in KINDS:
         t = insider_trial(kind, workdir, parcels=20)
@@ -279,7 +323,9 @@ def insiders_md(sec: dict, meta_lines: list[str]) -> list[str]:
         "A process on the run's domain reads the run id off /parcels and forges, during a "
         "20-parcel run at rtf 1: the next 10 parcel ids just ahead of the scanner (other size "
         "and mass, not to divert), a flood of 5000 parcels/s for 2 s with new ids, or a second "
-        "/clock 6.7e7 s ahead for 2 s. Target: exit 4, every real divert parcel sorted as "
+        "/clock 6.7e7 s ahead for 2 s, or a SORTED outcome of 1 N for each of the first 10 "
+        "parcels the moment it is scanned, with a /diagnostics status in the simulator's name. "
+        "Target: exit 4, every real divert parcel sorted as "
         "planned, no forgery in the figures, the forgery named; during the flood, deadline misses "
         "< 0.5 % (the pacing loop runs in a process of its own, which the flood does not reach).",
         "",

@@ -99,3 +99,63 @@ def message_payload(msg) -> bytes:
 def clock_payload(sec: int, nanosec: int, run_id: int) -> bytes:
     """What a /run_clock message's tag covers: its time and run id."""
     return struct.pack("<iIQ", int(sec), int(nanosec), int(run_id))
+
+
+#: the KeyValue of a DiagnosticStatus that carries its tag (a decimal text)
+STATUS_TAG_KEY = "auth"
+
+
+def status_payload(sec: int, nanosec: int, name: str, message: str, level: int, values) -> bytes:
+    """What a /diagnostics status's tag covers: its array's stamp, name, message, level and
+    every (key, value) but :data:`STATUS_TAG_KEY`, in order."""
+    pairs = [(str(k), str(v)) for k, v in values if k != STATUS_TAG_KEY]
+    return repr((int(sec), int(nanosec), str(name), str(message), int(level), pairs)).encode()
+
+
+#: the string parameter through which a change at run time carries its tag, ``SEQ:TAG``: a
+#: node with the run's key takes a change of its parameters only with this one beside it in
+#: the same atomic request, SEQ above every one it took before
+CHANGE_AUTH_PARAM = "run_change_auth"
+
+
+def change_value_text(value) -> str:
+    """A parameter value as the tag of a change covers it (an array as a list)."""
+    if hasattr(value, "tolist"):
+        value = value.tolist()
+    elif not isinstance(value, (bool, int, float, str, list)):
+        value = list(value)
+    return repr(value)
+
+
+def change_payload(node: str, seq: int, changes) -> bytes:
+    """What the tag of a change at run time covers: the node's fully qualified name, the
+    sequence number and every (name, value) set, sorted by name."""
+    pairs = sorted((str(n), change_value_text(v)) for n, v in changes)
+    return repr((str(node), int(seq), pairs)).encode()
+
+
+def change_auth(key: bytes, node: str, seq: int, changes) -> str:
+    """The :data:`CHANGE_AUTH_PARAM` value of a change: ``SEQ:TAG``."""
+    return f"{int(seq)}:{tag(key, change_payload(node, seq, changes))}"
+
+
+def change_refusal(key: bytes, node: str, last_seq: int, auth: str | None, changes) -> str:
+    """Why a keyed node refuses a change (empty: it takes it): no tag, a malformed one, a
+    sequence number not above ``last_seq`` (a replay) or a tag that does not verify."""
+    names = ", ".join(sorted(str(n) for n, _ in changes)) or CHANGE_AUTH_PARAM
+    if auth is None:
+        return (
+            f"{names}: a change in a run needs the run's key "
+            "(fence-sorter param set --key-file <the run's log directory>/run.key)"
+        )
+    seq_text, _, tag_text = str(auth).partition(":")
+    if not (seq_text.isdigit() and tag_text.isdigit()):
+        return f"{names}: {CHANGE_AUTH_PARAM} must be SEQ:TAG, got {auth!r}"
+    if int(seq_text) <= last_seq:
+        return (
+            f"{names}: {CHANGE_AUTH_PARAM} sequence {seq_text} is not above {last_seq} (a replay)"
+        )
+    payload = change_payload(node, int(seq_text), changes)
+    if not verify(key, payload, int(tag_text) % 2**64):
+        return f"{names}: the tag of the change does not verify under the run's key"
+    return ""

@@ -112,8 +112,8 @@ COVERED: dict[str, str] = {
     "fence-sorter param list controller --domain 219": (
         "test/ros/test_param_cli.py::test_param_list_get_set_through_the_services"
     ),
-    "fence-sorter param set controller a_ndop 150 --domain 219": (
-        "test/ros/test_param_cli.py::test_param_list_get_set_through_the_services"
+    "fence-sorter param set controller a_ndop 150 --domain 219 --key-file LOGDIR/run.key": (
+        "test/ros/test_param_cli.py::test_a_ndop_changed_during_a_run_holds_for_the_next_plans"
     ),
     "fence-sorter run --parcels 4 --bag /tmp/b": (
         "test/ros/test_recording.py::test_run_bag_has_every_topic_and_consistent_counts"

@@ -10,7 +10,9 @@ its domain; default ROS_DOMAIN_ID) with localhost discovery, as ``fence-sorter t
 - ``set NODE NAME VALUE``: VALUE is read as ``--param NODE:NAME=VALUE`` reads it (YAML, an
   integer widens to a double) and, for a fence_sorter node, checked against the same table
   (``fence_sorter/nodes/parameters.py``) before it is sent; the node checks it again and
-  either applies it at once or refuses it with the reason, which is printed.
+  either applies it at once or refuses it with the reason, which is printed. A node of a
+  run (``fence-sorter run``) holds the run's key and takes a change only with its tag under
+  that key: ``--key-file`` names the run's ``run.key`` (in its log directory).
 
 Exit codes: 0 done; 1 the node's parameter services did not answer within ``--timeout``, the
 parameter does not exist, or the node refused the value; 2 bad options or a VALUE outside
@@ -24,9 +26,11 @@ import json
 import os
 import sys
 import time
+from pathlib import Path
 
 import yaml
 
+from fence_sorter import provenance
 from fence_sorter.cli.ros_session import DomainSession, domain_options, run_in_session
 from fence_sorter.cli.subcommands import add_subcommands
 from fence_sorter.jsonsafe import json_safe
@@ -78,6 +82,12 @@ def register(parser: argparse.ArgumentParser) -> None:
     p_set.add_argument("node")
     p_set.add_argument("name")
     p_set.add_argument("value")
+    p_set.add_argument(
+        "--key-file",
+        metavar="FILE",
+        help="the run's key (run.key in the log directory of `fence-sorter run`): a node of "
+        "a run takes a change only with its tag under that key",
+    )
     p_set.set_defaults(func=run_set)
 
 
@@ -143,15 +153,26 @@ class _Session(DomainSession):
             raise ParamError(f"node {self.target} has no parameter {name!r}")
         return parameter_value_to_python(values[0])
 
-    def set(self, name: str, value) -> None:
-        """Set ``name``; ParamError with the node's reason if it refuses."""
-        from rcl_interfaces.srv import SetParameters  # lazy: ROS messages
+    def set(self, name: str, value, key: bytes | None = None) -> None:
+        """Set ``name``; ParamError with the node's reason if it refuses. With the run's
+        ``key``: atomically with its tag (``run_change_auth``), as a keyed node requires."""
+        from rcl_interfaces.srv import SetParameters, SetParametersAtomically  # lazy: ROS
         from rclpy.parameter import Parameter
 
-        request = SetParameters.Request(
-            parameters=[Parameter(name, value=value).to_parameter_msg()]
-        )
-        result = self.call("set_parameters", SetParameters, request).results[0]
+        params = [Parameter(name, value=value)]
+        if key is None:
+            request = SetParameters.Request(parameters=[params[0].to_parameter_msg()])
+            result = self.call("set_parameters", SetParameters, request).results[0]
+        else:
+            seq = time.time_ns()
+            auth = provenance.change_auth(key, self.target, seq, [(name, value)])
+            params.append(Parameter(provenance.CHANGE_AUTH_PARAM, value=auth))
+            request = SetParametersAtomically.Request(
+                parameters=[p.to_parameter_msg() for p in params]
+            )
+            result = self.call(
+                "set_parameters_atomically", SetParametersAtomically, request
+            ).result
         if not result.successful:
             raise ParamError(f"node {self.target} refused {name} = {value!r}: {result.reason}")
 
@@ -214,8 +235,21 @@ def run_set(args: argparse.Namespace) -> int:
         print(f"fence-sorter param set: {str(exc).removeprefix('--param ')}", file=sys.stderr)
         return 2
 
+    key = None
+    if args.key_file is not None:
+        try:
+            text = Path(args.key_file).read_text(encoding="utf-8").strip()
+            key = provenance.run_key({provenance.RUN_KEY_ENV: text})
+        except (OSError, UnicodeDecodeError, ValueError) as exc:
+            print(
+                f"fence-sorter param set: --key-file must be a run's key file (run.key in "
+                f"its log directory), got {args.key_file} ({exc})",
+                file=sys.stderr,
+            )
+            return 2
+
     def body(s: _Session) -> int:
-        s.set(args.name, value)
+        s.set(args.name, value, key)
         print(f"{args.name}: {shown(value)} (set)")
         return 0
 

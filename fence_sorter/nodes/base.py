@@ -16,7 +16,7 @@ from collections.abc import Sequence
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import SetParametersResult
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks, UnsupportedEventTypeError
 from rclpy.exceptions import ParameterException
@@ -27,7 +27,7 @@ from rclpy.parameter import Parameter
 from fence_sorter import __version__, provenance
 from fence_sorter.nodes.parameters import COMMON_PARAMETERS, ParamSpec
 from fence_sorter.nodes.qos import topic_qos
-from fence_sorter.nodes.sources import PinnedClock, authentic
+from fence_sorter.nodes.sources import PinnedClock, authentic, sign_diagnostics
 from fence_sorter.recording.topics import DIAGNOSTICS
 
 #: the signature of a subscription callback that takes rclpy's message info too
@@ -81,13 +81,27 @@ class FenceSorterNode(Node):
         reason = self.validate_parameters([self.get_parameter(name) for name in names])
         if reason:
             raise ParameterException(reason, "initial values")
-        self.add_on_set_parameters_callback(self._on_set_parameters)
         # the run's key (fence_sorter.provenance): tags on what this node sends, checks on what
-        # it takes in, and its sim time from /run_clock
+        # it takes in, on every change of its parameters at run time, and its sim time from
+        # /run_clock
         try:
             self.run_key = provenance.run_key()
         except ValueError as exc:
             raise ParameterException(str(exc), provenance.RUN_KEY_ENV) from None
+        self.change_seq = 0  # the sequence number of the last keyed change taken
+        self.parameter_changes_refused = 0
+        self.parameter_change_log: list[str] = []  # "t=<sim s> NAME=VALUE, ..." taken
+        self.parameter_refusals: list[str] = []  # the reasons of the refused, last few
+        if self.run_key is not None:
+            self.declare_parameter(
+                provenance.CHANGE_AUTH_PARAM,
+                "",
+                ParameterDescriptor(
+                    description="SEQ:TAG of a change at run time under the run's key "
+                    "(set by fence-sorter param set --key-file, beside the change)"
+                ),
+            )
+        self.add_on_set_parameters_callback(self._on_set_parameters)
         self.pinned_clock: PinnedClock | None = None
         if (
             self.PINNED_CLOCK
@@ -130,6 +144,23 @@ class FenceSorterNode(Node):
             return SetParametersResult(
                 successful=False, reason="use_sim_time is fixed in a run with a key (/run_clock)"
             )
+        seq = None
+        if self.run_key is not None:
+            auth = [p.value for p in parameters if p.name == provenance.CHANGE_AUTH_PARAM]
+            changes = [(p.name, p.value) for p in parameters if p.name in self.param_specs]
+            reason = provenance.change_refusal(
+                self.run_key,
+                self.get_fully_qualified_name(),
+                self.change_seq,
+                auth[0] if len(auth) == 1 else None,
+                changes,
+            )
+            if reason:
+                self.parameter_changes_refused += 1
+                self.parameter_refusals = [*self.parameter_refusals[-4:], reason]
+                self.get_logger().warning(f"refused a change of parameters: {reason}")
+                return SetParametersResult(successful=False, reason=reason)
+            seq = int(str(auth[0]).partition(":")[0])
         for param in parameters:
             spec = self.param_specs.get(param.name)
             if spec is None:
@@ -150,6 +181,15 @@ class FenceSorterNode(Node):
             return SetParametersResult(successful=False, reason=reason)
         self.apply_parameters(parameters)
         self.parameter_changes += 1
+        if seq is not None:
+            self.change_seq = seq
+        now = self.get_clock().now().nanoseconds * 1e-9
+        changed = ", ".join(
+            f"{p.name}={provenance.change_value_text(p.value)}"
+            for p in parameters
+            if p.name in self.param_specs
+        )
+        self.parameter_change_log.append(f"t={now:.3f} s {changed}")
         return SetParametersResult(successful=True)
 
     def create_intake_subscription(
@@ -223,6 +263,11 @@ class FenceSorterNode(Node):
                     for k, v in (self.pinned_clock.values() if self.pinned_clock else {}).items()
                 ),
                 KeyValue(key="parameter_changes", value=str(self.parameter_changes)),
+                KeyValue(
+                    key="parameter_changes_refused", value=str(self.parameter_changes_refused)
+                ),
+                KeyValue(key="parameter_change_log", value="; ".join(self.parameter_change_log)),
+                KeyValue(key="parameter_refusals", value=" | ".join(self.parameter_refusals)),
             ],
         )
 
@@ -239,7 +284,7 @@ class FenceSorterNode(Node):
 
     def publish_heartbeat(self) -> bool:
         """Publish :meth:`heartbeat_message` on /diagnostics; False if this node holds it back."""
-        self._diagnostics_pub.publish(self.heartbeat_message())
+        self._diagnostics_pub.publish(sign_diagnostics(self.heartbeat_message(), self.run_key))
         return True
 
 

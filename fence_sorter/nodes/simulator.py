@@ -59,7 +59,7 @@ from fence_sorter.nodes.base import FenceSorterNode, spin_node
 from fence_sorter.nodes.intake import ParcelRegistry, TopicIntake
 from fence_sorter.nodes.parameters import SIMULATOR_PARAMETERS
 from fence_sorter.nodes.qos import CLOCK_QOS, INPUT_QOS, topic_qos
-from fence_sorter.nodes.sources import SourceWatch, sign_clock
+from fence_sorter.nodes.sources import SourceWatch, sign, sign_clock
 from fence_sorter.nodes.tf_publisher import TfPublisher
 from fence_sorter.recording import topics
 from fence_sorter.scene import DEFAULT_SCENE, load_scene
@@ -86,6 +86,7 @@ WATCHED_SOURCES = (
     (topics.RUN_CLOCK, "simulator"),
     (topics.PARCELS, "scanner"),
     (topics.FENCE_COMMANDS, "controller"),
+    (topics.SORT_OUTCOMES, "simulator"),
 )
 GRAPH_PERIOD = 0.2
 #: after a publisher of /parcels or /fence_commands is matched, the graph is looked at this
@@ -477,7 +478,8 @@ class SimulatorNode(FenceSorterNode):
                 self._publish_clock(e.t)
                 out = convert.outcome_to_msg(e, self.frame_id, self.limits)
                 out.disputed = e.parcel_id in self.parcel_registry.disputed
-                self.pub_outcomes.publish(out)
+                out.run_id = self.run_id
+                self.pub_outcomes.publish(sign(out, self.run_key))
                 if self.rerun is not None and math.isfinite(e.peak_normal_force):
                     # its EventTrace follows in the same list: the damage colours of the view
                     from fence_sorter.analysis.events import risk_of  # lazy: see _start_rerun

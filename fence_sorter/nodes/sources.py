@@ -9,6 +9,7 @@ which takes a node's sim time from /run_clock under the key instead of /clock, a
 
 from __future__ import annotations
 
+from diagnostic_msgs.msg import KeyValue
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
@@ -30,6 +31,40 @@ def authentic(msg, key: bytes | None) -> bool:
         return True
     given = int(msg.auth)
     return bool(given) and provenance.verify(key, provenance.message_payload(msg), given)
+
+
+def _level(status) -> int:
+    level = status.level
+    return int.from_bytes(level, "little") if isinstance(level, bytes) else int(level)
+
+
+def _status_payload(stamp, status) -> bytes:
+    return provenance.status_payload(
+        stamp.sec,
+        stamp.nanosec,
+        status.name,
+        status.message,
+        _level(status),
+        [(kv.key, kv.value) for kv in status.values],
+    )
+
+
+def sign_diagnostics(msg, key: bytes | None):
+    """Append to each status of a DiagnosticArray its tag under ``key`` (the KeyValue
+    :data:`fence_sorter.provenance.STATUS_TAG_KEY`; nothing without a key)."""
+    if key is not None:
+        for status in msg.status:
+            text = str(provenance.tag(key, _status_payload(msg.header.stamp, status)))
+            status.values.append(KeyValue(key=provenance.STATUS_TAG_KEY, value=text))
+    return msg
+
+
+def status_authentic(stamp, status, key: bytes) -> bool:
+    """True when a status carries the tag of its content (and its array's ``stamp``)."""
+    given = [kv.value for kv in status.values if kv.key == provenance.STATUS_TAG_KEY]
+    if len(given) != 1 or not given[0].isdigit():
+        return False
+    return provenance.verify(key, _status_payload(stamp, status), int(given[0]) % 2**64)
 
 
 def clock_authentic(msg, key: bytes) -> bool:

@@ -63,6 +63,8 @@ START_DELAY = 0.5
 #: sim time a parcel needs after its scan to leave the line (line end ~3 m) plus margin [s]
 LINE_END_X = 3.0
 STOP_ORDER = ("scanner", "controller", "simulator", "sensors", "recorder", "foxglove")
+#: the run's key in its log directory (mode 0600), for `fence-sorter param set --key-file`
+RUN_KEY_FILE = "run.key"
 #: controller parameters the simulator takes too (the limits of its outcomes' damage margins)
 DAMAGE_LIMITS = ("w_dop", "a_ndop")
 #: the nodes that share the run's id (parameter run_id) on /parcels and /fence_commands
@@ -459,6 +461,11 @@ def _run(
     if plan.transport is not None:
         profile = write_profile(plan.transport, log_dir)
     env = node_env(domain, log_dir / "ros", {RUN_KEY_ENV: plan.run_key}, profile)
+    # the key for `fence-sorter param set --key-file`: changes at run time from the run's user
+    key_file = log_dir / RUN_KEY_FILE
+    fd = os.open(key_file, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "w", encoding="utf-8") as f:
+        f.write(plan.run_key + "\n")
     clean_shm()  # what killed runs (of any program) left in /dev/shm
     # this process's participant (the monitor) on the nodes' transports
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = env["ROS_AUTOMATIC_DISCOVERY_RANGE"]
@@ -740,6 +747,7 @@ def _run(
     summary["controller_restarts"] = group.restarts.get("controller", 0)
     summary["exit_codes"] = exit_codes
     # a temporary log directory goes with a run that did not fail (kept: --keep-logs)
+    key_file.unlink(missing_ok=True)  # the run is over: its key changes nothing any more
     keep = opts.keep_logs or opts.log_dir is not None or code not in (EXIT_OK, EXIT_INTERRUPTED)
     if not keep:
         shutil.rmtree(log_dir, ignore_errors=True)

@@ -9,6 +9,7 @@ one whose spec differs from the stream's (or from an earlier message's) is dispu
 
 from __future__ import annotations
 
+import math
 import os
 import time
 from dataclasses import dataclass, field, replace
@@ -21,6 +22,9 @@ from fence_sorter.stamps import time_to_sec
 
 #: the monitor's node name (the scanner's start gate waits for its subscriptions)
 MONITOR_NAME = "fence_sorter_run"
+#: the /diagnostics status names of the run's nodes (``fence_sorter/<node>``): a status so
+#: named must carry its node's tag under the run's key
+RUN_STATUS_PREFIX = "fence_sorter/"
 
 
 @dataclass
@@ -35,6 +39,12 @@ class Records:
     #: messages with the run's id whose tag did not verify under the run's key, by parcel id
     forged_parcels: dict[int, int] = field(default_factory=dict)
     forged_commands: dict[int, int] = field(default_factory=dict)
+    forged_outcomes: dict[int, int] = field(default_factory=dict)
+    foreign_outcome_messages: int = 0
+    #: /diagnostics statuses named as a node of the run whose tag did not verify, by name
+    forged_diagnostics: dict[str, int] = field(default_factory=dict)
+    #: authentic statuses older than one already taken from the same node (a replay)
+    stale_diagnostics: int = 0
     #: authentic parcel messages of ids outside the run's stream
     unexpected_parcel_messages: int = 0
     #: parcel ids given two specs (two authentic messages, or a message and the stream)
@@ -84,6 +94,8 @@ class Monitor:
         self.run_key = run_key
         self.stream = stream
         self._authentic = sources.authentic
+        self._status_authentic = sources.status_authentic
+        self._status_stamps: dict[str, float] = {}
         self._parcel_from_msg = convert.parcel_from_msg
         self._specs: dict[int, tuple[str, ...]] = {}
         n = self.node
@@ -194,6 +206,11 @@ class Monitor:
 
     def _on_outcome(self, msg) -> None:
         r = self.records
+        if self._foreign(msg):
+            r.foreign_outcome_messages += 1
+            return
+        if self._forged(msg, r.forged_outcomes):
+            return
         r.outcome_messages += 1
         r.outcomes.setdefault(
             int(msg.parcel_id),
@@ -215,7 +232,18 @@ class Monitor:
 
     def _on_diag(self, msg) -> None:
         r = self.records
+        stamp = time_to_sec(msg.header.stamp)
         for status in msg.status:
+            if self.run_key is not None and status.name.startswith(RUN_STATUS_PREFIX):
+                if not self._status_authentic(msg.header.stamp, status, self.run_key):
+                    r.forged_diagnostics[status.name] = (
+                        r.forged_diagnostics.get(status.name, 0) + 1
+                    )
+                    continue
+                if stamp < self._status_stamps.get(status.name, -math.inf):
+                    r.stale_diagnostics += 1
+                    continue
+                self._status_stamps[status.name] = stamp
             values = {kv.key: kv.value for kv in status.values}
             values["_message"] = status.message
             values["_level"] = (

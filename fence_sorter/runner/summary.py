@@ -228,6 +228,13 @@ def summarise(
         "no_command": sum(
             1 for pid, o in outcomes.items() if pid in divert and o["reason_name"] == "NO_COMMAND"
         ),
+        "parameter_changes": parameter_changes(records.diagnostics),
+        "parameter_changes_refused": parameter_refusals(records.diagnostics),
+        "foreign_outcome_messages": getattr(records, "foreign_outcome_messages", 0),
+        "forged_outcome_messages": sum(getattr(records, "forged_outcomes", {}).values()),
+        "forged_outcome_ids": sorted(getattr(records, "forged_outcomes", {})),
+        "forged_diagnostics": dict(getattr(records, "forged_diagnostics", {})),
+        "stale_diagnostics": getattr(records, "stale_diagnostics", 0),
         "foreign_parcel_messages": getattr(records, "foreign_parcel_messages", 0),
         "foreign_command_messages": getattr(records, "foreign_command_messages", 0),
         "forged_parcel_messages": sum(forged_parcels.values()),
@@ -281,6 +288,29 @@ def _with_failed(outcomes: dict, rows: list[dict]) -> list[dict]:
     return [{**o, "failed": pid in failed} for pid, o in outcomes.items()]
 
 
+def parameter_changes(diagnostics: dict[str, dict[str, str]]) -> dict[str, list[str]]:
+    """Per node: the changes of its parameters it took at run time under the run's key
+    (``t=<sim s> NAME=VALUE``, in order)."""
+    out = {}
+    for name, values in sorted(diagnostics.items()):
+        log = values.get("parameter_change_log", "")
+        if log:
+            out[name.rpartition("/")[2]] = log.split("; ")
+    return out
+
+
+def parameter_refusals(diagnostics: dict[str, dict[str, str]]) -> dict[str, dict]:
+    """Per node: the changes of its parameters it refused (without the run's key), with the
+    last reasons."""
+    out = {}
+    for name, values in sorted(diagnostics.items()):
+        n = _count(values.get("parameter_changes_refused"))
+        if n:
+            reasons = [r for r in values.get("parameter_refusals", "").split(" | ") if r]
+            out[name.rpartition("/")[2]] = {"count": n, "reasons": reasons}
+    return out
+
+
 def foreign_traffic(s: dict) -> list[str]:
     """What came from outside the run, one phrase each (empty: nothing)."""
     out = []
@@ -297,6 +327,28 @@ def foreign_traffic(s: dict) -> list[str]:
             "with the run's id that its key does not vouch for"
             + (f" (forging parcel ids {ids[:20]} of the run)" if ids else "")
         )
+    for node, refused in sorted((s.get("parameter_changes_refused") or {}).items()):
+        why = refused["reasons"][-1] if refused["reasons"] else "no key"
+        out.append(
+            f"{refused['count']} changes of {node}'s parameters without the run's key "
+            f"(refused: {why})"
+        )
+    if s.get("foreign_outcome_messages"):
+        out.append(f"{s['foreign_outcome_messages']} outcomes of another run")
+    if s.get("forged_outcome_messages"):
+        ids = s.get("forged_outcome_ids", [])
+        out.append(
+            f"{s['forged_outcome_messages']} outcomes with the run's id that its key does not "
+            f"vouch for (parcel ids {ids[:20]})"
+        )
+    forged_diag = s.get("forged_diagnostics") or {}
+    if forged_diag:
+        out.append(
+            "diagnostics in the name of the run's nodes that its key does not vouch for: "
+            + ", ".join(f"{name} {n}" for name, n in sorted(forged_diag.items()))
+        )
+    if s.get("stale_diagnostics"):
+        out.append(f"{s['stale_diagnostics']} replayed (older) diagnostics of the run's nodes")
     for topic, names in sorted(s.get("foreign_publishers", {}).items()):
         out.append(f"publishers of {topic} that are not the run's: {'; '.join(names)}")
     return out
@@ -397,6 +449,8 @@ def format_summary(s: dict) -> str:
     deadline = pick(sim, "deadline") or pick(sim, "miss")
     lateness = pick(sim, "late")
     rtf = pick(sim, "rtf") or pick(sim, "real_time")
+    for node, log in sorted((s.get("parameter_changes") or {}).items()):
+        lines.append(f"changed ({node:<8}) " + "; ".join(log) + " (under the run's key)")
     limits = s.get("limits")
     if limits is not None:
         lines.append(f"limits            {describe(limits)}")

@@ -75,3 +75,25 @@ def test_a_second_clock_moves_no_node_and_is_named(tmp_path: Path) -> None:
     named = s["foreign_publishers"]["/clock"]
     assert any("fence_sorter_insider" in n for n in named), named
     assert t.exit_code == 4 and "publishers of /clock that are not the run's" in t.message
+
+
+def test_forged_outcomes_and_statuses_are_refused_and_the_figures_are_the_runs(
+    tmp_path: Path,
+) -> None:
+    """An insider answers each scanned parcel at once with SORTED, 1 N, 0.01 m/s, and speaks
+    for the simulator on /diagnostics: every one refused; the real outcomes stand."""
+    t = insider_trial("outcomes", tmp_path, parcels=PARCELS, count=PARCELS)
+    assert t.insider["sent"] == PARCELS and t.insider["forged_ids"] == list(
+        range(1, PARCELS + 1)
+    ), t.insider
+    real_parcels_as_planned(t)
+    s = t.summary
+    assert s["forged_outcome_messages"] == PARCELS
+    assert s["forged_outcome_ids"] == list(range(1, PARCELS + 1))
+    assert s["forged_diagnostics"]["fence_sorter/simulator"] == t.insider["statuses"]
+    # the figures are the simulator's: not the insider's 1 N and 0.01 m/s
+    assert s["peak_force_N"] > 100.0 and s["peak_impact_speed_mps"] > 0.5
+    assert s["outcome_messages"] == PARCELS
+    assert any("fence_sorter_insider" in n for n in s["foreign_publishers"]["/sort_outcomes"])
+    assert t.exit_code == 4
+    assert f"{PARCELS} outcomes with the run's id that its key does not vouch for" in t.message

@@ -190,10 +190,11 @@ def test_a_ndop_changed_during_a_run_holds_for_the_next_plans(
             before = list(got["commands"])
             assert all(c.feasible for c in before), [c.reason for c in before]
             limit = round(LIMIT_FACTOR * min(c.predicted_peak_accel for c in before), 3)
-            for name, value in (("max_evaluations", BUDGET), ("a_ndop", limit)):
+
+            def param_set(name: str, value: float, *key: str) -> tuple[int, str]:
                 setter = subprocess.Popen(
                     [sys.executable, "-m", "fence_sorter.cli.main", "param", "set"]
-                    + ["controller", name, f"{value}", "--domain", str(domain)],
+                    + ["controller", name, f"{value}", "--domain", str(domain), *key],
                     env=env,
                     stdout=subprocess.PIPE,
                     stderr=subprocess.PIPE,
@@ -201,11 +202,28 @@ def test_a_ndop_changed_during_a_run_holds_for_the_next_plans(
                 )
                 wait_until(lambda s=setter: s.poll() is not None, CLI_TIMEOUT, "param set", spin)
                 out, err = setter.communicate()
-                assert setter.returncode == 0, out + err
+                return setter.returncode, out + err
+
+            # from outside the run (no key): refused with the reason, the plans unchanged
+            code, text = param_set("w_dop", 1e-6)
+            assert code == 1 and "a change in a run needs the run's key" in text, text
+            for name, value in (("max_evaluations", BUDGET), ("a_ndop", limit)):
+                code, text = param_set(name, value, "--key-file", str(logs / "run.key"))
+                assert code == 0, text
             wait_until(lambda: run.poll() is not None, 240.0, "the end of the run", spin)
             summary = run.stdout.read()
-    assert run.returncode == 0, summary
     s = json.loads(summary)
+    # the attempt from outside is named, and makes the run's exit 4; the keyed changes are
+    # listed, who (the run's key), what and when (sim time)
+    assert run.returncode == 4, summary
+    assert s["parameter_changes_refused"]["controller"]["count"] == 1
+    assert "w_dop" in s["parameter_changes_refused"]["controller"]["reasons"][0]
+    changes = s["parameter_changes"]["controller"]
+    assert [c.split(" ", 2)[2] for c in changes] == [
+        f"max_evaluations={BUDGET}",
+        f"a_ndop={limit!r}",
+    ]
+    assert not (logs / "run.key").exists()  # the run is over: its key is gone
     event = next(
         e
         for e in got["events"]

@@ -195,3 +195,41 @@ def test_source_watch_names_an_unnamed_publisher_that_left_before_its_grace() ->
     assert watch.poll(graph, 1.1) == {}
     graph.publishers["/parcels"] = []
     assert watch.poll(graph, 1.2) == {}
+
+
+def test_outcomes_and_statuses_are_tagged() -> None:
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+    from fence_sorter.nodes.sources import authentic, sign, sign_diagnostics, status_authentic
+    from fence_sorter_msgs.msg import SortOutcome
+
+    out = sign(SortOutcome(parcel_id=3, run_id=99, sorted=True, peak_normal_force=812.5), KEY)
+    assert authentic(out, KEY) and not authentic(out, OTHER)
+    out.peak_normal_force = 1.0
+    assert not authentic(out, KEY)
+    status = DiagnosticStatus(name="fence_sorter/simulator", message="running")
+    status.values = [KeyValue(key="overlap_warnings", value="0")]
+    array = DiagnosticArray(status=[status])
+    array.header.stamp.sec = 12
+    sign_diagnostics(array, KEY)
+    assert status.values[-1].key == provenance.STATUS_TAG_KEY
+    assert status_authentic(array.header.stamp, status, KEY)
+    assert not status_authentic(array.header.stamp, status, OTHER)
+    array.header.stamp.sec = 13  # the same status under another stamp: not its tag
+    assert not status_authentic(array.header.stamp, status, KEY)
+    array.header.stamp.sec = 12
+    status.values[0].value = "5"
+    assert not status_authentic(array.header.stamp, status, KEY)
+
+
+def test_a_change_of_parameters_needs_its_tag_a_fresh_sequence_and_the_same_values() -> None:
+    changes = [("a_ndop", 150.0)]
+    auth = provenance.change_auth(KEY, "/controller", 7, changes)
+    refusal = provenance.change_refusal
+    assert refusal(KEY, "/controller", 0, auth, changes) == ""
+    assert "needs the run's key" in refusal(KEY, "/controller", 0, None, changes)
+    assert "a replay" in refusal(KEY, "/controller", 7, auth, changes)
+    assert "does not verify" in refusal(KEY, "/controller", 0, auth, [("a_ndop", 1e-6)])
+    assert "does not verify" in refusal(KEY, "/unit_2/controller", 0, auth, changes)
+    assert "does not verify" in refusal(OTHER, "/controller", 0, auth, changes)
+    assert "must be SEQ:TAG" in refusal(KEY, "/controller", 0, "7", changes)
