@@ -1,6 +1,7 @@
 """Replay of a recorded bag over DDS (``fence-sorter replay``): every message republished raw
 (CDR as recorded) with its original timing scaled by ``rate``, /clock included, so nodes run
-with ``use_sim_time:=true`` follow the recorded sim time.
+with ``use_sim_time:=true`` follow the recorded sim time. A topic recorded in another version
+of its type (a field added since) is republished field by field into the current type.
 
 Timing: message k goes out at wall ``start + (t_k - t_0) / rate`` (t = bag timestamp, the
 recorder's reception time), paced on the steady clock. QoS per topic as recorded (reliable or
@@ -36,6 +37,38 @@ class ReplayResult:
     bag_time: float = 0.0  # span of the bag timestamps replayed [s]
     max_lateness: float = 0.0  # [s]
     unacknowledged: list[str] = field(default_factory=list)  # topics not acked within ACK_WAIT
+
+
+def _fields(obj) -> list[str]:
+    """Field names of a rosbags message (a dataclass) or of an rclpy message class."""
+    if hasattr(obj, "get_fields_and_field_types"):
+        return list(obj.get_fields_and_field_types())
+    # a rosbags dataclass lists the type's constants (UPPER_CASE) and __msgtype__ too
+    names = getattr(obj, "__dataclass_fields__", {})
+    return [n for n in names if not n.startswith("__") and not n.isupper()]
+
+
+def _copy_into(cls, src):
+    """An rclpy message of ``cls`` with the fields ``src`` (a rosbags message) has by name;
+    the others keep their defaults (a field the recording's version did not have)."""
+    out = cls()
+    types = cls.get_fields_and_field_types()
+    for name in types:
+        if not hasattr(src, name):
+            continue
+        value = getattr(src, name)
+        current = getattr(out, name)
+        if hasattr(current, "get_fields_and_field_types"):
+            setattr(out, name, _copy_into(type(current), value))
+        elif isinstance(value, (list, tuple)) and value and _fields(value[0]):
+            pkg, _, kind = types[name].removeprefix("sequence<").partition(">")[0].partition("/")
+            inner = message_class(f"{pkg}/msg/{kind}")
+            setattr(out, name, [_copy_into(inner, v) for v in value])
+        elif hasattr(value, "tolist"):
+            setattr(out, name, value.tolist())
+        else:
+            setattr(out, name, value)
+    return out
 
 
 def offered(qos):
@@ -81,10 +114,22 @@ def replay(
     node = rclpy.create_node(NODE_NAME)
     try:
         pubs = {}
+        convert: dict[str, type] = {}  # topics recorded in another version of their type
         for topic in sorted({m.topic for m in msgs}):
-            msgtype = next(m.msgtype for m in msgs if m.topic == topic)
+            first = next(m for m in msgs if m.topic == topic)
+            cls = message_class(first.msgtype)
+            if _fields(first.msg) != _fields(cls):
+                convert[topic] = cls
+                had, has = _fields(first.msg), _fields(cls)
+                missing = ", ".join(n for n in has if n not in had) or "none"
+                gone = ", ".join(n for n in had if n not in has) or "none"
+                say(
+                    f"{topic}: recorded as another version of {first.msgtype} (without "
+                    f"{missing}; dropped: {gone}): republished field by field, the fields it "
+                    "lacks at their defaults"
+                )
             qos = topic_qos(topic, REPLAY_DEPTH) if topic in TOPICS else RELIABLE_QOS
-            pubs[topic] = node.create_publisher(message_class(msgtype), topic, offered(qos))
+            pubs[topic] = node.create_publisher(cls, topic, offered(qos))
         if wait_for_subscribers > 0:
             deadline = time.monotonic() + wait_for_subscribers
             while (
@@ -107,7 +152,8 @@ def replay(
                 time.sleep(due - now)
             else:
                 result.max_lateness = max(result.max_lateness, now - due)
-            pubs[m.topic].publish(m.raw)
+            cls = convert.get(m.topic)
+            pubs[m.topic].publish(m.raw if cls is None else _copy_into(cls, m.msg))
             result.published[m.topic] += 1
             if on_publish is not None:
                 on_publish(m)

@@ -5,6 +5,7 @@ analysis matches with the live outcomes, and `fence-sorter replay` republishes i
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import subprocess
@@ -579,3 +580,42 @@ def test_live_rrd_of_the_run_has_every_published_frame(recorded_run):
     # on, every published frame is in both (a few may follow the recorder's last one)
     assert clocks <= since_first_clock["/world/fence"] <= clocks + 5
     assert rows["/events/outcomes"] == 3
+
+
+def test_replay_of_a_bag_of_an_earlier_message_version(ros_node, env):
+    """The committed example bag was recorded before Parcel and SortOutcome gained fields: its
+    raw CDR would be misread as the current type, so those topics are republished field by
+    field (the new ones at their defaults) and a current subscriber reads the bag's values."""
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import DurabilityPolicy
+
+    from fence_sorter.nodes.qos import topic_qos
+    from fence_sorter.recording.topics import REPLAY_DEPTH
+    from fence_sorter_msgs.msg import SortOutcome
+
+    bag = Path(__file__).resolve().parents[2] / "bags" / "example_4_parcels"
+    recorded = {m.msg.parcel_id: m.msg for m in read_bag(bag, ["/sort_outcomes"]).messages}
+    qos = topic_qos("/sort_outcomes", REPLAY_DEPTH)
+    qos.durability = DurabilityPolicy.TRANSIENT_LOCAL
+    got = []
+    ros_node.create_subscription(SortOutcome, "/sort_outcomes", got.append, qos)
+    executor = SingleThreadedExecutor(context=ros_node.context)
+    executor.add_node(ros_node)
+    spin = lambda: executor.spin_once(timeout_sec=0.05)  # noqa: E731
+    cmd = [sys.executable, "-m", "fence_sorter.cli.main", "replay", str(bag), "--rate", "20",
+           "--topics", "/sort_outcomes", "--wait", "30"]  # fmt: skip
+    with managed_process(cmd, env) as proc:
+        wait_until(lambda: proc.poll() is not None, 120.0, "the replay to end", spin)
+        stdout, _ = proc.communicate()
+    wait_until(lambda: len(got) >= len(recorded), 10.0, "every replayed outcome", spin)
+    executor.shutdown()
+    assert "/sort_outcomes: recorded as another version" in stdout and "run_id" in stdout
+    assert sorted(m.parcel_id for m in got) == sorted(recorded)
+    for m in got:
+        r = recorded[m.parcel_id]
+        assert (m.sorted, m.reason_code, m.reason) == (r.sorted, r.reason_code, r.reason)
+        assert (
+            m.peak_normal_force == r.peak_normal_force
+            or r.peak_normal_force != r.peak_normal_force
+        )
+        assert m.run_id == 0 and m.auth == 0
