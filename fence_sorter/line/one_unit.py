@@ -46,6 +46,9 @@ __all__ = [
 UNSCANNED = -1
 #: length of that region upstream of the scan line [m] (any belt ahead of the scanner)
 UNSCANNED_LENGTH = 1000.0
+#: a parcel scanned up to this long before a decision may not have reached the controller yet
+#: (the middleware's delivery): the region of the parcels not scanned starts that far on [s]
+IN_FLIGHT = 0.1
 #: sim time between the decision on a parcel and its earliest admissible stroke start, beyond
 #: the planner's start margin: the planning itself and the command's delivery [s]
 DECISION_LEAD = 0.3
@@ -120,14 +123,15 @@ class UnitTraffic:
         self, parcel_id: int, start: float, end: float, alpha_k: float, now: float
     ) -> Decision:
         """The line's guard for a stroke of ``parcel_id`` over [start, end] decided at sim
-        time ``now``: the other scanned parcels and those not scanned by ``now``."""
+        time ``now``: the other scanned parcels and those not scanned by ``now`` (less
+        ``IN_FLIGHT``)."""
         own = self.tracks[parcel_id]
         others = [
             tr
             for pid, tr in self.tracks.items()
             if pid != parcel_id and self.ends.get(pid, math.inf) > start
         ]
-        others.append(unscanned(self.scan_line_x, now, self.width, self.v))
+        others.append(unscanned(self.scan_line_x, now - IN_FLIGHT, self.width, self.v))
         cand = self.booking(parcel_id, start, end, alpha_k)
         return guard(cand, own, others, self.bookings, self.width)
 
@@ -138,18 +142,46 @@ class UnitTraffic:
         if req.parcel_id not in self.tracks:  # past the fence's reach: no stroke to guard
             return planner.plan(req, now, commit=False)
         alpha_k = planner.config.alpha_k
-        refusals: list[Decision] = []
+        refusals: list[tuple[Decision, float, float, float, float]] = []
 
-        def clear(_ev, start: float, end: float) -> bool:
+        def clear(ev, start: float, end: float) -> bool:
             d = self.guard(req.parcel_id, start, end, alpha_k, now)
             if not d.accepted:
-                refusals.append(d)
+                refusals.append((d, ev.r_s, ev.t1, start, end))
             return d.accepted
 
         plan = planner.plan(req, now, commit=False, accept=clear)
         if not plan.feasible and refusals:
-            plan.reason = f"{SECTOR_OCCUPIED}: {refusals[0].detail}"
+            plan = self._second_search(planner, req, now, clear) or plan
+        if not plan.feasible and refusals:
+            d, r_s, t1, start, end = refusals[0]
+            who = ", ".join("not yet scanned" if i == UNSCANNED else str(i) for i in d.intruders)
+            plan.reason = (
+                f"{SECTOR_OCCUPIED}: parcel(s) {who} in the swept sector of the stroke "
+                f"R_s = {r_s:g} m, t1 = {t1:g} s [{start:.3f}, {end:.3f}] s"
+                + (f" ({len(refusals)} strokes refused)" if len(refusals) > 1 else "")
+            )
         return plan
+
+    def _second_search(self, planner: Planner, req: LoadRequest, now: float, clear):
+        """The planner's search again over the admissible candidates whose times alone the
+        guard accepts (its search probes a few candidates, spread over all of them); the
+        planner's hints stay those of the physics alone. None if none is feasible."""
+        alpha_k = planner.config.alpha_k
+        clear_times = []
+        for r_s, t1 in planner.admissible(req, now):
+            start = req.scan_time + (r_s - req.scan_position_x) / planner.v
+            if self.guard(req.parcel_id, start, start + 2.0 * t1, alpha_k, now).accepted:
+                clear_times.append((r_s, t1))
+        if not clear_times:
+            return None
+        saved, chosen = planner.candidate_list, dict(planner.chosen)
+        planner.candidate_list = clear_times
+        try:
+            plan = planner.plan(req, now, commit=False, accept=clear)
+        finally:
+            planner.candidate_list, planner.chosen = saved, chosen
+        return plan if plan.feasible else None
 
     def book(self, parcel_id: int, start: float, end: float, alpha_k: float) -> None:
         """A stroke was commanded: its parcel may leave the belt from ``start`` on."""

@@ -135,7 +135,7 @@ def test_a_bystander_close_behind_is_never_swept(base, warm) -> None:
         assert d.accepted
     else:
         assert decline_reason(plan) == SECTOR_OCCUPIED
-        assert plan.reason.startswith(f"{SECTOR_OCCUPIED}: parcel(s) 2")
+        assert plan.reason.startswith(f"{SECTOR_OCCUPIED}: parcel(s) 2 in the swept sector")
     guarded = run_line(base, fresh(base, warm), stream, guarded=True)
     assert guarded["warnings"] == []
     assert guarded["strokes"] + guarded["declined"].get(SECTOR_OCCUPIED, 0) == 1
@@ -167,11 +167,12 @@ def test_parcels_not_yet_scanned_bound_the_stroke(base) -> None:
 
 @pytest.mark.parametrize("rate", [2800.0, 7200.0])
 def test_the_guarded_plans_cause_no_intrusion_on_a_dense_stream(base, warm, rate) -> None:
-    """60 parcels of the default stream at 2800 and 7200 pcs/h: the planner alone commands
+    """40 parcels of the default stream at 2800 and 7200 pcs/h: the planner alone commands
     strokes whose sectors other parcels enter (the plant's OverlapWarning); the guarded one
-    none, declining the other divert parcels as sector_occupied."""
+    none, declining the other divert parcels as sector_occupied (at 7200 pcs/h, 0.3 m apart,
+    each of them: the sector reaches 1.2 m along the belt)."""
     cfg = replace(StreamConfig.from_yaml("default"), rate_pcs_h=rate)
-    stream = generate(cfg, base.conveyor.belt_speed, count=60)
+    stream = generate(cfg, base.conveyor.belt_speed, count=40)
     divert = sum(s.divert for s in stream)
     plain = run_line(base, fresh(base, warm), stream, guarded=False)
     guarded = run_line(base, fresh(base, warm), stream, guarded=True)
@@ -179,5 +180,5 @@ def test_the_guarded_plans_cause_no_intrusion_on_a_dense_stream(base, warm, rate
     assert guarded["warnings"] == []
     assert guarded["strokes"] + sum(guarded["declined"].values()) == divert
     assert guarded["declined"].get(SECTOR_OCCUPIED, 0) > 0
-    if rate < 3000.0:  # room for strokes between the parcels
-        assert guarded["sorted"] >= 5
+    if rate < 3000.0:  # room for strokes clear of the other parcels for most divert ones
+        assert guarded["sorted"] >= 0.75 * divert
