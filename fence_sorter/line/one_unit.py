@@ -168,15 +168,20 @@ class UnitTraffic:
         guard accepts (its search probes a few candidates, spread over all of them); the
         planner's hints stay those of the physics alone. None if none is feasible."""
         alpha_k = planner.config.alpha_k
-        clear_times = []
+        by_start: dict[float, list[float]] = {}
         for r_s, t1 in planner.admissible(req, now):
+            by_start.setdefault(r_s, []).append(t1)
+        clear_times = set()
+        for r_s, t1s in by_start.items():
             start = req.scan_time + (r_s - req.scan_position_x) / planner.v
-            if self.guard(req.parcel_id, start, start + 2.0 * t1, alpha_k, now).accepted:
-                clear_times.append((r_s, t1))
+            for t1 in sorted(t1s):  # a longer stroke from the same start sweeps a superset
+                if not self.guard(req.parcel_id, start, start + 2.0 * t1, alpha_k, now).accepted:
+                    break
+                clear_times.add((r_s, t1))
         if not clear_times:
             return None
         saved, chosen = planner.candidate_list, dict(planner.chosen)
-        planner.candidate_list = clear_times
+        planner.candidate_list = [c for c in saved if c in clear_times]  # W_t order kept
         try:
             plan = planner.plan(req, now, commit=False, accept=clear)
         finally:
