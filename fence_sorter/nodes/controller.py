@@ -2,13 +2,18 @@
 
 Subscribes /parcels, publishes one fence_sorter_msgs/FenceCommand per divert parcel on
 /fence_commands: feasible with the predicted figures, or feasible=false with the reason. The
-planning itself is :class:`fence_sorter.capacity.Planner` (ROS-free); this module only turns
-messages into its inputs and its plans into messages. A parcel whose R_s is already behind when
-the controller gets it (e.g. right after a restart) gets no command (logged and counted).
+planning itself is :class:`fence_sorter.capacity.Planner` under the swept-sector guard of
+:class:`fence_sorter.line.one_unit.UnitTraffic` (both ROS-free): a divert parcel is planned at
+its decision time (:func:`fence_sorter.line.one_unit.decision_time`), when the parcels behind
+it are scanned, and a stroke whose sector another parcel enters is passed over (none left: a
+``sector_occupied`` decline). This module only turns messages into their inputs and plans into
+messages. A parcel whose R_s is already behind when the controller gets it (e.g. right after a
+restart) gets no command (logged and counted).
 """
 
 from __future__ import annotations
 
+import heapq
 import math
 import time
 from collections import Counter, deque
@@ -23,6 +28,8 @@ from rclpy.time import Time
 
 from fence_sorter.capacity.planner import LoadRequest, Plan, Planner, PlannerConfig
 from fence_sorter.inputs import InputError, ParcelSpec, validate_parcel
+from fence_sorter.line.one_unit import UnitTraffic, decision_time, decline_reason
+from fence_sorter.line.routing import NO_FEASIBLE_STROKE, SECTOR_OCCUPIED
 from fence_sorter.nodes.base import FenceSorterNode, run_node
 from fence_sorter.nodes.convert import parcel_from_msg
 from fence_sorter.nodes.intake import ParcelRegistry, TopicIntake
@@ -111,6 +118,8 @@ class ControllerStats:
         self.rejected = self.not_diverted = self.evaluations = self.replans = 0
         self.replanned_configs = 0  # planner settings changed at run time
         self.rejected_by_key: Counter[str] = Counter()  # InputError.key -> parcels
+        # divert parcels without a stroke by reason: the swept-sector guard's, or none feasible
+        self.declined: Counter[str] = Counter({NO_FEASIBLE_STROKE: 0, SECTOR_OCCUPIED: 0})
 
     def percentile(self, q: float, samples=None) -> float:
         samples = self.latency if samples is None else samples
@@ -136,6 +145,7 @@ class ControllerStats:
             ),
             "min_lead_s": f"{min(self.lead, default=math.nan):.4f}",
             **{f"rejected_parcels.{k}": str(v) for k, v in sorted(self.rejected_by_key.items())},
+            **{f"declined.{k}": str(v) for k, v in sorted(self.declined.items())},
         }
 
 
@@ -181,6 +191,7 @@ class ControllerNode(FenceSorterNode):
             )
         if "scan_line_x" in values:
             self.scan_line_x = float(values["scan_line_x"])
+            self.traffic.scan_line_x = self.scan_line_x
         if "scan_line_tolerance" in values:
             self.scan_line_tolerance = float(values["scan_line_tolerance"])
 
@@ -213,9 +224,15 @@ class ControllerNode(FenceSorterNode):
             clock=Clock(clock_type=ClockType.STEADY_TIME),
         )
         self.seen: set[int] = set()
+        # the swept-sector guard's traffic; divert parcels wait for their decision time
+        self.traffic = UnitTraffic.of_scenario(self.base, self.scan_line_x)
+        self.pending: list[tuple[float, int, ParcelSpec]] = []
         self._warm_up(p)
         self._pub = self.create_publisher(
             FenceCommand, topics.FENCE_COMMANDS, topic_qos(topics.FENCE_COMMANDS)
+        )
+        self._due_timer = self.create_timer(
+            0.01, self._plan_due, clock=Clock(clock_type=ClockType.STEADY_TIME)
         )
         # Listen to /parcels only once a commands subscriber (the simulator) is matched: a
         # command published before discovery completes would be lost (volatile QoS).
@@ -290,10 +307,23 @@ class ControllerNode(FenceSorterNode):
             self.stats.latency.append(1e-9 * (now - received))
             self.stats.latency_from_send.append(1e-9 * (now - sent))
 
+    def _plan_due(self) -> None:
+        """Plan the parcels whose decision time (:func:`decision_time`) has come; their
+        latency runs from then."""
+        t_now = self.get_clock().now().nanoseconds * 1e-9
+        self.traffic.prune(t_now)
+        while self.pending and self.pending[0][0] <= t_now:
+            due_wall = time.time_ns()
+            cmd = plan_parcel(self, heapq.heappop(self.pending)[2])
+            if cmd is not None:
+                self._pub.publish(cmd)
+                self.stats.latency.append(1e-9 * (time.time_ns() - due_wall))
+
     def heartbeat_status(self) -> DiagnosticStatus:
         status = super().heartbeat_status()
         values = self.stats.values()
         values["cache_entries"] = str(len(self.planner.cache))
+        values["pending_parcels"] = str(len(self.pending))
         values["listening"] = str(self._sub is not None).lower()
         # matched /parcels publishers: a parcel published before its scanner is matched with
         # this subscription is lost to it (volatile QoS), whatever "listening" says
@@ -357,9 +387,25 @@ def handle_parcel(node: ControllerNode, msg):
         log.warning(f"parcel {msg.parcel_id} rejected ({exc.key}): {exc}")
         return None
     node.seen.add(spec.parcel_id)
+    node.traffic.scanned(spec)
     if not spec.divert:
         stats.not_diverted += 1
         return None
+    due = decision_time(spec, node.planner.v, node.config)
+    if t_now < due:  # planned then (``_plan_due``): the parcels behind it are scanned by then
+        heapq.heappush(node.pending, (due, spec.parcel_id, spec))
+        return None
+    return plan_parcel(node, spec)
+
+
+def plan_parcel(node: ControllerNode, spec: ParcelSpec):
+    """A divert parcel at its decision time -> its FenceCommand, or None (too late). Each
+    feasible stroke must pass the swept-sector guard (``node.traffic``); the planner passes
+    one it refuses over for its next feasible one."""
+    stats = node.stats
+    log = node.get_logger()
+    now = node.get_clock().now()
+    t_now = now.nanoseconds * 1e-9
     req = request_from_spec(spec)
     rtf = node.rtf.update(time.monotonic(), t_now)
     evals0 = node.planner.evaluations
@@ -367,15 +413,16 @@ def handle_parcel(node: ControllerNode, msg):
     # the real-time factor in sim time) for the message; the planning time itself is checked
     # after planning: a plan that took too long for its own stroke is made again from the
     # new time (its evaluations are cached, so that is quick)
-    plan = node.planner.plan(req, t_now + rtf * DELIVERY_ALLOWANCE, commit=False)
+    plan = node.traffic.plan(node.planner, req, t_now + rtf * DELIVERY_ALLOWANCE)
     if plan.feasible:
         t_after = node.get_clock().now().nanoseconds * 1e-9
         earliest = t_after + rtf * DELIVERY_ALLOWANCE + node.config.start_margin
         if plan.start_time < earliest:
             stats.replans += 1
-            plan = node.planner.plan(req, t_after + rtf * DELIVERY_ALLOWANCE, commit=False)
+            plan = node.traffic.plan(node.planner, req, t_after + rtf * DELIVERY_ALLOWANCE)
     if plan.feasible:
         node.planner.busy_until = plan.end_time
+        node.traffic.book(req.parcel_id, plan.start_time, plan.end_time, node.config.alpha_k)
     stats.evaluations += node.planner.evaluations - evals0
     if not plan.feasible and plan.reason.startswith("too late"):
         stats.late += 1
@@ -399,6 +446,7 @@ def handle_parcel(node: ControllerNode, msg):
         )
     else:
         stats.infeasible += 1
+        stats.declined[decline_reason(plan)] += 1
         log.warning(f"parcel {req.parcel_id}: infeasible: {plan.reason}")
     return cmd
 

@@ -600,6 +600,8 @@ class SimulatorNode(FenceSorterNode):
             "bad_parcels": str(sum(bad.values())),
             "commands_rejected": str(sum(rejected.values())),
             "overlap_warnings": str(counts.get("overlap_warnings", 0)),
+            # the same count under the line's name: parcels in a stroke's swept sector
+            "swept_sector_intrusions": str(counts.get("overlap_warnings", 0)),
             # publishers this node's subscriptions are matched with (its side of discovery:
             # a command sent before the simulator matched its publisher is lost)
             "parcel_publishers": str(self._parcel_sub.get_publisher_count()),

@@ -165,6 +165,10 @@ def test_simulator_sorts_reports_and_survives_bad_parcels(env, tmp_path: Path, p
         assert d["parcels.conflict"] == "1" and d["parcels.disputed_ids"] == "1", d
         assert out[1].disputed and not any(out[i].disputed for i in (2, 3, 4))
         assert d["commands_rejected.unknown_parcel"] == "1"
+        # one parcel in the sector of parcel 1's stroke (t0 + 1.22 to 1.92 s): parcel 4, its
+        # front at -1.5 + 1.92 = 0.42 m by the end, past 0.25 m / tan(40 deg) = 0.30 m (its
+        # near side in the sector); parcels 2 and 3 are past R_z = 1.2 m from the start
+        assert d["swept_sector_intrusions"] == d["overlap_warnings"] == "1", d
         assert 0.5 < float(d["real_time_factor_achieved"]) < 1.5  # paced at rtf 1 (loaded CI)
         for key in ("cycle_lateness_p50_ms", "cycle_lateness_p99_ms", "cycle_lateness_p99_9_ms"):
             assert math.isfinite(float(d[key]))
