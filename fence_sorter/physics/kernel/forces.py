@@ -434,17 +434,21 @@ def _evaluate(model, alpha, rate, accel, ca, sa, y, c, s, lam, weight, ev):
             _place(out[k], s_arc, d, d_rate, px, py, nx, ny, vux, vuy)
             _add(model, ev, k, tx, ty, slide, y, lam, weight)
     # the fence tip inside the load (past a corner that slid off it, or pressed into a face
-    # beyond the last pushing corner): it presses on the face that faces the fence (outward
-    # normal most against the fence normal), the depth is the tip's distance to that face's
-    # plane, which starts from 0 as the tip enters through it and equals the corner's D when a
-    # corner of a face along the fence slides off (continuous hand-over), and the force acts
-    # along the face normal: the gradient of the potential k_p D^5 / 5, zero at release.
+    # beyond the last pushing corner): it presses on the face its normal ray leaves the load
+    # through (from the tip against the fence normal n: least depth / cos(n, -m) over the faces
+    # with outward normal m against n), the depth is the tip's distance to that face's plane,
+    # which starts from 0 as the tip enters through it; the ray leaves through a corner exactly
+    # when that corner's arc is R_z, so a corner of a face along the fence sliding off hands its
+    # D over to the tip on that face; the force acts along the face normal: the gradient of the
+    # potential k_p D^5 / 5, zero at release. (The face merely most against n, whatever the
+    # tip's position, is the far face of a load yawed past 45 deg against the fence with the
+    # tip in its near face: D jumped from cm to the load's length.)
     # (Measuring the depth along the fence normal and pushing along it did work in a closed
     # elastic cycle; starting the contact only once a corner had passed the tip let it appear at
     # finite depth.)
     if use_tip:
         exit_face = -1
-        facing = -math.inf
+        ray = math.inf
         depth = 0.0
         fnx = fny = 0.0
         for k in range(4):
@@ -457,8 +461,8 @@ def _evaluate(model, alpha, rate, accel, ca, sa, y, c, s, lam, weight, ev):
                 exit_face = -1
                 break
             cos_dir = -(ntx * mx + nty * my)
-            if cos_dir > facing:
-                facing = cos_dir
+            if cos_dir > 0.0 and inside < ray * cos_dir:
+                ray = inside / cos_dir
                 exit_face = k
                 depth = inside
                 fnx, fny = -mx, -my  # on the load: pushed away from the tip
