@@ -20,6 +20,7 @@ CAMPAIGNS = {
     "line-bench": "saturation curve of a line: sort rate and throughput against induction rate",
     "line-scale": "the line over DDS against its units: speed, paced misses, hand-off transit",
     "line-speed": "speed of the ROS-free line: sim time / wall time, median of a few runs",
+    "stability-random": "random stability campaign: events over the user's space, failures",
 }
 BENCHMARKS = fence_sorter_cli.CommandLine(
     "python -m benchmarks",
