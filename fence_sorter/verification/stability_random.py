@@ -161,8 +161,12 @@ def run_event(ev: Event) -> dict:
     except Exception as exc:  # a crash is a bug: counted as a failure of its own cause
         out.update(cause="exception", diagnosis=f"{type(exc).__name__}: {exc}", sorted=False)
         out.update(d_max=math.nan, d_ratio=math.nan, peak_n=math.nan, wall=0.0)
+        out.update(w_n=math.nan, d_law_ratio=math.nan)
         return out
     diag = stepper.diagnosis
+    w_n = max((float(w) for _, w, _ in r.impacts), default=0.0)  # the fastest impact's
+    # law (16) with b = 0: D_max = (5 m w_n^2 / (2 k_p))^(1/5) of a free impact at w_n
+    d_law = (5.0 * ev.mass * w_n**2 / (2.0 * sc.contact.k_p)) ** 0.2 if w_n > 0 else 0.0
     out.update(
         cause=None if diag is None else diag.kind.value,
         diagnosis=r.diagnosis,
@@ -170,6 +174,8 @@ def run_event(ev: Event) -> dict:
         d_max=float(r.max_penetration),
         d_ratio=float(r.max_penetration / model.deep),
         peak_n=float(r.peak_contact_force),
+        w_n=w_n,
+        d_law_ratio=d_law / model.deep if math.isfinite(d_law) else math.nan,
         wall=time.perf_counter() - wall0,
     )
     return out
@@ -216,12 +222,19 @@ def run_campaign(
 #: the drawn parameters whose range over the failures bounds a failing region
 REGION = (
     "mass", "length_a", "width_b", "yaw_deg", "lateral_gap", "cog_x", "cog_y", "belt_speed",
-    "r_s", "t1", "alpha_k_deg",
+    "r_s", "t1", "alpha_k_deg", "w_n", "d_law_ratio",
 )  # fmt: skip
 UNITS = {
     "mass": "kg", "length_a": "m", "width_b": "m", "yaw_deg": "deg", "lateral_gap": "m",
     "cog_x": "m", "cog_y": "m", "belt_speed": "m/s", "r_s": "m", "t1": "s", "alpha_k_deg": "deg",
+    "w_n": "m/s", "d_law_ratio": "-",
 }  # fmt: skip
+
+
+def _range(values) -> list:
+    """[min, max] of the finite values ([None, None] if none)."""
+    vals = [v for v in values if v is not None and math.isfinite(v)]
+    return [min(vals), max(vals)] if vals else [None, None]
 
 
 def _finite_max(values) -> float | None:
@@ -242,7 +255,7 @@ def summarise(outcomes: Sequence[dict]) -> dict:
         bad = [o for o in outcomes if o["cause"] == cause]
         regions[cause] = {
             "events": len(bad),
-            "bounds": {k: [min(o[k] for o in bad), max(o[k] for o in bad)] for k in REGION},
+            "bounds": {k: _range(o[k] for o in bad) for k in REGION},
             "fences": sorted({o["fence"] for o in bad}),
             "solvers": sorted({o["solver"] for o in bad}),
             "indices": [o["index"] for o in bad][:50],
