@@ -231,6 +231,13 @@ UNITS = {
 }  # fmt: skip
 
 
+#: the columns of a failing region's table of events
+EVENT_COLUMNS = (
+    "index", "fence", "solver", "mass", "length_a", "width_b", "belt_speed", "r_s", "t1",
+    "alpha_k_deg", "w_n", "d_law_ratio", "d_ratio",
+)  # fmt: skip
+
+
 def _range(values) -> list:
     """[min, max] of the finite values ([None, None] if none)."""
     vals = [v for v in values if v is not None and math.isfinite(v)]
@@ -260,6 +267,7 @@ def summarise(outcomes: Sequence[dict]) -> dict:
             "solvers": sorted({o["solver"] for o in bad}),
             "indices": [o["index"] for o in bad][:50],
             "diagnoses": [o["diagnosis"] for o in bad][:10],
+            "rows": [{k: o[k] for k in EVENT_COLUMNS} for o in bad][:50],
         }
     walls = [o["wall"] for o in outcomes]
     return {
@@ -360,5 +368,20 @@ def render_markdown(data: dict) -> str:
         )
         lines += ["", "Events (seed, index): " + ", ".join(
             f"({data['seed']}, {i})" for i in reg["indices"])]  # fmt: skip
+        lines += [
+            "",
+            "Per event: the fastest impact's w_n, the law (16) free-impact D_max at it over the "
+            "deep-penetration limit (above 1: the law's own penetration is past the limit) and "
+            "the failing D over the limit.",
+            "",
+        ]
+        lines += table(
+            ["index", "fence", "settings", "m [kg]", "A x B [m]", "v [m/s]", "R_s [m]", "t1 [s]",
+             "alpha_k [deg]", "w_n [m/s]", "D_law / limit", "D / limit"],
+            [[r["index"], r["fence"], r["solver"], _g(r["mass"]),
+              f"{_g(r['length_a'])} x {_g(r['width_b'])}", _g(r["belt_speed"]), _g(r["r_s"]),
+              _g(r["t1"]), _g(r["alpha_k_deg"]), _g(r["w_n"]), _g(r["d_law_ratio"]),
+              _g(r["d_ratio"])] for r in reg.get("rows", [])],
+        )  # fmt: skip
         lines += [""] + [f"- {d}" for d in reg["diagnoses"]]
     return "\n".join(lines) + "\n"
