@@ -31,6 +31,7 @@ from fence_sorter.capacity.evaluate import planning_scenario
 from fence_sorter.physics.params import DriveParams, ParcelParams
 from fence_sorter.physics.simulate import Scenario, SortingModel, solve_stepper
 from fence_sorter.physics.stepper import run
+from fence_sorter.pool import evaluation_pool
 from fence_sorter.scene import load_scene
 from fence_sorter.verification.report import table
 
@@ -202,8 +203,6 @@ def run_campaign(
 ) -> list[dict]:
     """Events 0 .. events-1 of ``seed`` on the evaluation pool (``fence_sorter.pool``), in
     their order; ``progress(done, failed)`` after each chunk."""
-    from fence_sorter.pool import evaluation_pool  # lazy: multiprocessing
-
     chunks = [range(i, min(i + chunk, events)) for i in range(0, events, chunk)]
     out: list[dict] = []
     failed = 0
