@@ -21,6 +21,7 @@ CAMPAIGNS = {
     "line-scale": "the line over DDS against its units: speed, paced misses, hand-off transit",
     "line-speed": "speed of the ROS-free line: sim time / wall time, median of a few runs",
     "limits": "a user's mixed stream over DDS: sorted parcels against the limits (7)-(12)",
+    "stability-random": "random stability campaign: events over the user's space, failures",
 }
 BENCHMARKS = fence_sorter_cli.CommandLine(
     "python -m benchmarks",

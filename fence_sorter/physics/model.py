@@ -107,6 +107,7 @@ def _packed(sc: Scenario) -> dict:
     y0 = d["initial"][1]
     steep = sc.drive.alpha_k > math.atan2(1.0, max(sc.contact.mu_fence, 1e-12))
     d["use_border"] = use_border = y0 - reach < 1e-3 or steep
+    d["deep"] = deep = sc.contact.deep_penetration * min(body.length_a, body.width_b)
     d["P"] = K.pack(
         alpha_k=sc.drive.alpha_k,
         t1=sc.drive.t1,
@@ -127,10 +128,10 @@ def _packed(sc: Scenario) -> dict:
         flexible=flexible,
         belt=belt,
         external=sc.external_wrench,
+        deep=deep,
     )
     tip_speed = peak_rate(sc.drive) * sc.length
     d["speed_limit"] = 20.0 * (belt + tip_speed) + 10.0
-    d["deep"] = sc.contact.deep_penetration * min(body.length_a, body.width_b)
     parts = ["load", "belt_friction", "fence_contact", "stiff_reference"]
     parts.append("fem_fence" if flexible else "rigid_fence")
     if use_border:

@@ -10,7 +10,7 @@ import pytest
 
 from benchmarks import bench, convergence, dt_max, faults, imports, startup, versus
 from benchmarks.sections import section_of
-from fence_sorter.verification import accuracy, stability_report
+from fence_sorter.verification import accuracy, stability_random, stability_report
 from fence_sorter.verification.report import fmt, table, tables
 
 DOCS = Path(__file__).resolve().parents[2] / "docs" / "reports"
@@ -48,6 +48,15 @@ def test_accuracy_summary_is_computed_from_the_runs() -> None:
     assert rows["default: peak-force, trajectory, final-pose error"].startswith(
         f"{default['errors']['peak_force']:.2e}"
     )
+
+
+def test_random_stability_tables_are_those_of_its_json() -> None:
+    data = json.loads((DOCS / "stability" / "random.json").read_text(encoding="utf-8"))
+    committed = tables((DOCS / "stability" / "random.md").read_text(encoding="utf-8"))
+    rendered = tables(stability_random.render_markdown(data))
+    # the space, the results, and per failing cause its bounds and its events
+    assert len(rendered) == 2 + 2 * len(data["summary"]["regions"])
+    assert committed == rendered
 
 
 def test_stability_readme_tables_are_those_of_its_results_json() -> None:

@@ -290,3 +290,20 @@ def test_impact_peak_stops_past_the_deepest_compression_with_the_same_peak(mass,
         for k_p in (1.72e9, 1.72e12):
             full = K.stiff_impact_peak(mass, speed, b_p, k_p, 4000)
             assert K.stiff_impact_peak_force(mass, speed, b_p, k_p, 4000) == full[0] > 0.0
+
+
+def test_the_peak_between_points_is_the_parabola_vertex_and_no_extrapolation():
+    """Law-shaped peak N = 900 - 4e7 (t - 0.3)^2 sampled at 0.299, 0.3005, 0.302 s: the vertex
+    is the exact 900 N. Three points 1 ns and 1 ms apart on a force chattering by 1 N around
+    886 N: the parabola's vertex would lie at 2.5e5 N; the peak stays within the samples'
+    spread, 886 + 1 N."""
+
+    def law(t):
+        return 900.0 - 4e7 * (t - 0.3) ** 2
+
+    t = (0.299, 0.3005, 0.302)
+    assert K.parabola_peak(t[0], law(t[0]), t[1], law(t[1]), t[2], law(t[2])) == pytest.approx(
+        900.0, rel=1e-12
+    )
+    peak = K.parabola_peak(0.0, 885.0, 1e-9, 886.0, 1e-3, 885.0)
+    assert 886.0 <= peak <= 887.0

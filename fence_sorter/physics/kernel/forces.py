@@ -282,6 +282,33 @@ def belt_multiplier(P, u0, u1, u2, w0, w1, w2, lam, sigma0):
 
 # -- contacts -----------------------------------------------------------------------------------
 @njit(cache=True, _nrt=False, inline="always")
+def _fence_in_load(x, yy, c, s, corners, normals, ux, uy, tx, ty, s_arc, length):
+    """Whether the fence, the line through U(s) along its tangent (tx, ty) cut to the arc range
+    [0, R_z], passes through the load (C_s at (x, yy), yaw cos c, sin s): the load's interval
+    on the line, from its four faces, overlaps the fence's. A corner deeper than the
+    deep-penetration limit behind the fence line whose line misses the load did not get there
+    through the fence surface (that contact would have been diagnosed on the way): it came
+    round the tip and is on the fence's back side, not in the fence. (Shallower, it may be in
+    the fence's end, as a corner sliding on after the tip has left the load through a face.)"""
+    lo = -math.inf
+    hi = math.inf
+    for j in range(4):
+        mx = c * normals[j, 0] - s * normals[j, 1]
+        my = s * normals[j, 0] + c * normals[j, 1]
+        qx = x + c * corners[j, 0] - s * corners[j, 1]
+        qy = yy + s * corners[j, 0] + c * corners[j, 1]
+        g = (ux - qx) * mx + (uy - qy) * my  # U outside face j by g
+        h = tx * mx + ty * my
+        if h > 0.0:
+            hi = min(hi, -g / h)
+        elif h < 0.0:
+            lo = max(lo, -g / h)
+        elif g > 0.0:
+            return False
+    return lo <= hi and s_arc + lo < length and s_arc + hi > 0.0
+
+
+@njit(cache=True, _nrt=False, inline="always")
 def _place(row, s_arc, d, d_rate, px, py, nx, ny, vsx, vsy):
     """The geometry of a contact in its slot: arc position, D, Ddot, point, normal, surface
     velocity (:func:`_add` reads them back)."""
@@ -422,6 +449,10 @@ def _evaluate(model, alpha, rate, accel, ca, sa, y, c, s, lam, weight, ev):
             vux, vuy = -rate * s_arc * sa, rate * s_arc * ca
         nx, ny = -ty, tx
         d = (ux - px) * nx + (uy - py) * ny
+        if d > P[0].deep and not _fence_in_load(
+            x, yy, c, s, corners, normals, ux, uy, tx, ty, s_arc, length
+        ):
+            continue  # deep behind the fence line, off the fence: round the tip, no contact
         vpx = vx - om * (py - yy)
         vpy = vy + om * (px - x)
         d_rate = (vux - vpx) * nx + (vuy - vpy) * ny
@@ -434,17 +465,21 @@ def _evaluate(model, alpha, rate, accel, ca, sa, y, c, s, lam, weight, ev):
             _place(out[k], s_arc, d, d_rate, px, py, nx, ny, vux, vuy)
             _add(model, ev, k, tx, ty, slide, y, lam, weight)
     # the fence tip inside the load (past a corner that slid off it, or pressed into a face
-    # beyond the last pushing corner): it presses on the face that faces the fence (outward
-    # normal most against the fence normal), the depth is the tip's distance to that face's
-    # plane, which starts from 0 as the tip enters through it and equals the corner's D when a
-    # corner of a face along the fence slides off (continuous hand-over), and the force acts
-    # along the face normal: the gradient of the potential k_p D^5 / 5, zero at release.
+    # beyond the last pushing corner): it presses on the face its normal ray leaves the load
+    # through (from the tip against the fence normal n: least depth / cos(n, -m) over the faces
+    # with outward normal m against n), the depth is the tip's distance to that face's plane,
+    # which starts from 0 as the tip enters through it; the ray leaves through a corner exactly
+    # when that corner's arc is R_z, so a corner of a face along the fence sliding off hands its
+    # D over to the tip on that face; the force acts along the face normal: the gradient of the
+    # potential k_p D^5 / 5, zero at release. (The face merely most against n, whatever the
+    # tip's position, is the far face of a load yawed past 45 deg against the fence with the
+    # tip in its near face: D jumped from cm to the load's length.)
     # (Measuring the depth along the fence normal and pushing along it did work in a closed
     # elastic cycle; starting the contact only once a corner had passed the tip let it appear at
     # finite depth.)
     if use_tip:
         exit_face = -1
-        facing = -math.inf
+        ray = math.inf
         depth = 0.0
         fnx = fny = 0.0
         for k in range(4):
@@ -457,8 +492,8 @@ def _evaluate(model, alpha, rate, accel, ca, sa, y, c, s, lam, weight, ev):
                 exit_face = -1
                 break
             cos_dir = -(ntx * mx + nty * my)
-            if cos_dir > facing:
-                facing = cos_dir
+            if cos_dir > 0.0 and inside < ray * cos_dir:
+                ray = inside / cos_dir
                 exit_face = k
                 depth = inside
                 fnx, fny = -mx, -my  # on the load: pushed away from the tip

@@ -60,6 +60,7 @@ PARAMS = _record(
         ("ext_y", "f8"),
         ("ext_m", "f8"),
         ("margin", "f8"),  # cheap-reject margin beyond the deflection [m]
+        ("deep", "f8"),  # deep-penetration depth [m]: deeper off the fence is round the tip
     ]
 )
 
@@ -86,6 +87,7 @@ def pack(
     belt,
     external,
     margin=0.05,
+    deep=np.inf,
 ) -> np.ndarray:
     """The parameters of one event: an array of one :data:`PARAMS` record (SI units)."""
     # one tuple, one array (a NumPy field assignment each costs ~1 us on a cold cache; a model
@@ -93,7 +95,7 @@ def pack(
     row = (
         alpha_k, t1, mass, inertia, f_max, t_max, b_p * mass**0.4, k_p, mu2, v_min, phidot_min,
         length, dl, n_el, float(use_border), float(use_tip), float(flexible), belt, *external,
-        margin,
+        margin, deep,
     )  # fmt: skip
     return np.array([row], dtype=PARAMS)
 

@@ -104,7 +104,12 @@ def classify_code(out, normals, phi, touched, flush):
 
 @njit(cache=True, _nrt=False)
 def parabola_peak(t0, n0, t1, n1, t2, n2):
-    """Vertex value of the parabola through three points with n1 >= n0, n2 (else n1)."""
+    """Vertex value of the parabola through three points with n1 >= n0, n2 (else n1), at most
+    n1 + max(n1 - n0, n1 - n2).
+
+    Equally spaced, the vertex lies at most a quarter of that above n1; the cap binds only for
+    very uneven spacing, where the vertex is an extrapolation: three points 1 ns and 1 ms apart
+    on a force chattering by 1 N in 900 N put it at 3.4e6 N."""
     d0, d2 = t0 - t1, t2 - t1
     if d0 >= 0.0 or d2 <= 0.0:
         return n1
@@ -115,7 +120,7 @@ def parabola_peak(t0, n0, t1, n1, t2, n2):
     d = -b / (2.0 * c)
     if not d0 <= d <= d2:
         return n1
-    return n1 + b * d + c * d * d
+    return min(n1 + b * d + c * d * d, n1 + max(n1 - n0, n1 - n2))
 
 
 @njit(cache=True, _nrt=False)
