@@ -361,13 +361,18 @@ def handle_parcel(node: ControllerNode, msg):
     # the real-time factor in sim time) for the message; the planning time itself is checked
     # after planning: a plan that took too long for its own stroke is made again from the
     # new time (its evaluations are cached, so that is quick)
-    plan = node.planner.plan(req, t_now + rtf * DELIVERY_ALLOWANCE, commit=False)
+    # the planner evaluates until its stroke is verified or the command's deadline comes (the
+    # front at the last R_s less start_margin, at the real-time factor seen)
+    t_plan = t_now + rtf * DELIVERY_ALLOWANCE
+    deadline = node.planner.deadline(req, t_plan, rtf, time.perf_counter())
+    plan = node.planner.plan(req, t_plan, commit=False, deadline=deadline, rtf=rtf)
     if plan.feasible:
         t_after = node.get_clock().now().nanoseconds * 1e-9
         earliest = t_after + rtf * DELIVERY_ALLOWANCE + node.config.start_margin
         if plan.start_time < earliest:
             stats.replans += 1
-            plan = node.planner.plan(req, t_after + rtf * DELIVERY_ALLOWANCE, commit=False)
+            t_plan = t_after + rtf * DELIVERY_ALLOWANCE
+            plan = node.planner.plan(req, t_plan, commit=False, deadline=deadline, rtf=rtf)
     if plan.feasible:
         node.planner.busy_until = plan.end_time
     stats.evaluations += node.planner.evaluations - evals0
