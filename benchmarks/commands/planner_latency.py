@@ -37,6 +37,7 @@ WARMUP_PARCELS, WARMUP_SEED, WARMUP_TIME = 400, 987654321, 8.0
 #: the settings compared: name -> PlannerConfig fields over the defaults
 SETTINGS = {
     "plant + uncertainty set (default)": {},
+    "plant, mu1 and mu2 exact": dict(uncertainty_mu=0.0),
     "plant, exact figures": dict(uncertainty_mass=0.0, uncertainty_mu=0.0, uncertainty_size=0.0),
     "stiff fence, exact figures": dict(
         fence_model="stiff", uncertainty_mass=0.0, uncertainty_mu=0.0, uncertainty_size=0.0
@@ -50,7 +51,12 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scene", default="impact_flexible")
     parser.add_argument("--belt-speed", type=float, default=2.0, metavar="M_S")
     parser.add_argument("--stream", default="mixed")
-    parser.add_argument("--rate-factor", type=float, default=2.0, metavar="X")
+    parser.add_argument(
+        "--rate-factor",
+        default="2",
+        metavar="X[,X...]",
+        help="times the stream's own rate, one run each (default 2)",
+    )
     parser.add_argument("--parcels", type=int, default=150, metavar="N")
     parser.add_argument("--out", default="docs/reports/planner.md", metavar="FILE")
     parser.add_argument("--json", default="docs/reports/planner.json", metavar="FILE")
@@ -63,8 +69,12 @@ def _error(msg: str) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    if not 0.1 <= args.rate_factor <= 20.0:
-        return _error(f"--rate-factor must be in [0.1, 20], got {args.rate_factor:g}")
+    try:
+        factors = [float(x) for x in args.rate_factor.split(",")]
+    except ValueError:
+        factors = [math.nan]
+    if not all(0.1 <= f <= 20.0 for f in factors):
+        return _error(f"--rate-factor must be numbers in [0.1, 20], got {args.rate_factor!r}")
     if not 1 <= args.parcels <= 100000:
         return _error(f"--parcels must be in [1, 100000], got {args.parcels}")
     if not 0.1 <= args.belt_speed <= 10.0:
@@ -77,27 +87,30 @@ def run(args: argparse.Namespace) -> int:
         cfg = StreamConfig.from_yaml(args.stream)
     except (SceneError, StreamError, ParameterError, OSError) as exc:
         return _error(str(exc))
-    cfg = replace(cfg, rate_pcs_h=cfg.rate_pcs_h * args.rate_factor)
     v = base.conveyor.belt_speed
-    stream = generate(cfg, v, count=args.parcels)
-    warm = generate(cfg, v, count=WARMUP_PARCELS, seed=WARMUP_SEED)
-    results = {}
-    for name, fields in SETTINGS.items():
-        results[name] = one_setting(base, stream, warm, fields)
-        print_row(name, results[name])
+    runs = []
+    for factor in factors:
+        c = replace(cfg, rate_pcs_h=cfg.rate_pcs_h * factor)
+        stream = generate(c, v, count=args.parcels)
+        warm = generate(c, v, count=WARMUP_PARCELS, seed=WARMUP_SEED)
+        results = {}
+        for name, fields in SETTINGS.items():
+            results[name] = one_setting(base, stream, warm, fields)
+            print_row(f"x{factor:g} {name}", results[name])
+        runs.append({"rate_factor": factor, "rate_pcs_h": c.rate_pcs_h, "settings": results})
     data = {
         "command": (
             f"python -m benchmarks planner-latency --scene {shlex.quote(args.scene)} "
             f"--belt-speed {args.belt_speed:g} --stream {shlex.quote(args.stream)} "
-            f"--rate-factor {args.rate_factor:g} --parcels {args.parcels}"
+            f"--rate-factor {','.join(f'{f:g}' for f in factors)} --parcels {args.parcels}"
         ),
         "commit": git_revision(),
         "date": time.strftime("%Y-%m-%d", time.gmtime()),
         "cpus": os.cpu_count(),
         "load_average": os.getloadavg()[0],
-        "rate_pcs_h": cfg.rate_pcs_h,
         "belt_speed": v,
-        "settings": results,
+        "stream": args.stream,
+        "runs": runs,
     }
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
@@ -207,42 +220,48 @@ def print_row(name: str, r: dict) -> None:
 
 
 def render(data: dict) -> str:
-    rows = []
-    for name, r in data["settings"].items():
-        o = r["over_limit_on_plant"]
-        w = r["worst_on_plant"]
-        declines = ", ".join(f"{k}: {n}" for k, n in r["declines"].items()) or "none"
-        rows.append(
-            f"| {name} | {r['strokes']} / {r['parcels']} | {o['8']} | {o['10']} | {o['11']} "
-            f"| {o['12']} | {w['impact_speed']:.2f} / {w['peak_accel']:.0f} / "
-            f"{w['exit_speed']:.2f} | {r['mean_W_t_pcs_h']:.0f} "
-            f"| {r['evaluations_per_parcel']:.1f} | {r['latency_p50_ms']:.1f} "
-            f"({r['latency_p50_ms_evaluated']:.1f}) "
-            f"| {r['latency_p99_ms']:.1f} | {declines} |"
+    sections = []
+    for run_ in data["runs"]:
+        rows = []
+        for name, r in run_["settings"].items():
+            o = r["over_limit_on_plant"]
+            w = r["worst_on_plant"]
+            declines = ", ".join(f"{k}: {n}" for k, n in r["declines"].items()) or "none"
+            rows.append(
+                f"| {name} | {r['strokes']} / {r['parcels']} | {o['8']} | {o['10']} | {o['11']} "
+                f"| {o['12']} | {w['impact_speed']:.2f} / {w['peak_accel']:.0f} / "
+                f"{w['exit_speed']:.2f} | {r['mean_W_t_pcs_h']:.0f} "
+                f"| {r['evaluations_per_parcel']:.1f} | {r['latency_p50_ms']:.1f} "
+                f"({r['latency_p50_ms_evaluated']:.1f}) | {r['latency_p99_ms']:.1f} "
+                f"| {r['deadline_lead_median_ms']:.0f} ({r['deadline_lead_min_ms']:.0f}) "
+                f"| {declines} |"
+            )
+        sections.append(
+            f"## {run_['rate_factor']:g}x the stream's rate: {run_['rate_pcs_h']:g} pcs/h\n\n"
+            "| planner | strokes / parcels | over (8) | over (10) | over (11) | over (12) "
+            "| worst on the plant | mean W_t [pcs/h] | evaluations / parcel "
+            "| p50 (evaluated) [ms] | p99 [ms] | deadline lead median (min) [ms] | declines |\n"
+            "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n"
+            + "\n".join(rows)
+            + "\n"
         )
-    first = next(iter(data["settings"].values()))
+    first = next(iter(data["runs"][0]["settings"].values()))
     return (
         "# Planner: strokes on the plant, price and latency\n\n"
         f"`{data['command']}` at commit {data['commit']}, {data['date']}, on this machine "
-        f"({data['cpus']} CPUs, shared; load average {data['load_average']:.2f}; figures also "
-        "in [planner.json](planner.json)).\n\n"
-        f"The controller's loop without ROS at real time: {first['parcels']} parcels offered at "
-        f"{data['rate_pcs_h']:g} pcs/h on a belt at {data['belt_speed']:g} m/s, each planned "
-        "with its command's deadline (the front at R_s_max less start_margin, less "
-        "deadline_margin), then its stroke run on the plant (the scene's flexible fence at "
-        "the scene's own solver settings, the exact parcel). Over: strokes whose plant run "
-        "breaks (8) (not sorted), (10) w_n > 2.4 m/s, (11) a_N > 300 m/s^2 or (12) exit "
-        "speed > 2.5 m/s. Worst: the largest w_n [m/s] / a_N [m/s^2] / exit speed [m/s] on the "
-        "plant. Latency: wall time from the parcel's turn to its plan (re-plan included).\n\n"
-        "| planner | strokes / parcels | over (8) | over (10) | over (11) | over (12) "
-        "| worst on the plant | mean W_t [pcs/h] | evaluations / parcel | p50 (evaluated) [ms] "
-        "| p99 [ms] "
-        "| declines |\n"
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n"
-        + "\n".join(rows)
-        + "\n\n"
-        f"Deadline lead (command deadline less the parcel's turn): median "
-        f"{first['deadline_lead_median_ms']:.0f} ms, smallest {first['deadline_lead_min_ms']:.0f}"
-        f" ms; smallest slack left at the command: {first['slack_min_ms']:.0f} ms (default "
-        "planner).\n"
+        f"({data['cpus']} CPUs, shared; load average {data['load_average']:.2f} at the end; "
+        "figures also in [planner.json](planner.json)).\n\n"
+        f"The controller's loop without ROS at real time: {first['parcels']} parcels of the "
+        f"`{data['stream']}` stream on a belt at {data['belt_speed']:g} m/s reach the planner "
+        "at their scan time, one after the other; each is planned with its command's deadline "
+        "(the front at R_s_max less start_margin, less deadline_margin; the lead is that "
+        "deadline less the parcel's turn, shorter when it waited for the one before), then "
+        "its stroke is run on the plant (the scene's flexible fence at the scene's own solver "
+        "settings, the exact parcel). Over: strokes whose plant run breaks (8) (not sorted), "
+        "(10) w_n > 2.4 m/s, (11) a_N > 300 m/s^2 or (12) exit speed > 2.5 m/s. Worst: the "
+        "largest w_n [m/s] / a_N [m/s^2] / exit speed [m/s] on the plant. Latency: wall time "
+        "from the parcel's turn to its plan (re-plan included); p50 over every parcel and, in "
+        "brackets, over those with at least one evaluation. W_t (1) is each stroke's own "
+        "capacity; a single fence declines most parcels as fence busy at these rates.\n\n"
+        + "\n".join(sections)
     )

@@ -4,9 +4,8 @@ Candidates (R_s, t1) from the ranges (3) and (5) are ordered once by W_t (1) (t_
 then the gentler stroke first). For a load, the candidates its timing admits (the load front
 must still be upstream of R_s when the command is out, the fence must be free) are tried: the
 stroke chosen for its load class (or the nearest class, or the decision table's) first, then
-a few in W_t order, then on an even spread over the rest (feasibility is not monotone along
-the order), until one is feasible, the deadline comes or the safety cap of evaluations is
-reached.
+W_t order, until one is feasible, the command's deadline comes or the safety cap of
+evaluations is reached.
 
 Every candidate is evaluated on the plant's model (the scene's fence, flexible where the
 scene's is) with the exact load (its own A, B, mass, C_s offsets, gap, yaw, mu1, mu2), and is
@@ -33,7 +32,6 @@ from fence_sorter.capacity.constraints import (
 from fence_sorter.capacity.decision_table import DecisionTable
 from fence_sorter.capacity.evaluate import StrokeEvaluation, evaluate_stroke, planning_scenario
 from fence_sorter.capacity.planner_config import PlannerConfig
-from fence_sorter.capacity.uncertainty import spread_order
 from fence_sorter.codes import BUDGET_REASON, OutcomeCode
 from fence_sorter.physics.params import ParcelParams
 from fence_sorter.physics.simulate import Scenario
@@ -44,8 +42,6 @@ HOPELESS_AFTER = 3
 HOPELESS_RATE = 0.5
 #: evaluations per load class during the warm-up (it also learns which candidates never work)
 WARMUP_BUDGET = 12
-#: candidates tried in plain W_t order before the even spread over the rest
-LINEAR_FIRST = 4
 #: exact-load verdicts kept (a re-plan of the same parcel, or the same parcel again)
 CACHE_SIZE = 20000
 
@@ -302,24 +298,22 @@ class Planner:
     def order(self, req: LoadRequest, now: float, key: tuple, use_hint: bool) -> list:
         """The admissible candidates in the order they are tried: the decision table's
         stroke (unless the class has a chosen one), the class's (or nearest class's) chosen
-        stroke, LINEAR_FIRST in W_t order, then an even spread over the rest; candidates
-        that failed for this class or for most loads go behind the others."""
+        stroke, then W_t order, the candidates that failed for this class or for most loads
+        behind the others. With a deadline rather than a count as the budget, plain W_t order
+        finds the best capacity the time allows."""
         cands = self.admissible(req, now)
         bad = {c for c in cands if self.hopeless(c) or self.class_verdict.get((key, c)) is False}
-        good = [c for c in cands if c not in bad]
-        rest = [c for c in cands if c in bad]
-        head = good[:LINEAR_FIRST]
-        tail = good[LINEAR_FIRST:]
-        ordered = head + [tail[i] for i in spread_order(len(tail))] + rest
-        firsts = []
-        if key not in self.chosen:
-            firsts.append(self.table_candidate(req, now))
-        if use_hint:
-            firsts.append(self.hint(key))
-        for cand in reversed(firsts):
-            if cand is not None and cand in ordered:
-                ordered.remove(cand)
-                ordered.insert(0, cand)
+        ordered = [c for c in cands if c not in bad] + [c for c in cands if c in bad]
+        hint = self.hint(key) if use_hint else None
+        if hint is not None and hint in ordered:
+            ordered.remove(hint)
+            ordered.insert(0, hint)
+        # the table's stroke (admitted, on the grid or not) first of all
+        first = self.table_candidate(req, now) if key not in self.chosen else None
+        if first is not None:
+            if first in ordered:
+                ordered.remove(first)
+            ordered.insert(0, first)
         return ordered
 
     def plan(

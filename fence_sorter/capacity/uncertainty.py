@@ -16,7 +16,6 @@ factor on the flexible fence of the default scene at 2 m/s (docs/guide/controlle
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 
 from fence_sorter.physics.params import ParcelParams, check_range
@@ -99,27 +98,3 @@ class UncertaintySet:
         m1 = max(mu1 + corner.mu_belt * self.mu, 0.0)
         m2 = max(mu2 + corner.mu_fence * self.mu, 0.0)
         return p, m1, m2
-
-
-def spread_order(n: int) -> list[int]:
-    """0..n-1 in an order whose every prefix is spread evenly over the range (bisection
-    midpoints: 0, n-1, the middle, the quarters, ...)."""
-    if n <= 0:
-        return []
-    out = [0]
-    seen = {0}
-    if n > 1:
-        out.append(n - 1)
-        seen.add(n - 1)
-    step = 1
-    while len(out) < n:
-        step *= 2
-        for k in range(1, step, 2):
-            i = int(math.floor(k * (n - 1) / step + 0.5))
-            if i not in seen:
-                seen.add(i)
-                out.append(i)
-        if step > 2 * n:
-            out += [i for i in range(n) if i not in seen]
-            break
-    return out

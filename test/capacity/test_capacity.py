@@ -196,7 +196,10 @@ def test_planner_passes_a_refused_stroke_over_for_the_next_feasible_one(base) ->
 
 def test_lower_friction_gives_no_lower_capacity(base) -> None:
     """Paper, Fig. 4: smaller mu1, mu2 -> higher (here: not lower) capacity."""
-    cfg = PlannerConfig(max_evaluations=400)  # linear over all candidates: the true first
+    # every candidate in W_t order, the figures exact (the paper's curves): the true first
+    cfg = PlannerConfig(
+        max_evaluations=400, uncertainty_mass=0.0, uncertainty_mu=0.0, uncertainty_size=0.0
+    )
     p = ParcelParams(0.7, 0.1, 0.1, 5.0, -0.35, -0.05, 0.0, 0.0)
     caps = []
     for mu1, mu2 in ((0.65, 0.35), (0.3, 0.15)):

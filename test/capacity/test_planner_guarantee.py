@@ -10,7 +10,7 @@ from dataclasses import replace
 import pytest
 
 from fence_sorter.capacity import LoadRequest, Planner, PlannerConfig, evaluate_stroke
-from fence_sorter.capacity.uncertainty import CORNERS, UncertaintySet, spread_order
+from fence_sorter.capacity.uncertainty import CORNERS, UncertaintySet
 from fence_sorter.codes import OutcomeCode
 from fence_sorter.physics.params import ParameterError, ParcelParams
 from fence_sorter.scene import load_scene
@@ -127,13 +127,6 @@ def test_uncertainty_corners_by_hand() -> None:
         PlannerConfig.from_mapping({"uncertainty_mu": 0.9})
     cfg = PlannerConfig.from_mapping({"uncertainty_size": 0.002, "uncertainty_mass": 0.1})
     assert cfg.uncertainty == UncertaintySet(0.1, 0.05, 0.002)
-
-
-def test_spread_order_covers_every_candidate_evenly() -> None:
-    for n in (0, 1, 2, 5, 17, 64):
-        order = spread_order(n)
-        assert sorted(order) == list(range(n))
-    assert spread_order(9)[:5] == [0, 8, 4, 2, 6]
 
 
 def test_deadline_is_the_last_start_at_the_real_time_factor(plant) -> None:
