@@ -385,7 +385,8 @@ class Planner:
             self.class_verdict[(key, cand)] = ev.feasible
             if not ev.feasible:
                 continue
-            self.chosen.setdefault(key, cand)
+            if not any(e.feasible for e in plan.tried[:-1]):
+                self.chosen[key] = cand  # the class's stroke: the first feasible, by physics
             start = self.start_of(req, cand)
             if accept is not None and not accept(ev, start, start + 2.0 * ev.t1):
                 plan.refused += 1
