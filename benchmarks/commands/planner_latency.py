@@ -9,7 +9,7 @@ the plant, the scene's own settings with the exact parcel (``evaluate_stroke`` o
 and checked against (8), (10)-(12). Per planner setting (the default; the same without the
 uncertainty set; the stiff fence without it): parcels over each limit on the plant, declines
 by reason and constraint, mean W_t (1) of the strokes, evaluations per parcel, planning
-latency p50/p99 against the deadline's lead. Prints a table and writes ``--out``
+latency p50/p99 against the time to the deadline. Prints a table and writes ``--out``
 (docs/reports/planner.md) and ``--json``; ``''`` writes nothing.
 """
 
@@ -132,7 +132,7 @@ def one_setting(base, stream, warm, fields: dict) -> dict:
     clock = 0.0  # sim time = wall time since the first scan (rtf 1)
     over: Counter[int] = Counter()
     declines: Counter[str] = Counter()
-    latency, slack, lead, evals, w_t = [], [], [], [], []
+    latency, slack, ahead, evals, w_t = [], [], [], [], []
     worst = {"impact_speed": 0.0, "peak_accel": 0.0, "exit_speed": 0.0}
     planned = 0
     for s in stream:
@@ -154,7 +154,7 @@ def one_setting(base, stream, warm, fields: dict) -> dict:
         clock = now + done - wall0
         latency.append(done - wall0)
         slack.append(deadline - done)
-        lead.append(deadline - wall0)
+        ahead.append(deadline - wall0)
         evals.append(n)
         if not plan.feasible:
             declines[decline_key(plan)] += 1
@@ -190,8 +190,8 @@ def one_setting(base, stream, warm, fields: dict) -> dict:
         ),
         "latency_p99_ms": 1e3 * q[98] if q else math.nan,
         "latency_max_ms": 1e3 * max(latency, default=math.nan),
-        "deadline_lead_median_ms": 1e3 * statistics.median(lead) if lead else math.nan,
-        "deadline_lead_min_ms": 1e3 * min(lead, default=math.nan),
+        "time_to_deadline_median_ms": 1e3 * statistics.median(ahead) if ahead else math.nan,
+        "time_to_deadline_min_ms": 1e3 * min(ahead, default=math.nan),
         "slack_min_ms": 1e3 * min(slack, default=math.nan),
     }
 
@@ -212,9 +212,9 @@ def print_row(name: str, r: dict) -> None:
         f"(10) {o['10']} (11) {o['11']} (12) {o['12']}; mean W_t {r['mean_W_t_pcs_h']:.0f} "
         f"pcs/h; {r['evaluations_per_parcel']:.1f} evaluations/parcel; latency p50 "
         f"{r['latency_p50_ms']:.1f} ms ({r['latency_p50_ms_evaluated']:.1f} ms of those "
-        f"evaluated), p99 {r['latency_p99_ms']:.1f} ms against a deadline "
-        f"lead of {r['deadline_lead_median_ms']:.0f} ms (median, min "
-        f"{r['deadline_lead_min_ms']:.0f}); declines {r['declines']}",
+        f"evaluated), p99 {r['latency_p99_ms']:.1f} ms against "
+        f"{r['time_to_deadline_median_ms']:.0f} ms to the deadline (median, min "
+        f"{r['time_to_deadline_min_ms']:.0f}); declines {r['declines']}",
         flush=True,
     )
 
@@ -233,14 +233,15 @@ def render(data: dict) -> str:
                 f"{w['exit_speed']:.2f} | {r['mean_W_t_pcs_h']:.0f} "
                 f"| {r['evaluations_per_parcel']:.1f} | {r['latency_p50_ms']:.1f} "
                 f"({r['latency_p50_ms_evaluated']:.1f}) | {r['latency_p99_ms']:.1f} "
-                f"| {r['deadline_lead_median_ms']:.0f} ({r['deadline_lead_min_ms']:.0f}) "
+                f"| {r['time_to_deadline_median_ms']:.0f} ({r['time_to_deadline_min_ms']:.0f}) "
                 f"| {declines} |"
             )
         sections.append(
             f"## {run_['rate_factor']:g}x the stream's rate: {run_['rate_pcs_h']:g} pcs/h\n\n"
             "| planner | strokes / parcels | over (8) | over (10) | over (11) | over (12) "
             "| worst on the plant | mean W_t [pcs/h] | evaluations / parcel "
-            "| p50 (evaluated) [ms] | p99 [ms] | deadline lead median (min) [ms] | declines |\n"
+            "| p50 (evaluated) [ms] | p99 [ms] | to the deadline, median (min) [ms] "
+            "| declines |\n"
             "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n"
             + "\n".join(rows)
             + "\n"
@@ -254,11 +255,12 @@ def render(data: dict) -> str:
         f"The controller's loop without ROS at real time: {first['parcels']} parcels of the "
         f"`{data['stream']}` stream on a belt at {data['belt_speed']:g} m/s reach the planner "
         "at their scan time, one after the other; each is planned with its command's deadline "
-        "(the front at R_s_max less start_margin, less deadline_margin; the lead is that "
+        "(the front at R_s_max less start_margin, less deadline_margin; the time to it is that "
         "deadline less the parcel's turn, shorter when it waited for the one before), then "
         "its stroke is run on the plant (the scene's flexible fence at the scene's own solver "
         "settings, the exact parcel). Over: strokes whose plant run breaks (8) (not sorted), "
-        "(10) w_n > 2.4 m/s, (11) a_N > 300 m/s^2 or (12) exit speed > 2.5 m/s. Worst: the "
+        "(10) w_n > 2.4 m/s, (11) a_N > 300 m/s^2 or (12) exit speed > 2.5 m/s (a plant run "
+        "that failed counts over each). Worst: the "
         "largest w_n [m/s] / a_N [m/s^2] / exit speed [m/s] on the plant. Latency: wall time "
         "from the parcel's turn to its plan (re-plan included); p50 over every parcel and, in "
         "brackets, over those with at least one evaluation. W_t (1) is each stroke's own "
