@@ -268,11 +268,12 @@ class Planner:
     def deadline(self, req: LoadRequest, now: float, rtf: float, wall_now: float) -> float:
         """The latest wall time (``time.perf_counter``) for the load's command to be out:
         the front reaches the largest R_s less ``start_margin`` then, at ``rtf`` sim seconds
-        per wall second, less ``deadline_margin``."""
+        per wall second, less ``deadline_margin``; ``min_planning_time`` after ``wall_now``
+        at the least."""
         c = self.config
         last = max(r for r, _ in self.candidate_list)
-        lead = self.start_of(req, (last, 0.0)) - c.start_margin - now
-        return wall_now + lead / max(rtf, 1e-9) - c.deadline_margin
+        left = self.start_of(req, (last, 0.0)) - c.start_margin - now
+        return wall_now + max(left / max(rtf, 1e-9) - c.deadline_margin, c.min_planning_time)
 
     def table_candidate(self, req: LoadRequest, now: float) -> tuple[float, float] | None:
         """The decision table's stroke for the load's class, if a table is configured and

@@ -29,6 +29,9 @@ class PlannerConfig:
     fence_model: str = "scene"  # "scene" (the plant's fence) or "stiff"
     max_evaluations: int = 60  # safety cap of twin evaluations per load (cached ones are free)
     deadline_margin: float = 0.02  # wall time kept before the command's deadline [s]
+    # the least wall time a deadline gives (an unpaced simulator holds a parcel for its
+    # command, so sim time over the real-time factor seen is not the time left there) [s]
+    min_planning_time: float = 0.2
     uncertainty_mass: float = 0.05  # relative half-width of the load's mass
     uncertainty_mu: float = 0.05  # absolute half-width of mu1 and mu2
     uncertainty_size: float = 0.005  # half-width of A and B [m]
@@ -62,6 +65,7 @@ class PlannerConfig:
         "quantum_mu": (1e-4, 1.0, ""),
         "min_exit_speed": (0.0, 100.0, "m/s"),
         "deadline_margin": (0.0, 10.0, "s"),
+        "min_planning_time": (0.0, 10.0, "s"),
         "uncertainty_mass": (0.0, 0.5, ""),
         "uncertainty_mu": (0.0, 0.5, ""),
         "uncertainty_size": (0.0, 0.1, "m"),

@@ -365,14 +365,14 @@ def handle_parcel(node: ControllerNode, msg):
     # front at the last R_s less start_margin, at the real-time factor seen)
     t_plan = t_now + rtf * DELIVERY_ALLOWANCE
     deadline = node.planner.deadline(req, t_plan, rtf, time.perf_counter())
-    plan = node.planner.plan(req, t_plan, commit=False, deadline=deadline, rtf=rtf)
+    plan = node.planner.plan(req, t_plan, commit=False, deadline=deadline)
     if plan.feasible:
         t_after = node.get_clock().now().nanoseconds * 1e-9
         earliest = t_after + rtf * DELIVERY_ALLOWANCE + node.config.start_margin
         if plan.start_time < earliest:
             stats.replans += 1
             t_plan = t_after + rtf * DELIVERY_ALLOWANCE
-            plan = node.planner.plan(req, t_plan, commit=False, deadline=deadline, rtf=rtf)
+            plan = node.planner.plan(req, t_plan, commit=False, deadline=deadline)
     if plan.feasible:
         node.planner.busy_until = plan.end_time
     stats.evaluations += node.planner.evaluations - evals0

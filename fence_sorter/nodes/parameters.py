@@ -467,6 +467,15 @@ PLANNER_PARAMETERS: tuple[ParamSpec, ...] = (
         10.0,
     ),
     ParamSpec(
+        "min_planning_time",
+        0.2,
+        "Least wall time a command's deadline gives the planner [s] (an unpaced simulator "
+        "holds a parcel for its command)",
+        False,
+        0.0,
+        10.0,
+    ),
+    ParamSpec(
         "uncertainty_mass",
         0.05,
         "Relative half-width of a parcel's mass a stroke is verified over",

@@ -131,9 +131,12 @@ def test_uncertainty_corners_by_hand() -> None:
 
 def test_deadline_is_the_last_start_at_the_real_time_factor(plant) -> None:
     """The front reaches R_s_max = 1 m from the scan line at -3 m in 4 m / v = 2 s; less
-    start_margin 0.1 s and, at rtf 4, a quarter of that in wall time, less the margin."""
+    start_margin 0.1 s and, at rtf 4, a quarter of that in wall time, less the margin; never
+    less than min_planning_time."""
     planner = Planner(plant, PlannerConfig(deadline_margin=0.02))
     req = LoadRequest(1, ParcelParams(), scan_time=10.0, scan_position_x=SCAN_X)
     d = planner.deadline(req, now=10.5, rtf=4.0, wall_now=100.0)
     assert d == pytest.approx(100.0 + (10.0 + 4.0 / 2.0 - 0.1 - 10.5) / 4.0 - 0.02)
     assert math.isfinite(planner.deadline(req, now=10.5, rtf=0.0, wall_now=0.0))
+    # unpaced (50x: 28 ms of wall time left): min_planning_time, 0.2 s, at the least
+    assert planner.deadline(req, now=10.5, rtf=50.0, wall_now=100.0) == pytest.approx(100.2)
