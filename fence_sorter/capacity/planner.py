@@ -173,6 +173,7 @@ class Planner:
         mu2: float,
         cand: tuple[float, float],
         out_of_time: Callable[[], bool] = lambda: False,
+        corners: bool = True,
     ) -> tuple[StrokeEvaluation | None, bool]:
         """(verdict, cached?) of one candidate for the exact load over its uncertainty set.
 
@@ -180,7 +181,10 @@ class Planner:
         first failure ends it. The verdict carries the nominal figures; infeasible at a
         corner, it names the corner and the violated constraint; feasible, ``extra['worst']``
         holds the largest w_n, a_N and exit speed over the corners. None: ``out_of_time``
-        said so before the last corner (nothing is cached then)."""
+        said so before the last corner (nothing is cached then). Without ``corners`` only the
+        nominal load is simulated (the warm-up's learning; not cached, it is no verdict)."""
+        if not corners:
+            return self._evaluate(p, mu1, mu2, cand), False
         key = (_load_key(p, mu1, mu2), cand)
         hit = self.cache.get(key)
         if hit is not None:
@@ -328,6 +332,7 @@ class Planner:
         rtf: float | None = None,
         use_hint: bool = True,
         accept: Callable[[StrokeEvaluation, float, float], bool] | None = None,
+        corners: bool = True,
     ) -> Plan:
         """Plan one load at sim time ``now``; with ``commit`` a feasible stroke books the fence.
 
@@ -340,7 +345,8 @@ class Planner:
         ``accept(evaluation, start, end)``: the caller's own test of a feasible stroke and its
         times (a line's swept-sector guard: another parcel in the sector then; a stroke that
         missed this parcel before); a refused stroke is passed over for the next feasible
-        one, and counted in ``Plan.refused``.
+        one, and counted in ``Plan.refused``. ``corners=False``: the nominal load only (the
+        warm-up's; such a plan is no verdict over the uncertainty set).
         """
         wall0 = time.perf_counter()
         evals0 = self.evaluations
@@ -373,7 +379,7 @@ class Planner:
                 if self.start_of(req, cand) < sim_now + margin:
                     left += 1  # too late by now: not evaluated, it counts as left
                     continue
-            ev, cached = self.verify(req.parcel, mu1, mu2, cand, out_of_time)
+            ev, cached = self.verify(req.parcel, mu1, mu2, cand, out_of_time, corners)
             if ev is None:
                 left += 1
                 break
@@ -459,9 +465,11 @@ class Planner:
 
     # -- warm-up ---------------------------------------------------------------------------
     def warm_up(self, loads: Iterable[ParcelParams], time_budget: float = 10.0) -> int:
-        """Plan ``loads`` (timing ignored, up to WARMUP_BUDGET evaluations each, one per load
-        class) to learn the classes' strokes and the candidates that fail; return classes
-        done. The first call compiles/loads the JIT kernel; run this before subscribing."""
+        """Plan ``loads`` at their nominal figures (timing ignored, up to WARMUP_BUDGET
+        evaluations each, one per load class) to learn the classes' strokes and the
+        candidates that fail; return classes done. Nothing is cached as a verdict: each
+        parcel's stroke is verified over its uncertainty set when it is planned. The first
+        call compiles/loads the JIT kernel; run this before subscribing."""
         wall0 = time.perf_counter()
         busy = self.busy_until
         done: set[tuple] = set()
@@ -480,6 +488,7 @@ class Planner:
                 commit=False,
                 budget=WARMUP_BUDGET,
                 deadline=wall0 + time_budget,
+                corners=False,
             )
         self.busy_until = busy
         return len(done)
