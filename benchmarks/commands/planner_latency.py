@@ -58,6 +58,13 @@ def register(parser: argparse.ArgumentParser) -> None:
         help="times the stream's own rate, one run each (default 2)",
     )
     parser.add_argument("--parcels", type=int, default=150, metavar="N")
+    parser.add_argument(
+        "--warmup-time",
+        type=float,
+        default=WARMUP_TIME,
+        metavar="S",
+        help=f"each planner's warm-up, as the controller's warmup_time (default {WARMUP_TIME:g})",
+    )
     parser.add_argument("--out", default="docs/reports/planner.md", metavar="FILE")
     parser.add_argument("--json", default="docs/reports/planner.json", metavar="FILE")
     parser.set_defaults(func=run)
@@ -77,6 +84,8 @@ def run(args: argparse.Namespace) -> int:
         return _error(f"--rate-factor must be numbers in [0.1, 20], got {args.rate_factor!r}")
     if not 1 <= args.parcels <= 100000:
         return _error(f"--parcels must be in [1, 100000], got {args.parcels}")
+    if not 0.0 <= args.warmup_time <= 600.0:
+        return _error(f"--warmup-time must be in [0, 600] s, got {args.warmup_time:g}")
     if not 0.1 <= args.belt_speed <= 10.0:
         return _error(f"--belt-speed must be in [0.1, 10] m/s, got {args.belt_speed:g}")
     from fence_sorter.scene import SceneError, load_scene
@@ -95,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
         warm = generate(c, v, count=WARMUP_PARCELS, seed=WARMUP_SEED)
         results = {}
         for name, fields in SETTINGS.items():
-            results[name] = one_setting(base, stream, warm, fields)
+            results[name] = one_setting(base, stream, warm, fields, args.warmup_time)
             print_row(f"x{factor:g} {name}", results[name])
         runs.append({"rate_factor": factor, "rate_pcs_h": c.rate_pcs_h, "settings": results})
     data = {
@@ -103,6 +112,7 @@ def run(args: argparse.Namespace) -> int:
             f"python -m benchmarks planner-latency --scene {shlex.quote(args.scene)} "
             f"--belt-speed {args.belt_speed:g} --stream {shlex.quote(args.stream)} "
             f"--rate-factor {','.join(f'{f:g}' for f in factors)} --parcels {args.parcels}"
+            + (f" --warmup-time {args.warmup_time:g}" if args.warmup_time != WARMUP_TIME else "")
         ),
         "commit": git_revision(),
         "date": time.strftime("%Y-%m-%d", time.gmtime()),
@@ -121,14 +131,14 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def one_setting(base, stream, warm, fields: dict) -> dict:
+def one_setting(base, stream, warm, fields: dict, warmup_time: float = WARMUP_TIME) -> dict:
     """Plan the stream as the controller does at rtf 1, then run each stroke on the plant."""
     from fence_sorter.capacity import LoadRequest, Planner, PlannerConfig, evaluate_stroke
 
     planner = Planner(base, replace(PlannerConfig(), **fields))
     c = planner.config
     planner.warm_up([s.to_parcel_params() for s in warm[:1]], math.inf)  # the kernel
-    planner.warm_up([s.to_parcel_params() for s in warm if s.divert], WARMUP_TIME)
+    planner.warm_up([s.to_parcel_params() for s in warm if s.divert], warmup_time)
     clock = 0.0  # sim time = wall time since the first scan (rtf 1)
     over: Counter[int] = Counter()
     declines: Counter[str] = Counter()
