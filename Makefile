@@ -51,6 +51,8 @@ reports: bootstrap
 			--rates 2000,3000,4000,6000,8000,12000 --out docs/reports/line-bench.md \
 		&& nice -n 10 python -m benchmarks line-speed four_units --runs 3 \
 			--out docs/reports/line-speed.md --json docs/reports/line-speed.json \
+		&& nice -n 10 python -m benchmarks planner-latency --rate-factor 1,2 \
+			--out docs/reports/planner.md --json docs/reports/planner.json \
 		&& python -m benchmarks line-scale --units 1,2,4,8 --parcels 8 --seed 3 --rtf 1 \
 			--out docs/reports/line-scale.md \
 		&& python -m benchmarks line-scale --units 2,4,8 --parcels 8 --seed 3 --hosts 2 \

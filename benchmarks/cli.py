@@ -17,6 +17,7 @@ CAMPAIGNS = {
     "faults": "fault-injection campaign of the node suite (writes docs/reports/reliability.md)",
     "calibrate-bench": "calibration benchmark: interval coverage, identifiability, wall time",
     "paper-sweep": "the optimisation sweeps of the paper's Figs. 3-10 and the decision table",
+    "planner-latency": "planner latency against the command deadline; its strokes on the plant",
     "line-bench": "saturation curve of a line: sort rate and throughput against induction rate",
     "line-scale": "the line over DDS against its units: speed, paced misses, hand-off transit",
     "line-speed": "speed of the ROS-free line: sim time / wall time, median of a few runs",

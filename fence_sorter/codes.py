@@ -18,6 +18,7 @@ class OutcomeCode(IntEnum):
     MISSED = 4
     REJECTED = 5
     SOLVER_FAILURE = 6
+    NO_STROKE_IN_BUDGET = 7
 
 
 class Stage(IntEnum):
@@ -45,6 +46,19 @@ class StartMode(IntEnum):
 
     AT_RS = 0  # start the working motion when the parcel front reaches r_s
     AT_TIME = 1  # start the working motion at start_time
+
+
+#: the reason of a controller's "no stroke" whose planning ran out of time (deadline or cap)
+#: with candidates left starts with this; a FenceCommand carries the reason, not the code
+BUDGET_REASON = "planning budget ran out"
+
+
+def decline_code(reason: str) -> OutcomeCode:
+    """The outcome of a parcel whose command says "no stroke" with ``reason``:
+    NO_STROKE_IN_BUDGET when planning ran out of time, else NO_FEASIBLE_COMMAND."""
+    if reason.startswith(BUDGET_REASON):
+        return OutcomeCode.NO_STROKE_IN_BUDGET
+    return OutcomeCode.NO_FEASIBLE_COMMAND
 
 
 def code_name(enum: type[IntEnum], value: int) -> str:

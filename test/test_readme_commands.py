@@ -406,6 +406,7 @@ REPORTS = {
     "docs/reports/calibration.md": "python -m benchmarks calibrate-bench",
     "docs/reports/line-bench.md": "--out docs/reports/line-bench.md",
     "docs/reports/line-speed.json": "--json docs/reports/line-speed.json",
+    "docs/reports/planner.json": "planner-latency --rate-factor 1,2",
     "docs/reports/line-scale.json": "line-scale --units 1,2,4,8 --parcels 8 --seed 3 --rtf 1",
     "docs/reports/line-scale-hosts.json": "line-scale --units 2,4,8 --parcels 8 --seed 3 --hosts",
     "docs/reports/startup/README.md": "python -m benchmarks.startup",

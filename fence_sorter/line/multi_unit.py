@@ -157,7 +157,7 @@ class LinePlant:
 
     def warm_up(self, time_budget: float = math.inf) -> None:
         """Fill each planner's cache from the stream's parcels (and load the JIT). Complete
-        by default (about 0.1 s a unit for 200 parcels), so the line's figures do not depend
+        by default (about 1.2 s a unit for 200 parcels), so the line's figures do not depend
         on how busy the machine was while it warmed up; ``time_budget`` [s] is each unit's."""
         loads = [p.spec.to_parcel_params() for p in self.parcels[:200]]
         for u in self.units:

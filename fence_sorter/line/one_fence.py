@@ -28,7 +28,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from fence_sorter.codes import StartMode
+from fence_sorter.codes import StartMode, decline_code
 from fence_sorter.inputs import (
     SCAN_LINE_TOLERANCE,
     ParcelSpec,
@@ -241,7 +241,13 @@ class SortingLine:
             )
         if not cmd.feasible:
             reason = cmd.reason or "the controller found no feasible stroke"
-            self._finish(p, OutcomeCode.NO_FEASIBLE_COMMAND, now, f"no feasible stroke: {reason}")
+            code = decline_code(reason)
+            text = (
+                reason
+                if code is OutcomeCode.NO_STROKE_IN_BUDGET
+                else f"no feasible stroke: {reason}"
+            )
+            self._finish(p, code, now, text)
             return CommandResult(True, "infeasible", reason)
         try:
             validate_command(cmd, self.config.r_s_range)

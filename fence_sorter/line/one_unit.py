@@ -135,12 +135,13 @@ class UnitTraffic:
         cand = self.booking(parcel_id, start, end, alpha_k)
         return guard(cand, own, others, self.bookings, self.width)
 
-    def plan(self, planner: Planner, req: LoadRequest, now: float) -> Plan:
+    def plan(self, planner: Planner, req: LoadRequest, now: float, **options) -> Plan:
         """The planner's first feasible stroke the guard accepts (``commit=False``); none
         accepted: the plan's reason names the guard (``sector_occupied: ...``) and the
-        parcels of the first stroke it refused."""
+        parcels of the first stroke it refused. ``options``: the planner's own (its
+        ``deadline``)."""
         if req.parcel_id not in self.tracks:  # past the fence's reach: no stroke to guard
-            return planner.plan(req, now, commit=False)
+            return planner.plan(req, now, commit=False, **options)
         alpha_k = planner.config.alpha_k
         refusals: list[tuple[Decision, float, float, float, float]] = []
 
@@ -150,9 +151,9 @@ class UnitTraffic:
                 refusals.append((d, ev.r_s, ev.t1, start, end))
             return d.accepted
 
-        plan = planner.plan(req, now, commit=False, accept=clear)
+        plan = planner.plan(req, now, commit=False, accept=clear, **options)
         if not plan.feasible and refusals:
-            plan = self._second_search(planner, req, now, clear) or plan
+            plan = self._second_search(planner, req, now, clear, options) or plan
         if not plan.feasible and refusals:
             d, r_s, t1, start, end = refusals[0]
             who = ", ".join("not yet scanned" if i == UNSCANNED else str(i) for i in d.intruders)
@@ -163,7 +164,7 @@ class UnitTraffic:
             )
         return plan
 
-    def _second_search(self, planner: Planner, req: LoadRequest, now: float, clear):
+    def _second_search(self, planner: Planner, req: LoadRequest, now: float, clear, options):
         """The planner's search again over the admissible candidates whose times alone the
         guard accepts (its search probes a few candidates, spread over all of them); the
         planner's hints stay those of the physics alone. None if none is feasible."""
@@ -183,7 +184,7 @@ class UnitTraffic:
         saved, chosen = planner.candidate_list, dict(planner.chosen)
         planner.candidate_list = [c for c in saved if c in clear_times]  # W_t order kept
         try:
-            plan = planner.plan(req, now, commit=False, accept=clear)
+            plan = planner.plan(req, now, commit=False, accept=clear, **options)
         finally:
             planner.candidate_list, planner.chosen = saved, chosen
         return plan if plan.feasible else None

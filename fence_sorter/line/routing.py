@@ -45,11 +45,14 @@ NO_READ = "no_read"
 NOT_SERVED = "not_served"
 #: the unit is down (its process or host is gone): the line's owner passes the parcel on for it
 UNIT_DOWN = "unit_down"
+#: the planner's cap of evaluations came with candidates left unverified
+PLANNING_BUDGET = "planning_budget"
 #: after its stroke a parcel left on the belt rides at v again within this time [s] (the
 #: solve's settle time, 0.5 s by default, and a reserve)
 SETTLE_SLACK = 1.5
 REASONS = (
     NO_FEASIBLE_STROKE, FENCE_BUSY, SECTOR_OCCUPIED, CHUTE_FULL, NO_READ, NOT_SERVED, UNIT_DOWN,
+    PLANNING_BUDGET,
 )  # fmt: skip
 
 

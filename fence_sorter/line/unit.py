@@ -43,6 +43,7 @@ from fence_sorter.line.routing import (
     NO_FEASIBLE_STROKE,
     NO_READ,
     NOT_SERVED,
+    PLANNING_BUDGET,
     REASONS,
     Booking,
     Decision,
@@ -345,7 +346,10 @@ class LineUnit:
         if not plan.feasible:
             if refusals:
                 return refusals[0], None, None
-            code = FENCE_BUSY if "fence busy" in plan.reason else NO_FEASIBLE_STROKE
+            if plan.budget_ran_out:
+                code = PLANNING_BUDGET
+            else:
+                code = FENCE_BUSY if "fence busy" in plan.reason else NO_FEASIBLE_STROKE
             return Decision(False, code, plan.reason), None, None
         ev = plan.evaluation
         self.planner.busy_until = plan.end_time

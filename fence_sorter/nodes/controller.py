@@ -413,13 +413,18 @@ def plan_parcel(node: ControllerNode, spec: ParcelSpec):
     # the real-time factor in sim time) for the message; the planning time itself is checked
     # after planning: a plan that took too long for its own stroke is made again from the
     # new time (its evaluations are cached, so that is quick)
-    plan = node.traffic.plan(node.planner, req, t_now + rtf * DELIVERY_ALLOWANCE)
+    # the planner evaluates until its stroke is verified or the command's deadline comes (the
+    # front at the last R_s less start_margin, at the real-time factor seen)
+    t_plan = t_now + rtf * DELIVERY_ALLOWANCE
+    deadline = node.planner.deadline(req, t_plan, rtf, time.perf_counter())
+    plan = node.traffic.plan(node.planner, req, t_plan, deadline=deadline)
     if plan.feasible:
         t_after = node.get_clock().now().nanoseconds * 1e-9
         earliest = t_after + rtf * DELIVERY_ALLOWANCE + node.config.start_margin
         if plan.start_time < earliest:
             stats.replans += 1
-            plan = node.traffic.plan(node.planner, req, t_after + rtf * DELIVERY_ALLOWANCE)
+            t_plan = t_after + rtf * DELIVERY_ALLOWANCE
+            plan = node.traffic.plan(node.planner, req, t_plan, deadline=deadline)
     if plan.feasible:
         node.planner.busy_until = plan.end_time
         node.traffic.book(req.parcel_id, plan.start_time, plan.end_time, node.config.alpha_k)

@@ -447,8 +447,58 @@ PLANNER_PARAMETERS: tuple[ParamSpec, ...] = (
         "active_constraints", [7, 8, 9, 10, 11, 12], "Constraints that count, of (7)-(12)", False
     ),
     ParamSpec("pitch_gap", 0.1, "Gap Delta between loads in Delta_c (2) [m]", False, 0.0, 10.0),
-    ParamSpec("fence_model", "stiff", "Fence the planner simulates: stiff | scene", False),
-    ParamSpec("max_evaluations", 6, "Twin evaluations per parcel (cached free)", False, 1, 1000),
+    ParamSpec(
+        "fence_model", "scene", "Fence the planner simulates: scene (the plant's) | stiff", False
+    ),
+    ParamSpec(
+        "max_evaluations",
+        60,
+        "Safety cap of twin evaluations per parcel (the deadline ends planning first)",
+        False,
+        1,
+        1000,
+    ),
+    ParamSpec(
+        "deadline_margin",
+        0.02,
+        "Wall time kept before a command's deadline [s]",
+        False,
+        0.0,
+        10.0,
+    ),
+    ParamSpec(
+        "min_planning_time",
+        0.2,
+        "Least wall time a command's deadline gives the planner [s] (an unpaced simulator "
+        "holds a parcel for its command)",
+        False,
+        0.0,
+        10.0,
+    ),
+    ParamSpec(
+        "uncertainty_mass",
+        0.05,
+        "Relative half-width of a parcel's mass a stroke is verified over",
+        False,
+        0.0,
+        0.5,
+    ),
+    ParamSpec(
+        "uncertainty_mu",
+        0.05,
+        "Half-width of mu1 and mu2 a stroke is verified over",
+        False,
+        0.0,
+        0.5,
+    ),
+    ParamSpec(
+        "uncertainty_size",
+        0.005,
+        "Half-width of A and B a stroke is verified over [m]",
+        False,
+        0.0,
+        0.1,
+    ),
     ParamSpec(
         "decision_table",
         "",

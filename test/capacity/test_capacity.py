@@ -20,6 +20,7 @@ from fence_sorter.capacity import (
     scraping_time,
     stroke_capacity,
 )
+from fence_sorter.codes import OutcomeCode, decline_code
 from fence_sorter.physics.params import ParameterError, ParcelParams
 from fence_sorter.scene import load_scene
 
@@ -78,10 +79,24 @@ def test_infeasible_profile_names_the_constraint(base) -> None:
     assert not ev.feasible
     assert 11 in ev.violated
     assert "(11)" in ev.diagnosis
-    planner = Planner(base, PlannerConfig(profile=tight, max_evaluations=6))
+    # every admissible candidate evaluated: no feasible stroke, naming the constraint
+    planner = Planner(base, PlannerConfig(profile=tight, max_evaluations=1000))
     plan = planner.plan(LoadRequest(1, base.parcel, 0.0, -3.0), now=0.0)
-    assert not plan.feasible
-    assert "(11) acceleration" in plan.reason
+    assert not plan.feasible and plan.code is OutcomeCode.NO_FEASIBLE_COMMAND
+    assert len(plan.tried) == plan.admissible > 6
+    assert 11 in plan.violated and "(11) acceleration" in plan.reason
+    assert plan.reason.startswith("no feasible stroke")
+    # the cap reached with candidates left: the budget ran out, which is not "no stroke"
+    capped = Planner(base, PlannerConfig(profile=tight, max_evaluations=6))
+    plan = capped.plan(LoadRequest(1, base.parcel, 0.0, -3.0), now=0.0)
+    assert not plan.feasible and plan.code is OutcomeCode.NO_STROKE_IN_BUDGET
+    assert plan.evaluations == 6 and len(plan.tried) < plan.admissible
+    assert decline_code(plan.reason) is OutcomeCode.NO_STROKE_IN_BUDGET
+    # a deadline long past: nothing evaluated, the budget ran out
+    late = Planner(base, PlannerConfig()).plan(
+        LoadRequest(1, base.parcel, 0.0, -3.0), now=0.0, deadline=-math.inf
+    )
+    assert late.code is OutcomeCode.NO_STROKE_IN_BUDGET and late.evaluations == 0
 
 
 # -- planner -----------------------------------------------------------------------------------
@@ -100,20 +115,15 @@ def test_planner_choice_satisfies_every_constraint_it_reports(base) -> None:
         assert ev.feasible and ev.sorted
         assert all(ev.margins[c] <= 0.0 for c in ev.active if not math.isnan(ev.margins[c]))
         assert plan.evaluations <= planner.config.max_evaluations
-        # re-simulating the chosen stroke on the representative load gives the same verdict
+        # re-simulating the chosen stroke on the exact load gives the same verdict
         again = evaluate_stroke(
-            planner.base,
-            planner.quantise(LoadRequest(0, p, 0, 0))[1],
-            ev.r_s,
-            ev.t1,
-            ev.alpha_k,
-            gap=planner.config.pitch_gap,
+            planner.base, p, ev.r_s, ev.t1, ev.alpha_k, gap=planner.config.pitch_gap
         )
         assert again.feasible and again.margins == pytest.approx(ev.margins, nan_ok=True)
         # timing: the command is out before the front reaches R_s, after the previous stroke
         assert plan.start_time >= t + planner.config.start_margin
         assert planner.busy_until == pytest.approx(plan.end_time)
-        t += 1.0  # the next load is scanned while the fence may still be busy
+        t += 2.0  # the next load is scanned while the fence may still be busy
 
 
 def test_planner_respects_the_busy_window_and_the_time_left(base) -> None:
@@ -132,15 +142,22 @@ def test_planner_respects_the_busy_window_and_the_time_left(base) -> None:
     assert not late.feasible and late.reason.startswith("too late") and late.evaluations == 0
 
 
-def test_planner_cache_makes_a_repeated_class_free(base) -> None:
+def test_planner_class_gives_the_first_candidate_the_exact_load_verifies_it(base) -> None:
+    """A load of a class planned before gets the class's stroke first, verified on the load
+    itself (nominal and each corner: 1 + 4 evaluations); the same load again is free."""
     planner = Planner(base, PlannerConfig())
+    n_corners = len(planner.corners)
+    assert n_corners == 4
     p = ParcelParams(0.4, 0.3, 0.3, 5.0, 0.0, 0.0, 0.1, 0.0)
     a = planner.plan(LoadRequest(1, p, 0.0, -3.0), now=0.0, commit=False)
-    b = planner.plan(
-        LoadRequest(2, replace(p, mass=5.05, lateral_gap=0.105), 0.0, -3.0), now=0.0, commit=False
-    )
-    assert a.evaluations >= 1 and b.evaluations == 0 and b.cache_hits >= 1
+    q = replace(p, mass=5.05, lateral_gap=0.105)
+    b = planner.plan(LoadRequest(2, q, 0.0, -3.0), now=0.0, commit=False)
+    assert a.feasible and b.feasible
     assert (a.evaluation.r_s, a.evaluation.t1) == (b.evaluation.r_s, b.evaluation.t1)
+    assert b.evaluations == 1 + n_corners and len(b.tried) == 1
+    again = planner.plan(LoadRequest(3, q, 0.0, -3.0), now=0.0, commit=False)
+    assert again.evaluations == 0 and again.cache_hits == 1
+    assert again.evaluation == b.evaluation
 
 
 def test_planner_passes_a_refused_stroke_over_for_the_next_feasible_one(base) -> None:
@@ -167,11 +184,11 @@ def test_planner_passes_a_refused_stroke_over_for_the_next_feasible_one(base) ->
     assert start == pytest.approx((r_s + 3.0) / planner.v) and end == pytest.approx(start + 2 * t1)
     assert plan.start_time == pytest.approx((ev.r_s + 3.0) / planner.v)
     assert plan.end_time == pytest.approx(plan.start_time + 2.0 * ev.t1)
-    assert planner.chosen[planner.quantise(LoadRequest(1, p, 0.0, -3.0))[0]] == (
+    assert planner.chosen[planner.class_key(LoadRequest(1, p, 0.0, -3.0))] == (
         first.evaluation.r_s,
         first.evaluation.t1,
     )
-    none = Planner(base, PlannerConfig(max_evaluations=6))
+    none = Planner(base, PlannerConfig(max_evaluations=1000))
     refused = none.plan(LoadRequest(1, p, 0.0, -3.0), now=0.0, accept=lambda ev, s, e: False)
     assert not refused.feasible and refused.refused >= 1
     assert "refused" in refused.reason and none.busy_until == -math.inf
@@ -179,7 +196,10 @@ def test_planner_passes_a_refused_stroke_over_for_the_next_feasible_one(base) ->
 
 def test_lower_friction_gives_no_lower_capacity(base) -> None:
     """Paper, Fig. 4: smaller mu1, mu2 -> higher (here: not lower) capacity."""
-    cfg = PlannerConfig(max_evaluations=400)  # linear over all candidates: the true first
+    # every candidate in W_t order, the figures exact (the paper's curves): the true first
+    cfg = PlannerConfig(
+        max_evaluations=400, uncertainty_mass=0.0, uncertainty_mu=0.0, uncertainty_size=0.0
+    )
     p = ParcelParams(0.7, 0.1, 0.1, 5.0, -0.35, -0.05, 0.0, 0.0)
     caps = []
     for mu1, mu2 in ((0.65, 0.35), (0.3, 0.15)):

@@ -76,7 +76,7 @@ def test_a_run_on_one_host_is_seen_whole_from_another(two_hosts, tmp_path: Path)
     assert sorted(got["parcels"]) == [r["parcel_id"] for r in summary["parcels"]]
     codes = {name: code for code, name in enumerate(
         ["SORTED", "NOT_DIVERTED", "NO_FEASIBLE_COMMAND", "NO_COMMAND", "MISSED", "REJECTED",
-         "SOLVER_FAILURE"])}  # fmt: skip
+         "SOLVER_FAILURE", "NO_STROKE_IN_BUDGET"])}  # fmt: skip
     assert sorted(map(tuple, got["outcomes"])) == [
         (r["parcel_id"], codes[r["outcome"]]) for r in summary["parcels"]
     ]

@@ -12,6 +12,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from fence_sorter.codes import BUDGET_REASON
 from fence_sorter.line import (
     InputError,
     LineConfig,
@@ -196,6 +197,12 @@ def test_infeasible_command_keeps_the_controllers_reason():
     assert out[3].code is OutcomeCode.NO_FEASIBLE_COMMAND
     assert "impact speed 3.1 > 2.4 m/s" in out[3].reason
     assert out[3].t == 0.0  # at once, not at the line end
+    # a planner that ran out of time is not one that found no stroke
+    line.add_parcel(heavy(4, scan_time=5.0), 5.0)
+    reason = f"{BUDGET_REASON}: 3 of 20 candidates verified by the command's deadline"
+    assert line.command(stroke(4, feasible=False, reason=reason), 5.0).accepted
+    out = outcomes(run(line, 6.0))
+    assert out[4].code is OutcomeCode.NO_STROKE_IN_BUDGET and out[4].reason == reason
 
 
 def test_start_at_time_uses_the_front_position_then():
