@@ -6,7 +6,9 @@ For each induction rate (default 2000 to 12000 pcs/h) one ROS-free run of the li
 at that rate (or of ``--parcels``), to the drain: throughput in and out over the run's steady
 window (:meth:`~fence_sorter.line.multi_unit.LinePlant.steady_window`), out against in less
 the parcels no pass could read, sort rate, recirculation share, rejects, intrusions and
-conservation, with each unit's capacity bound W_t (1)-(2) of its median stroke beside them.
+conservation, the sorted parcels over each limit (10)-(12) and the failed events, with each
+unit's capacity bound W_t (1)-(2) of its median stroke beside them. Exits 1 when a row has an
+intrusion, a conservation error, a failed event or a sorted parcel over a limit.
 Prints a Markdown table and writes it with the command and commit to ``--out``
 (docs/reports/line-bench.md by default; ``--out ''`` writes nothing).
 """
@@ -73,10 +75,11 @@ def run(args: argparse.Namespace) -> int:
     head = (
         "| rate set [pcs/h] | in [pcs/h] | out [pcs/h] | out / (in (1 - p^k)) "
         "| window's parcels sorted / (1 - p^k) | sort rate "
-        "| recirculated | rejected | intrusions | conservation | W_t per unit [pcs/h] "
+        "| recirculated | rejected | intrusions | conservation "
+        "| sorted over (10) / (11) / (12) | failed | W_t per unit [pcs/h] "
         "| window [s] | sim/wall |"
     )
-    rows = [head, "|" + " --- |" * 13]
+    rows = [head, "|" + " --- |" * 15]
     print(head, flush=True)
     ok = True
     for rate in rates:
@@ -89,7 +92,10 @@ def run(args: argparse.Namespace) -> int:
         plant = LinePlant(line, cfg)
         plant.warm_up()
         s = plant.run()
+        over = s["parcels_over_limits"]
         ok &= s["conservation_ok"] and s["swept_sector_intrusions"] == 0
+        ok &= s["solver_failures"] == 0 and not any(over.values())
+        over_cells = " / ".join(str(len(over.get(c, []))) for c in ("10", "11", "12"))
         wt = ", ".join(
             "-" if math.isnan(u["capacity_bound_pcs_h"]) else f"{u['capacity_bound_pcs_h']:.0f}"
             for u in s["units"].values()
@@ -104,7 +110,8 @@ def run(args: argparse.Namespace) -> int:
             f"| {rate:.0f} | {s['throughput_in_pcs_h']:.0f} | {s['throughput_out_pcs_h']:.0f} "
             f"| {ratio:.3f} | {cohort} | {s['sort_rate']:.1%} | {s['recirculation_share']:.1%} "
             f"| {s['rejected']} | {s['swept_sector_intrusions']} "
-            f"| {'exact' if s['conservation_ok'] else 'NO'} | {wt} "
+            f"| {'exact' if s['conservation_ok'] else 'NO'} | {over_cells} "
+            f"| {s['solver_failures']} | {wt} "
             + ("| - " if w is None else f"| {w['start_s']:.0f}-{w['end_s']:.0f} ")
             + f"| {s['real_time_factor']:.0f}x |"
         )
@@ -137,7 +144,10 @@ def run(args: argparse.Namespace) -> int:
         "left on the line at its end (a few parcels each way); the fate of the parcels first\n"
         "inducted in the window does not: `window's parcels sorted` is the share of them\n"
         "sorted by the end of the run, the steady state's out / in. Recirculated: share of\n"
-        "parcels that went round the loop at least once; W_t: each unit's capacity (1)-(2)\n"
+        "parcels that went round the loop at least once; sorted over (10) / (11) / (12): the\n"
+        "parcels sorted whose delivered impact speed, acceleration or exit speed went over the\n"
+        "limit its unit planned for; failed: events whose simulation failed (counted apart);\n"
+        "W_t: each unit's capacity (1)-(2)\n"
         "for its median stroke (by scraping time t_z) and the median parcel length (`-`: no\n"
         "stroke).\n\n" + "\n".join(rows) + "\n"
     )

@@ -37,9 +37,11 @@ def test_saturation_rows_conserve_parcels_and_count_over_the_steady_window(
         assert ratio == pytest.approx(rate_out / (rate_in * (1 - unread)), abs=0.02)
         # the window's parcels sorted: a share of them, over the parcels some pass could read
         assert 0.0 < float(cells[4]) <= 1.0 / (1 - unread) + 1e-3
-        start, end = (float(c) for c in cells[11].split("-"))
+        start, end = (float(c) for c in cells[13].split("-"))
         assert start >= fill and end <= 60.0 + 60.0  # a loop cycle in; the held tail at most
         assert cells[8] == "0" and cells[9] == "exact"  # no intrusion, every parcel counted
+        # every sorted parcel within (10)-(12) as delivered, no failed event
+        assert cells[10] == "0 / 0 / 0" and cells[11] == "0"
     assert capsys.readouterr().out.count("| exact |") == 2
 
 
