@@ -33,7 +33,8 @@ test: bootstrap
 
 # every generated report of docs/reports/, each with the arguments its committed version was
 # made with and its output named (the package writes nowhere by default but the current
-# directory); hours of CPU, niced; versus is left out: it compares with a commit the reader names
+# directory); hours of CPU, niced; versus is left out: it compares with a commit the reader names;
+# stability-random exits 1 while an event of its report fails (the report names them)
 reports: bootstrap
 	$(ENV) && nice -n 10 fence-sorter accuracy --out docs/reports/accuracy --repeats 3 --max-wall 30 \
 		&& nice -n 10 fence-sorter stability --out docs/reports/stability \
@@ -53,6 +54,10 @@ reports: bootstrap
 			--out docs/reports/line-speed.md --json docs/reports/line-speed.json \
 		&& nice -n 10 python -m benchmarks planner-latency --rate-factor 1,2 \
 			--out docs/reports/planner.md --json docs/reports/planner.json \
+		&& python -m benchmarks limits --parcels 60 --rtf 1 \
+			--out docs/reports/limits.md --json docs/reports/limits.json \
+		&& { nice -n 10 python -m benchmarks stability-random --events 100000 --seed 1 \
+			--workers 2 || [ $$? -eq 1 ]; } \
 		&& python -m benchmarks line-scale --units 1,2,4,8 --parcels 8 --seed 3 --rtf 1 \
 			--out docs/reports/line-scale.md \
 		&& python -m benchmarks line-scale --units 2,4,8 --parcels 8 --seed 3 --hosts 2 \

@@ -407,6 +407,8 @@ REPORTS = {
     "docs/reports/line-bench.md": "--out docs/reports/line-bench.md",
     "docs/reports/line-speed.json": "--json docs/reports/line-speed.json",
     "docs/reports/planner.json": "planner-latency --rate-factor 1,2",
+    "docs/reports/limits.json": "limits --parcels 60 --rtf 1 --out docs/reports/limits.md",
+    "docs/reports/stability/random.json": "stability-random --events 100000 --seed 1",
     "docs/reports/line-scale.json": "line-scale --units 1,2,4,8 --parcels 8 --seed 3 --rtf 1",
     "docs/reports/line-scale-hosts.json": "line-scale --units 2,4,8 --parcels 8 --seed 3 --hosts",
     "docs/reports/startup/README.md": "python -m benchmarks.startup",
