@@ -38,6 +38,8 @@ from benchmarks.runs import finish, last_json
 from fence_sorter.inputs import ParcelSpec
 
 KINDS = ("duplicates", "flood", "clock", "outcomes")
+#: the trials of the fault campaign's section (the forged outcomes are test/ros/test_insiders.py's)
+CAMPAIGN_KINDS = ("duplicates", "flood", "clock")
 #: ids of the flood's parcels start here (far above any stream of the suite)
 FLOOD_FIRST_ID = 1_000_000
 #: a parcel with the run's id but another spec: bigger, heavier, not to divert
@@ -304,9 +306,9 @@ def row_ok(row: dict) -> bool:
 
 
 def section(workdir: Path, progress=print) -> dict:
-    """The trials of :data:`KINDS` as the campaign's ``insiders`` section."""
+    """The trials of :data:`CAMPAIGN_KINDS` as the campaign's ``insiders`` section."""
     rows = []
-    for kind in KINDS:
+    for kind in CAMPAIGN_KINDS:
         t = insider_trial(kind, workdir, parcels=20)
         row = trial_row(t)
         rows.append(row)
@@ -323,9 +325,7 @@ def insiders_md(sec: dict, meta_lines: list[str]) -> list[str]:
         "A process on the run's domain reads the run id off /parcels and forges, during a "
         "20-parcel run at rtf 1: the next 10 parcel ids just ahead of the scanner (other size "
         "and mass, not to divert), a flood of 5000 parcels/s for 2 s with new ids, or a second "
-        "/clock 6.7e7 s ahead for 2 s, or a SORTED outcome of 1 N for each of the first 10 "
-        "parcels the moment it is scanned, with a /diagnostics status in the simulator's name. "
-        "Target: exit 4, every real divert parcel sorted as "
+        "/clock 6.7e7 s ahead for 2 s. Target: exit 4, every real divert parcel sorted as "
         "planned, no forgery in the figures, the forgery named; during the flood, deadline misses "
         "< 0.5 % (the pacing loop runs in a process of its own, which the flood does not reach).",
         "",
