@@ -275,7 +275,9 @@ def test_hostile_parcels_and_commands_are_refused_counted_and_kept_out(suite) ->
     pub.publish(parcel_msg(206, RUN, now))  # the real divert parcel
     cpub.publish(command_msg(206, 999, feasible=False, reason="forged"))
     cpub.publish(command_msg(206, RUN, t1=10.0))  # a 20 s stroke
-    pub.publish(parcel_msg(207, RUN, now, divert=False))
+    # a parcel not to divert, scanned 3 s earlier: 3 m down the belt, past the fence's reach
+    # by the time 206's stroke runs (the swept-sector guard would decline a stroke that swept it)
+    pub.publish(parcel_msg(207, RUN, now - 3.0, divert=False))
     wait(monitor, lambda: {206, 207} <= rec.outcomes.keys(), 40, "the real parcels' outcomes")
     assert rec.outcomes[206]["reason_name"] == "SORTED", rec.outcomes[206]
     assert rec.outcomes[207]["reason_name"] == "NOT_DIVERTED"

@@ -60,10 +60,14 @@ def test_run_line_paced_with_line_sim_s_options_equals_line_sim(tmp_path: Path) 
     # every deadline of the grid is a cycle, run or missed: the steps plus those a slip dropped
     assert p["cycles"] >= p["steps"] and 0 <= p["deadline_misses"] <= p["cycles"]
     assert p["deadline_miss_share"] == pytest.approx(p["deadline_misses"] / p["cycles"])
-    # the hand-offs' transit was measured on every link, once per hand-off received there
+    # the hand-offs' transit was measured on every link, once per hand-off received there (a
+    # link that carried none has no transit figures)
     lat = got["handoff_latency"]
     for link, v in got["links"].items():
-        assert lat[link]["n"] == v["sent"] and 0.0 <= lat[link]["p50_ms"] <= lat[link]["max_ms"]
+        assert lat[link]["n"] == v["sent"]
+        if v["sent"]:
+            assert 0.0 <= lat[link]["p50_ms"] <= lat[link]["max_ms"]
+    assert any(v["sent"] for v in got["links"].values())
 
 
 def test_run_line_refuses_a_bad_line_file(tmp_path: Path) -> None:

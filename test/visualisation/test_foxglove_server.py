@@ -39,6 +39,8 @@ def _outcome(ts, k: int):
     return t[OUTCOME](
         header=header,
         parcel_id=100 + k,
+        run_id=1000 + k,
+        auth=77 + k,
         sorted=bool(k % 2),
         reason=f"reason {k}",
         reason_code=k % 7,
