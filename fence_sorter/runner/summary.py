@@ -212,6 +212,7 @@ def summarise(
         if not (pid in outcomes and outcomes[pid]["sorted"])
     ]
     rows = delivered_rows(records, outcomes, profile, belt_speed)
+    judged = _with_failed(outcomes, rows)
     return {
         "limits": limits_verdict(rows, profile),
         "delivered": rows,
@@ -261,11 +262,11 @@ def summarise(
         },
         "throughput_pcs_h": throughput,
         "sorted_pcs_h": sorted_rate,
-        "peak_force_N": peak(_with_failed(outcomes, rows), "peak_normal_force"),
-        "peak_force_stiff_N": peak(_with_failed(outcomes, rows), "peak_normal_force_stiff"),
-        "peak_accel_mps2": peak(_with_failed(outcomes, rows), "peak_normal_accel"),
-        "peak_impact_speed_mps": peak(_with_failed(outcomes, rows), "impact_normal_speed"),
-        "peak_exit_speed_mps": peak(_with_failed(outcomes, rows), "exit_speed_y"),
+        "peak_force_N": peak(judged, "peak_normal_force"),
+        "peak_force_stiff_N": peak(judged, "peak_normal_force_stiff"),
+        "peak_accel_mps2": peak(judged, "peak_normal_accel"),
+        "peak_impact_speed_mps": peak(judged, "impact_normal_speed"),
+        "peak_exit_speed_mps": peak(judged, "exit_speed_y"),
         "commands": len(records.commands),
         "command_messages": records.command_messages,
         "infeasible_commands": sum(1 for c in records.commands.values() if not c["feasible"]),
