@@ -11,6 +11,7 @@ from __future__ import annotations
 import inspect
 import signal
 import sys
+import time
 from array import array
 from collections.abc import Sequence
 
@@ -27,7 +28,7 @@ from rclpy.parameter import Parameter
 from fence_sorter import __version__, provenance
 from fence_sorter.nodes.parameters import COMMON_PARAMETERS, ParamSpec
 from fence_sorter.nodes.qos import topic_qos
-from fence_sorter.nodes.sources import PinnedClock, authentic, sign_diagnostics
+from fence_sorter.nodes.sources import STARTED_KEY, PinnedClock, authentic, sign_diagnostics
 from fence_sorter.recording.topics import DIAGNOSTICS
 
 #: the signature of a subscription callback that takes rclpy's message info too
@@ -68,6 +69,9 @@ class FenceSorterNode(Node):
     def __init__(self, **kwargs: object) -> None:
         super().__init__(self.NODE_NAME, **kwargs)
         self.take_errors = 0  # messages lost to rclpy take failures (see spin_node)
+        #: this process's start (wall clock, ns): a restarted node's heartbeats, stamped from
+        #: sim time 0 until its clock arrives, are newer than the last process's
+        self.started_ns = time.time_ns()
         specs = COMMON_PARAMETERS + self.PARAMETERS
         self.param_specs = {spec.name: spec for spec in specs}
         self.parameter_changes = 0  # accepted changes at run time (heartbeat parameter_changes)
@@ -117,7 +121,7 @@ class FenceSorterNode(Node):
         # the node runs with use_sim_time:=true.
         self._heartbeat_timer = self.create_timer(
             float(self.get_parameter("heartbeat_period").value),
-            self.publish_heartbeat,
+            self._on_heartbeat_timer,
             clock=Clock(clock_type=ClockType.STEADY_TIME),
         )
         self.get_logger().info(f"{self.NODE_NAME} {__version__}: {self.STATUS}")
@@ -257,6 +261,7 @@ class FenceSorterNode(Node):
             values=[
                 KeyValue(key="version", value=__version__),
                 KeyValue(key="node", value=self.get_fully_qualified_name()),
+                KeyValue(key=STARTED_KEY, value=str(self.started_ns)),
                 KeyValue(key="take_errors", value=str(self.take_errors)),
                 *(
                     KeyValue(key=k, value=v)
@@ -281,6 +286,17 @@ class FenceSorterNode(Node):
         msg.header.stamp = self.heartbeat_stamp()
         msg.status = [self.heartbeat_status()]
         return msg
+
+    def _on_heartbeat_timer(self) -> None:
+        """A heartbeat, or, when this node's sim time lags the run's clock (a long callback
+        kept the executor from the clock), one with the next clock message: stamped from the
+        lagging time it would follow later-stamped heartbeats of other nodes, out of stamp
+        order on /diagnostics."""
+        pinned = self.pinned_clock
+        if pinned is not None and pinned.behind(time.monotonic()):
+            pinned.on_next = self.publish_heartbeat
+            return
+        self.publish_heartbeat()
 
     def publish_heartbeat(self) -> bool:
         """Publish :meth:`heartbeat_message` on /diagnostics; False if this node holds it back."""

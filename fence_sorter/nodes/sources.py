@@ -9,6 +9,10 @@ which takes a node's sim time from /run_clock under the key instead of /clock, a
 
 from __future__ import annotations
 
+import math
+import time
+from collections.abc import Callable
+
 from diagnostic_msgs.msg import KeyValue
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
@@ -47,6 +51,17 @@ def _status_payload(stamp, status) -> bytes:
         _level(status),
         [(kv.key, kv.value) for kv in status.values],
     )
+
+
+#: the heartbeat value naming the node process's start (ns, wall clock): statuses of one
+#: node are ordered by (start, stamp), so a restart is not taken for a replay
+STARTED_KEY = "started_ns"
+
+
+def status_order(stamp: float, status) -> tuple[int, float]:
+    """Where a node's status stands among its others: (its process's start, its stamp)."""
+    started = [kv.value for kv in status.values if kv.key == STARTED_KEY]
+    return (int(started[0]) if started and started[0].isdigit() else 0, stamp)
 
 
 def sign_diagnostics(msg, key: bytes | None):
@@ -91,11 +106,19 @@ class PinnedClock:
     """
 
     COUNTERS = ("accepted", "foreign_source", "stale")
+    #: the node's time is behind the run's once no clock message was taken for this long [s]
+    #: (a callback kept the executor busy; the run's clock ticks every few ms of wall time)
+    BEHIND_AFTER = 0.05
+    #: ... unless none came for this long [s]: the run's clock is paused or has ended
+    PAUSED_AFTER = 1.0
 
     def __init__(self, node, key: bytes) -> None:
         self.key = key
         self.accepted = self.foreign_source = self.stale = 0
         self._last = -1
+        self._taken_at = -math.inf  # time.monotonic() of the last message taken
+        #: called once with the next message taken (a heartbeat held back until then)
+        self.on_next: Callable[[], object] | None = None
         self._clock = Clock()
         self._time_source = node._time_source  # rclpy's, attached to the node's clock
         if self._time_source._clock_sub is not None:
@@ -119,6 +142,16 @@ class PinnedClock:
         self.accepted += 1
         self._clock.clock = msg.clock
         self._time_source.clock_callback(self._clock)
+        self._taken_at = time.monotonic()
+        if self.on_next is not None:
+            call, self.on_next = self.on_next, None
+            call()
+
+    def behind(self, now: float) -> bool:
+        """Whether the node's time lags the run's clock (``now``: time.monotonic()): running,
+        but no message taken for BEHIND_AFTER (a heartbeat stamped now would be stamped before
+        other nodes' heartbeats already sent)."""
+        return self._last > 0 and self.BEHIND_AFTER < now - self._taken_at < self.PAUSED_AFTER
 
     def values(self) -> dict[str, str]:
         return {f"run_clock.{k}": str(getattr(self, k)) for k in self.COUNTERS}

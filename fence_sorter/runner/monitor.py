@@ -43,7 +43,7 @@ class Records:
     foreign_outcome_messages: int = 0
     #: /diagnostics statuses named as a node of the run whose tag did not verify, by name
     forged_diagnostics: dict[str, int] = field(default_factory=dict)
-    #: authentic statuses older than one already taken from the same node (a replay)
+    #: authentic statuses older than one already taken from the same node process (a replay)
     stale_diagnostics: int = 0
     #: authentic parcel messages of ids outside the run's stream
     unexpected_parcel_messages: int = 0
@@ -95,7 +95,8 @@ class Monitor:
         self.stream = stream
         self._authentic = sources.authentic
         self._status_authentic = sources.status_authentic
-        self._status_stamps: dict[str, float] = {}
+        self._status_order = sources.status_order
+        self._status_stamps: dict[str, tuple[int, float]] = {}
         self._parcel_from_msg = convert.parcel_from_msg
         self._specs: dict[int, tuple[str, ...]] = {}
         n = self.node
@@ -240,10 +241,11 @@ class Monitor:
                         r.forged_diagnostics.get(status.name, 0) + 1
                     )
                     continue
-                if stamp < self._status_stamps.get(status.name, -math.inf):
+                order = self._status_order(stamp, status)
+                if order < self._status_stamps.get(status.name, (-1, -math.inf)):
                     r.stale_diagnostics += 1
                     continue
-                self._status_stamps[status.name] = stamp
+                self._status_stamps[status.name] = order
             values = {kv.key: kv.value for kv in status.values}
             values["_message"] = status.message
             values["_level"] = (

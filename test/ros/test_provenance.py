@@ -222,6 +222,38 @@ def test_outcomes_and_statuses_are_tagged() -> None:
     assert not status_authentic(array.header.stamp, status, KEY)
 
 
+def test_a_restarted_node_is_not_a_replay_but_an_older_status_of_one_process_is() -> None:
+    """Statuses of one node are ordered by (process start, stamp): a restarted node stamps from
+    sim time 0 until its clock arrives and is taken; an older status of the same process, or
+    any status of the process before, is counted stale and left out."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+    from fence_sorter.nodes.sources import STARTED_KEY, sign_diagnostics
+    from fence_sorter.runner.monitor import Monitor
+
+    def status(started: int, sec: int, taken: str) -> DiagnosticArray:
+        s = DiagnosticStatus(name="fence_sorter/controller", message="running")
+        s.values = [KeyValue(key=STARTED_KEY, value=str(started)), KeyValue(key="n", value=taken)]
+        array = DiagnosticArray(status=[s])
+        array.header.stamp.sec = sec
+        return sign_diagnostics(array, KEY)
+
+    monitor = Monitor(0, name="test_restart_monitor", run_key=KEY)
+    try:
+        feed = [(100, 5, "a5"), (100, 3, "a3"), (200, 0, "b0"), (100, 6, "a6"), (200, 7, "b7")]
+        for started, sec, taken in feed:
+            monitor._on_diag(status(started, sec, taken))
+        r = monitor.records
+        assert [h["n"] for h in r.diagnostics_history["fence_sorter/controller"]] == [
+            "a5",
+            "b0",
+            "b7",
+        ]
+        assert r.stale_diagnostics == 2 and not r.forged_diagnostics
+    finally:
+        monitor.close()
+
+
 def test_a_change_of_parameters_needs_its_tag_a_fresh_sequence_and_the_same_values() -> None:
     changes = [("a_ndop", 150.0)]
     auth = provenance.change_auth(KEY, "/controller", 7, changes)
@@ -233,3 +265,17 @@ def test_a_change_of_parameters_needs_its_tag_a_fresh_sequence_and_the_same_valu
     assert "does not verify" in refusal(KEY, "/unit_2/controller", 0, auth, changes)
     assert "does not verify" in refusal(OTHER, "/controller", 0, auth, changes)
     assert "must be SEQ:TAG" in refusal(KEY, "/controller", 0, "7", changes)
+
+
+def test_a_node_whose_time_lags_the_run_clock_holds_its_heartbeat_back() -> None:
+    """Behind: the run's clock is running but the node took no message of it for longer than a
+    tick (a long callback); not behind before the clock starts or once it has paused."""
+    from fence_sorter.nodes.sources import PinnedClock
+
+    clock = PinnedClock.__new__(PinnedClock)
+    clock._last, clock._taken_at = -1, -math.inf
+    assert not clock.behind(10.0)  # no clock yet: heartbeats stamped 0 announce the node
+    clock._last, clock._taken_at = 5_000_000_000, 10.0
+    assert not clock.behind(10.0 + 0.5 * PinnedClock.BEHIND_AFTER)
+    assert clock.behind(10.0 + 2.0 * PinnedClock.BEHIND_AFTER)
+    assert not clock.behind(10.0 + 1.5 * PinnedClock.PAUSED_AFTER)  # paused: beat on
