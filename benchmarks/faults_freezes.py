@@ -18,8 +18,9 @@ from benchmarks.faults_processes import ProcessWatch, start_watched
 # -- freezes and a full disk -------------------------------------------------------------------
 #: the freeze cases: what is stopped (SIGSTOP, then SIGCONT) or filled up
 FREEZES = ("pacing loop", "controller", "disk full")
-#: the scan spacing of a freeze run's parcels [s]: the first parcel scanned during a stop of
-#: stop_s waits at least stop_s - FREEZE_SPACING for the stopped controller
+#: the scan spacing of a freeze run's parcels [s] (every one to divert when the controller is
+#: stopped, at rtf 1): the first decision time in a stop of stop_s is decided at least
+#: stop_s - FREEZE_SPACING late
 FREEZE_SPACING = 1.5
 #: size of the file system a disk-full run records into (the bag of 12 parcels needs ~1 MB)
 FULL_DISK = "256k"
@@ -31,6 +32,7 @@ FREEZE_CONTROLLER_KEYS = (
     "latency_from_send_p99_ms",
     "latency_from_send_max_ms",
     "late_no_command",
+    "decision_lateness_max_s",
 )
 
 
@@ -54,11 +56,13 @@ def freeze_trial(case: str, workdir: Path, stop_s: float = 3.0, parcels: int = 1
     full``) recording into a tmpfs of FULL_DISK mounted for it (root only; else not run, with
     the reason)."""
     d = Path(tempfile.mkdtemp(prefix="freeze-", dir=workdir))
-    # a parcel every FREEZE_SPACING (every other one to divert): a 3 s stop has parcels in it
+    # a parcel every FREEZE_SPACING (every other one to divert, every one when the controller
+    # is stopped: its decision times then come every FREEZE_SPACING): a 3 s stop has some
     stream = workdir / f"{d.name}.csv"
     rows = ["parcel_id,arrival_time,length_a,width_b,height,mass,lateral_gap,divert"]
     rows += [
-        f"{i},{FREEZE_SPACING * (i - 1):.2f},0.30,0.25,0.2,4.0,0.1,{str(i % 2 == 1).lower()}"
+        f"{i},{FREEZE_SPACING * (i - 1):.2f},0.30,0.25,0.2,4.0,0.1,"
+        f"{str(case == 'controller' or i % 2 == 1).lower()}"
         for i in range(1, parcels + 1)
     ]
     stream.write_text("\n".join(rows) + "\n")
@@ -128,6 +132,8 @@ def freeze_trial(case: str, workdir: Path, stop_s: float = 3.0, parcels: int = 1
         "dropped": summary.get("dropped"),
         "recording_failed": summary.get("recording_failed"),
         "recording_told": told.group(0) if told else "",
+        "limits": summary.get("limits"),
+        "swept_sector_intrusions": summary.get("swept_sector_intrusions"),
         "simulator": {k: sim.get(k) for k in FREEZE_SIM_KEYS},
         "controller": {k: ctrl.get(k) for k in FREEZE_CONTROLLER_KEYS},
     }
@@ -144,9 +150,11 @@ def freeze_met(row: dict) -> bool:
         misses = float(row["simulator"].get("deadline_misses") or 0)
         return ok and misses >= 0.9 * row["stop_s"] * 1000.0 and row["exit_code"] == 0
     if row["case"] == "controller":
-        c = row["controller"]
-        waited = 1e3 * (row["stop_s"] - FREEZE_SPACING)
-        seen = float(c.get("latency_from_send_max_ms") or 0) >= waited
+        c, waited = row["controller"], row["stop_s"] - FREEZE_SPACING
+        if "decision_lateness_max_s" in c:  # decided at decision time: late by the stop
+            seen = float(c["decision_lateness_max_s"] or 0) >= waited
+        else:  # a row of a controller that planned at reception
+            seen = float(c.get("latency_from_send_max_ms") or 0) >= 1e3 * waited
         late = int(c.get("late_no_command") or 0)
         return ok and row["exit_code"] in (0, 3) and (seen or late > 0)
     return ok and row["exit_code"] == 5 and bool(row["recording_failed"] and row["recording_told"])

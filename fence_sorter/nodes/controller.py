@@ -114,6 +114,9 @@ class ControllerStats:
         # process stopped as a whole receives late, so only this one sees its stop
         self.latency_from_send = deque(maxlen=window)
         self.lead = deque(maxlen=window)  # command sim time before the front reaches R_s [s]
+        # sim time from a divert parcel's decision time to its planning [s]: the timer's tick
+        # normally; a stopped or starved controller decides late by up to its stop
+        self.decision_lateness = deque(maxlen=window)
         self.received = self.commands = self.infeasible = self.late = 0
         self.rejected = self.not_diverted = self.evaluations = self.replans = 0
         self.replanned_configs = 0  # planner settings changed at run time
@@ -144,6 +147,7 @@ class ControllerStats:
                 f"{1e3 * max(self.latency_from_send, default=math.nan):.3f}"
             ),
             "min_lead_s": f"{min(self.lead, default=math.nan):.4f}",
+            "decision_lateness_max_s": f"{max(self.decision_lateness, default=math.nan):.4f}",
             **{f"rejected_parcels.{k}": str(v) for k, v in sorted(self.rejected_by_key.items())},
             **{f"declined.{k}": str(v) for k, v in sorted(self.declined.items())},
         }
@@ -310,11 +314,15 @@ class ControllerNode(FenceSorterNode):
     def _plan_due(self) -> None:
         """Plan the parcels whose decision time (:func:`decision_time`) has come; their
         latency runs from then."""
+        if clock_behind(self):  # its time is not the run's yet: decide with the next tick
+            return
         t_now = self.get_clock().now().nanoseconds * 1e-9
         self.traffic.prune(t_now)
         while self.pending and self.pending[0][0] <= t_now:
             due_wall = time.time_ns()
-            cmd = plan_parcel(self, heapq.heappop(self.pending)[2])
+            due, _, spec = heapq.heappop(self.pending)
+            self.stats.decision_lateness.append(t_now - due)
+            cmd = plan_parcel(self, spec)
             if cmd is not None:
                 self._pub.publish(cmd)
                 self.stats.latency.append(1e-9 * (time.time_ns() - due_wall))
@@ -392,10 +400,20 @@ def handle_parcel(node: ControllerNode, msg):
         stats.not_diverted += 1
         return None
     due = decision_time(spec, node.planner.v, node.config)
-    if t_now < due:  # planned then (``_plan_due``): the parcels behind it are scanned by then
+    # planned then (``_plan_due``): the parcels behind it are scanned by then; also when the
+    # node's time lags the run's (received just after a stop, before the clock's next tick)
+    if t_now < due or clock_behind(node):
         heapq.heappush(node.pending, (due, spec.parcel_id, spec))
         return None
+    stats.decision_lateness.append(t_now - due)
     return plan_parcel(node, spec)
+
+
+def clock_behind(node) -> bool:
+    """Whether the node's sim time lags the run's clock (a stop or a long callback kept it
+    from the clock's messages): a plan from that time would start its stroke in the past."""
+    pinned = getattr(node, "pinned_clock", None)
+    return pinned is not None and pinned.behind(time.monotonic())
 
 
 def plan_parcel(node: ControllerNode, spec: ParcelSpec):
