@@ -288,7 +288,7 @@ def render_readme(data: Mapping) -> str:
     if notes:
         lines += ["", "## Case notes", ""]
         lines += [f"- `{c['name']}`: {c['note']}" for c in notes]
-    lines += ["", "## Coverage of the issue's items", ""]
+    lines += ["", "## Coverage of the required ranges", ""]
     names_by_item: dict[str, list[str]] = {}
     for c in cases:
         names_by_item.setdefault(c["item"], []).append(c["name"])
