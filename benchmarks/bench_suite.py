@@ -1,4 +1,4 @@
-"""The node suite's benchmark (issue 5 targets): paced run at rtf 1.0 for 60 s at 2400 pcs/h,
+"""The node suite's benchmark against its targets: paced run at rtf 1.0 for 60 s at 2400 pcs/h,
 and the unpaced simulator's achieved real-time factor, from the nodes' own diagnostics.
 
 Paced: deadline-miss share and cycle lateness p99 / p99.9 (simulator), lost messages on the
@@ -8,11 +8,13 @@ parcel's front reached R_s. Unpaced (rtf 0): sim time over wall time between the
 heartbeats around the stream (first scan to last outcome), with all topics published.
 
 :func:`write_section` replaces only the part of docs/reports/benchmarks.md between the suite
-markers (the rest of that file is `python -m benchmarks bench`'s).
+markers (the rest of that file is `python -m benchmarks bench`'s); :func:`write_json` keeps the
+figures of a run with and one without ``--rrd`` side by side in one JSON file.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import tempfile
@@ -263,7 +265,7 @@ def render(fig: dict, command: str, machine: dict, revision: str) -> str:
     ]
     lines = [
         BEGIN,
-        "## Node suite (issue 5): `python -m benchmarks bench-suite`",
+        "## Node suite: `python -m benchmarks bench-suite`",
         "",
         f"Command: `{command}` at {revision}, {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}"
         f", {f['bench_wall_s']:.0f} s. Machine: {machine.get('cpu', '?')}, "
@@ -339,3 +341,22 @@ def _probe_line(probes: list[dict]) -> str:
 def write_section(path: Path, section: str) -> None:
     """Replace the text between the suite markers (append them if absent); keep the rest."""
     replace_section(path, section, BEGIN, END, append=True)
+
+
+def write_json(path: Path, fig: dict, command: str, revision: str) -> None:
+    """Store ``fig`` with its command, commit and load under "rrd" or "plain" in ``path``,
+    keeping the other entry the file holds."""
+    try:
+        runs = json.loads(path.read_text(encoding="utf-8")).get("runs", {})
+    except (OSError, ValueError):
+        runs = {}
+    runs["rrd" if fig.get("rrd") else "plain"] = {
+        "command": command,
+        "commit": revision,
+        "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+        "cores": os.cpu_count(),
+        "targets": TARGETS,
+        **fig,
+    }
+    text = json.dumps({"runs": runs}, indent=1, sort_keys=True, default=str)
+    path.write_text(text + "\n", encoding="utf-8")

@@ -48,7 +48,7 @@ TRUTH = {
     "b_p": 4.0e5,
     "fence.damping_ratio": 0.08,
 }
-ISSUE_SEEDS = 20  # the issue's target counts the truth inside for 17-19 of 20 seeds
+TARGET_SEEDS = 20  # the target counts the truth inside for 17-19 of 20 seeds
 BLOCK_INSIDE = (17, 19)
 Z95 = 1.959963984540054
 BEGIN, END = "<!-- calibrate-bench:begin -->", "<!-- calibrate-bench:end -->"
@@ -119,15 +119,15 @@ def binomial_share(n: int, p: float, lo: int, hi: int) -> float:
 
 def coverage_figures(rows: list[dict]) -> dict:
     """Per parameter over the rows: the share whose interval holds the truth with its Wilson
-    interval, the same over the first ``ISSUE_SEEDS``, the counts of each block of
-    ``ISSUE_SEEDS`` consecutive seeds and how many blocks hold it for 17-19 of 20 (for an
+    interval, the same over the first ``TARGET_SEEDS``, the counts of each block of
+    ``TARGET_SEEDS`` consecutive seeds and how many blocks hold it for 17-19 of 20 (for an
     exact 95 % interval a block does so with probability ``block_expected``), the RMS of z
     (1 for intervals of the right width; over n seeds it scatters by about 1 / sqrt(2 n))
     and the median relative half-width."""
     names = list(TRUTH)
     n = len(rows)
-    k_issue = min(ISSUE_SEEDS, n)
-    blocks = [rows[i : i + ISSUE_SEEDS] for i in range(0, n - ISSUE_SEEDS + 1, ISSUE_SEEDS)]
+    k_first = min(TARGET_SEEDS, n)
+    blocks = [rows[i : i + TARGET_SEEDS] for i in range(0, n - TARGET_SEEDS + 1, TARGET_SEEDS)]
     lo, hi = BLOCK_INSIDE
     out: dict = {"share_inside": {}, "share_inside_ci95": {}, "share_inside_first": {},
                  "block_counts": {}, "blocks_in_target": {}, "rms_z": {},
@@ -140,13 +140,13 @@ def coverage_figures(rows: list[dict]) -> dict:
         counts = [sum(r[name]["inside"] for r in b) for b in blocks]
         out["share_inside"][name] = sum(inside) / max(1, n)
         out["share_inside_ci95"][name] = wilson(sum(inside), n)
-        out["share_inside_first"][name] = sum(inside[:k_issue]) / max(1, k_issue)
+        out["share_inside_first"][name] = sum(inside[:k_first]) / max(1, k_first)
         out["block_counts"][name] = counts
         out["blocks_in_target"][name] = sum(lo <= c <= hi for c in counts)
         out["rms_z"][name] = math.sqrt(sum(z * z for z in zs) / max(1, len(zs)))
         out["median_rel_halfwidth"][name] = widths[len(widths) // 2] if widths else None
     out["blocks"] = len(blocks)
-    out["block_expected"] = binomial_share(ISSUE_SEEDS, 0.95, lo, hi)
+    out["block_expected"] = binomial_share(TARGET_SEEDS, 0.95, lo, hi)
     return out
 
 
@@ -269,14 +269,14 @@ def _pct(share: float) -> str:
 def _render_coverage(cov: dict) -> list[str]:
     rows = cov["rows"]
     fig = coverage_figures(rows)
-    n, k = len(rows), min(ISSUE_SEEDS, len(rows))
+    n, k = len(rows), min(TARGET_SEEDS, len(rows))
     lo, hi = BLOCK_INSIDE
     lines = [
         f"**Coverage** ({n} seeds from 100, {cov['parcels']} parcels each, `{SCENE}` truth "
         + ", ".join(f"{name} = {v:g}" for name, v in TRUTH.items()) + ", `camera60`; "
         "prior: the plain scene):", "",
         f"| parameter | truth inside the 95 % interval, {n} seeds (95 % interval of the share) "
-        f"| the first {k} seeds | blocks of {ISSUE_SEEDS} seeds with {lo}-{hi} inside "
+        f"| the first {k} seeds | blocks of {TARGET_SEEDS} seeds with {lo}-{hi} inside "
         "| RMS of z | median relative half-width |",
         "| --- | --- | --- | --- | --- | --- |",
     ]  # fmt: skip
@@ -292,7 +292,7 @@ def _render_coverage(cov: dict) -> list[str]:
             f"| {'-' if half is None else f'{half * 100:.2g} %'} |"
         )
     if fig["blocks"]:
-        lines += ["", f"For an exact 95 % interval a block of {ISSUE_SEEDS} seeds holds the "
+        lines += ["", f"For an exact 95 % interval a block of {TARGET_SEEDS} seeds holds the "
                   f"truth {lo}-{hi} times with probability {fig['block_expected']:.2f} "
                   "(binomial): the count of one block is a coarse draw, the share over all "
                   f"{n} seeds the measurement. Truth-inside counts per block, in seed "

@@ -1,4 +1,4 @@
-"""The fault-injection campaign of the node suite: the faults of issue 16, injected again and
+"""The fault-injection campaign of the node suite: the faults below, injected again and
 counted, written to docs/reports/reliability.md (``python -m benchmarks faults``).
 
 Cases:

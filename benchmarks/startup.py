@@ -75,8 +75,8 @@ NODES = ("controller", "simulator", "scanner", "recorder")
 NODES_UP = re.compile(r"nodes up in ([0-9.]+) s \(heartbeats: ([^)]*)\)")
 #: a node's first log line, "[INFO] [1795511389.514130065] [simulator]: simulator 0.1.0: ..."
 FIRST_LOG = re.compile(r"^\[INFO\] \[([0-9.]+)\] \[(\w+)\]: ", re.MULTILINE)
-FIRST_SOLVE_TARGET = 0.050  # [s] issue 19: a new process's first solve
-NODES_UP_TARGET = 5.0  # [s] issue 19: `fence-sorter run` has its nodes up
+FIRST_SOLVE_TARGET = 0.050  # [s] a new process's first solve
+NODES_UP_TARGET = 5.0  # [s] `fence-sorter run` has its nodes up
 BUSY = "while True: pass"
 
 

@@ -1,4 +1,4 @@
-"""``python -m benchmarks bench-suite``: the node suite against the issue 5 targets.
+"""``python -m benchmarks bench-suite``: the node suite against its pacing targets.
 
 Runs :mod:`benchmarks.bench_suite` (a paced run at rtf 1.0 for 60 s at
 2400 pcs/h, then an unpaced run), prints the section and writes it between the suite markers
@@ -16,7 +16,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from benchmarks.bench_suite import render, run_bench, write_section
+from benchmarks.bench_suite import render, run_bench, write_json, write_section
 from fence_sorter.cli.run import add_param_option
 from fence_sorter.runner.job import BadInput
 from fence_sorter.verification.machine import git_revision, machine_info
@@ -46,7 +46,12 @@ def register(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="both runs also save a Rerun recording (measures the logging overhead)",
     )
-    parser.add_argument("--no-write", action="store_true", help="print only")
+    parser.add_argument(
+        "--json",
+        metavar="FILE",
+        help="also store the figures in FILE, under plain or rrd (the other entry is kept)",
+    )
+    parser.add_argument("--no-write", action="store_true", help="print only; --json is written")
     parser.set_defaults(func=run)
 
 
@@ -61,6 +66,9 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if not args.no_write and not out.parent.is_dir():
         print(f"benchmarks: error: --out {out}: no such directory", file=sys.stderr)
+        return 2
+    if args.json and not Path(args.json).parent.is_dir():
+        print(f"benchmarks: error: --json {args.json}: no such directory", file=sys.stderr)
         return 2
 
     try:
@@ -77,8 +85,12 @@ def run(args: argparse.Namespace) -> int:
     command = "python -m benchmarks bench-suite " + " ".join(
         shlex.quote(a) for a in sys.argv[2:] if a != "--no-write"
     )
-    section = render(fig, command.strip(), machine_info(), git_revision())
+    revision = git_revision()
+    section = render(fig, command.strip(), machine_info(), revision)
     print(section)
+    if args.json:
+        write_json(Path(args.json), fig, command.strip(), revision)
+        print(f"wrote the figures to {args.json}", file=sys.stderr)
     if not args.no_write:
         write_section(out, section)
         print(f"wrote the suite section of {out}", file=sys.stderr)

@@ -36,7 +36,7 @@ class Case:
     scene: str
     overrides: dict[str, object] = field(default_factory=dict)
     expected: str = "pass"  # pass | diagnosed | warning
-    item: str = ""  # the item this case covers
+    item: str = ""  # the required range this case covers (REQUIRED_RANGES)
     speed: str = FAST  # fast: in the CI subset (--quick); slow: full campaign only
     max_wall_time: float = DEFAULT_WALL
     cause: str = ""  # expected "diagnosed": a word of the diagnosis naming the cause

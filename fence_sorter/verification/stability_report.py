@@ -15,7 +15,7 @@ from fence_sorter.verification.stability import CaseResult
 from fence_sorter.verification.stability_cases import DIAGNOSED, FAIL, PASS, yaml_value
 
 # -- the report ----------------------------------------------------------------------------------
-ISSUE_ITEMS = (
+REQUIRED_RANGES = (
     "fence meshes up to 50 elements",
     "contact stiffness k_p x1000",
     "parcel masses 0.1 kg to 60 kg",
@@ -288,11 +288,11 @@ def render_readme(data: Mapping) -> str:
     if notes:
         lines += ["", "## Case notes", ""]
         lines += [f"- `{c['name']}`: {c['note']}" for c in notes]
-    lines += ["", "## Coverage of the issue's items", ""]
+    lines += ["", "## Coverage of the required ranges", ""]
     names_by_item: dict[str, list[str]] = {}
     for c in cases:
         names_by_item.setdefault(c["item"], []).append(c["name"])
-    for item in ISSUE_ITEMS:
+    for item in REQUIRED_RANGES:
         got = names_by_item.get(item)
         lines.append(
             f"- {item}: " + (", ".join(f"`{n}`" for n in got) if got else "(not in this run)")

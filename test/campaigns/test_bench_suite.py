@@ -3,6 +3,7 @@ arithmetic; bad options are exit 2 naming them."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
@@ -15,6 +16,7 @@ from benchmarks.bench_suite import (
     message_counts,
     stream_sim_span,
     unpaced_rtf,
+    write_json,
     write_section,
 )
 from fence_sorter.runner.monitor import Records
@@ -82,3 +84,14 @@ def test_bad_input_exits_2_naming_it(args, named):
     assert done.returncode == 2, done.stderr
     assert named in done.stderr
     assert "Traceback" not in done.stderr
+
+
+def test_json_keeps_the_run_with_and_the_run_without_rrd_side_by_side(tmp_path: Path) -> None:
+    out = tmp_path / "bench-suite.json"
+    write_json(out, {"rrd": False, "deadline_misses": 3.0}, "bench-suite", "abc1234")
+    write_json(out, {"rrd": True, "deadline_misses": 5.0}, "bench-suite --rrd", "abc1234")
+    write_json(out, {"rrd": False, "deadline_misses": 4.0}, "bench-suite", "def5678")
+    runs = json.loads(out.read_text())["runs"]
+    assert sorted(runs) == ["plain", "rrd"]
+    assert runs["plain"]["deadline_misses"] == 4.0 and runs["plain"]["commit"] == "def5678"
+    assert runs["rrd"]["deadline_misses"] == 5.0 and runs["rrd"]["command"] == "bench-suite --rrd"

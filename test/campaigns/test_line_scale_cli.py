@@ -69,3 +69,15 @@ def test_two_hosts_without_root_or_ip_exit_2_with_one_line(tmp_path, capsys, mon
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"benchmarks: error: --hosts 2: {why}"]
     assert not out.exists()
+
+
+def test_two_hosts_skip_unless_root_says_so_in_one_line_and_exits_0(
+    tmp_path, capsys, monkeypatch
+) -> None:
+    monkeypatch.setattr(line_scale.os, "geteuid", lambda: 1000)
+    out = tmp_path / "x.md"
+    argv = ["line-scale", "--hosts", "2", "--skip-unless-root", "--out", str(out)]
+    assert cli_main.main(argv) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["line-scale: --hosts 2 skipped: network namespaces need root"]
+    assert not out.exists()

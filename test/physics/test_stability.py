@@ -93,7 +93,7 @@ def test_energy_audit_matches_the_observer(warm: None) -> None:
         assert cr.audit.flow >= cr.audit.e0 > 0.0
 
 
-def test_every_case_loads_and_the_issue_is_covered() -> None:
+def test_every_case_loads_and_every_required_range_is_covered() -> None:
     items = set()
     for case in C.CASES:
         loaded = load_scene(case.scene, case.override_strings())
@@ -101,7 +101,7 @@ def test_every_case_loads_and_the_issue_is_covered() -> None:
         if case.expected == "warning":
             assert any(case.warning in w for w in loaded.warnings), case.name
         items.add(case.item)
-    assert set(R.ISSUE_ITEMS) <= items
+    assert set(R.REQUIRED_RANGES) <= items
     assert len(set(C.case_names())) == len(C.CASES)
     assert any(c.expected == "diagnosed" for c in C.fast_cases())
 
