@@ -240,6 +240,8 @@ def run_set(args: argparse.Namespace) -> int:
         try:
             text = Path(args.key_file).read_text(encoding="utf-8").strip()
             key = provenance.run_key({provenance.RUN_KEY_ENV: text})
+            if key is None:
+                raise ValueError("the file is empty")
         except (OSError, UnicodeDecodeError, ValueError) as exc:
             print(
                 f"fence-sorter param set: --key-file must be a run's key file (run.key in "

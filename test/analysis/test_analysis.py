@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from bag_edit import rewrite_bag
 from processes import run_cli
 
 from fence_sorter.analysis import analyze_bag
@@ -93,31 +94,12 @@ def test_truncated_bag_reports_the_file_and_analyses_the_rest(example, tmp_path)
     assert 0 < sum(part.values()) < sum(full.values())
 
 
-def copy_bag_without(src: Path, dst: Path, drop) -> None:
-    """``src`` rewritten into ``dst`` (one MCAP file, each topic with the definition embedded in
-    ``src``) without the messages for which ``drop(message)`` is true: a bag that lost them."""
-    from rosbags.rosbag2 import Reader, StoragePlugin, Writer
-
-    dropped = {(m.topic, m.t_ns, m.raw) for m in read_bag(src).messages if drop(m)}
-    assert dropped
-    with Reader(src) as reader, Writer(dst, version=9, storage_plugin=StoragePlugin.MCAP) as w:
-        out = {}
-        for c in reader.connections:
-            if c.topic not in out:
-                out[c.topic] = w.add_connection(
-                    c.topic, c.msgtype, msgdef=c.msgdef.data, rihs01=c.digest
-                )
-        for c, t_ns, raw in reader.messages():
-            if (c.topic, t_ns, bytes(raw)) not in dropped:
-                w.write(out[c.topic], t_ns, raw)
-
-
 def test_outcome_without_its_parcel_message_is_flagged(example, tmp_path):
     """The bag lost parcel 1's /parcels message (the scanner started before the recorder was
     matched): its outcome and its command have no parcel. analyze names it and exits 1, where
     it used to report 2 of 2 diverted and 2400 pcs/h with exit 0."""
     bag = tmp_path / "lost_parcel_1"
-    copy_bag_without(example, bag, lambda m: m.topic == "/parcels" and m.msg.parcel_id == 1)
+    assert rewrite_bag(example, bag, lambda m: m.topic == "/parcels" and m.msg.parcel_id == 1)
     assert 1 not in {m.msg.parcel_id for m in read_bag(bag, ["/parcels"]).messages}
     assert 1 in {m.msg.parcel_id for m in read_bag(bag, ["/sort_outcomes"]).messages}
     out = run_cli("analyze", str(bag), "--json", "--no-plots")

@@ -8,33 +8,13 @@ import json
 from dataclasses import replace
 from pathlib import Path
 
+from bag_edit import rewrite_bag
 from processes import run_cli
 
 from fence_sorter.analysis.run import load_run, parcel_table, stream_summary
 from fence_sorter.recording.bagread import read_bag
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "bags" / "example_4_parcels"
-
-
-def copy_bag_editing(src: Path, dst: Path, topic: str, edit) -> None:
-    """``src`` rewritten into ``dst`` with each message of ``topic`` replaced by
-    ``edit(message)`` (a dataclass of the bag's own definition, serialised again)."""
-    from rosbags.highlevel import AnyReader
-    from rosbags.rosbag2 import StoragePlugin, Writer
-
-    writer = Writer(dst, version=9, storage_plugin=StoragePlugin.MCAP)
-    with AnyReader([src]) as reader, writer as w:
-        out = {}
-        for c in reader.connections:
-            if c.topic not in out:
-                out[c.topic] = w.add_connection(
-                    c.topic, c.msgtype, msgdef=c.msgdef.data, rihs01=c.digest
-                )
-        for c, t_ns, raw in reader.messages():
-            if c.topic == topic:
-                msg = edit(reader.deserialize(raw, c.msgtype))
-                raw = reader.typestore.serialize_cdr(msg, c.msgtype)
-            w.write(out[c.topic], t_ns, raw)
 
 
 def test_the_example_bag_is_judged_against_its_controllers_limits() -> None:
@@ -84,7 +64,7 @@ def test_analyze_exits_7_naming_the_parcels_over_the_controllers_limit(tmp_path)
         return replace(msg, status=status)
 
     bag = tmp_path / "edited"
-    copy_bag_editing(EXAMPLE, bag, "/diagnostics", edit)
+    rewrite_bag(EXAMPLE, bag, topic="/diagnostics", edit=edit)
     out = run_cli("analyze", str(bag), "--json", "--no-plots", "--out", str(tmp_path / "a"))
     assert out.returncode == 7, out.stderr
     limits = json.loads(out.stdout)["summary"]["limits"]

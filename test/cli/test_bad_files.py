@@ -123,3 +123,17 @@ def test_run_refuses_unreadable_scene_and_stream_files(option: str, tmp_path: Pa
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("fence-sorter: error: "), done.stderr
     assert "not UTF-8" in lines[0] or "nested too deeply" in lines[0]
+
+
+@pytest.mark.parametrize("content", [None, b"", b"not a key\n", b"\xff\xfe\x00"])
+def test_param_set_refuses_a_key_file_that_is_not_a_run_key(content, tmp_path: Path) -> None:
+    """A missing, empty, malformed or undecodable --key-file: one line naming the option and
+    what it must be, exit 2, before any ROS session."""
+    key = tmp_path / "run.key"
+    if content is not None:
+        key.write_bytes(content)
+    out = run_cli("param", "set", "controller", "w_dop", "2.0", "--key-file", str(key))
+    assert out.returncode == 2, out.stdout + out.stderr
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--key-file must be a run's key file" in lines[0], out.stderr
+    assert "Traceback" not in out.stderr
