@@ -281,6 +281,8 @@ def decode(text: str) -> object:
 
 
 _KINDS = _kinds()
+#: how a Delivered reply starts on the wire (a reader that wants only those)
+DELIVERED_PREFIX = encode(Delivered(0, "", None, None, ())).partition('"parcel_id"')[0]
 
 
 def answered(body: object) -> bool:
@@ -325,6 +327,13 @@ class UnitSide:
         self.waiting: Deliver | None = None  # a Deliver whose hand-off has not come yet
         self.arrived = 0  # hand-offs that came on the upstream link
         self.foreign = 0  # hand-offs on the link not addressed to this unit
+        self.last: object = None  # the body of the last command applied
+
+    @property
+    def reported(self) -> bool:
+        """True once the last command applied is the owner's :class:`Report`: the line is
+        over only after it (the owner's ``end`` follows its reports)."""
+        return isinstance(self.last, Report)
 
     @property
     def blocked(self) -> bool:
@@ -354,6 +363,7 @@ class UnitSide:
         while self.waiting is None and self.next_seq in self.early:
             cmd = self.early.pop(self.next_seq)
             self.next_seq += 1
+            self.last = cmd.body
             out.extend(self._apply(cmd.body))
         return out
 
@@ -434,6 +444,10 @@ class Links:
         """Unit ``k``'s command stream starts again (from 0; replies still queued are
         dropped)."""
 
+    def left_over(self, k: int) -> list[Reply]:
+        """Unit ``k``'s replies received and not taken (none asked for them), taken now."""
+        return []
+
 
 class UnitDown(RuntimeError):
     """:meth:`Links.wait`: unit ``k`` stopped answering (its process or host is gone);
@@ -485,6 +499,10 @@ class LocalLinks(Links):
                 raise UnitDown(k, f"unit {k} is gone")
             raise RuntimeError(f"unit {k} owes no reply (blocked={side.blocked})")
         return self.replies[k].pop(0)
+
+    def left_over(self, k: int) -> list[Reply]:
+        out, self.replies[k] = self.replies[k], []
+        return out
 
     def hand_off(self, h: HandOff) -> None:
         if h.to_unit == RECIRCULATION:
@@ -593,7 +611,24 @@ class RemoteUnit:
         self.tally = _Tally()  # its process's counts, from its replies
         self.banked = _Tally()  # the counts of its earlier processes
         self.stood_in = 0  # hand-offs the stand-in took and passed on for it
+        #: replies on its link the owner did not ask for (another kind, another parcel or
+        #: step, or left over at the end): refused, never taken for the unit's answer
+        self.replies_refused: list[str] = []
         self.on_down: Callable[[RemoteUnit, str, float], None] = lambda u, why, waited: None
+
+    def answer(self, kind: type, asked: Callable[[object], bool] = lambda r: True) -> Reply:
+        """The unit's reply of ``kind`` that ``asked`` accepts; every other reply on its link
+        before it is refused and counted (UnitDown as :meth:`Links.wait`)."""
+        while True:
+            r = self.links.wait(self.index)
+            if isinstance(r, kind) and asked(r):
+                return r
+            self.refuse(r)
+
+    def refuse(self, r: object) -> None:
+        what = type(r).__name__
+        about = getattr(r, "parcel_id", getattr(r, "t", None))
+        self.replies_refused.append(what if about is None else f"{what} {about}")
 
     def announce(self, parcel_id: int, passes: int, spec=None, destination: str = "") -> None:
         if self.down:
@@ -611,11 +646,10 @@ class RemoteUnit:
                 if h.from_unit == INDUCTION:
                     self.links.hand_off(h)
                 self.links.send(self.index, Deliver(h.parcel_id, h.passes, h.from_unit, t))
-                r = self.links.wait(self.index)
+                r = self.answer(Delivered, lambda r: r.parcel_id == h.parcel_id)
             except UnitDown as exc:
                 self.on_down(self, str(exc), exc.waited)
             else:
-                assert isinstance(r, Delivered) and r.parcel_id == h.parcel_id, r
                 self.count(r)
                 return UnitReply(r.refusal, r.decision, r.booking, list(r.records))
         return self.stand_in(h, t)
@@ -651,12 +685,13 @@ class RemoteUnit:
             return
         self.links.send(self.index, Report(t))
         try:
-            r = self.links.wait(self.index)
+            r = self.answer(Figures, lambda r: r.t == t)
         except UnitDown as exc:
             self.on_down(self, str(exc), exc.waited)
             return
-        assert isinstance(r, Figures), r
         self._fig = r
+        for left in self.links.left_over(self.index):  # answers to nothing the owner asked
+            self.refuse(left)
 
     # what the plant's summary reads (after :meth:`report`): the unit's process's figures,
     # plus the counts of its earlier processes and of its stand-in
@@ -764,11 +799,10 @@ class LockstepOwner(LinePlant):
     def _wait(self, u: RemoteUnit, t: float) -> Done:
         if not u.down:
             try:
-                r = self.transport.wait(u.index)
+                r = u.answer(Done, lambda r: r.t == t)
             except UnitDown as exc:
                 self._unit_down(u, str(exc), exc.waited)
             else:
-                assert isinstance(r, Done) and r.t == t, r
                 u.count(r)
                 return r
         return Done(t, (), ())
@@ -804,11 +838,9 @@ class LockstepOwner(LinePlant):
             self.transport.send(u.index, WarmUp(specs, time_budget))
         for u in self.units:
             try:
-                r = self.transport.wait(u.index)
+                u.answer(Warmed)
             except UnitDown as exc:
                 self._unit_down(u, str(exc), exc.waited)
-                continue
-            assert isinstance(r, Warmed), r
 
     def summary(self) -> dict:
         for u in self.units:
@@ -817,6 +849,9 @@ class LockstepOwner(LinePlant):
         lost = [p for p in self.parcels if p.state == "lost"]
         ended = s["sorted"] + s["rejected"] + s["solver_failures"] + s["still_on_line"]
         s["lost_with_unit"] = len(lost)
+        s["replies_refused"] = {
+            u.spec.name: list(u.replies_refused) for u in self.units if u.replies_refused
+        }
         s["conservation_ok"] = s["parcels_inducted"] == ended + len(lost)
         now = self.wall_clock()
         s["units_down"] = {

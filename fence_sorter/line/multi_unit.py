@@ -591,7 +591,9 @@ class LinePlant:
 def line_problems(s: dict) -> list[str]:
     """What keeps a line summary from being clean, one phrase each (empty: clean): not
     drained, conservation violated, a wrong destination, hand-offs unbalanced, (guard on) a
-    swept-sector intrusion, a failed event, a sorted parcel over a limit of (10)-(12)."""
+    swept-sector intrusion, a failed event, a sorted parcel over a limit of (10)-(12), a
+    reply on a unit's link that answers nothing the owner asked (refused: a forgery or a
+    confused process)."""
     out = []
     if not s["drained"]:
         out.append(f"{s['still_on_line']} parcels still on the line")
@@ -608,6 +610,8 @@ def line_problems(s: dict) -> list[str]:
     for c, ids in s.get("parcels_over_limits", {}).items():
         if ids:
             out.append(f"({c}) {len(ids)} sorted parcels over it {ids[:20]}")
+    for name, refused in s.get("replies_refused", {}).items():
+        out.append(f"{name}: {len(refused)} replies the owner did not ask for {refused[:5]}")
     return out
 
 

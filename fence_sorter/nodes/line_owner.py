@@ -220,6 +220,12 @@ class LineOwnerNode(FenceSorterNode, Links):
                 self.get_logger().error(f"{why}: the line goes on without it")
                 raise UnitDown(k, why, time.monotonic() - t0)
 
+    def left_over(self, k: int) -> list:
+        out = []
+        while not self.inbox[k].empty():
+            out.append(self.inbox[k].get_nowait())
+        return out
+
     def hand_off(self, h: HandOff) -> None:
         self.induction.publish(handoff_to_msg(h))
         self.induction_published += 1

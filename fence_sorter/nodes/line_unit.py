@@ -6,7 +6,8 @@ Started in the namespace ``/<unit name>`` (``/unit_1``, ...); its own topic name
   one or more :class:`~fence_sorter.line.lockstep.Command` in the wire format of
   :func:`~fence_sorter.line.lockstep.encode`, one a line (the owner sends the commands up to
   one the unit answers in one message), then ``end`` once the line is over (the unit exits
-  0: a unit on another host ends with the line);
+  0: a unit on another host ends with the line); an ``end`` before the owner's report (the
+  last command of a line) is not the owner's: refused and counted (``ends_refused``);
 - ``replies`` (std_msgs/String, out): ``ready<token>`` (a token of this process: the owner
   tells a new process of the unit from the one it ran with) until the first command comes,
   then the answers (Delivered, Done, Figures) in the same format;
@@ -158,6 +159,7 @@ class LineUnitNode(FenceSorterNode):
         upstream = INDUCTION_TOPIC if k == 0 else handoff_topic(line.units[k - 1].name)
         self.published = 0  # hand-offs published on the downstream link
         self.bad_messages = 0  # commands or hand-offs that could not be read (refused)
+        self.ends_refused = 0  # 'end' before the owner's report: not the owner's (refused)
         self.started = False
         self.token = uuid.uuid4().hex[:12]
         self.upstream = upstream
@@ -246,6 +248,12 @@ class LineUnitNode(FenceSorterNode):
     def _on_command(self, msg: String) -> None:
         self.started = True
         self.last_command = time.monotonic()
+        if msg.data == END and not self.side.reported:  # the owner ends after its report
+            self.ends_refused += 1
+            self.get_logger().error(
+                "'end' refused: the line's owner ends a unit only after its report"
+            )
+            return
         if msg.data == END:
             self.get_logger().info("the line is over")
             self.transit.publish(String(data=json.dumps(self.latency_ns)))
@@ -292,6 +300,7 @@ class LineUnitNode(FenceSorterNode):
             "handoffs_foreign": self.side.foreign,
             "commands_applied": self.side.next_seq,
             "bad_messages": self.bad_messages,
+            "ends_refused": self.ends_refused,
             "view_samples": self.view_samples,
         }
         status.values.extend(KeyValue(key=k, value=str(v)) for k, v in values.items())

@@ -285,3 +285,52 @@ def test_the_owner_s_observers_see_every_step_and_the_units_records():
     assert [t for t, _ in got] == [t for t, _ in ref] and len(got) > 100
     assert [recs for _, recs in got] == [recs for _, recs in ref]
     assert any(recs for _, recs in got)
+
+
+class ForgedLinks(LocalLinks):
+    """An insider on the units' reply links: before unit 0's real answer it slips in a reply
+    of another kind, another step or another parcel (``mismatched``), or one that matches
+    what the owner waits for but carries nothing (``matching``: a Done of the right step with
+    no records, or a Delivered of the right parcel declining it)."""
+
+    def __init__(self, sides, matching: bool):
+        super().__init__(sides)
+        self.matching = matching
+        self.forged = 0
+
+    def wait(self, k):
+        real = super().wait(k)
+        if k != 0 or self.forged >= 3:
+            return real
+        if self.matching and isinstance(real, Done):
+            fake = Done(real.t, (), ())
+        elif self.matching:
+            return real
+        else:
+            fake = Done(-1.0, (), ()) if self.forged % 2 else Delivered(-7, "", None, None, ())
+        self.forged += 1
+        self.replies[k].insert(0, real)  # the real answer comes after the forged one
+        return fake
+
+
+@pytest.mark.slow
+def test_a_reply_the_owner_did_not_ask_for_is_refused_and_named_never_asserted():
+    """Forged replies on a unit's link never kill the owner. Those that answer nothing asked
+    are refused and counted, and the line's figures equal the undisturbed line's; one that
+    matches a question takes the real answer's place, which is then refused as unasked: the
+    line is not clean (line_problems names the unit), so a changed figure never passes."""
+    from fence_sorter.line.multi_unit import line_problems
+
+    cfg = LineRunConfig(parcels=10, rate_pcs_h=2000.0, seed=3)
+    ref = LinePlant(TWO, cfg).run()
+    assert not line_problems(ref)
+    name = TWO.units[0].name
+    for matching in (False, True):
+        owner, _, links = _line(cfg, lambda sides, m=matching: ForgedLinks(sides, m))
+        got = owner.run()
+        assert links.forged == 3
+        assert len(got["replies_refused"][name]) == 3, got["replies_refused"]
+        problems = line_problems(got)
+        assert any(p.startswith(f"{name}: 3 replies the owner did not ask for") for p in problems)
+        if not matching:
+            assert _same(ref, got) == {}
