@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 
 from fence_sorter.recording.topics import CLOCK
-from fence_sorter.visualisation.foxglove_address import AddressError, parse_address
+from fence_sorter.visualisation.foxglove_address import AddressError, check_free, parse_address
 
 
 def register(parser: argparse.ArgumentParser) -> None:
@@ -51,6 +51,7 @@ def run(args: argparse.Namespace) -> int:
     if args.foxglove is not None:
         try:
             address = parse_address(args.foxglove)
+            check_free(address)
         except AddressError as exc:
             print(f"fence-sorter replay: error: {exc}", file=sys.stderr)
             return 2
