@@ -123,3 +123,15 @@ def test_run_refuses_unreadable_scene_and_stream_files(option: str, tmp_path: Pa
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("fence-sorter: error: "), done.stderr
     assert "not UTF-8" in lines[0] or "nested too deeply" in lines[0]
+
+
+@pytest.mark.parametrize("command", [["bag", "info"], ["replay"]])
+def test_a_rerun_recording_given_as_a_bag_is_named_so(command: list[str], tmp_path: Path) -> None:
+    rrd = tmp_path / "run.rrd"
+    rrd.write_bytes(b"")  # named by its suffix: no bag is read
+    done = run_cli(*command, str(rrd), timeout=120)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.strip().splitlines() == [
+        f"fence-sorter {' '.join(command)}: error: {rrd}: a Rerun recording, not a bag "
+        f"(view it with `fence-sorter views {rrd}`)"
+    ]
