@@ -199,10 +199,19 @@ def load_run(bag: BagContents) -> RecordedRun:
 
 
 # -- per-parcel figures from the sampled states -------------------------------------------------
-def crossing(s: Series, belt_width: float, period: float) -> tuple[float, float] | None:
-    """(time, vy) where C_s crosses y0 = s, from the last samples: the parcel leaves the line
-    when it crosses, so the crossing lies after the last sample and is extrapolated (vy
-    linearly); None if the parcel was not heading over the edge within ~1 publish period."""
+def crossing(
+    s: Series, belt_width: float, period: float, t_next: float | None = None
+) -> tuple[float, float] | None:
+    """(time, vy) where C_s crosses y0 = s, or None if the samples do not show it crossing.
+
+    A sample past the edge: interpolated between it and the one before. Else the parcel left
+    the line at the crossing, after its last sample and by the next snapshot, which no longer
+    holds it: ``t_next``, the first fence sample after the last one (None: one publish period
+    later; inf: no bound). The crossing is extrapolated from the last sample at the
+    acceleration a_y of the last two, constant (the fence's push, or the belt's friction once
+    released): y + vy tau + a_y tau^2 / 2 = s, first root; a parcel that stops short of the
+    edge (vy^2 < 2 |a_y| (s - y) when decelerating) or crosses more than half a period after
+    the next snapshot did not cross there."""
     if s.t.size == 0:
         return None
     inside = np.nonzero(s.y >= belt_width)[0]
@@ -215,14 +224,29 @@ def crossing(s: Series, belt_width: float, period: float) -> tuple[float, float]
             float(s.t[k - 1] + f * (s.t[k] - s.t[k - 1])),
             float(s.vy[k - 1] + f * (s.vy[k] - s.vy[k - 1])),
         )
-    y, vy = s.y[-1], s.vy[-1]
-    if vy <= 0.0:
+    if not math.isfinite(period):
         return None
-    dt = (belt_width - y) / vy
-    if not math.isfinite(period) or dt > 1.5 * period:
+    d, vy = belt_width - float(s.y[-1]), float(s.vy[-1])
+    ay = float((s.vy[-1] - s.vy[-2]) / (s.t[-1] - s.t[-2])) if s.t.size > 1 else 0.0
+    tau = _time_to_reach(d, vy, ay)
+    window = period if t_next is None else t_next - float(s.t[-1])
+    if tau is None or tau > window + 0.5 * period:
         return None
-    ay = (s.vy[-1] - s.vy[-2]) / (s.t[-1] - s.t[-2]) if s.t.size > 1 else 0.0
-    return float(s.t[-1] + dt), float(vy + ay * dt)
+    return float(s.t[-1] + tau), vy + ay * tau
+
+
+def _time_to_reach(d: float, v: float, a: float) -> float | None:
+    """First tau >= 0 with v tau + a tau^2 / 2 = d (d > 0) at constant acceleration a; None if
+    the motion never covers d (it stops short, or moves away)."""
+    if a == 0.0:
+        return d / v if v > 0.0 else None
+    disc = v * v + 2.0 * a * d
+    if disc < 0.0:
+        return None  # decelerates to rest short of d
+    root = math.sqrt(disc)
+    # the smaller non-negative root, written without cancellation
+    tau = 2.0 * d / (v + root) if v + root > 0.0 else (root - v) / a
+    return tau if tau >= 0.0 else None
 
 
 def sampled_figures(run: RecordedRun, pid: int) -> dict:
@@ -245,7 +269,9 @@ def sampled_figures(run: RecordedRun, pid: int) -> dict:
             ok = dt > 0
             a = np.hypot(np.diff(s.vx)[ok], np.diff(s.vy)[ok]) / dt[ok]
             out["peak_accel"] = float(np.max(a)) if a.size else NAN
-    cross = crossing(s, run.belt_width, run.publish_period)
+    # the snapshot that no longer holds it (none recorded: taken one publish period on)
+    later = run.fence.t[run.fence.t > s.t[-1] + 1e-9]
+    cross = crossing(s, run.belt_width, run.publish_period, later[0] if later.size else None)
     sorted_ = bool(np.any(s.stage == Stage.SORTED)) or cross is not None
     out["sorted"] = sorted_
     if cross is not None:

@@ -12,7 +12,7 @@ import argparse
 import json
 import sys
 
-from fence_sorter.cli.subcommands import add_subcommands
+from fence_sorter.cli.subcommands import add_subcommands, doc_summary
 
 
 def register(parser: argparse.ArgumentParser) -> None:
@@ -22,7 +22,7 @@ def register(parser: argparse.ArgumentParser) -> None:
     info = commands.add_parser(
         "info",
         help="what `ros2 bag info` shows, plus the health of each segment",
-        description=__doc__.splitlines()[0],
+        description=doc_summary(__doc__),
     )
     info.add_argument("bag", help="bag directory (or one .mcap/.db3 file)")
     info.add_argument("--json", action="store_true", help="print it as one JSON object")

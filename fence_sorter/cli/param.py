@@ -32,7 +32,7 @@ import yaml
 
 from fence_sorter import provenance
 from fence_sorter.cli.ros_session import DomainSession, domain_options, run_in_session
-from fence_sorter.cli.subcommands import add_subcommands
+from fence_sorter.cli.subcommands import add_subcommands, doc_summary
 from fence_sorter.jsonsafe import json_safe
 from fence_sorter.nodes.parameters import NODE_PARAMETERS, ParamOverrideError, parse_override
 
@@ -56,7 +56,7 @@ class ParamError(RuntimeError):
 
 
 def register(parser: argparse.ArgumentParser) -> None:
-    commands = add_subcommands(parser, __doc__.splitlines()[0], "param_command")
+    commands = add_subcommands(parser, doc_summary(__doc__), "param_command")
     common = domain_options("the node's parameter services and their answer")
     p_list = commands.add_parser(
         "list",

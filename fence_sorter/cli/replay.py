@@ -1,8 +1,9 @@
-"""``fence-sorter replay BAG [--rate R] [--topics ...]``: republish a recorded bag over DDS with
-its original timing scaled by R, /clock included (fence_sorter.nodes.replay).
+"""``fence-sorter replay BAG [--rate R] [--topics ...] [--domain N]``: republish a recorded bag
+over DDS with its original timing scaled by R, /clock included (fence_sorter.nodes.replay).
 
 Exit codes: 0 replayed a clean bag; 1 replayed what was readable (problems named per file on
-stderr); 2 bad input (not a bag, --rate <= 0, a topic not in the bag); 130 interrupted.
+stderr); 2 bad input (not a bag, --rate <= 0, --domain outside 0-232, a topic not in the
+bag); 130 interrupted.
 """
 
 from __future__ import annotations
@@ -12,18 +13,26 @@ import sys
 from pathlib import Path
 
 from fence_sorter.recording.topics import CLOCK
-from fence_sorter.visualisation.foxglove_address import AddressError, parse_address
+from fence_sorter.runner.processes import DomainError, check_domain
+from fence_sorter.visualisation.foxglove_address import AddressError, check_free, parse_address
 
 
 def register(parser: argparse.ArgumentParser) -> None:
     parser.description = (
-        "Republish every message of a bag (or the chosen topics) on the current "
-        "ROS_DOMAIN_ID with the recorded timing divided by --rate; /clock comes from the bag, so "
-        "nodes with use_sim_time:=true follow it."
+        "Republish every message of a bag (or the chosen topics) on the ROS domain --domain "
+        "(default: ROS_DOMAIN_ID) with the recorded timing divided by --rate; /clock comes "
+        "from the bag, so nodes with use_sim_time:=true follow it."
     )
     parser.add_argument("bag", help="bag directory (or one .mcap/.db3 file)")
     parser.add_argument("--rate", type=float, default=1.0, help="speed factor (default 1)")
     parser.add_argument("--topics", nargs="+", metavar="TOPIC", help="only these topics")
+    parser.add_argument(
+        "--domain",
+        type=int,
+        metavar="N",
+        help="ROS domain id to publish on, 0-232 (default: ROS_DOMAIN_ID or 0); e.g. the "
+        "domain `fence-sorter run` prints",
+    )
     parser.add_argument(
         "--wait",
         type=float,
@@ -47,10 +56,17 @@ def run(args: argparse.Namespace) -> int:
         print(f"fence-sorter replay: error: --rate must be in (0, inf), got {args.rate}",
               file=sys.stderr)  # fmt: skip
         return 2
+    if args.domain is not None:
+        try:
+            check_domain(args.domain)
+        except DomainError as exc:
+            print(f"fence-sorter replay: error: {exc}", file=sys.stderr)
+            return 2
     address = None
     if args.foxglove is not None:
         try:
             address = parse_address(args.foxglove)
+            check_free(address)
         except AddressError as exc:
             print(f"fence-sorter replay: error: {exc}", file=sys.stderr)
             return 2
@@ -84,7 +100,14 @@ def run(args: argparse.Namespace) -> int:
         print(f"serving the bag to Foxglove on ws://{server.host}:{server.port}", flush=True)
         hooks = {"on_publish": _foxglove_forward(server), "ready": server.has_clients}
     try:
-        result = replay(contents, args.rate, args.topics, wait_for_subscribers=args.wait, **hooks)
+        result = replay(
+            contents,
+            args.rate,
+            args.topics,
+            wait_for_subscribers=args.wait,
+            domain=args.domain,
+            **hooks,
+        )
     except KeyboardInterrupt:
         print("fence-sorter replay: interrupted", file=sys.stderr)
         return 130

@@ -1,11 +1,14 @@
-"""``fence-sorter rrd BAG [--out FILE]``: a recorded bag as a Rerun recording (.rrd).
+"""``fence-sorter rrd BAG [--out FILE] [--force]``: a recorded bag as a Rerun recording (.rrd);
+without ``--out`` it is ``<bag>.rrd`` beside the bag, and an existing one is kept unless
+``--force``.
 
 A line's bag (``run --line --bag``): the line's view, its units simulated again from their
 recorded commands (:mod:`fence_sorter.visualisation.line_bag_view`).
 
 Exit codes: 0 written from a clean bag (a line's bag: every reply of the units simulated
 again equals the recorded one); 1 written from what was readable (problems named per
-file on stderr); 2 not a bag / nothing readable, or the output cannot be written.
+file on stderr); 2 not a bag / nothing readable, the output cannot be written, or the
+default output exists (without --force).
 """
 
 from __future__ import annotations
@@ -27,7 +30,15 @@ def register(parser: argparse.ArgumentParser) -> None:
         "default blueprint; open it with `rerun FILE`."
     )
     parser.add_argument("bag", help="bag directory (or one .mcap/.db3 file)")
-    parser.add_argument("--out", metavar="FILE", help="output .rrd (default: <bag>.rrd)")
+    parser.add_argument(
+        "-o",
+        "--out",
+        metavar="FILE",
+        help="output .rrd (default: <bag>.rrd beside the bag, not overwritten without --force)",
+    )
+    parser.add_argument(
+        "--force", action="store_true", help="overwrite the default <bag>.rrd if it exists"
+    )
     parser.add_argument(
         "--spawn", action="store_true", help="also stream to a Rerun viewer spawned locally"
     )
@@ -41,6 +52,10 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else bag.resolve().with_suffix(".rrd")
     if out.suffix != ".rrd":
         print(f"fence-sorter rrd: error: --out {out}: must end in .rrd", file=sys.stderr)
+        return 2
+    if not args.out and out.exists() and not args.force:
+        print(f"fence-sorter rrd: error: {out} exists (the default output, <bag>.rrd): give "
+              "--out FILE, or --force to overwrite it", file=sys.stderr)  # fmt: skip
         return 2
     try:
         contents = read_bag(bag)

@@ -21,7 +21,7 @@ from pathlib import Path
 from fence_sorter.cli.line_sim import format_summary as line_summary
 from fence_sorter.jsonsafe import json_safe
 from fence_sorter.runner.job import BadInput, RunOptions, StopRequest, run_job
-from fence_sorter.runner.summary import format_summary
+from fence_sorter.runner.summary import format_summary, summary_for_json
 
 
 def register(parser: argparse.ArgumentParser) -> None:
@@ -348,7 +348,9 @@ def _run_and_report(args: argparse.Namespace, opts, say, stop) -> int:
     if args.json:
         print(
             json.dumps(
-                json_safe({**result.summary, "exit": result.code, "message": result.message})
+                summary_for_json(
+                    {**result.summary, "exit": result.code, "message": result.message}
+                )
             )
         )
     else:

@@ -15,6 +15,13 @@ def add_subcommands(parser: argparse.ArgumentParser, description: str, dest: str
     return parser.add_subparsers(dest=dest, metavar="COMMAND")
 
 
+def doc_summary(doc: str) -> str:
+    """The first paragraph of a module's docstring as one line of help text (its reST
+    ``literals`` in single backquotes)."""
+    paragraph = doc.strip().split("\n\n", 1)[0]
+    return " ".join(paragraph.split()).replace("``", "`")
+
+
 def usage(parser: argparse.ArgumentParser) -> int:
     parser.print_help(sys.stderr)
     return 2

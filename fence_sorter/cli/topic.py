@@ -26,7 +26,7 @@ import time
 import yaml
 
 from fence_sorter.cli.ros_session import DomainSession, domain_options, run_in_session
-from fence_sorter.cli.subcommands import add_subcommands
+from fence_sorter.cli.subcommands import add_subcommands, doc_summary
 from fence_sorter.jsonsafe import json_safe
 from fence_sorter.stamps import time_to_sec
 
@@ -35,7 +35,7 @@ SETTLE = 0.5
 
 
 def register(parser: argparse.ArgumentParser) -> None:
-    commands = add_subcommands(parser, __doc__.splitlines()[0], "topic_command")
+    commands = add_subcommands(parser, doc_summary(__doc__), "topic_command")
     common = domain_options("the topic and its messages")
     p_list = commands.add_parser(
         "list",

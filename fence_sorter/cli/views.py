@@ -51,17 +51,23 @@ def run(args: argparse.Namespace) -> int:
             f"fence-sorter views: error: --out {out}: no directory {out.parent}", file=sys.stderr
         )
         return 2
-    why = browser.missing_tools()
-    if why:
-        print(f"fence-sorter views: error: {why}", file=sys.stderr)
+    try:
+        lo, hi = browser.time_range(rrd)
+    except (RuntimeError, ValueError, OSError) as exc:
+        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        print(f"fence-sorter views: error: rrd {rrd}: not a Rerun recording ({first})",
+              file=sys.stderr)  # fmt: skip
         return 2
-    lo, hi = browser.time_range(rrd)
     mid = 0.5 * (lo + hi) if args.mid is None else args.mid
     if not lo <= mid <= hi:
         print(
             f"fence-sorter views: error: --mid {mid}: outside {lo:.2f}..{hi:.2f} s",
             file=sys.stderr,
         )
+        return 2
+    why = browser.missing_tools()
+    if why:
+        print(f"fence-sorter views: error: {why}", file=sys.stderr)
         return 2
     out.mkdir(exist_ok=True)
     shots = [browser.Shot("default"), browser.Shot("mid", mid), browser.Shot("end", hi)]

@@ -94,8 +94,10 @@ def replay(
     say: Callable[[str], None] = print,
     on_publish: Callable[[BagMessage], None] | None = None,
     ready: Callable[[], bool] | None = None,
+    domain: int | None = None,
 ) -> ReplayResult:
-    """Publish the bag's messages over DDS on the current ROS_DOMAIN_ID; returns counts.
+    """Publish the bag's messages over DDS on ROS domain ``domain`` (None: the current
+    ROS_DOMAIN_ID); returns counts.
 
     ``wait_for_subscribers`` > 0: wait up to that long [s] for at least one subscriber on a
     replayed topic before starting (so a node started just before does not miss the start);
@@ -110,7 +112,7 @@ def replay(
     result = ReplayResult()
     if not msgs:
         return result
-    rclpy.init()
+    rclpy.init(**({} if domain is None else {"domain_id": domain}))
     node = rclpy.create_node(NODE_NAME)
     try:
         pubs = {}

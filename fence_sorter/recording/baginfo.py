@@ -23,6 +23,7 @@ from fence_sorter.recording.bagread import (
     BagIssue,
     BagReadError,
     bag_files,
+    not_a_bag,
     recover_mcap,
 )
 from fence_sorter.recording.writer import STAGING_DIR
@@ -177,7 +178,7 @@ def bag_info(path: Path | str) -> BagInfo:
         except Exception:  # reported by bag_files already
             meta = {}
     else:
-        raise BagReadError(f"{path}: no such bag (directory or .mcap/.db3 file)")
+        raise not_a_bag(path)
     types: dict[str, str] = {}
     segments = [
         _mcap_segment(f, types) if f.suffix == ".mcap" else _sqlite_segment(f, types)

@@ -246,6 +246,18 @@ def read_file_into(out: BagContents, path: Path, topics: set[str] | None = None)
         out.issues.append(BagIssue(file, recovered.problem, recovered=recovered.recovered))
 
 
+def not_a_bag(path: Path) -> BagReadError:
+    """The error for a path that is neither a bag directory nor a storage file: missing, a
+    Rerun recording (pointed to `fence-sorter views`) or another file."""
+    if not path.exists():
+        return BagReadError(f"{path}: no such bag (directory or .mcap/.db3 file)")
+    if path.suffix == ".rrd":
+        return BagReadError(
+            f"{path}: a Rerun recording, not a bag (view it with `fence-sorter views {path}`)"
+        )
+    return BagReadError(f"{path}: not a bag (expected a directory, .mcap or .db3 file)")
+
+
 def read_bag(path: Path | str, topics: Iterable[str] | None = None) -> BagContents:
     """Read every readable message of a bag directory or storage file.
 
@@ -258,11 +270,11 @@ def read_bag(path: Path | str, topics: Iterable[str] | None = None) -> BagConten
     out = BagContents(path)
     if path.is_file():
         if path.suffix not in STORAGE_SUFFIXES:
-            raise BagReadError(f"{path}: not a bag (expected a directory, .mcap or .db3 file)")
+            raise not_a_bag(path)
         read_file_into(out, path, wanted)
         return _readable(out)
     if not path.is_dir():
-        raise BagReadError(f"{path}: no such bag (directory or .mcap/.db3 file)")
+        raise not_a_bag(path)
     files, out.expected_counts = bag_files(path, out.issues)
     staging = path / STAGING_DIR
     unclosed = sorted(staging.glob("*/*.mcap")) if staging.is_dir() else []

@@ -55,7 +55,7 @@ from fence_sorter.runner.transport import (
 )
 from fence_sorter.scene import DEFAULT_SCENE, load_scene, resolve_scene
 from fence_sorter.stream import DEFAULT_STREAM, load_stream, resolve_stream
-from fence_sorter.visualisation.foxglove_address import AddressError, parse_address
+from fence_sorter.visualisation.foxglove_address import AddressError, check_free, parse_address
 
 DEFAULT_PARCELS = 20
 SCAN_LINE_X = -3.0
@@ -241,6 +241,7 @@ def prepare(opts: RunOptions) -> RunPlan:
     if opts.foxglove is not None:
         try:
             foxglove = parse_address(opts.foxglove)
+            check_free(foxglove)
         except AddressError as exc:
             raise BadInput(str(exc)) from None
     transport = None

@@ -77,6 +77,15 @@ def domain_in_use(domain: int) -> list[int]:
     return taken
 
 
+def check_domain(domain: int, what: str = "--domain") -> int:
+    """``domain`` if it is a ROS domain id the default ports allow (DOMAIN_LIMITS), else
+    DomainError naming ``what`` and the range."""
+    lo, hi = DOMAIN_LIMITS
+    if not lo <= domain <= hi:
+        raise DomainError(f"{what} must be in [{lo}, {hi}], got {domain}")
+    return domain
+
+
 def choose_domain(requested: int | None = None, env: Mapping[str, str] | None = None) -> int:
     """The ROS domain of a run: ``requested`` (--domain), else ROS_DOMAIN_ID if set, else the
     first free one of RUN_DOMAIN_RANGE from one derived from the process id. An asked-for
@@ -92,8 +101,7 @@ def choose_domain(requested: int | None = None, env: Mapping[str, str] | None = 
     else:
         what = "--domain"
     if requested is not None:
-        if not lo <= requested <= hi:
-            raise DomainError(f"{what} must be in [{lo}, {hi}], got {requested}")
+        check_domain(requested, what)
         taken = domain_in_use(requested)
         if taken:
             raise DomainError(

@@ -8,6 +8,7 @@ from collections import Counter
 
 from fence_sorter.capacity.constraints import ConstraintProfile
 from fence_sorter.capacity.delivered import delivered_row, describe, limits_verdict, peak
+from fence_sorter.jsonsafe import json_safe
 
 #: exit status: a divert parcel of the run's own stream got no outcome
 EXIT_INCOMPLETE = 3
@@ -402,6 +403,46 @@ def verdict(s: dict) -> tuple[int, str] | None:
     return None
 
 
+def simulator_line(sim: dict[str, str]) -> str:
+    """The simulator's pacing figures: deadline misses, cycle lateness, real-time factor; a
+    figure the node could not take reads n/a. An unpaced run (target real-time factor 0) has
+    no deadlines: its lateness is n/a (unpaced)."""
+    rtf = pick(sim, "rtf") or pick(sim, "real_time")
+    if _num(sim.get("real_time_factor_target")) == 0.0:
+        figures = {"cycle_lateness": "n/a (unpaced)", **rtf}
+    else:
+        figures = {**(pick(sim, "deadline") or pick(sim, "miss")), **pick(sim, "late"), **rtf}
+    return ", ".join(f"{k} {_figure(v)}" for k, v in figures.items()) or "n/a"
+
+
+def _figure(text: str) -> str:
+    """A diagnostics value as shown: a number that is not finite (nan, inf) as n/a."""
+    return "n/a" if _not_finite(text) else text
+
+
+#: the summary's entries that hold a node's diagnostics (text values, as published)
+NODE_DIAGNOSTICS = ("controller", "simulator", "scanner", "sensors")
+
+
+def summary_for_json(s: dict) -> dict:
+    """The summary as JSON takes it: a figure a node could not take (its diagnostics value
+    nan or inf, e.g. an unpaced run's cycle lateness) as null, as the summary's own
+    non-finite figures (:func:`fence_sorter.jsonsafe.json_safe`)."""
+    out = dict(s)
+    for node in NODE_DIAGNOSTICS:
+        if isinstance(s.get(node), dict):
+            out[node] = {k: None if _not_finite(v) else v for k, v in s[node].items()}
+    return json_safe(out)
+
+
+def _not_finite(text) -> bool:
+    """A number written as text that is not finite (nan, inf)."""
+    try:
+        return not math.isfinite(float(text))
+    except (TypeError, ValueError):
+        return False
+
+
 def format_summary(s: dict) -> str:
     """Human-readable summary."""
 
@@ -446,10 +487,6 @@ def format_summary(s: dict) -> str:
         lines.append(
             f"dropped ({node:<9}) " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items()))
         )
-    sim = s["simulator"]
-    deadline = pick(sim, "deadline") or pick(sim, "miss")
-    lateness = pick(sim, "late")
-    rtf = pick(sim, "rtf") or pick(sim, "real_time")
     for node, log in sorted((s.get("parameter_changes") or {}).items()):
         lines.append(f"changed ({node:<8}) " + "; ".join(log) + " (under the run's key)")
     limits = s.get("limits")
@@ -472,8 +509,7 @@ def format_summary(s: dict) -> str:
         f"{s['commands_late']}, min lead {f(s['command_min_lead_s'], '.3f', 's')}",
         f"controller        latency p99 {f(s['controller_latency_p99_ms'], '.1f', 'ms')}, max "
         f"{f(s['controller_latency_max_ms'], '.1f', 'ms')}",
-        "simulator         "
-        + (", ".join(f"{k} {v}" for k, v in {**deadline, **lateness, **rtf}.items()) or "n/a"),
+        f"simulator         {simulator_line(s['simulator'])}",
         f"sim time          {f(s['sim_time_s'], '.2f', 's')}",
     ]
     sensors = s.get("sensors") or {}

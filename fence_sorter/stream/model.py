@@ -271,11 +271,15 @@ class StreamConfig:
 
 
 def resolve_stream(path: str | Path) -> Path:
-    """A stream file by path, or by bare name in config/streams/ (checkout or share)."""
+    """A stream file by path, or by bare name in config/streams/ (checkout or share); a
+    missing one is named as given (a path: that path; a bare name: also its config file)."""
     found = find_data("config/streams", path, (".yaml", ".yml", ".csv"))
-    if found is None:
-        raise StreamError(f"stream {path}: file not found (nor config/streams/{path}.yaml)")
-    return found
+    if found is not None:
+        return found
+    text = str(path)
+    if isinstance(path, Path) or Path(text).suffix or "/" in text:
+        raise StreamError(f"stream {text}: file not found")
+    raise StreamError(f"stream {text}: file not found (nor config/streams/{text}.yaml)")
 
 
 def _sample_parcel(cfg: StreamConfig, rng: np.random.Generator, pid: int, t: float) -> ParcelSpec:

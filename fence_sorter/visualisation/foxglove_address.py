@@ -4,6 +4,7 @@ no websockets import, so ``fence-sorter run`` checks it before anything starts).
 from __future__ import annotations
 
 import ipaddress
+import socket
 
 #: the host the server binds to unless told otherwise: this machine only
 DEFAULT_HOST = "127.0.0.1"
@@ -34,3 +35,20 @@ def parse_address(text: str, option: str = "--foxglove") -> tuple[str, int]:
                 f"{option} HOST must be an IP address or localhost, got {host!r}"
             ) from None
     return host, port
+
+
+def check_free(address: tuple[str, int], option: str = "--foxglove") -> None:
+    """AddressError (naming ``option`` and HOST:PORT) unless a server can listen at ``address``
+    now, e.g. the port is in use; the socket is closed again at once."""
+    host, port = address
+    try:
+        family, kind, proto, _, sockaddr = socket.getaddrinfo(
+            host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE
+        )[0]
+        with socket.socket(family, kind, proto) as sock:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as the server binds
+            sock.bind(sockaddr)
+    except OSError as exc:
+        raise AddressError(
+            f"{option} {host}:{port}: cannot listen there: {exc.strerror or exc}"
+        ) from None

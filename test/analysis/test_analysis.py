@@ -19,7 +19,7 @@ from bag_edit import rewrite_bag
 from processes import run_cli
 
 from fence_sorter.analysis import analyze_bag
-from fence_sorter.analysis.run import Series, check_row, crossing
+from fence_sorter.analysis.run import Series, check_row, crossing, load_run, parcel_table
 from fence_sorter.recording.bagread import read_bag
 from fence_sorter.visualisation import rerun_layout as layout
 from fence_sorter.visualisation import rerun_log as rl
@@ -124,9 +124,71 @@ def test_crossing_is_extrapolated_from_the_last_samples():
     z = np.zeros(3)
     s = Series(t, z, z, y, z, z, vy, z, z, z, z)
     tc, v = crossing(s, 0.7, 0.01)
-    assert tc == pytest.approx(0.02 + 0.009 / 1.0)
-    assert v == pytest.approx(1.0 - 10.0 * 0.009)
-    assert crossing(s, 0.8, 0.01) is None  # 0.109 m away: more than 1.5 periods
+    # 0.009 m at 1 m/s, decelerating at 10 m/s^2: tau = (v - sqrt(v^2 - 2 a d)) / a
+    tau = (1.0 - math.sqrt(1.0 - 2.0 * 10.0 * 0.009)) / 10.0
+    assert tc == pytest.approx(0.02 + tau)
+    assert v == pytest.approx(1.0 - 10.0 * tau)
+    # 0.109 m away: it stops after v^2 / (2 a) = 0.05 m, whatever the window
+    assert crossing(s, 0.8, 0.01, math.inf) is None
+    # 0.029 m away: it crosses after 0.035 s, past the next snapshot (0.01 s) and half a period
+    assert crossing(s, 0.72, 0.01) is None
+
+
+def _samples(period: float, y_last: float, vy_last: float, ay: float, n: int = 2) -> Series:
+    """Samples every ``period`` of a parcel at constant lateral acceleration ``ay`` whose last
+    one is at (y_last, vy_last)."""
+    t = period * np.arange(n, dtype=float)
+    tau = t - t[-1]
+    z = np.zeros(n)
+    y = y_last + vy_last * tau + 0.5 * ay * tau**2
+    return Series(t, z + 2, z, y, z, z, vy_last + ay * tau, z, z, z, z)
+
+
+def test_a_parcel_the_fence_pushes_over_the_edge_crosses_at_its_acceleration():
+    """Hit between two samples (at rest on the belt, then 1 m/s: 50 m/s^2, a_N within
+    a_Ndop = 300 m/s^2), the parcel 0.025 m from y0 = s crosses while the fence still pushes
+    it: at tau = (sqrt(v^2 + 2 a d) - v) / a, before the next snapshot, faster than 1 m/s."""
+    period, d, a = 0.02, 0.025, 50.0
+    s = _samples(period, 0.7 - d, 1.0, a)
+    tc, v = crossing(s, 0.7, period)
+    tau = (math.sqrt(1.0 + 2.0 * a * d) - 1.0) / a
+    assert tc == pytest.approx(s.t[-1] + tau) and tau < period
+    assert v == pytest.approx(1.0 + a * tau) and v == pytest.approx(math.sqrt(1.0 + 2 * a * d))
+
+
+def test_a_skipped_snapshot_widens_the_window_of_the_crossing():
+    """Released, sliding on the belt (a_y = -5 m/s^2 of friction), the parcel crosses 1.8
+    periods after its last sample; the snapshot after it went out 2 periods later (one
+    skipped), so it left the line in between."""
+    period = 0.02
+    tau = 1.8 * period
+    d = 1.0 * tau - 0.5 * 5.0 * tau**2
+    s = _samples(period, 0.7 - d, 1.0, -5.0, n=4)
+    assert crossing(s, 0.7, period) is None  # no snapshot skipped: it would have been seen
+    tc, v = crossing(s, 0.7, period, s.t[-1] + 2 * period)
+    assert tc == pytest.approx(s.t[-1] + tau) and v == pytest.approx(1.0 - 5.0 * tau)
+
+
+#: the topics load_run reads
+RUN_TOPICS = [
+    "/parcels", "/fence_commands", "/sort_outcomes", "/sort_events", "/load_states",
+    "/fence_state", "/markers", "/diagnostics",
+]  # fmt: skip
+
+
+def test_a_snapshot_skipped_before_the_crossing_leaves_the_parcel_sorted(example):
+    """The example run without its snapshot at 9.02 s, the last with parcel 1 on the line
+    (15 ms before it crossed y0 = s), as a paced loop that slips skips one: the parcel left the
+    line between its sample at 9.00 s and the next snapshot at 9.04 s, and decelerating on the
+    belt from there it crosses 35 ms on, inside that window; the states say sorted, as live."""
+    t_skipped = 9_020_000_000
+    contents = read_bag(example, RUN_TOPICS)
+    contents.messages = [m for m in contents.messages if m.t_ns != t_skipped]
+    run = load_run(contents)
+    assert run.series[1].t[-1] == pytest.approx(9.0)
+    row = next(r for r in parcel_table(run) if r["parcel_id"] == 1)
+    assert row["sampled_sorted"] and row["sorted"], row["disagreements"]
+    assert row["agrees"], row["disagreements"]
 
 
 def test_check_row_flags_contradictions():

@@ -3,6 +3,8 @@
 import pytest
 from processes import run_cli
 
+from fence_sorter.runner.processes import DomainError, check_domain
+
 
 @pytest.mark.slow
 @pytest.mark.parametrize(
@@ -38,3 +40,21 @@ def test_plots_only_redraws_from_the_saved_results(tmp_path):
     assert "| default: wall, RTF |" in (acc / "README.md").read_text()  # rendered again
     res = run_cli("accuracy", "--plots-only", "--out", str(tmp_path / "none"))
     assert res.returncode == 2 and "results.json" in res.stderr
+
+
+@pytest.mark.parametrize("domain", ["-1", "233"])
+def test_replay_domain_outside_the_ros_range_exits_2(domain):
+    done = run_cli("replay", "bags/example_4_parcels", "--domain", domain, timeout=120)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.strip().splitlines() == [
+        f"fence-sorter replay: error: --domain must be in [0, 232], got {domain}"
+    ]
+
+
+@pytest.mark.parametrize(("domain", "ok"), [(0, True), (232, True), (-1, False), (233, False)])
+def test_the_ros_domain_range_is_0_to_232(domain, ok):
+    if ok:
+        assert check_domain(domain) == domain
+    else:
+        with pytest.raises(DomainError, match=r"--domain must be in \[0, 232\]"):
+            check_domain(domain)

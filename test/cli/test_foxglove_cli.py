@@ -3,6 +3,8 @@ one line naming the option and the allowed values, before any node or server sta
 
 from __future__ import annotations
 
+import socket
+
 import pytest
 from processes import run_cli
 
@@ -26,4 +28,24 @@ def test_bad_foxglove_address_is_one_line_exit_2(args: list[str], expected: str)
     proc = run_cli(*args, timeout=120)
     assert proc.returncode == 2, proc.stdout + proc.stderr
     assert proc.stderr.strip().splitlines() == [expected]
+    assert proc.stdout == ""
+
+
+@pytest.mark.parametrize(
+    ("command", "prefix"),
+    [
+        (["run", "--parcels", "1"], "fence-sorter: error: "),
+        (["replay", "bags/example_4_parcels"], "fence-sorter replay: error: "),
+    ],
+)
+def test_a_port_in_use_is_one_line_exit_2(command: list[str], prefix: str) -> None:
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        proc = run_cli(*command, "--foxglove", str(port), timeout=120)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert proc.stderr.strip().splitlines() == [
+        f"{prefix}--foxglove 127.0.0.1:{port}: cannot listen there: Address already in use"
+    ]
     assert proc.stdout == ""

@@ -5,6 +5,8 @@ message counters in the summary."""
 
 from __future__ import annotations
 
+import json
+
 from fence_sorter.runner.monitor import Records
 from fence_sorter.runner.summary import (
     EXIT_DISPUTED,
@@ -13,6 +15,7 @@ from fence_sorter.runner.summary import (
     EXIT_RECORDING,
     format_summary,
     summarise,
+    summary_for_json,
     verdict,
 )
 
@@ -223,3 +226,43 @@ def test_a_recorder_write_error_exits_5_naming_the_error_and_where_the_bag_ends(
     # a divert parcel without an outcome is the graver verdict
     del r.outcomes[3]
     assert verdict(summarise(r, 1.0, [1, 2, 3], [1, 3]))[0] == EXIT_INCOMPLETE
+
+
+#: the simulator's pacing diagnostics of an unpaced run: no deadlines, so no lateness figures
+UNPACED = {
+    "real_time_factor_target": "0",
+    "real_time_factor_achieved": "26.203",
+    "deadline_misses": "0",
+    "cycle_lateness_p50_ms": "nan",
+    "cycle_lateness_p99_ms": "nan",
+    "cycle_lateness_max_ms": "0.0000",
+    "publish_lag_max_ms": "nan",
+}
+
+
+def test_an_unpaced_run_shows_no_lateness_and_json_has_null_for_nan() -> None:
+    r = records()
+    r.outcomes = {1: outcome("SORTED", True), 2: outcome("NOT_DIVERTED")}
+    r.diagnostics["fence_sorter/simulator"] = dict(UNPACED)
+    s = summarise(r, 1.0, [1, 2], [1])
+    line = next(x for x in format_summary(s).splitlines() if x.startswith("simulator"))
+    assert line.split(None, 1)[1] == (
+        "cycle_lateness n/a (unpaced), real_time_factor_target 0, real_time_factor_achieved 26.203"
+    )
+    text = json.dumps(summary_for_json(s), allow_nan=False)  # raises on a NaN left
+    sim = json.loads(text)["simulator"]
+    assert sim["cycle_lateness_p50_ms"] is None and sim["publish_lag_max_ms"] is None
+    assert sim["cycle_lateness_max_ms"] == "0.0000" and sim["deadline_misses"] == "0"
+    assert s["simulator"]["cycle_lateness_p50_ms"] == "nan"  # the summary keeps the node's text
+
+
+def test_a_paced_runs_figure_the_node_could_not_take_reads_n_a() -> None:
+    r = records()
+    r.outcomes = {1: outcome("SORTED", True), 2: outcome("NOT_DIVERTED")}
+    r.diagnostics["fence_sorter/simulator"] = {**UNPACED, "real_time_factor_target": "1"}
+    line = next(
+        x for x in format_summary(summarise(r, 1.0, [1, 2], [1])).splitlines()
+        if x.startswith("simulator")
+    )  # fmt: skip
+    assert "nan" not in line
+    assert "deadline_misses 0, cycle_lateness_p50_ms n/a" in line

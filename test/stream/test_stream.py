@@ -138,6 +138,19 @@ def test_unknown_stream_file() -> None:
         load_stream("nope", 1.0, count=1)
 
 
+@pytest.mark.parametrize("given", ["/nonexistent/s.yaml", "/nonexistent/s", "sub/s.yaml"])
+def test_a_missing_stream_path_is_named_as_given(given: str) -> None:
+    with pytest.raises(StreamError) as info:
+        load_stream(given, 1.0, count=1)
+    assert str(info.value) == f"stream {given}: file not found"
+
+
+def test_a_missing_stream_name_names_its_config_file() -> None:
+    with pytest.raises(StreamError) as info:
+        load_stream("nope", 1.0, count=1)
+    assert str(info.value) == "stream nope: file not found (nor config/streams/nope.yaml)"
+
+
 def test_config_yaml_roundtrip_rejects_missing_stream_key(tmp_path: Path) -> None:
     f = tmp_path / "s.yaml"
     f.write_text(yaml.safe_dump({"parcels": {}}))
