@@ -157,7 +157,12 @@ def register(p: argparse.ArgumentParser) -> None:
         help="override one of the ranges (3)-(6), e.g. v=0.2:2.0 (repeatable)",
     )
     p.add_argument("--fence", choices=("stiff", "flexible"), default=d.fence)
-    p.add_argument("--seed", type=int, default=d.seed)
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=d.seed,
+        help="seed of the first restart; restart i runs with SEED+i (%(default)s)",
+    )
     p.add_argument(
         "--budget",
         type=int,
