@@ -20,6 +20,8 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
+import yaml
+
 from fence_sorter.physics.params import (
     MAX_ELEMENTS,
     PROFILES,
@@ -43,6 +45,7 @@ __all__ = [
     "load_scene",
     "resolve_scene",
     "scene_dirs",
+    "scene_text",
 ]
 
 #: the scene of a run, and of every node, when none is named (config/scenes/)
@@ -410,3 +413,20 @@ def load_scene(path_or_name: str | Path, overrides: Sequence[str] = ()) -> Loade
         warnings=tuple(warnings),
         source_path=path.resolve(),
     )
+
+
+def scene_text(path_or_name: str | Path, overrides: Sequence[str]) -> str:
+    """The YAML of a scene with ``key=value`` overrides applied, for processes that read the
+    scene by path: it loads to the Scenario of ``load_scene(path_or_name, overrides)``.
+    SceneError names a bad override."""
+    loaded = load_scene(path_or_name, overrides)
+    path = loaded.source_path
+    raw = load_yaml(read_text(path)) or {}
+    overridden = _apply_overrides(path.name, raw, overrides)
+    fence = raw.get("fence")
+    if "fence.type" in overridden and isinstance(fence, dict) and fence.get("type") == "stiff":
+        # as load_scene does: a flexible scene set stiff drops its flexible-only keys
+        raw["fence"] = {k: v for k, v in fence.items() if k in FENCE_COMMON_KEYS}
+    raw["name"] = loaded.name
+    note = f"# {path.name} with --set {' --set '.join(overrides)}\n"
+    return note + yaml.safe_dump(raw, sort_keys=False)

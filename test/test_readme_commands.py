@@ -27,6 +27,7 @@ MAKE = "test/test_readme_commands.py::test_make_targets_run_the_documented_comma
 ACCURACY = (
     "test/cli/test_accuracy_cli.py::test_quick_report_has_the_command_plots_and_reference_check"
 )
+RUN_AT_A_RATE = "test/ros/test_run_rate.py::test_a_run_at_a_rate_scans_3600_over_rate_s_apart"
 
 #: README command -> "test file::test function" that runs it
 COVERED: dict[str, str] = {
@@ -43,6 +44,8 @@ COVERED: dict[str, str] = {
     "fence-sorter run --stream config/streams/example_manifest.csv": HERE,
     "fence-sorter run --rtf 0 --json": HERE,
     "fence-sorter run --param controller:a_ndop=150": HERE,
+    "fence-sorter run --rate 1200 --parcels 10": RUN_AT_A_RATE,
+    "fence-sorter run --set conveyor.belt_speed=1.5": RUN_AT_A_RATE,
     "fence-sorter run --sensors camera60 --bag bags/cal": (
         "test/ros/test_sensors_run.py::test_the_bag_carries_the_truth_and_calibrate_fits_it"
     ),

@@ -13,7 +13,15 @@ import math
 import sys
 
 from fence_sorter.jsonsafe import json_safe
-from fence_sorter.optimize.problem import OptimizeSpec
+from fence_sorter.optimize.problem import (
+    BELT_WIDTH_RANGE,
+    MASS_RANGE,
+    MIN_LENGTH_LOW,
+    MINIMAL_MASS,
+    MINIMAL_SIZE,
+    OptimizeSpec,
+)
+from fence_sorter.optimize.restarts import spread_lines
 from fence_sorter.physics.params import ParameterError
 
 EXIT_OK = 0
@@ -75,8 +83,15 @@ def register(p: argparse.ArgumentParser) -> None:
         "(docs/guide/optimize.md). Prints the optimum X, W_t [pcs/h], Delta_c, the active "
         "constraints and every margin; 'feasible: false' with the constraint no point met."
     )
-    p.add_argument("--case", choices=("arbitrary", "positioned"), help="section 4.1 or 4.2")
-    p.add_argument("--alpha-k", type=float, metavar="DEG", help="fence deflection alpha_k [deg]")
+    p.add_argument(
+        "--case", choices=("arbitrary", "positioned"), help="required: section 4.1 or 4.2"
+    )
+    p.add_argument(
+        "--alpha-k",
+        type=float,
+        metavar="DEG",
+        help="required: fence deflection alpha_k [deg], in (0, 89]",
+    )
     p.add_argument("--w-dop", type=float, default=d.w_dop, help="(10) limit [m/s] (%(default)s)")
     p.add_argument(
         "--a-ndop", type=float, default=d.a_ndop, help="(11) limit [m/s^2] (%(default)s)"
@@ -99,6 +114,30 @@ def register(p: argparse.ArgumentParser) -> None:
     p.add_argument("--load-length", type=float, default=d.load_length, help="A [m] (%(default)s)")
     p.add_argument("--load-width", type=float, default=d.load_width, help="B [m] (%(default)s)")
     p.add_argument(
+        "--mass",
+        type=float,
+        metavar="KG",
+        default=d.mass,
+        help=f"m_p of the limiting load A x B [kg], in [{MASS_RANGE[0]:g}, {MASS_RANGE[1]:g}] "
+        f"(%(default)s; the minimal object of the arbitrary case keeps {MINIMAL_MASS:g} kg)",
+    )
+    p.add_argument(
+        "--belt-width",
+        type=float,
+        metavar="M",
+        default=d.belt_width,
+        help=f"belt width s of (8) [m], in [{BELT_WIDTH_RANGE[0]:g}, {BELT_WIDTH_RANGE[1]:g}] "
+        "(%(default)s); the arbitrary case's minimal object lies at Delta_s = s - 0.1 m",
+    )
+    p.add_argument(
+        "--min-length",
+        type=float,
+        metavar="M",
+        default=d.min_length,
+        help=f"length along the belt of the arbitrary case's minimal object (0.1 m wide, the "
+        f"T_g case of (9)) [m], in [{MIN_LENGTH_LOW:g}, max(A, {MINIMAL_SIZE:g})] (%(default)s)",
+    )
+    p.add_argument(
         "--gap", type=float, default=d.gap, help="Delta of (2), least gap [m] (%(default)s)"
     )
     p.add_argument(
@@ -107,7 +146,7 @@ def register(p: argparse.ArgumentParser) -> None:
         action="append",
         default=[],
         metavar="NAME=VALUE",
-        help="hold a variable fixed, e.g. R_s=0 (repeatable)",
+        help="hold a variable fixed within its range (3)-(6) or --bound, e.g. R_s=0 (repeatable)",
     )
     p.add_argument(
         "--bound",
@@ -118,7 +157,12 @@ def register(p: argparse.ArgumentParser) -> None:
         help="override one of the ranges (3)-(6), e.g. v=0.2:2.0 (repeatable)",
     )
     p.add_argument("--fence", choices=("stiff", "flexible"), default=d.fence)
-    p.add_argument("--seed", type=int, default=d.seed)
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=d.seed,
+        help="seed of the first restart; restart i runs with SEED+i (%(default)s)",
+    )
     p.add_argument(
         "--budget",
         type=int,
@@ -186,13 +230,24 @@ def spec_from_args(args: argparse.Namespace):
         budget=args.budget,
         restarts=args.restarts,
         gap=args.gap,
+        mass=args.mass,
+        belt_width=args.belt_width,
+        min_length=args.min_length,
     )
     try:
         return spec.validate()
     except ParameterError as exc:
         # name the option as typed: load_length -> --load-length
         msg = str(exc)
-        for field in ("exit_speed_limit", "load_length", "load_width", "w_dop", "a_ndop"):
+        for field in (
+            "exit_speed_limit",
+            "load_length",
+            "load_width",
+            "belt_width",
+            "min_length",
+            "w_dop",
+            "a_ndop",
+        ):
             if msg.startswith(field):
                 msg = "--" + field.replace("_", "-") + msg[len(field) :]
                 break
@@ -201,12 +256,16 @@ def spec_from_args(args: argparse.Namespace):
                 "mu1",
                 "mu2",
                 "gap",
+                "mass",
                 "seed",
                 "budget",
                 "restarts",
                 "constraints",
             ):
                 msg = "--" + msg
+            elif msg.startswith("fixed."):
+                name = msg[len("fixed.") :].split(" ", 1)[0]
+                msg = f"--fix {msg[len('fixed.') :]}; widen the range with --bound {name}=LOW:HIGH"
             elif msg.startswith("fixed"):
                 msg = "--fix " + msg
             elif msg.startswith("bounds"):
@@ -214,13 +273,28 @@ def spec_from_args(args: argparse.Namespace):
         raise ParameterError(msg) from None
 
 
-def summary(d: dict) -> str:
-    """Readable lines of a result dict (OptimumResult.to_dict())."""
-    spec = d["spec"]
+def header(spec: dict) -> str:
+    """The problem's lines of a result: case, limits and the load model the twin ran."""
     head = (
         f"case {spec['case']}, alpha_k {spec['alpha_k_deg']:g} deg, constraints "
         f"{','.join(str(c) for c in spec['constraints'])}, fence {spec['fence']}"
     )
+    loads = (
+        f"limiting load A x B = {spec['load_length']:g} x {spec['load_width']:g} m, "
+        f"m_p = {spec['mass']:g} kg, belt width s = {spec['belt_width']:g} m, "
+        f"gap Delta = {spec['gap']:g} m"
+    )
+    if spec["case"] == "arbitrary":
+        loads += (
+            f"; minimal object {spec['min_length']:g} x {MINIMAL_SIZE:g} m, {MINIMAL_MASS:g} kg "
+            f"at Delta_s = {spec['belt_width'] - MINIMAL_SIZE:g} m"
+        )
+    return f"{head}\n{loads}"
+
+
+def summary(d: dict) -> str:
+    """Readable lines of a result dict (OptimumResult.to_dict())."""
+    head = header(d["spec"])
     tail = f"{d['evaluations']} twin evaluations, {d['wall_time']:.1f} s"
     if not d["feasible"]:
         return f"{head}\n{d['infeasible']}\n{tail}"
@@ -238,12 +312,8 @@ def summary(d: dict) -> str:
         lines.append(
             "at range bounds: " + ", ".join(f"{n} {s}" for n, s in d["at_bounds"].items())
         )
-    if len(d.get("restarts") or ()) > 1:
-        lines.append(
-            "restarts reached: "
-            + ", ".join("none feasible" if w is None else f"{w:.0f}" for w in d["restarts"])
-            + " pcs/h"
-        )
+    optima = [math.nan if w is None else w for w in d.get("restarts") or ()]
+    lines += spread_lines(d.get("restart_spread"), optima)
     lines.append(tail)
     return "\n".join(lines)
 
@@ -289,6 +359,7 @@ def _print_grid(g: dict, spec, args) -> int:
         print(json.dumps(json_safe(d)))
         return EXIT_OK
     steps = ", ".join(f"{n} {s:g}" for n, s in g["steps"].items())
+    print(header(d["spec"]))
     print(
         f"grid of {g['grid_points']} points (steps {steps}), {g['evaluations']} simulated, "
         f"{g['wall_time']:.1f} s"

@@ -19,6 +19,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from fence_sorter.cli.line_sim import format_summary as line_summary
+from fence_sorter.cli.simulate import add_set_argument
 from fence_sorter.jsonsafe import json_safe
 from fence_sorter.runner.job import BadInput, RunOptions, StopRequest, run_job
 from fence_sorter.runner.summary import format_summary, summary_for_json
@@ -30,6 +31,7 @@ def register(parser: argparse.ArgumentParser) -> None:
         "separate processes on an isolated ROS domain, run the stream, stop cleanly, summarise."
     )
     parser.add_argument("--scene", default="impact_flexible", help="scene file or name")
+    add_set_argument(parser)
     parser.add_argument(
         "--line",
         metavar="LINE",
@@ -44,7 +46,9 @@ def register(parser: argparse.ArgumentParser) -> None:
         "--rate",
         type=float,
         metavar="PCS_H",
-        help="with --line: induction rate [pcs/h] (default: the line's stream's)",
+        help="arrival rate [pcs/h], in [1, 100000]: the stream config's parcel mix drawn at "
+        "this rate instead of its own spacing (not for a CSV manifest); with --line the "
+        "induction rate of the line's stream (default: the stream's own)",
     )
     parser.add_argument(
         "--no-guard",
@@ -178,7 +182,6 @@ def run(args: argparse.Namespace) -> int:
     for opt, given in (
         ("--units", args.units is not None),
         ("--no-owner", args.no_owner),
-        ("--rate", args.rate is not None),
         ("--no-guard", args.no_guard),
         ("--rerun-url", args.rerun_url is not None),
         ("--live-rrd", args.live_rrd is not None),
@@ -207,6 +210,8 @@ def run(args: argparse.Namespace) -> int:
         foxglove=args.foxglove,
         interface=args.interface,
         peers=args.peers,
+        overrides=args.overrides,
+        rate=args.rate,
     )
     say = (lambda s: print(s, file=sys.stderr)) if args.json else print
     # from here to the exit SIGINT/SIGTERM are flags the job checks (no traceback, no
@@ -232,9 +237,9 @@ def _run_line(args: argparse.Namespace) -> int:
             opt = "--" + name.replace("_", "-")
             print(f"fence-sorter: error: {opt} does not go with --line", file=sys.stderr)
             return 2
-    if args.params or args.stream != "default":
-        print("fence-sorter: error: --param and --stream do not go with --line "
-              "(the line file names its stream)", file=sys.stderr)  # fmt: skip
+    if args.params or args.stream != "default" or args.overrides:
+        print("fence-sorter: error: --param, --set and --stream do not go with --line "
+              "(the line file names its units and its stream)", file=sys.stderr)  # fmt: skip
         return 2
     rrd = Path(args.rrd) if args.rrd is not None else None
     if rrd is not None and (rrd.suffix != ".rrd" or not rrd.resolve().parent.is_dir()):

@@ -409,6 +409,15 @@ SCANNER_PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "duration", 0.0, "Inject parcels arriving within [s]; 0: use parcels", True, 0.0, 1e6
     ),
+    ParamSpec(
+        "rate",
+        0.0,
+        "Arrival rate of a stream config's parcel mix [pcs/h], replacing its spacing; 0: the "
+        "stream's own",
+        True,
+        0.0,
+        1e5,
+    ),
     ParamSpec("start_delay", 0.5, "Sim time before the first parcel [s]", True, 0.0, 1e4),
     ParamSpec(
         "start_gate",

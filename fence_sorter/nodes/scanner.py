@@ -128,6 +128,7 @@ class ScannerNode(FenceSorterNode):
             duration=duration,
             seed=None if p["seed"] < 0 else int(p["seed"]),
             belt_width=base.conveyor.width,
+            rate_pcs_h=float(p["rate"]) or None,
         )
         self.scan_x = float(p["scan_line_x"])
         self.start_delay = float(p["start_delay"])

@@ -4,9 +4,11 @@
 that count, friction, the limiting load, variables held fixed, range overrides, fence model).
 It also knows the loads the twin is run on for each X (:meth:`OptimizeSpec.loads`):
 
-* ``positioned`` (section 4.2): the limiting load A x B at the fence-side border (Delta_s = 0);
+* ``positioned`` (section 4.2): the limiting load A x B of mass m_p at the fence-side border
+  (Delta_s = 0);
 * ``arbitrary`` (section 4.1): the same limiting load at Delta_s = 0 and the minimal object
-  0.1 x 0.1 m on the far side (Delta_s = 0.6 m, the T_g case of (9));
+  (length ``min_length`` along the belt, 0.1 m wide, 1 kg) on the far side (Delta_s = s - 0.1 m,
+  the T_g case of (9)); A_max of (2) is the longer of the two;
 
 each with both limiting centre-of-gravity positions of Fig. 2 (rear and front corner on the fence
 side); the worse margin of every constraint counts.
@@ -29,7 +31,8 @@ PAPER_RANGES: dict[str, tuple[float, float]] = {
     "t1": (0.1, 1.5),
     "R_z": (0.2, 2.5),
 }
-#: what the twin accepts at all (range overrides and fixed values must lie within)
+#: what the twin accepts at all (range overrides must lie within; fixed values within the
+#: ranges)
 HARD_LIMITS: dict[str, tuple[float, float]] = {
     "R_s": (-5.0, 5.0),
     "v": (0.05, 10.0),
@@ -41,14 +44,19 @@ CASES = ("arbitrary", "positioned")
 FENCES = ("stiff", "flexible")
 #: belt width s [m] (the scenes' conveyor; (8) measures y_k against it)
 BELT_WIDTH = 0.7
-#: the minimal object of section 4.1: 0.1 x 0.1 m at Delta_s = 0.6 m
+#: what belt widths s the problem accepts [m]
+BELT_WIDTH_RANGE = (0.2, 5.0)
+#: the minimal object of section 4.1: 0.1 x 0.1 m at Delta_s = s - 0.1 m (0.6 m on s = 0.7 m)
 MINIMAL_SIZE = 0.1
-MINIMAL_GAP = 0.6
+#: the shortest minimal object along the belt [m]
+MIN_LENGTH_LOW = 0.05
 #: masses of the limiting and the minimal load [kg] (those of the positioned_stiff and
 #: arbitrary_stiff scenes; the paper does not state them, a stiff drive makes a_N = N / m_p
 #: nearly independent of m_p)
 LIMITING_MASS = 5.0
 MINIMAL_MASS = 1.0
+#: what masses of the limiting load the problem accepts [kg] (ParcelParams' range)
+MASS_RANGE = (0.01, 500.0)
 LOAD_HEIGHT = 0.1
 
 
@@ -73,6 +81,9 @@ class OptimizeSpec:
     budget: int = 4000  # max twin evaluations (points X simulated) per restart
     restarts: int = 3  # independent searches (seeds seed, seed + 1, ...); the best counts
     gap: float = 0.0  # Delta of (2): least distance between loads [m]
+    mass: float = LIMITING_MASS  # m_p of the limiting load [kg]
+    belt_width: float = BELT_WIDTH  # s of (8) [m]
+    min_length: float = MINIMAL_SIZE  # length along the belt of the minimal object [m]
 
     # -- validation ------------------------------------------------------------------------
     def validate(self) -> OptimizeSpec:
@@ -90,7 +101,12 @@ class OptimizeSpec:
         check_range("mu1", self.mu1, 0.0, 2.0)
         check_range("mu2", self.mu2, 0.0, 2.0)
         check_range("load_length", self.load_length, 0.05, 3.0, unit="m")
-        check_range("load_width", self.load_width, 0.05, BELT_WIDTH, unit="m")
+        check_range("belt_width", self.belt_width, *BELT_WIDTH_RANGE, unit="m")
+        check_range("load_width", self.load_width, 0.05, self.belt_width, unit="m")
+        # the minimal object is no longer than the limiting load (nor than 0.1 m when A < 0.1 m)
+        longest = max(self.load_length, MINIMAL_SIZE)
+        check_range("min_length", self.min_length, MIN_LENGTH_LOW, longest, unit="m")
+        check_range("mass", self.mass, *MASS_RANGE, unit="kg")
         check_range("gap", self.gap, 0.0, 10.0, unit="m")
         cons = tuple(self.constraints)
         if (
@@ -132,8 +148,12 @@ class OptimizeSpec:
                 raise ParameterError(f"fixed entries are (name, value), got {item!r}")
             name, value = item
             self._check_name("fixed", name, seen)
-            hl, hh = HARD_LIMITS[name]
-            check_range(f"fixed.{name}", value, hl, hh, unit=UNITS[name])
+            lo, hi = self.ranges()[name]
+            if not (isinstance(value, int | float) and lo <= value <= hi):
+                raise ParameterError(
+                    f"fixed.{name} must be in [{lo:g}, {hi:g}] {UNITS[name]} (its search "
+                    f"range), got {value!r}"
+                )
         return self
 
     @staticmethod
@@ -173,11 +193,12 @@ class OptimizeSpec:
     def loads(self) -> tuple[tuple[str, ParcelParams], ...]:
         """(name, load) pairs the twin runs for each X: both C_s positions of Fig. 2 of the
         limiting load at Delta_s = 0, and (case ``arbitrary``) of the minimal object at
-        Delta_s = 0.6 m. C_s on a corner on the fence side (y offset -B/2), rear or front."""
+        Delta_s = s - 0.1 m. C_s on a corner on the fence side (y offset -B/2), rear or front."""
         out = []
-        sets = [("limiting", self.load_length, self.load_width, 0.0, LIMITING_MASS)]
+        sets = [("limiting", self.load_length, self.load_width, 0.0, self.mass)]
         if self.case == "arbitrary":
-            sets.append(("minimal", MINIMAL_SIZE, MINIMAL_SIZE, MINIMAL_GAP, MINIMAL_MASS))
+            far = self.belt_width - MINIMAL_SIZE
+            sets.append(("minimal", self.min_length, MINIMAL_SIZE, far, MINIMAL_MASS))
         for name, a, b, gap, mass in sets:
             for cog, sign in (("rear", -1.0), ("front", 1.0)):
                 parcel = ParcelParams(
@@ -195,7 +216,9 @@ class OptimizeSpec:
     def a_max(self) -> float:
         """A_max of (2): the longest load of the case [m]."""
         return (
-            max(self.load_length, MINIMAL_SIZE) if self.case == "arbitrary" else self.load_length
+            max(self.load_length, self.min_length)
+            if self.case == "arbitrary"
+            else self.load_length
         )
 
     def to_dict(self) -> dict:

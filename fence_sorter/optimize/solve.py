@@ -30,6 +30,7 @@ from fence_sorter.capacity.evaluate import evaluate_stroke, planning_scenario
 from fence_sorter.capacity.formulas import pitch
 from fence_sorter.jsonsafe import json_safe
 from fence_sorter.optimize.problem import UNITS, VARIABLES, OptimizeSpec
+from fence_sorter.optimize.restarts import restart_spread
 from fence_sorter.physics.params import ParameterError
 from fence_sorter.scene import load_scene
 
@@ -64,7 +65,7 @@ def _base_scenario(fence: str):
 
 def _scenario_for(spec: OptimizeSpec, v: float, r_z: float):
     base = _base_scenario(spec.fence)
-    base = replace(base, conveyor=replace(base.conveyor, belt_speed=v))
+    base = replace(base, conveyor=replace(base.conveyor, belt_speed=v, width=spec.belt_width))
     if base.fence is not None:
         return replace(base, fence=replace(base.fence, length=r_z))
     return replace(base, fence_length=r_z)
@@ -175,6 +176,7 @@ class OptimumResult:
                 "evaluations": self.evaluations,
                 "points": self.points,
                 "restarts": list(self.restarts),
+                "restart_spread": restart_spread(self.restarts),
                 "wall_time": self.wall_time,
                 "spec": self.spec,
             }

@@ -14,7 +14,7 @@ import tempfile
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import yaml
@@ -53,7 +53,7 @@ from fence_sorter.runner.transport import (
     hosts_transport,
     write_profile,
 )
-from fence_sorter.scene import DEFAULT_SCENE, load_scene, resolve_scene
+from fence_sorter.scene import DEFAULT_SCENE, load_scene, resolve_scene, scene_text
 from fence_sorter.stream import DEFAULT_STREAM, load_stream, resolve_stream
 from fence_sorter.visualisation.foxglove_address import AddressError, check_free, parse_address
 
@@ -112,6 +112,12 @@ class RunOptions:
     foxglove: str | None = None  # [HOST:]PORT: the Foxglove node serves the run there
     interface: str | None = None  # IPv4 address: the run talks to other hosts on it
     peers: str | None = None  # comma-separated IPv4 addresses of the other hosts
+    overrides: list[str] = field(default_factory=list)  # --set KEY=VALUE of the scene
+    rate: float | None = None  # [pcs/h]: the stream config's parcel mix at this rate
+
+
+#: what --rate accepts [pcs/h]
+RATE_RANGE = (1.0, 1e5)
 
 
 @dataclass
@@ -154,6 +160,8 @@ class RunPlan:
     #: the limits (10)-(12) and active constraints the controller plans with: what every
     #: sorted parcel's delivered figures are judged against
     limits: ConstraintProfile = field(default_factory=ConstraintProfile)
+    #: the scene with the --set overrides (YAML), written for the nodes at the start; None: none
+    scene_yaml: str | None = field(default=None, repr=False)
 
 
 def controller_limits(overrides: dict[str, ParamValue]) -> ConstraintProfile:
@@ -192,6 +200,9 @@ def prepare(opts: RunOptions) -> RunPlan:
         raise BadInput(f"--rtf must be in [0, 100] (0: unpaced), got {opts.rtf}")
     if opts.seed is not None and opts.seed < 0:
         raise BadInput(f"--seed must be in [0, inf), got {opts.seed}")
+    lo, hi = RATE_RANGE
+    if opts.rate is not None and not (math.isfinite(opts.rate) and lo <= opts.rate <= hi):
+        raise BadInput(f"--rate must be in [{lo:g}, {hi:g}] pcs/h, got {opts.rate:g}")
     if opts.rrd is not None:
         rrd = Path(opts.rrd)
         if rrd.suffix != ".rrd" or not rrd.resolve().parent.is_dir():
@@ -203,7 +214,8 @@ def prepare(opts: RunOptions) -> RunPlan:
             raise BadInput(str(exc)) from None
     try:
         scene_path = resolve_scene(opts.scene).resolve()
-        base = load_scene(scene_path).scenario
+        base = load_scene(scene_path, opts.overrides).scenario
+        scene_yaml = scene_text(scene_path, opts.overrides) if opts.overrides else None
     except (ParameterError, OSError) as exc:
         raise BadInput(str(exc)) from None
     v, width = base.conveyor.belt_speed, base.conveyor.width
@@ -213,7 +225,13 @@ def prepare(opts: RunOptions) -> RunPlan:
     try:
         stream_path = resolve_stream(opts.stream).resolve()
         stream = load_stream(
-            stream_path, v, count=count, duration=opts.duration, seed=opts.seed, belt_width=width
+            stream_path,
+            v,
+            count=count,
+            duration=opts.duration,
+            seed=opts.seed,
+            belt_width=width,
+            rate_pcs_h=opts.rate,
         )
     except (ParameterError, OSError) as exc:
         raise BadInput(str(exc)) from None
@@ -274,7 +292,33 @@ def prepare(opts: RunOptions) -> RunPlan:
         foxglove=foxglove,
         transport=transport,
         limits=controller_limits(node_params.get("controller", {})),
+        scene_yaml=scene_yaml,
     )
+
+
+def scanner_stream_args(plan: RunPlan, opts: RunOptions) -> list[str]:
+    """The scanner's stream parameters: it draws the plan's stream again."""
+    out = [f"stream:={plan.stream_path}"]
+    if opts.parcels is not None or opts.duration is None:
+        out.append(f"parcels:={len(plan.expected_ids)}")
+    if opts.duration is not None:
+        out.append(f"duration:={opts.duration}")
+    if opts.seed is not None:
+        out.append(f"seed:={opts.seed}")
+    if opts.rate is not None:
+        out.append(f"rate:={float(opts.rate)}")
+    return out
+
+
+def with_scene_file(plan: RunPlan, log_dir: Path) -> RunPlan:
+    """The plan whose nodes read the scene with the --set overrides: written to
+    LOG_DIR/scene_set/ under the scene file's own name; the plan itself without overrides."""
+    if plan.scene_yaml is None:
+        return plan
+    path = log_dir / "scene_set" / plan.scene_path.name
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(plan.scene_yaml, encoding="utf-8")
+    return replace(plan, scene_path=path)
 
 
 def load_sensors_arg(sensors: str | Path):
@@ -458,6 +502,7 @@ def _run(
     domain = plan.domain
     log_dir = Path(opts.log_dir or tempfile.mkdtemp(prefix=LOG_DIR_PREFIX))
     log_dir.mkdir(parents=True, exist_ok=True)
+    plan = with_scene_file(plan, log_dir)
     profile = FASTDDS_PROFILE
     if plan.transport is not None:
         profile = write_profile(plan.transport, log_dir)
@@ -580,17 +625,11 @@ def _run(
         scanner_args = [
             scene,
             "use_sim_time:=true",
-            f"stream:={plan.stream_path}",
+            *scanner_stream_args(plan, opts),
             f"scan_line_x:={SCAN_LINE_X}",
             f"start_delay:={START_DELAY}",
             f"start_gate:={','.join(gate)}",
         ]
-        if opts.parcels is not None or opts.duration is None:
-            scanner_args.append(f"parcels:={count}")
-        if opts.duration is not None:
-            scanner_args.append(f"duration:={opts.duration}")
-        if opts.seed is not None:
-            scanner_args.append(f"seed:={opts.seed}")
         group.start(
             "scanner", node_command("scanner", _ros_args("scanner", plan, opts, scanner_args))
         )

@@ -260,6 +260,15 @@ class StreamConfig:
             source=source,
         )
 
+    def at_rate(self, rate_pcs_h: float) -> StreamConfig:
+        """This stream's parcel mix arriving at ``rate_pcs_h`` [pcs/h] (a gap spacing dropped;
+        headway and min_gap kept)."""
+        if not (math.isfinite(rate_pcs_h) and rate_pcs_h > 0.0):
+            raise StreamError(
+                f"stream {self.source}: rate must be in (0, inf) pcs/h, got {rate_pcs_h!r}"
+            )
+        return replace(self, rate_pcs_h=float(rate_pcs_h), gap=None)
+
     @classmethod
     def from_yaml(cls, path: str | Path) -> StreamConfig:
         p = resolve_stream(path)
@@ -438,15 +447,23 @@ def load_stream(
     duration: float | None = None,
     seed: int | None = None,
     belt_width: float = 0.7,
+    rate_pcs_h: float | None = None,
 ) -> list[ParcelSpec]:
-    """A stream from a YAML config (drawn) or a CSV manifest (read, then cut to count/duration)."""
+    """A stream from a YAML config (drawn; at ``rate_pcs_h`` [pcs/h] instead of its own spacing
+    when given) or a CSV manifest (read, then cut to count/duration; it takes no rate)."""
     p = resolve_stream(path)
     if p.suffix.lower() == ".csv":
+        if rate_pcs_h is not None:
+            raise StreamError(
+                f"stream {p}: a rate needs a stream config (YAML) to draw from, not a manifest"
+            )
         parcels = read_manifest(p, belt_width)
         if duration is not None:
             parcels = [s for s in parcels if s.arrival_time <= duration]
         return parcels[:count] if count is not None else parcels
     cfg = StreamConfig.from_yaml(p)
+    if rate_pcs_h is not None:
+        cfg = cfg.at_rate(rate_pcs_h)
     if count is None and duration is None:
         count = 100
     return generate(cfg, belt_speed, count=count, duration=duration, seed=seed)

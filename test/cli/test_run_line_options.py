@@ -45,7 +45,6 @@ def test_a_bad_value_exits_2_naming_the_option_and_its_range(
 @pytest.mark.parametrize(
     ("args", "option"),
     [
-        (["--rate", "2000"], "--rate"),
         (["--no-guard"], "--no-guard"),
         (["--reply-timeout", "5"], "--reply-timeout"),
         (["--owner-timeout", "30"], "--owner-timeout"),

@@ -254,6 +254,9 @@ def test_restarts_are_independent_searches_and_the_best_counts(reduced):
     assert reduced.evaluations > 2 * REDUCED.budget
     reached = [w for w in reduced.restarts if math.isfinite(w)]
     assert reached and reduced.W_t >= max(reached) - 1e-9
+    spread = reduced.to_dict()["restart_spread"]
+    assert (spread["best"], spread["worst"]) == (max(reached), min(reached))
+    assert spread["near_best"] == sum(w >= 0.99 * max(reached) for w in reached)
     assert evaluate_point(REDUCED, reduced.X)["W_t"] == pytest.approx(reduced.W_t, rel=1e-12)
 
 

@@ -156,3 +156,17 @@ def test_config_yaml_roundtrip_rejects_missing_stream_key(tmp_path: Path) -> Non
     f.write_text(yaml.safe_dump({"parcels": {}}))
     with pytest.raises(StreamError, match="must contain a 'stream:' mapping"):
         StreamConfig.from_yaml(f)
+
+
+def test_at_rate_replaces_a_gap_spacing_and_keeps_the_mix() -> None:
+    """A gap-spaced stream at 600 pcs/h: regular 6 s headways (above any (A + min_gap) / v),
+    the same parcels as drawn with the gap (a constant gap draws no random number)."""
+    gapped = cfg(rate_pcs_h=None, gap=0.5)
+    timed = gapped.at_rate(600.0)
+    assert timed.gap is None and timed.rate_pcs_h == 600.0
+    a, b = generate(gapped, 1.0, count=5), generate(timed, 1.0, count=5)
+    times = [s.arrival_time for s in b]
+    assert [t1 - t0 for t0, t1 in zip(times, times[1:], strict=False)] == pytest.approx([6.0] * 4)
+    assert [(s.length_a, s.mass) for s in a] == [(s.length_a, s.mass) for s in b]
+    with pytest.raises(StreamError, match=r"rate must be in \(0, inf\) pcs/h"):
+        gapped.at_rate(0.0)
