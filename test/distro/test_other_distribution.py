@@ -6,11 +6,12 @@ The suite runs on Jazzy (LTS) by default and on Kilted with ``FENCE_SORTER_ROS_D
 ``.build/kilted``; docs/guide/install.md). ``make test`` runs everything on the distribution of its
 venv and, through this test, the set-up and ``pytest test/ros`` on the other one in a child
 process, so CI (which runs ``make test`` alone) covers both: every node, message, bag and
-DDS path runs on each distribution; the command-line tests (``test/cli``: argument checks,
-summaries and verdicts, the same Python on both) run on the default one. On the other one the
-fault-injection tests (marker ``faults``: killed and restarted nodes, floods, a full disk)
-are left out but for the signal tests of ``test_shutdown.py``: they test the runner's and the
-nodes' own logic, the same on both, while signal handling is the distribution's rclpy. A
+DDS path runs on each distribution (the quick ROS tests and the slow ones of ``OTHER_SLOW``);
+the command-line tests (``test/cli``: argument checks, summaries and verdicts, the same
+Python on both) run on the default one. On the other one the fault-injection tests (marker
+``faults``: killed and restarted nodes, floods, a full disk) are left out but for the signal
+tests of ``test_shutdown.py``: they test the runner's and the nodes' own logic, the same on
+both, while signal handling is the distribution's rclpy. A
 failure shows the child's output. ``pytest -m "not distro"`` leaves it out. The colcon
 install test runs on the default distribution only (docs/guide/install.md: what the other leg
 costs).
@@ -32,6 +33,18 @@ pytestmark = [pytest.mark.distro, pytest.mark.slow]
 REPO = Path(__file__).resolve().parents[2]
 #: the distribution that is not the one this test runs on
 OTHER = {"jazzy": "kilted", "kilted": "jazzy"}
+#: the slow ROS tests run on the other distribution too: the node suite end to end, every
+#: message through DDS, the recorder's bags, the nodes one by one, the line over DDS (equal
+#: to line-sim) and the signal tests; the other slow ones (views, bags of lines, the CLI
+#: clients) run the same Python on the same paths and are left to the default distribution
+OTHER_SLOW = (
+    "test/ros/test_suite_e2e.py",
+    "test/ros/test_dds_roundtrip.py",
+    "test/ros/test_recording.py",
+    "test/ros/test_nodes.py",
+    "test/ros/test_line_run.py",
+    "test/ros/test_shutdown.py",
+)
 #: the other distribution's set-up (a first one: download and message build) [s]
 BOOTSTRAP_TIMEOUT = 1800.0
 #: its ROS tests [s]
@@ -97,8 +110,8 @@ def test_the_other_distribution_sets_up_and_passes_the_ros_tests() -> None:
 
     tests = run_in(
         distro,
-        "source scripts/env.sh && pytest -q -p no:cacheprovider -m 'not faults' test/ros"
-        " && pytest -q -p no:cacheprovider test/ros/test_shutdown.py",
+        "source scripts/env.sh && pytest -q -p no:cacheprovider -m 'not faults and not slow'"
+        f" test/ros && pytest -q -p no:cacheprovider -m 'not faults' {' '.join(OTHER_SLOW)}",
         TESTS_TIMEOUT,
     )
     assert tests.returncode == 0, shown(tests)
