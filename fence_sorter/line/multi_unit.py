@@ -476,7 +476,8 @@ class LinePlant:
         steady = self.steady_window()
         # the cohort first inducted in the window: its sorted / inducted is at most 1
         st = steady_state(ps, steady, rate(n), self.holds, self.merges)
-        throughput_in, throughput_out = st["inducted_pcs_h"], st["sorted_pcs_h"]
+        throughput_in = st["inducted_pcs_h"] if steady is not None else math.nan
+        throughput_out = st["sorted_pcs_h"]
         prof = self.spec.planner.profile
         units = {}
         for u in self.units:
