@@ -19,8 +19,9 @@ from importlib import import_module
 #: submodules (0.6-1 s), rclpy (0.25 s) and the ROS message and ament packages (present only in
 #: a ROS environment), Rerun (0.5 s), Dask's scheduler (1.6 s), Matplotlib (0.7-1.3 s), rosbags
 #: and mcap (40-70 ms, only for bag files), websockets (0.1-0.3 s with asyncio, only to serve
-#: Foxglove), CyRK (optional: only the compiled peers of the benchmark, ``cyrk:*``).
-#: numpy (80 ms), yaml and tqdm are imported at the top.
+#: Foxglove), CyRK (optional: only the compiled peers of the benchmark, ``cyrk:*``), pyarrow
+#: (1.3 s with its Parquet module, only to write a Parquet file). numpy (80 ms), yaml and tqdm
+#: are imported at the top.
 HEAVY = frozenset(
     {
         "numba",
@@ -44,6 +45,7 @@ HEAVY = frozenset(
         "mcap",
         "websockets",
         "CyRK",
+        "pyarrow",
     }
 )
 

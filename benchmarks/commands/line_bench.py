@@ -3,24 +3,29 @@ induction).
 
 For each induction rate (default 2000 to 12000 pcs/h) one ROS-free run of the line
 (:mod:`fence_sorter.line.multi_unit`, guard on) of a stream drawn over ``--duration`` (600 s)
-at that rate (or of ``--parcels``), to the drain: throughput in and out over the run's steady
-window (:meth:`~fence_sorter.line.multi_unit.LinePlant.steady_window`), out against in less
-the parcels no pass could read, sort rate, recirculation share, rejects, intrusions and
+at that rate (or of ``--parcels``), to the drain: what the stream offered, and throughput in
+and out of the cohort of parcels first inducted in the run's steady window
+(:mod:`fence_sorter.line.steady`: out / in at most 1), inducted against offered, whether the
+line is saturated and where its queue forms, out against in less the parcels no pass could
+read, sort rate, recirculation share, rejects, intrusions and
 conservation, the sorted parcels over each limit (10)-(12) and the failed events, with each
 unit's capacity bound W_t (1)-(2) of its median stroke beside them. Exits 1 when a row has an
 intrusion, a conservation error, a failed event or a sorted parcel over a limit.
 Prints a Markdown table and writes it with the command and commit to ``--out``
-(docs/reports/line-bench.md by default; ``--out ''`` writes nothing).
+(docs/reports/line-bench.md by default; ``--out ''`` writes nothing); ``--json FILE`` writes
+the rows' figures as one JSON object.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import sys
 import time
 from pathlib import Path
 
+from fence_sorter.jsonsafe import json_safe
 from fence_sorter.physics.params import ParameterError
 from fence_sorter.verification.machine import git_revision
 
@@ -41,6 +46,7 @@ def register(parser: argparse.ArgumentParser) -> None:
     )  # fmt: skip
     parser.add_argument("--seed", type=int, default=None)
     parser.add_argument("--out", default="docs/reports/line-bench.md", metavar="FILE")
+    parser.add_argument("--json", default=None, metavar="FILE", help="the rows as JSON")
     parser.set_defaults(func=run)
 
 
@@ -60,6 +66,8 @@ def run(args: argparse.Namespace) -> int:
         return _error(f"--parcels must be in [1, 1000000], got {args.parcels}")
     if not 1.0 <= args.duration <= 1e5:
         return _error(f"--duration must be in [1, 100000] s, got {args.duration:g}")
+    if args.json is not None and not Path(args.json).parent.is_dir():
+        return _error(f"--json must be a FILE in an existing directory, got {args.json}")
     # lazy: the line's physics loads Numba and the compiled kernel
     from fence_sorter.line.line_file import load_line
     from fence_sorter.line.multi_unit import LinePlant, LineRunConfig
@@ -73,15 +81,17 @@ def run(args: argparse.Namespace) -> int:
     # a parcel unread on each of its max_passes passes is lost to the no-reads
     unread = line.no_read_share**line.max_passes
     head = (
-        "| rate set [pcs/h] | in [pcs/h] | out [pcs/h] | out / (in (1 - p^k)) "
-        "| window's parcels sorted / (1 - p^k) | sort rate "
+        "| rate set [pcs/h] | offered [pcs/h] | in [pcs/h] | in / offered | out [pcs/h] "
+        "| out / in | out / (in (1 - p^k)) | saturated (queue at) | sort rate "
         "| recirculated | rejected | intrusions | conservation "
         "| sorted over (10) / (11) / (12) | failed | W_t per unit [pcs/h] "
         "| window [s] | sim/wall |"
     )
-    rows = [head, "|" + " --- |" * 15]
+    rows = [head, "|" + " --- |" * 18]
     print(head, flush=True)
     ok = True
+    saturated: list[str] = []
+    figures: list[dict] = []
     for rate in rates:
         cfg = (
             LineRunConfig(parcels=args.parcels, rate_pcs_h=rate, seed=args.seed)
@@ -100,15 +110,18 @@ def run(args: argparse.Namespace) -> int:
             "-" if math.isnan(u["capacity_bound_pcs_h"]) else f"{u['capacity_bound_pcs_h']:.0f}"
             for u in s["units"].values()
         )
-        w = s["steady_window"]
-        ratio = s["throughput_out_pcs_h"] / (s["throughput_in_pcs_h"] * (1.0 - unread))
-        cohort = (
-            "-" if w is None or not w["first_inductions"]
-            else f"{w['cohort_sorted'] / (w['first_inductions'] * (1.0 - unread)):.3f}"
-        )  # fmt: skip
+        w, st = s["steady_window"], s["steady"]
+        sat = "yes (" + (", ".join(st["queue_at"]) or "-") + ")" if st["saturated"] else "no"
+        if st["saturated"]:
+            saturated.append(
+                f"{rate:.0f} (offered {st['offered_pcs_h']:.0f}, inducted "
+                f"{st['inducted_pcs_h']:.0f} pcs/h; queue at {', '.join(st['queue_at'])})"
+            )
         row = (
-            f"| {rate:.0f} | {s['throughput_in_pcs_h']:.0f} | {s['throughput_out_pcs_h']:.0f} "
-            f"| {ratio:.3f} | {cohort} | {s['sort_rate']:.1%} | {s['recirculation_share']:.1%} "
+            f"| {rate:.0f} | {st['offered_pcs_h']:.0f} | {st['inducted_pcs_h']:.0f} "
+            f"| {st['inducted_over_offered']:.3f} | {st['sorted_pcs_h']:.0f} "
+            f"| {st['out_over_in']:.3f} | {st['out_over_in'] / (1.0 - unread):.3f} | {sat} "
+            f"| {s['sort_rate']:.1%} | {s['recirculation_share']:.1%} "
             f"| {s['rejected']} | {s['swept_sector_intrusions']} "
             f"| {'exact' if s['conservation_ok'] else 'NO'} | {over_cells} "
             f"| {s['solver_failures']} | {wt} "
@@ -117,6 +130,15 @@ def run(args: argparse.Namespace) -> int:
         )
         rows.append(row)
         print(row, flush=True)
+        figures.append({"rate_set_pcs_h": rate, "steady": st, "steady_window": w, **{
+            k: s[k] for k in ("sort_rate", "recirculation_share", "rejected",
+                              "swept_sector_intrusions", "conservation_ok", "solver_failures",
+                              "parcels_over_limits", "induction_hold_s")
+        }})  # fmt: skip
+    verdict = (
+        "Saturated: " + "; ".join(saturated) + "." if saturated else "No rate saturated the line."
+    )
+    print(verdict, flush=True)
     when = time.strftime("%Y-%m-%d", time.gmtime())
     size = f"--parcels {args.parcels}" if args.parcels is not None else (
         f"--duration {args.duration:g}"
@@ -129,29 +151,35 @@ def run(args: argparse.Namespace) -> int:
         + f"` at commit {commit}, {when}, on this 2-core machine under load "
         "(sim/wall is the speed of the whole ROS-free line, planning included, while other "
         "work ran: not a speed benchmark; that is `python -m benchmarks line-speed`).\n\n"
-        "Each row: one stream of the given rate run to the drain with the guard on. `in` and\n"
-        "`out` are counted over the run's steady window (`window`, sim time): from one loop\n"
-        "cycle (belt length / v + transit time) after the first parcel's first induction to\n"
-        "the last parcel's first induction, so the fill at the start and the drain at the end\n"
-        "are left out. `in`: new parcels per hour whose front crossed the induction scan line\n"
-        "in the window (after the induction held them for returning parcels and, with\n"
-        "induction.min_gap, to the line's gap, so it stays below the rate set once the line\n"
-        "is saturated; a returning parcel is not counted again); `out`: parcels per hour\n"
-        "sorted to a chute in the window, whenever they were inducted. A no-read parcel goes\n"
-        f"round the loop and is scanned again: only p^k = {p:g}^{k} = {unread:.1e} of the\n"
-        f"parcels stay unread on all k = {k} passes, so in steady state with every readable\n"
-        "parcel sorted, out = in (1 - p^k). The window's counts carry the fill and the parcels\n"
-        "left on the line at its end (a few parcels each way); the fate of the parcels first\n"
-        "inducted in the window does not: `window's parcels sorted` is the share of them\n"
-        "sorted by the end of the run, the steady state's out / in. Recirculated: share of\n"
-        "parcels that went round the loop at least once; sorted over (10) / (11) / (12): the\n"
-        "parcels sorted whose delivered impact speed, acceleration or exit speed went over the\n"
-        "limit its unit planned for; failed: events whose simulation failed (counted apart);\n"
-        "W_t: each unit's capacity (1)-(2)\n"
-        "for its median stroke (by scraping time t_z) and the median parcel length (`-`: no\n"
-        "stroke).\n\n" + "\n".join(rows) + "\n"
+        "Each row: one stream of the given rate run to the drain with the guard on.\n"
+        "`offered`: the stream's arrivals per hour. `in` and `out` are those of the cohort\n"
+        "of parcels first inducted in the run's steady window (`window`, sim time: from one\n"
+        "loop cycle, belt length / v + transit time, after the first parcel's first induction\n"
+        "to the last parcel's first induction, so the fill and the drain are left out): `in`:\n"
+        "the cohort per hour of the window, after the induction held it for returning parcels\n"
+        "and, with induction.min_gap, to the line's gap; `out`: the cohort's parcels sorted by\n"
+        "the end of the run, per hour of the window. `out / in` is the share of the cohort\n"
+        "sorted, at most 1 by construction; the rest was rejected, failed or left on the line.\n"
+        "A no-read parcel goes round the loop and is scanned again: only\n"
+        f"p^k = {p:g}^{k} = {unread:.1e} of the parcels stay unread on all k = {k} passes, so\n"
+        "with every readable parcel sorted, out = in (1 - p^k). `saturated`: a queue grows\n"
+        "faster than 0.05 s per s of sim time (the induction's wait of new parcels, or the\n"
+        "returning parcels' wait at the merge), with where it forms: `induction hold\n"
+        "(min_gap)`, `induction hold (returning parcels)`, `merge waits`; a saturated line\n"
+        "inducts less than offered (`in / offered` < 1). The induction keeps the stream's own\n"
+        "spacing: a hold delays every parcel behind it, and the time is not made up later,\n"
+        "so the holds for returning parcels cost induction rate at any rate. Recirculated:\n"
+        "share of parcels that went round the loop at least once; sorted over (10) / (11) /\n"
+        "(12): the parcels sorted whose delivered impact speed, acceleration or exit speed\n"
+        "went over the limit its unit planned for; failed: events whose simulation failed\n"
+        "(counted apart); W_t: each unit's capacity (1)-(2) for its median stroke (by scraping\n"
+        "time t_z) and the median parcel length (`-`: no\n"
+        "stroke).\n\n" + "\n".join(rows) + "\n\n" + verdict + "\n"
     )
     if args.out:
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         Path(args.out).write_text(text)
+    if args.json is not None:
+        doc = {"line": line.name, "commit": commit, "unread_share": unread, "rows": figures}
+        Path(args.json).write_text(json.dumps(json_safe(doc)))
     return 0 if ok else 1

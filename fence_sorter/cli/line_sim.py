@@ -3,21 +3,25 @@
 Loads a line file (``config/lines/``), draws the induction stream, runs the line to the drain
 (:mod:`fence_sorter.line.multi_unit`) and prints the line summary (``--json``: one JSON object).
 ``--rrd FILE`` also writes a Rerun recording of the whole line, sampled as sim time passes
-(:mod:`fence_sorter.visualisation.line_view`). Exit codes: 0 a drained run with conservation
-exact, 0 wrong destinations, every hand-off received at the other end of its link, with the
-guard 0 swept-sector intrusions, 0 failed events and no sorted parcel over a limit of
-(10)-(12); 1 otherwise (each problem named on stderr); 2 a bad line file or option (one line
-naming it).
+(:mod:`fence_sorter.visualisation.line_view`). ``--parcels-out FILE`` writes one row per
+parcel (:mod:`fence_sorter.line.parcel_log`; CSV, or Parquet for ``FILE.parquet``);
+``--json --with-parcels`` puts the same rows under ``parcels``. Exit codes: 0 a drained run
+with conservation exact, 0 wrong destinations, every hand-off received at the other end of
+its link, with the guard 0 swept-sector intrusions, 0 failed events and no sorted parcel over
+a limit of (10)-(12); 1 otherwise (each problem named on stderr); 2 a bad line file or option
+(one line naming it).
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import sys
 from pathlib import Path
 
 from fence_sorter.jsonsafe import json_safe
+from fence_sorter.line.parcel_log import parcel_rows, write_rows
 from fence_sorter.physics.params import ParameterError
 
 EXIT_OK, EXIT_CHECK, EXIT_BAD = 0, 1, 2
@@ -41,6 +45,14 @@ def register(parser: argparse.ArgumentParser) -> None:
         help="turn the swept-sector guard off (the intrusions it prevents are counted)",
     )  # fmt: skip
     parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument(
+        "--parcels-out", metavar="FILE", default=None,
+        help="write one row per parcel to FILE (.csv, or .parquet)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--with-parcels", action="store_true",
+        help="with --json: the per-parcel rows under 'parcels'",
+    )  # fmt: skip
     parser.add_argument(
         "--rrd", metavar="FILE", default=None,
         help="write a Rerun recording of the line (top view, per-unit plots) to FILE.rrd",
@@ -68,6 +80,17 @@ def run(args: argparse.Namespace) -> int:
         rrd = Path(args.rrd)
         if rrd.suffix != ".rrd" or not rrd.parent.is_dir():
             return _error(f"--rrd must be a FILE.rrd in an existing directory, got {args.rrd}")
+    if args.parcels_out is not None:
+        out = Path(args.parcels_out)
+        if out.suffix not in (".csv", ".parquet") or not out.parent.is_dir():
+            return _error(
+                "--parcels-out must be a FILE.csv or FILE.parquet in an existing directory, "
+                f"got {args.parcels_out}"
+            )
+        if out.suffix == ".parquet" and importlib.util.find_spec("pyarrow") is None:
+            return _error("--parcels-out FILE.parquet needs pyarrow, not installed: use .csv")
+    if args.with_parcels and not args.json:
+        return _error("--with-parcels goes with --json only")
     if not 0.01 <= args.rrd_period <= 10.0:
         return _error(f"--rrd-period must be in [0.01, 10] s, got {args.rrd_period}")
     # lazy: the line's physics loads Numba and the compiled kernel
@@ -99,6 +122,12 @@ def run(args: argparse.Namespace) -> int:
         if logger is not None:
             logger.close(plant)
     problems = line_problems(s)
+    if args.parcels_out is not None or args.with_parcels:
+        rows = parcel_rows(plant)
+        if args.parcels_out is not None:
+            write_rows(rows, args.parcels_out)
+        if args.with_parcels:
+            s = {**s, "parcels": rows}
     if args.json:
         print(json.dumps(json_safe(s)))
     else:
@@ -122,16 +151,34 @@ def _recorder(line, path: str, period: float):
 
 
 def _steady_line(s: dict) -> str:
-    """Throughput in and out over the steady window (:meth:`LinePlant.steady_window`)."""
-    w = s["steady_window"]
+    """Throughput of the cohort first inducted in the steady window
+    (:mod:`fence_sorter.line.steady`), inducted against offered, and saturation."""
+    w, st = s["steady_window"], s.get("steady")
+    if st is None:  # a summary from before the cohort's figures
+        return "throughput: no cohort figures in this summary"
+    sat = (
+        f"SATURATED: offered {st['offered_pcs_h']:.0f}, inducted "
+        f"{st['inducted_pcs_h']:.0f} pcs/h; queue at {', '.join(st['queue_at']) or 'none'}"
+        if st["saturated"]
+        else "not saturated"
+    ) + (
+        f" (induction wait grows {st['induction_delay_growth']:.3f} s/s, merge wait "
+        f"{st['merge_wait_growth']:.3f} s/s)"
+    )
     if w is None:
-        return "throughput: no steady window (the induction ran no longer than a loop cycle)"
+        return (
+            "throughput: no steady window (the induction ran no longer than a loop cycle); " + sat
+        )
+    c = st["cohort"]
     return (
-        f"throughput over the steady window [{w['start_s']:.1f}, {w['end_s']:.1f}) s: in "
-        f"{s['throughput_in_pcs_h']:.0f} pcs/h ({w['first_inductions']} first inductions), out "
-        f"{s['throughput_out_pcs_h']:.0f} pcs/h ({w['sorts']} sorts = "
-        f"{w['first_inductions']} - {w['still_on_line']} still on the line - "
-        f"{w['ended_unsorted']} rejected or failed + {w['from_before']} from before)"
+        f"throughput of the {c['inducted']} parcels first inducted in the steady window "
+        f"[{w['start_s']:.1f}, {w['end_s']:.1f}) s: in {st['inducted_pcs_h']:.0f} pcs/h "
+        f"= {st['inducted_over_offered']:.1%} of {st['offered_pcs_h']:.0f} offered, out "
+        f"{st['sorted_pcs_h']:.0f} pcs/h (out/in {st['out_over_in']:.3f}: sorted "
+        f"{c['sorted']}, rejected {c['rejected']}, failed {c['failed']}"
+        + (f", lost with a unit {c['lost_with_unit']}" if c["lost_with_unit"] else "")
+        + f", on the line at the end {c['on_line']})\n"
+        + sat
     )
 
 

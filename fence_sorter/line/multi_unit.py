@@ -40,6 +40,7 @@ from fence_sorter.line.handoff import (
     link_name,
 )
 from fence_sorter.line.line_file import UNIT_LEAD, LineSpec
+from fence_sorter.line.parcel_log import ParcelLog
 from fence_sorter.line.routing import (
     REASONS,
     SETTLE_SLACK,
@@ -48,6 +49,8 @@ from fence_sorter.line.routing import (
     footprint,
     track_hits_sector,
 )
+from fence_sorter.line.steady import per_hour, steady_state
+from fence_sorter.line.steady import steady_window as _steady_window
 from fence_sorter.line.traffic import Announce, Hold, Left, TrafficView
 from fence_sorter.line.unit import LineUnit, Record, track_of
 from fence_sorter.stream.model import generate
@@ -129,6 +132,7 @@ class LinePlant:
             for i, u in enumerate(line.units)
         ]
         self.names = [u.name for u in line.units]
+        self.log = ParcelLog(self.names)  # what each unit decided, per parcel and pass
         self.bookings: list[Booking] = []
         self.view = TrafficView(self.v)  # the traffic the units are given: records alone
         self._next_new = 0  # index of the next stream parcel to announce
@@ -136,6 +140,10 @@ class LinePlant:
         self.inductions = 0
         self.merges_waited = 0.0  # summed waiting time of returning parcels at the merge [s]
         self.hold = 0.0  # the induction's summed hold of the stream for returning parcels [s]
+        # (sim time, "min_gap" | "returning", seconds) of each hold of the stream, and
+        # (return time, wait [s]) of each returning parcel merged: the queues' growth
+        self.holds: list[tuple[float, str, float]] = []
+        self.merges: list[tuple[float, float]] = []
         self.handoffs = 0
         self.induction_sent = 0  # hand-offs the induction sent to the first unit
         self.recirculation_received = 0  # hand-offs the recirculation took from the last unit
@@ -210,6 +218,7 @@ class LinePlant:
                 )  # fmt: skip
                 if gap < self.spec.min_gap:
                     self.hold += (self.spec.min_gap - gap) / self.v
+                    self.holds.append((self.t, "min_gap", (self.spec.min_gap - gap) / self.v))
                     at = p.arrival + self.hold
             self.live.append(p)
             self._induct(p, at)
@@ -234,7 +243,9 @@ class LinePlant:
                 tr.t_ref += delay
             self.view.apply(Hold(tuple(tr.parcel_id for tr in tracks), delay))
             self.hold += delay
+            self.holds.append((self.t, "returning", delay))
             self.merges_waited += self.t - p.return_time
+            self.merges.append((p.return_time, self.t - p.return_time))
             self._induct(p, self.t)
 
     def _holdable(self) -> list[Track]:
@@ -259,6 +270,7 @@ class LinePlant:
             tr.t_ref += delay
         self.view.apply(Hold(tuple(tr.parcel_id for tr in tracks), delay))
         self.hold += delay
+        self.holds.append((self.t, "returning", delay))
 
     def _merge_hold(self, cand: Track) -> tuple[float, list[Track]] | None:
         """How long the induction must hold the stream's parcels not yet at X = 0 (and which)
@@ -309,6 +321,9 @@ class LinePlant:
             return
         reply = u.receive(p.pending, self.t, self.view.traffic())
         self.handoffs += 1
+        reason = reply.decision.reason if reply.decision is not None else ""
+        booked = reply.booking is not None
+        self.log.decided(p.pid, p.passes, u.index, reply.refusal, reason, booked)
         p.pending = None
         p.next_unit = u.index + 1
         if reply.booking is not None:
@@ -352,12 +367,14 @@ class LinePlant:
         if p is None or p.state != "belt":
             self.records_ignored += 1
             return
+        in_stroke = p.stroke_unit == u.index
         if p.stroke_unit is not None:
             if p.stroke_unit != u.index:
                 self.records_ignored += 1
                 return
             p.stroke_unit = None
             self.bookings = [b for b in self.bookings if b.parcel_id != p.pid]
+        self.log.record(p.pid, p.passes, u.index, rec, in_stroke)
         if isinstance(rec, Sorted):
             p.state = "sorted"
             p.sorted_at = p.ended_at = rec.t
@@ -457,12 +474,10 @@ class LinePlant:
         rate = (lambda k: 3600.0 * k / window) if window > 0 else (lambda k: math.nan)
         firsts = [p.inducted_at for p in ps if not math.isnan(p.inducted_at)]
         steady = self.steady_window()
-        if steady is None:
-            throughput_in = throughput_out = math.nan
-        else:
-            hours = (steady["end_s"] - steady["start_s"]) / 3600.0
-            throughput_in = steady["first_inductions"] / hours
-            throughput_out = steady["sorts"] / hours
+        # the cohort first inducted in the window: its sorted / inducted is at most 1
+        st = steady_state(ps, steady, rate(n), self.holds, self.merges)
+        throughput_in = st["inducted_pcs_h"] if steady is not None else math.nan
+        throughput_out = st["sorted_pcs_h"]
         prof = self.spec.planner.profile
         units = {}
         for u in self.units:
@@ -498,10 +513,11 @@ class LinePlant:
             "links": self.links().table(),
             "handoffs_balanced": self.links().balanced(),
             "declined": {r: sum(u.declined[r] for u in self.units) for r in REASONS},
-            "induction_rate_pcs_h": _per_hour(firsts),
+            "induction_rate_pcs_h": per_hour(firsts),
             "throughput_in_pcs_h": throughput_in,
             "throughput_out_pcs_h": throughput_out,
             "steady_window": steady,
+            "steady": st,
             "merge_wait_mean_s": self.merges_waited / max(self.inductions - n, 1),
             "induction_hold_s": self.hold,
             "still_on_line": on_line,
@@ -519,46 +535,11 @@ class LinePlant:
         return self.spec.length / self.v + self.spec.transit_time
 
     def steady_window(self) -> dict | None:
-        """The steady-state window of the run and its counts, as users of sortation lines
-        measure throughput: from one loop cycle after the first parcel's first induction (the
-        fill: until then no parcel has come back from the loop) to the last parcel's first
-        induction (after it the line drains). ``first_inductions``: new parcels whose front
-        crossed the induction scan line X = 0 in the window (start <= t < end; a returning
-        parcel's second pass is not counted again); ``sorts``: parcels sorted to a chute in
-        it, whenever they were inducted. They differ by exact counts:
-        ``sorts = first_inductions - still_on_line - ended_unsorted + from_before``, where
-        ``still_on_line``: parcels first inducted in the window and not ended by its end;
-        ``ended_unsorted``: first inducted in it, rejected or failed in it; ``from_before``:
-        first inducted before it, sorted in it. ``cohort_sorted``: first inducted in it and
-        sorted, whenever (after the drain: the fate of the parcels the steady state took in,
-        free of the fill and of the parcels left on the line at its end). None when the
-        induction ran no longer than a loop cycle (no steady state)."""
-        firsts = [p.inducted_at for p in self.parcels if not math.isnan(p.inducted_at)]
-        if len(firsts) < 2:
-            return None
-        fill = self.loop_cycle()
-        start, end = min(firsts) + fill, max(firsts)
-        if end <= start:
-            return None
-
-        def inside(t: float) -> bool:
-            return start <= t < end
-
-        new = [p for p in self.parcels if inside(p.inducted_at)]
-        sorts = sum(inside(p.sorted_at) for p in self.parcels)
-        return {
-            "start_s": start,
-            "end_s": end,
-            "fill_s": fill,
-            "first_inductions": len(new),
-            "sorts": sorts,
-            "still_on_line": sum(not p.ended_at < end for p in new),
-            "ended_unsorted": sum(p.state != "sorted" and p.ended_at < end for p in new),
-            "from_before": sum(
-                p.inducted_at < start and inside(p.sorted_at) for p in self.parcels
-            ),
-            "cohort_sorted": sum(p.state == "sorted" for p in new),
-        }
+        """The steady-state window of the run and its counts (:func:`~fence_sorter.line.
+        steady.steady_window`), as users of sortation lines measure throughput: from one loop
+        cycle after the first parcel's first induction to the last parcel's first induction.
+        None when the induction ran no longer than a loop cycle (no steady state)."""
+        return _steady_window(self.parcels, self.loop_cycle())
 
     def links(self) -> LinkCounts:
         """Hand-offs per link, counted at both ends (the units count their own); a hand-off
@@ -623,15 +604,6 @@ def over_limits(units) -> dict[str, list[int]]:
         for c, ids in u["over_limits"].items():
             out.setdefault(c, set()).update(ids)
     return {c: sorted(ids) for c, ids in sorted(out.items(), key=lambda kv: int(kv[0]))}
-
-
-def _per_hour(times: list[float]) -> float:
-    """Events per hour over the span of ``times`` widened by one mean interval (NaN if < 2)."""
-    if len(times) < 2:
-        return math.nan
-    span = max(times) - min(times)
-    window = span * len(times) / (len(times) - 1)
-    return 3600.0 * len(times) / window if window > 0 else math.nan
 
 
 def run_line(line: LineSpec, cfg: LineRunConfig = LineRunConfig(), warm: bool = True) -> dict:

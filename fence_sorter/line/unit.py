@@ -56,7 +56,8 @@ from fence_sorter.line.routing import (
 from fence_sorter.line.types import Outcome, OverlapWarning, StrokeStarted
 
 __all__ = [
-    "ID_STRIDE", "LineUnit", "Record", "Traffic", "UnitReply", "local_offsets", "track_of"
+    "ID_STRIDE", "LineUnit", "Record", "StrokeRecord", "Traffic", "UnitReply", "local_offsets",
+    "track_of",
 ]  # fmt: skip
 
 #: a parcel's id in a unit's simulation: line id * ID_STRIDE + pass (ids stay unique per unit)
@@ -102,6 +103,27 @@ class _Held:
     handoff: HandOff
     local_id: int
     stroke: tuple[float, float] | None = None  # (R_s, t1) commanded
+    planned: tuple[float, float, float] = (math.nan,) * 3  # predicted w_n, a_N, ydot
+    yaw: float = 0.0  # its yaw in the unit's frame when taken [rad]
+
+
+@dataclass(frozen=True)
+class StrokeRecord:
+    """One stroke's end, for the line's per-parcel records: the line's parcel and pass, the
+    stroke (R_s, t1, alpha_k), the outcome's code and delivered figures (10)-(12) beside the
+    planned ones."""
+
+    parcel_id: int
+    passes: int
+    r_s: float
+    t1: float
+    alpha_k: float
+    code: OutcomeCode
+    impact_normal_speed: float  # w_n [m/s]
+    peak_normal_accel: float  # a_N [m/s^2]
+    exit_speed_y: float  # ydot [m/s]
+    planned: tuple[float, float, float]  # w_n, a_N, ydot the planner predicted
+    yaw: float  # [rad], the unit's frame
 
 
 def local_offsets(
@@ -170,6 +192,10 @@ class LineUnit:
         self.over_limits: dict[str, list[int]] = {
             str(c): [] for c in (10, 11, 12) if c in planner.profile.active
         }
+        self.stroke_records: list[StrokeRecord] = []  # every stroke's end, in order
+        # (line id of the parcel found in a stroke's sector, line id of the stroke's parcel)
+        self.intruded: list[tuple[int, int]] = []
+        self._planned: tuple[float, float, float] = (math.nan,) * 3
 
     # -- records in ------------------------------------------------------------------------
     def announce(
@@ -276,7 +302,9 @@ class LineUnit:
         res = self.line.command(cmd, t=t)
         if res.accepted:
             self.accepted += 1
-            self.held[spec.parcel_id] = _Held(h, spec.parcel_id, (cmd.r_s, cmd.t1))
+            self.held[spec.parcel_id] = _Held(
+                h, spec.parcel_id, (cmd.r_s, cmd.t1), self._planned, spec.yaw
+            )
             reply.booking = booking
         else:
             self.refused += 1
@@ -353,6 +381,7 @@ class LineUnit:
             return Decision(False, code, plan.reason), None, None
         ev = plan.evaluation
         self.planner.busy_until = plan.end_time
+        self._planned = (ev.impact_speed, ev.peak_accel, ev.exit_speed)
         cmd = StrokeCommand(spec.parcel_id, StartMode.AT_RS, ev.r_s, 0.0, ev.t1, self.alpha_k)
         return Decision(True), cmd, booking(plan.start_time, plan.end_time)
 
@@ -384,6 +413,21 @@ class LineUnit:
         if held is None:  # a parcel the unit declined left its zone
             return None
         h = held.handoff
+        if held.stroke is not None:
+            self.stroke_records.append(
+                StrokeRecord(
+                    h.parcel_id,
+                    h.passes,
+                    *held.stroke,
+                    self.alpha_k,
+                    ev.code,
+                    ev.impact_normal_speed,
+                    ev.peak_normal_accel,
+                    ev.exit_speed_y,
+                    held.planned,
+                    held.yaw,
+                )  # fmt: skip
+            )
         if ev.code in (OutcomeCode.SORTED, OutcomeCode.MISSED) and math.isfinite(
             ev.peak_normal_force
         ):
@@ -426,6 +470,9 @@ class LineUnit:
                     out.append(rec)
             elif isinstance(ev, OverlapWarning):
                 self.intrusions += 1
+                self.intruded.append(
+                    (ev.other_parcel_id // ID_STRIDE, ev.stroke_parcel_id // ID_STRIDE)
+                )
             elif isinstance(ev, StrokeStarted):
                 self.busy += 2.0 * ev.t1
                 self.strokes.append((ev.r_s, ev.t1))

@@ -279,8 +279,16 @@ def test_over_the_steady_window_sorts_are_first_inductions_less_open_ones_plus_e
         w["first_inductions"] - w["still_on_line"] - w["ended_unsorted"] + w["from_before"]
     )
     hours = (b - a) / 3600.0
+    # throughput is the cohort's: its parcels in, and those of them sorted, per hour of it
     assert s["throughput_in_pcs_h"] == w["first_inductions"] / hours
-    assert s["throughput_out_pcs_h"] == w["sorts"] / hours
+    assert s["throughput_out_pcs_h"] == seen["cohort_sorted"] / hours
+    st = s["steady"]
+    assert st["cohort"]["inducted"] == len(new) and st["cohort"]["sorted"] == len(
+        [pid for pid in new if pid in sorted_at]
+    )
+    assert st["out_over_in"] == seen["cohort_sorted"] / len(new) <= 1.0
+    assert st["offered_pcs_h"] == s["rate_in_pcs_h"]
+    assert st["inducted_over_offered"] == s["throughput_in_pcs_h"] / s["rate_in_pcs_h"]
 
 
 @pytest.mark.slow
