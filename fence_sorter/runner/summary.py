@@ -443,6 +443,23 @@ def _not_finite(text) -> bool:
         return False
 
 
+def dense_stream(s: dict) -> str:
+    """A phrase when the swept-sector guard declined at least half the divert parcels (the
+    parcel behind was in the sector each stroke sweeps): the stream is denser than one fence
+    sorts, whatever the planner does; empty otherwise."""
+    try:
+        occupied = int((s.get("controller") or {}).get("declined.sector_occupied", 0))
+    except (TypeError, ValueError):
+        return ""
+    if not s["divert"] or 2 * occupied < s["divert"]:
+        return ""
+    return (
+        f"{occupied} of {s['divert']} divert parcels declined sector_occupied: the parcel "
+        "behind was in the sector the stroke sweeps; space the parcels wider or spread the "
+        "destinations over more units"
+    )
+
+
 def format_summary(s: dict) -> str:
     """Human-readable summary."""
 
@@ -472,6 +489,9 @@ def format_summary(s: dict) -> str:
             f"without command   {s['no_command']} divert parcels got NO_COMMAND (no command "
             "before the point of no return: a controller outage costs these)"
         )
+    dense = dense_stream(s)
+    if dense:
+        lines.append(f"stream too dense  {dense}")
     for phrase in foreign_traffic(s):
         lines.append(f"foreign traffic   {phrase} (refused, not counted)")
     if s.get("disputed"):

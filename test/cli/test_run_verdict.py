@@ -266,3 +266,24 @@ def test_a_paced_runs_figure_the_node_could_not_take_reads_n_a() -> None:
     )  # fmt: skip
     assert "nan" not in line
     assert "deadline_misses 0, cycle_lateness_p50_ms n/a" in line
+
+
+def test_a_stream_the_guard_declines_half_of_is_called_too_dense() -> None:
+    """One divert parcel of two declined sector_occupied (the controller's diagnostics) is
+    half: the summary says the stream is denser than one fence sorts; none declined, or
+    declines for other reasons, say nothing."""
+
+    def summary(declined: dict[str, str]):
+        r = records()
+        r.outcomes = {
+            1: outcome("SORTED", True),
+            2: outcome("NOT_DIVERTED"),
+            3: outcome("NO_FEASIBLE_COMMAND"),
+        }
+        r.diagnostics["fence_sorter/controller"] = declined
+        return summarise(r, 1.0, [1, 2, 3], [1, 3])
+
+    dense = format_summary(summary({"declined.sector_occupied": "1"}))
+    assert "stream too dense  1 of 2 divert parcels declined sector_occupied" in dense
+    for quiet in ({"declined.sector_occupied": "0"}, {"declined.no_feasible_stroke": "1"}):
+        assert "stream too dense" not in format_summary(summary(quiet))
