@@ -249,6 +249,16 @@ def _time_to_reach(d: float, v: float, a: float) -> float | None:
     return tau if tau >= 0.0 else None
 
 
+def sampled_exit_speed(s: Series, cross: tuple[float, float], belt_width: float) -> float:
+    """The exit speed the states show at ``cross`` (:func:`crossing`): NaN when the crossing
+    is extrapolated from a last sample the fence still pushes (N > 0), whose push up to the
+    release is not in the states (the constant-acceleration extrapolation then misses it by
+    up to a_N times the time to the edge)."""
+    if not np.any(s.y >= belt_width) and s.n[-1] > 0.0:
+        return NAN
+    return cross[1]
+
+
 def sampled_figures(run: RecordedRun, pid: int) -> dict:
     """Figures of one parcel re-derived from its recorded states (NaN where not derivable)."""
     s = run.series.get(pid)
@@ -275,7 +285,7 @@ def sampled_figures(run: RecordedRun, pid: int) -> dict:
     sorted_ = bool(np.any(s.stage == Stage.SORTED)) or cross is not None
     out["sorted"] = sorted_
     if cross is not None:
-        out["exit_speed_y"] = cross[1]
+        out["exit_speed_y"] = sampled_exit_speed(s, cross, run.belt_width)
         spec = run.parcels.get(pid)
         if spec is not None and math.isfinite(run.belt_speed) and run.belt_speed > 0:
             t_enter = spec["scan_time"] + (0.0 - spec["scan_position_x"]) / run.belt_speed

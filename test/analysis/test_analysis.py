@@ -19,7 +19,14 @@ from bag_edit import rewrite_bag
 from processes import run_cli
 
 from fence_sorter.analysis import analyze_bag
-from fence_sorter.analysis.run import Series, check_row, crossing, load_run, parcel_table
+from fence_sorter.analysis.run import (
+    Series,
+    check_row,
+    crossing,
+    load_run,
+    parcel_table,
+    sampled_exit_speed,
+)
 from fence_sorter.recording.bagread import read_bag
 from fence_sorter.visualisation import rerun_layout as layout
 from fence_sorter.visualisation import rerun_log as rl
@@ -154,6 +161,23 @@ def test_a_parcel_the_fence_pushes_over_the_edge_crosses_at_its_acceleration():
     tau = (math.sqrt(1.0 + 2.0 * a * d) - 1.0) / a
     assert tc == pytest.approx(s.t[-1] + tau) and tau < period
     assert v == pytest.approx(1.0 + a * tau) and v == pytest.approx(math.sqrt(1.0 + 2 * a * d))
+
+
+def test_an_exit_speed_extrapolated_from_a_pushed_sample_is_not_a_measurement():
+    """The crossing of a parcel whose last sample the fence still pushes (N > 0) is found, but
+    its exit speed is not taken from it: the push up to the release is not in the states. A
+    released last sample (N = 0) or a sample past the edge gives it."""
+    period, d, a = 0.02, 0.025, 50.0
+    s = _samples(period, 0.7 - d, 1.0, a)
+    cross = crossing(s, 0.7, period)
+    assert cross is not None
+    assert sampled_exit_speed(s, cross, 0.7) == pytest.approx(cross[1])  # released: N = 0
+    s.n[-1] = 150.0
+    assert math.isnan(sampled_exit_speed(s, cross, 0.7))
+    past = _samples(period, 0.71, 1.0, a, n=3)  # the last sample is past the edge
+    past.n[:] = 150.0
+    cross = crossing(past, 0.7, period)
+    assert sampled_exit_speed(past, cross, 0.7) == pytest.approx(cross[1])
 
 
 def test_a_skipped_snapshot_widens_the_window_of_the_crossing():
