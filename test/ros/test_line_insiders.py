@@ -11,21 +11,15 @@ and seed, field by field, and no unit restarted.
 from __future__ import annotations
 
 import json
-import os
-import re
-import signal
-import subprocess
-import sys
 import threading
-import uuid
 from pathlib import Path
 
 import pytest
-from processes import run_cli, stop_process, wait_until
+from processes import run_cli, wait_until
 
 from fence_sorter.line.lockstep import DELIVERED_PREFIX, Done, encode
 
-from .test_line_unit_killed import LINE, PARCELS, RATE, REPO, RTF, SEED, TAG, _pid
+from .line_process import LINE, PARCELS, RATE, SEED, held_line_run
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.faults]
 
@@ -83,59 +77,22 @@ def test_a_forged_end_and_an_unasked_reply_change_no_figure_and_are_named(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     monkeypatch.setenv("ROS_LOG_DIR", str(tmp_path / "ros_log_insider"))
-    tag = uuid.uuid4().hex
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH")]))
-    env[TAG] = tag
-    cmd = [sys.executable, "-m", "fence_sorter.cli.main", "run", "--line", LINE, "--parcels",
-           str(PARCELS), "--seed", str(SEED), "--rate", str(RATE), "--rtf", str(RTF), "--json",
-           "--log-dir", str(tmp_path / "logs"), "--reply-timeout", "60",
-           "--owner-timeout", "90"]  # fmt: skip
-    err_file = tmp_path / "stderr.txt"
-    insider, held = None, None
-    with err_file.open("w") as err_out:
-        proc = subprocess.Popen(
-            cmd, stdout=subprocess.PIPE, stderr=err_out, text=True, cwd=REPO, env=env,
-            start_new_session=True,
-        )  # fmt: skip
-        try:
-            found = wait_until(
-                lambda: (
-                    re.search(r"ROS domain (\d+)", err_file.read_text()) or proc.poll() is not None
-                ),
-                120.0,
-                "the runner's domain",
-            )
-            assert proc.poll() is None, err_file.read_text()
-            # the owner held until the insider matched unit_2's topics
-            owner = wait_until(
-                lambda: _pid(tag, "fence_sorter.nodes.line_owner"), 60.0, "the owner's process"
-            )
-            os.kill(owner, signal.SIGSTOP)
-            held = owner
-            insider = _Insider(int(found.group(1)))
-            wait_until(
-                lambda: (
-                    insider.commands.get_subscription_count() > 0
-                    and insider.replies.get_subscription_count() > 0
-                    and insider.sub.get_publisher_count() > 0
-                ),
-                120.0,
-                "unit_2's topics matched",
-            )
-            os.kill(owner, signal.SIGCONT)
-            held = None
-            wait_until(
-                lambda: insider.running or proc.poll() is not None, 240.0, "the line running"
-            )
-            insider.strike()
-            out, _ = proc.communicate(timeout=300)
-        finally:
-            if held is not None:
-                os.kill(held, signal.SIGCONT)
-            if insider is not None:
-                insider.close()
-            stop_process(proc)
+
+    def matched(insider: _Insider) -> bool:
+        return (
+            insider.commands.get_subscription_count() > 0
+            and insider.replies.get_subscription_count() > 0
+            and insider.sub.get_publisher_count() > 0
+        )
+
+    with held_line_run(tmp_path, lambda domain, tag: _Insider(domain), matched) as (
+        proc,
+        insider,
+        err_file,
+    ):
+        wait_until(lambda: insider.running or proc.poll() is not None, 240.0, "the line running")
+        insider.strike()
+        out, _ = proc.communicate(timeout=300)
     err = err_file.read_text()
     assert proc.returncode == 1 and "Traceback" not in err, err
     s = json.loads(out)

@@ -19,42 +19,23 @@ from __future__ import annotations
 
 import json
 import os
-import re
 import signal
-import subprocess
-import sys
 import threading
-import uuid
 from pathlib import Path
 
 import pytest
-from processes import stop_process, wait_until
+from processes import wait_until
 
 from fence_sorter.line.lockstep import DELIVERED_PREFIX, Delivered, decode
-from fence_sorter.runner.processes import tagged
+
+from .line_process import PARCELS, held_line_run, run_pid
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.faults]
 
-REPO = Path(__file__).resolve().parents[2]
-TAG = "FENCE_SORTER_TEST_LINE_KILL"
-#: the line, its stream and the pace of its clock (real-time factor): parcel 6 is the first
-#: unit_2 books a stroke for; parcels announced after its new process rejoined go to it
-LINE, PARCELS, SEED, RATE, RTF = "two_units", 6, 3, 4000, 2
+#: on the line of line_process (two_units, 6 parcels, seed 3, 4000 pcs/h, rtf 2), parcel 6 is
+#: the first unit_2 books a stroke for; parcels announced after its new process rejoined go
+#: to it
 DT = 0.01  # the line clock's step [s]
-DELIVERED = DELIVERED_PREFIX  # the test reads only Delivered replies
-
-
-def _pid(tag: str, *words: str) -> int | None:
-    """The pid of the run's process whose command line holds every one of ``words`` (None:
-    none yet)."""
-    for pid in tagged(TAG, tag):
-        try:
-            cmd = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
-        except OSError:
-            continue
-        if all(w.encode() in cmd for w in words):
-            return pid
-    return None
 
 
 class _Killer:
@@ -87,7 +68,7 @@ class _Killer:
 
     def _on_reply(self, msg) -> None:
         # a step's answer (Done) or a ready: no booking; only a Delivered is read
-        if self.booking is not None or not msg.data.startswith(DELIVERED):
+        if self.booking is not None or not msg.data.startswith(DELIVERED_PREFIX):
             return
         r = decode(msg.data)
         if isinstance(r, Delivered) and r.booking is not None:
@@ -111,62 +92,27 @@ def test_a_unit_killed_in_a_stroke_loses_that_parcel_and_rejoins(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     monkeypatch.setenv("ROS_LOG_DIR", str(tmp_path / "ros_log_listener"))
-    tag = uuid.uuid4().hex
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH")]))
-    env[TAG] = tag
-    cmd = [sys.executable, "-m", "fence_sorter.cli.main", "run", "--line", LINE, "--parcels",
-           str(PARCELS), "--seed", str(SEED), "--rate", str(RATE), "--rtf", str(RTF), "--json",
-           "--log-dir", str(tmp_path / "logs")]  # fmt: skip
+
+    def killer(domain: int, tag: str) -> _Killer:
+        unit_2 = run_pid(tag, "fence_sorter.nodes.line_unit", "unit_index:=1")
+        assert unit_2 is not None
+        return _Killer(domain, unit_2)
+
     # the owner's clock waits for the killed unit's new process, however slow its start on a
     # loaded machine, and the other unit waits for the owner as long
-    cmd += ["--reply-timeout", "60", "--owner-timeout", "90"]
-    err_file = tmp_path / "stderr.txt"
-    killer, held = None, None
-    with err_file.open("w") as err_out:
-        proc = subprocess.Popen(
-            cmd, stdout=subprocess.PIPE, stderr=err_out, text=True, cwd=REPO, env=env,
-            start_new_session=True,
-        )  # fmt: skip
-        try:
-            # the runner says its domain once it checked that no other participant uses it
-            found = wait_until(
-                lambda: (
-                    re.search(r"ROS domain (\d+)", err_file.read_text()) or proc.poll() is not None
-                ),
-                120.0,
-                "the runner's domain",
-            )
-            assert proc.poll() is None, err_file.read_text()
-            # the owner held (SIGSTOP) until the subscriber here has matched unit_2's replies,
-            # before the line runs (the runner starts the units, then the owner)
-            owner = wait_until(
-                lambda: _pid(tag, "fence_sorter.nodes.line_owner"), 60.0, "the owner's process"
-            )
-            os.kill(owner, signal.SIGSTOP)
-            held = owner
-            unit_2 = _pid(tag, "fence_sorter.nodes.line_unit", "unit_index:=1")
-            assert unit_2 is not None
-            killer = _Killer(int(found.group(1)), unit_2)
-            wait_until(lambda: killer.sub.get_publisher_count() > 0, 120.0, "unit_2 matched")
-            os.kill(owner, signal.SIGCONT)
-            held = None
-            wait_until(
-                lambda: killer.booking is not None or proc.poll() is not None,
-                240.0,
-                "a stroke booked on unit_2",
-            )
-            b = killer.booking
-            assert b is not None, err_file.read_text()
-            killer.close()
-            killer = None
-            out, _ = proc.communicate(timeout=300)
-        finally:
-            if held is not None:
-                os.kill(held, signal.SIGCONT)
-            if killer is not None:
-                killer.close()
-            stop_process(proc)
+    with held_line_run(tmp_path, killer, lambda k: k.sub.get_publisher_count() > 0) as (
+        proc,
+        k,
+        err_file,
+    ):
+        wait_until(
+            lambda: k.booking is not None or proc.poll() is not None,
+            240.0,
+            "a stroke booked on unit_2",
+        )
+        b = k.booking
+        assert b is not None, err_file.read_text()
+        out, _ = proc.communicate(timeout=300)
     err = err_file.read_text()
     assert b.unit == 1 and b.t_start < b.t_end, b
     assert proc.returncode == 0 and "Traceback" not in err, err
