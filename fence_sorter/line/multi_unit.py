@@ -378,7 +378,7 @@ class LinePlant:
         if isinstance(rec, Sorted):
             p.state = "sorted"
             p.sorted_at = p.ended_at = rec.t
-            p.end = rec.chute
+            p.end = owner_chute(u.spec.destinations, u.index, p.destination, rec.chute)
             p.track = None
         elif isinstance(rec, Failed):
             p.state = "failed"
@@ -567,6 +567,14 @@ class LinePlant:
         r_s, t1 = tz[len(tz) // 2]
         a = float(np.median([p.spec.length_a for p in self.parcels]))
         return stroke_capacity(self.v, t1, r_s, a, self.spec.planner.pitch_gap)
+
+
+def owner_chute(served: tuple[str, ...], unit: int, destination: str, chute: str) -> str:
+    """Where a parcel a unit says it sorted into ``chute`` went, as the owner knows it: that
+    chute when it is the parcel's destination (the owner's, not the one its hand-off carried)
+    and the unit serves it; else ``wrong:<unit>`` (a unit misled by a hand-off of another
+    destination, or one that says so itself)."""
+    return chute if chute == destination and chute in served else f"wrong:{unit}"
 
 
 def line_problems(s: dict) -> list[str]:

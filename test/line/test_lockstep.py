@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import random
+from dataclasses import replace
 
 import pytest
 
@@ -334,3 +335,37 @@ def test_a_reply_the_owner_did_not_ask_for_is_refused_and_named_never_asserted()
         assert any(p.startswith(f"{name}: 3 replies the owner did not ask for") for p in problems)
         if not matching:
             assert _same(ref, got) == {}
+
+
+class RedirectedLinks(LocalLinks):
+    """An insider on unit_2's upstream link: every hand-off of a parcel to A (which unit_2
+    does not serve) arrives there as one to B (which it does)."""
+
+    def __init__(self, sides):
+        super().__init__(sides)
+        self.redirected: set[int] = set()
+
+    def _route(self, k, out):
+        def redirect(o):
+            if isinstance(o, HandOff) and o.to_unit == 1 and o.destination == "A":
+                self.redirected.add(o.parcel_id)
+                return replace(o, destination="B")
+            return o
+
+        super()._route(k, [redirect(o) for o in out])
+
+
+@pytest.mark.slow
+def test_a_parcel_sorted_on_a_redirected_hand_off_counts_as_a_wrong_destination():
+    """The owner judges a Sorted record by the destination it knows, not by the one the
+    hand-off carried: the parcels to A that unit_2 sorted into B on forged hand-offs are
+    sorted to a wrong destination, and the line is not clean."""
+    from fence_sorter.line.multi_unit import line_problems
+
+    cfg = LineRunConfig(parcels=30, rate_pcs_h=3000.0, seed=3)
+    owner, _, links = _line(cfg, RedirectedLinks)
+    got = owner.run()
+    misled = [p.pid for p in owner.parcels if p.pid in links.redirected and p.end == "wrong:1"]
+    assert misled and got["sorted_wrong_destination"] >= len(misled)
+    assert got["sorted_per_destination"]["B"] + len(misled) <= got["sorted"]
+    assert any("sorted to a wrong destination" in p for p in line_problems(got))
