@@ -20,6 +20,7 @@ import errno
 import fcntl
 import os
 import pickle
+import re
 import select
 import signal
 import struct
@@ -31,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from fence_sorter.visualisation.frames import FenceFrame, ParcelFrame, SceneGeometry
+from fence_sorter.visualisation.rerun_keys import outcome_of
 from fence_sorter.visualisation.rerun_layout import TIMELINE, open_recording
 from fence_sorter.visualisation.rerun_log import RerunLogger
 
@@ -249,6 +251,9 @@ def child_main(argv: list[str] | None = None) -> int:
             rec.set_time(TIMELINE, duration=t)
             text = payload[9:].decode("utf-8", "replace")
             rec.log("events/outcomes", rr.TextLog(text, level="INFO" if ok else "WARN"))
+            head = re.match(r"parcel (\d+): (\w+)", text)  # "parcel <id>: <CODE> at ..."
+            if head:
+                logger.log_outcome(t, int(head.group(1)), outcome_of(head.group(2)))
         elif kind == KIND_SORT_EVENT:
             logger.log_event(*pickle.loads(payload))
     logger.close()
