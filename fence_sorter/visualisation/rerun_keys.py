@@ -12,6 +12,8 @@ along +x0) with its label. Outcome marks: ``top/outcomes`` (and ``world/outcomes
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
 from fence_sorter.visualisation.frames import SceneGeometry
@@ -67,6 +69,13 @@ LABEL_DROP = 0.11
 def outcome_of(code_name: str) -> str:
     """The outcome (sorted, passed, missed, failed) of a /sort_outcomes reason code name."""
     return OUTCOME_OF_CODE.get(code_name, "failed")
+
+
+def outcome_of_line(text: str) -> tuple[int, str] | None:
+    """(parcel id, outcome) of the simulator's outcome line ``parcel <id>: <CODE> at ...``,
+    or None for any other text."""
+    head = re.match(r"parcel (\d+): ([A-Z_]+)\b", text)
+    return (int(head.group(1)), outcome_of(head.group(2))) if head else None
 
 
 def margin_color(margin: float) -> tuple[int, int, int]:

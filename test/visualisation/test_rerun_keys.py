@@ -141,3 +141,19 @@ def test_one_timeline_ending_at_the_last_outcome(recorded):
     assert fence_end > last_outcome + 1.0  # the bag holds later states: they were left out
     # the parcels gone by then are no longer drawn at the end
     assert rows["/top/parcels"][-1][1]["labels"] in (None, [])
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        ("parcel 7: SORTED at t = 9.035 s: C_s crossed y0 = s", (7, "sorted")),
+        ("parcel 3: NOT_DIVERTED at t = 14.310 s: passed the line end", (3, "passed")),
+        ("parcel 12: MISSED at t = 20.000 s: left the belt", (12, "missed")),
+        ("parcel 5: SOLVER_FAILURE at t = 1.000 s: no solution", (5, "failed")),
+        ("parcel 5: NO_FEASIBLE_COMMAND at t = 1.000 s", (5, "failed")),
+        ("run stopped", None),
+    ],
+    ids=["sorted", "passed", "missed", "solver-failure", "no-command", "other"],
+)
+def test_the_live_outcome_lines_map_onto_the_four_outcomes(text, expected):
+    assert keys.outcome_of_line(text) == expected
