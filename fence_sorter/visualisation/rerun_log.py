@@ -242,7 +242,7 @@ class RerunLogger:
             # reads pale), at the chute's far edge, off the belt and the parcels
             rec.log(
                 "world/chute_label",
-                rr.Points3D([(cx, cy + 0.5 * sy, 0.0)], colors=[LABEL_COLOR], radii=0.005,
+                rr.Points3D([(cx, cy + 0.5 * sy, 0.0)], colors=[LABEL_COLOR], radii=0.0,
                             labels=["chute"]),
                 static=True,
             )  # fmt: skip
@@ -325,7 +325,7 @@ class RerunLogger:
             "world/fence": rr.LineStrips3D.from_fields(colors=fence_color, radii=0.01),
             "world/parcels": rr.Boxes3D.from_fields(fill_mode="solid", show_labels=False),
             "world/parcel_labels": rr.Points3D.from_fields(
-                colors=[LABEL_COLOR], radii=0.005, show_labels=True
+                colors=[LABEL_COLOR], radii=0.0, show_labels=True
             ),
             f"{TOP}/parcel_labels": rr.Points2D.from_fields(
                 colors=[LABEL_COLOR], radii=0.0, show_labels=True, draw_order=7.0
