@@ -20,10 +20,10 @@ def read_rrd(path: Path) -> dict[str, list[tuple[float, dict]]]:
         cols = batch.schema.names
         if "sim_time" not in cols:
             continue
-        t = batch.column("sim_time").to_pylist()
+        t = batch.column("sim_time").cast("int64").to_pylist()  # [ns]
         data = {c.split(":")[-1]: batch.column(c).to_pylist() for c in cols if ":" in c}
         for i, ti in enumerate(t):
-            ts = ti.total_seconds() if hasattr(ti, "total_seconds") else ti * 1e-9
+            ts = ti * 1e-9
             rows[chunk.entity_path].append((ts, {k: v[i] for k, v in data.items()}))
     for v in rows.values():
         v.sort(key=lambda r: r[0])

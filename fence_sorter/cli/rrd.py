@@ -19,8 +19,8 @@ from pathlib import Path
 
 from fence_sorter.recording.topics import LINE_SETUP
 from fence_sorter.visualisation.frames import scene_from_bag
+from fence_sorter.visualisation.rerun_bag import bag_end, log_bag
 from fence_sorter.visualisation.rerun_layout import open_recording
-from fence_sorter.visualisation.rerun_log import log_bag
 
 
 def register(parser: argparse.ArgumentParser) -> None:
@@ -67,7 +67,9 @@ def run(args: argparse.Namespace) -> int:
         return 2
     if contents.by_topic(LINE_SETUP):
         return _line(contents, out, args.spawn)
-    rec = open_recording(out, spawn=args.spawn, scene=scene_from_bag(contents))
+    rec = open_recording(
+        out, spawn=args.spawn, scene=scene_from_bag(contents), t_end=bag_end(contents)
+    )
     logger = log_bag(contents, rec)
     logger.close()
     print(f"wrote {out} ({logger.frames} frames, {out.stat().st_size / 1e6:.2f} MB)")

@@ -23,8 +23,8 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.description = (
         "Render a Rerun recording in Rerun's bundled web viewer under headless Chromium "
         "(Debian's chromium, playwright-core) and write PNG screenshots: default.png (as it "
-        "opens, paused), mid.png, end.png, damage.png (the damage-risk tab at 80 % of the "
-        "run), 3d.png (the 3D tab, mid-run); a line's recording (line-sim --rrd): the first three."
+        "opens, paused), mid.png, end.png, damage.png (the damage-risk tab at the "
+        "end), 3d.png (the 3D tab, mid-run); a line's recording (line-sim --rrd): the first three."
     )
     parser.add_argument(
         "rrd", nargs="?", help="the .rrd (default: the checkout's bags/example_4_parcels.rrd)"
@@ -73,8 +73,9 @@ def run(args: argparse.Namespace) -> int:
     shots = [browser.Shot("default"), browser.Shot("mid", mid), browser.Shot("end", hi)]
     if not browser.is_line_recording(rrd):  # a line's layout has no tabs
         shots += [
-            # late in the run (the outcomes so far in the chart), the cursor inside the plots
-            browser.Shot("damage", lo + 0.8 * (hi - lo), (browser.TAB_DAMAGE,)),
+            # at the end: every outcome in the chart (the plots run past the end, so the
+            # cursor is inside them)
+            browser.Shot("damage", hi, (browser.TAB_DAMAGE,)),
             browser.Shot("3d", mid, (browser.TAB_3D, browser.TAB_SERIES)),
         ]
     try:

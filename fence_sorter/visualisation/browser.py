@@ -41,7 +41,7 @@ WIDTH, HEIGHT = 1280, 800
 TIME_BAR = (292.0, 1073.0, 786.0)
 #: the tabs of the default blueprint at this window size [px]
 TAB_TOP = (45, 50)
-TAB_3D = (139, 50)
+TAB_3D = (305, 50)  # right of the top view tab and its long name
 TAB_SERIES = (820, 50)
 TAB_DAMAGE = (921, 50)
 #: console errors that follow from the refused outside requests (and nothing else)

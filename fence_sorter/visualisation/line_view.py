@@ -14,7 +14,11 @@ Entity paths:
 - per sample: ``top/units/<name>/fence`` (the fence at its pose and side, deflected: one row
   per sample), ``top/parcels`` (the rotated footprints, labelled ``<id> <destination>``, the
   labels hidden; coloured by destination on the belt, by damage margin once sorted: a sorted
-  parcel stays SORTED_SHOWN s at its pose at the outcome, C_s on the chute edge);
+  parcel stays SORTED_SHOWN s at its pose at the outcome, C_s on the chute edge),
+  ``top/parcel_ids`` (their ids, dark, under them), ``top/loop/parcels`` (the parcels on the
+  recirculation loop: dots in their destinations' colours on a lane above the belt, static
+  ``top/loop``, from the belt's end back to the induction over the loop's transit time) and
+  ``top/counters`` (sorted, on the line, rejected, failed);
 - ``plots/alpha_w/<name>`` [rad] and ``plots/contact/<name>`` (the unit's largest N at the
   sample [kN]; an impact lasts a few ms, so the samples miss most peaks) in the unit's colour,
   and ``plots/contact/<name>/peak``: each sorted parcel's peak N from its solve, at its
@@ -66,9 +70,10 @@ DESTINATION_COLORS = (
     (31, 119, 180), (148, 103, 189), (23, 190, 207), (227, 119, 194),
     (140, 86, 75), (40, 40, 140), (200, 0, 200), (0, 128, 128),
 )  # fmt: skip
-#: each unit's colour in the plots (units in belt order, then again)
-UNIT_COLORS = ((40, 110, 220), (235, 120, 20), (150, 60, 190), (20, 160, 150))
-UNIT_COLOR_NAMES = ("blue", "orange", "purple", "teal")
+#: each unit's colour in the plots (units in belt order, then again): dark and neutral, none
+#: a destination's colour, the fence's orange or a damage margin's red-green
+UNIT_COLORS = ((20, 20, 20), (130, 130, 130), (128, 128, 0), (100, 50, 0))
+UNIT_COLOR_NAMES = ("black", "grey", "olive", "brown")
 FENCE_COLOR = (230, 80, 30)
 BELT_COLOR = (70, 70, 70)
 BORDER_COLOR = (220, 220, 60)
@@ -79,6 +84,39 @@ INDUCTION_COLOR = (255, 60, 60)
 LINE_CONTACT_AXIS = (-0.25, 4.0)
 #: a sorted parcel stays in the view this long at its pose at the outcome [s]
 SORTED_SHOWN = 2.0
+#: the recirculation loop's lane in the top view: this far beyond the far chutes [m]; a
+#: parcel on it is a dot moving from the belt's end back to the induction over transit_time
+LOOP_GAP = 0.6
+LOOP_RADIUS = 0.15  # [m]
+#: the running counters' line: this far above the loop's lane [m]
+COUNTERS_GAP = 1.2
+#: the viewer draws a point's label below the point: ids sit this far below their parcel's
+#: centre [m] (the line's top view draws about 50 px per metre)
+ID_DROP = 0.3
+LINE_CHAR_WIDTH = 0.12  # a label's width per character in the line's top view [m]
+
+
+def loop_lane_y(width: float) -> float:
+    """View y of the recirculation loop's lane (above the chutes beyond the far border)."""
+    return -width - CHUTE_DEPTH - LOOP_GAP
+
+
+def loop_x(length: float, transit_time: float, t: float, return_time: float) -> float:
+    """X [m] of a parcel on the loop at ``t`` [s]: from the belt's end (``length``) when it
+    left back to the induction (0) at ``return_time``."""
+    if transit_time <= 0.0:
+        return 0.0
+    return length * min(max((return_time - t) / transit_time, 0.0), 1.0)
+
+
+def counters_text(counts: dict) -> str:
+    """The counters' line: sorted, on the line (on the belt, on the loop), rejected, failed."""
+    on_line = counts.get("belt", 0) + counts.get("loop", 0)
+    return (
+        f"sorted {counts.get('sorted', 0)}    on the line {on_line} (belt "
+        f"{counts.get('belt', 0)}, loop {counts.get('loop', 0)})    rejected "
+        f"{counts.get('rejected', 0)}    failed {counts.get('failed', 0)}"
+    )
 
 
 def chute_box(position: float, mirrored: bool, width: float) -> tuple[float, float, float, float]:
@@ -102,12 +140,13 @@ def line_blueprint(line, paused: bool = False):
     colours = ", ".join(f"{u.name} {_color_text(k)}" for k, u in enumerate(line.units))
     margin = 0.6
     x_range = (-1.2 - margin, line.length + margin)
-    y_range = (-line.width - CHUTE_DEPTH - margin, CHUTE_DEPTH + margin)
+    y_range = (loop_lane_y(line.width) - COUNTERS_GAP - margin, CHUTE_DEPTH + margin)
     parts = [
         rrb.Vertical(
             rrb.Spatial2DView(
-                name="line, top view: parcels by destination (chute marks), sorted by damage "
-                "margin (green safe, red over a limit)",
+                name="line, top view [m], belt running to the right: parcels (ids) by "
+                "destination (chute marks), sorted ones by damage margin (green safe, red over "
+                "a limit); recirculation loop above",
                 origin=TOP,
                 visual_bounds=rrb.VisualBounds2D(x_range=x_range, y_range=y_range),
             ),
@@ -117,7 +156,7 @@ def line_blueprint(line, paused: bool = False):
                 "plots/contact",
                 LINE_CONTACT_AXIS,
             ),
-            row_shares=[1, 1, 1],
+            row_shares=[2, 1, 1],
         )
     ]
     if paused:
@@ -181,6 +220,12 @@ class LineRerunLogger:
         self._strips: list[np.ndarray] = []
         self._labels: list[str] = []
         self._colors: list[tuple] = []
+        self._ids: list[np.ndarray] = []  # per sample: the id labels' points
+        self._loop_counts: list[int] = []
+        self._loop_at: list[tuple] = []
+        self._loop_labels: list[str] = []
+        self._loop_colors: list[tuple] = []
+        self._counters: list[str] = []
         self._alpha: list[list[float]] = [[] for _ in self.line.units]
         self._force: list[list[float]] = [[] for _ in self.line.units]
 
@@ -248,6 +293,17 @@ class LineRerunLogger:
                 static=True,
             )  # fmt: skip
             texts.append(((u.position - 0.3, ay + (-0.4 if u.mirrored else 0.4)), u.name))
+        # the recirculation loop: a lane from the belt's end back to the induction
+        ly = loop_lane_y(s)
+        rec.log(
+            f"{TOP}/loop",
+            rr.Arrows2D(origins=[(length, ly)], vectors=[(-length, 0.0)], colors=[(150, 150, 150)],
+                        radii=0.03, draw_order=1.0),
+            static=True,
+        )  # fmt: skip
+        texts.append(((0.5 * length, ly - 0.6),
+                      f"recirculation loop: {ln.transit_time:g} s from the end back to the "
+                      "induction"))  # fmt: skip
         rec.log(
             f"{TOP}/labels",
             rr.Points2D([p for p, _ in texts], colors=[LABEL_COLOR], radii=0.001,
@@ -278,6 +334,19 @@ class LineRerunLogger:
             rr.LineStrips2D.from_fields(radii=0.05, show_labels=False, draw_order=3.0),
             static=True,
         )
+        styles = {
+            f"{TOP}/parcel_ids": rr.Points2D.from_fields(
+                colors=[LABEL_COLOR], radii=0.0, show_labels=True, draw_order=7.0
+            ),
+            f"{TOP}/loop/parcels": rr.Points2D.from_fields(
+                radii=LOOP_RADIUS, show_labels=True, draw_order=3.0
+            ),
+            f"{TOP}/counters": rr.Points2D.from_fields(
+                colors=[LABEL_COLOR], radii=0.0, show_labels=True, draw_order=8.0
+            ),
+        }
+        for entity, style in styles.items():
+            rec.log(entity, style, static=True)
 
     # -- samples ---------------------------------------------------------------------------
     def observe(self, plant, records) -> None:
@@ -350,7 +419,17 @@ class LineRerunLogger:
             frames.append(fr)
             labels.append(parcel_label(p.pid, p.destination))
             colors.append(self.dest_color[p.destination])
-        self.add(t, fences, alphas, forces, frames, labels, colors)
+        ln = self.line
+        loop = [
+            (p.pid, loop_x(ln.length, ln.transit_time, t, p.return_time),
+             self.dest_color[p.destination])
+            for p in plant.live
+            if p.state == "loop"
+        ]  # fmt: skip
+        counts: dict[str, int] = {}
+        for p in plant.parcels:
+            counts[p.state] = counts.get(p.state, 0) + 1
+        self.add(t, fences, alphas, forces, frames, labels, colors, loop=loop, counts=counts)
 
     def add(
         self,
@@ -361,13 +440,17 @@ class LineRerunLogger:
         frames: list[ParcelFrame],
         labels: list[str],
         colors: list[tuple],
+        loop: list[tuple] | None = None,
+        counts: dict | None = None,
     ) -> None:
         """One sample of the line at sim time ``t``, whoever took it (a LinePlant's
         :meth:`sample`, or the live view of a line over DDS): per unit in the line's order its
         fence (:func:`fence_strip`), alpha_w [rad] and largest contact force N [N]; the
         parcels on the belt or in a stroke as frames in the line frame (:func:`parcel_frame`)
         with their labels and colours. The sorted parcels noted within SORTED_SHOWN are
-        added here."""
+        added here. ``loop``: (id, X [m], colour) of each parcel on the recirculation loop;
+        ``counts``: parcels per state (sorted, belt, loop, rejected, failed) for the
+        counters."""
         self._last = t
         self._t.append(t)
         for k in range(len(self.line.units)):
@@ -385,6 +468,16 @@ class LineRerunLogger:
         self._counts.append(len(frames))
         if frames:
             self._strips.append(_footprints(frames))
+        self._ids.append(
+            np.array([(f.center_x, -f.center_y + ID_DROP) for f in frames]).reshape(-1, 2)
+        )
+        ly = loop_lane_y(self.line.width)
+        loop = list(loop or [])
+        self._loop_counts.append(len(loop))
+        self._loop_at += [(x, ly) for _, x, _ in loop]
+        self._loop_labels += [str(pid) for pid, _, _ in loop]
+        self._loop_colors += [c for _, _, c in loop]
+        self._counters.append(counters_text(counts) if counts is not None else "")
         self._labels += labels
         self._colors += colors
         self.samples += 1
@@ -402,6 +495,32 @@ class LineRerunLogger:
                  rr.LineStrips2D.columns(strips=self._fences[k]).partition(ones))  # fmt: skip
             send(f"plots/alpha_w/{u.name}", index, rr.Scalars.columns(scalars=self._alpha[k]))
             send(f"plots/contact/{u.name}", index, rr.Scalars.columns(scalars=self._force[k]))
+        send(
+            f"{TOP}/parcel_ids",
+            index,
+            rr.Points2D.columns(
+                positions=np.concatenate(self._ids),
+                labels=[lb.split()[0] for lb in self._labels],
+            ).partition([len(a) for a in self._ids]),
+        )
+        send(
+            f"{TOP}/loop/parcels",
+            index,
+            rr.Points2D.columns(
+                positions=np.array(self._loop_at, dtype=float).reshape(-1, 2),
+                colors=np.array(self._loop_colors, dtype=np.uint8).reshape(-1, 3),
+                labels=self._loop_labels,
+            ).partition(self._loop_counts),
+        )
+        if any(self._counters):
+            y = loop_lane_y(self.line.width) - COUNTERS_GAP
+            # a label is centred on its point: its text starts at the induction
+            at = [(0.5 * LINE_CHAR_WIDTH * len(c), y) for c in self._counters]
+            send(
+                f"{TOP}/counters",
+                index,
+                rr.Points2D.columns(positions=at, labels=self._counters),
+            )
         strips = np.concatenate(self._strips) if self._strips else np.zeros((0, 5, 2))
         send(
             f"{TOP}/parcels",

@@ -6,10 +6,12 @@ coordinates ``(x, -y)``), ``risk`` (the damage-risk chart), ``plots/...``, ``dam
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 
 from fence_sorter.visualisation.frames import SceneGeometry
+from fence_sorter.visualisation.rerun_keys import legend_height
 
 APP_ID = "fence_sorter"
 TIMELINE = "sim_time"
@@ -34,11 +36,13 @@ ACCEL_PLOT_UNIT = 100.0  # [m/s^2]
 DAMAGE_SPEED_AXIS = (-0.25, SPEED_AXIS_MAX)  # [m/s]
 DAMAGE_ACCEL_AXIS = (-0.25, 4.0)  # [10^2 m/s^2]
 DAMAGE_FORCE_AXIS = (-0.25, 4.0)  # [kN]
+TOP_VIEW_NAME = "top view [m], belt running to the right"
 RISK = "risk"  # root of the damage-risk chart (one column per parcel, value / limit upwards)
 #: the top view's damage marks: a grid below the belt, this many per row, rows this far apart
 RISK_MARKS_PER_ROW = 4
 RISK_ROW = 0.16  # [m]
 RISK_ROWS_FRAMED = 4  # rows the top view's bounds leave room for
+TIME_END_MARGIN = 0.03  # the plots' time axis runs this share past the recording's end
 
 
 def _rr():
@@ -48,8 +52,11 @@ def _rr():
     return rr
 
 
-def top_view_bounds(scene: SceneGeometry, margin: float = 0.3) -> tuple[tuple, tuple]:
-    """(x range, y range) of the top view [m, view coordinates]: belt, chute and scan line."""
+def top_view_bounds(
+    scene: SceneGeometry, margin: float = 0.3, legend: bool = False
+) -> tuple[tuple, tuple]:
+    """(x range, y range) of the top view [m, view coordinates]: belt, chute and scan line
+    (and with ``legend`` the legend above them)."""
     x0, x1 = scene.belt_x
     y_max = scene.belt_width
     if scene.chute is not None:
@@ -59,6 +66,8 @@ def top_view_bounds(scene: SceneGeometry, margin: float = 0.3) -> tuple[tuple, t
     if scene.scan_line_x is not None:
         x0, x1 = min(x0, scene.scan_line_x), max(x1, scene.scan_line_x)
     below = RISK_ROW * (RISK_ROWS_FRAMED + 1)  # the damage marks' grid under the belt
+    if legend:
+        y_max += legend_height()
     return (x0 - margin, x1 + margin), (-y_max - margin, below + margin)
 
 
@@ -87,14 +96,24 @@ def camera_position(scene: SceneGeometry) -> tuple[float, float, float]:
     return (cx, cy - 0.6 * reach, 0.75 * reach)
 
 
-def time_plot(name: str, origin: str, y_range: tuple[float, float] | None = None):
+def time_plot(
+    name: str,
+    origin: str,
+    y_range: tuple[float, float] | None = None,
+    t_end: float | None = None,
+):
     """A time series view showing the whole timeline (the same time range in every plot,
-    not each its own data's), a fixed y range and no legend (its title names the colours)."""
+    not each its own data's), a fixed y range and no legend (its title names the colours).
+    ``t_end``: the recording's last instant [s]; the plots run :data:`TIME_END_MARGIN` of it
+    further, so the time cursor at the end is drawn whole."""
     import rerun.blueprint as rrb  # lazy: Rerun (0.5 s), only to log
 
-    whole = rrb.TimeRange(
-        start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.infinite()
+    end = (
+        rrb.TimeRangeBoundary.absolute(seconds=(1.0 + TIME_END_MARGIN) * t_end)
+        if t_end is not None and math.isfinite(t_end)
+        else rrb.TimeRangeBoundary.infinite()
     )
+    whole = rrb.TimeRange(start=rrb.TimeRangeBoundary.infinite(), end=end)
     return rrb.TimeSeriesView(
         name=name,
         origin=origin,
@@ -104,7 +123,9 @@ def time_plot(name: str, origin: str, y_range: tuple[float, float] | None = None
     )
 
 
-def blueprint(scene: SceneGeometry | None = None, paused: bool = False):
+def blueprint(
+    scene: SceneGeometry | None = None, paused: bool = False, t_end: float | None = None
+):
     """Default layout: the top view (2D, framed on the belt and chute when ``scene`` is given)
     on the left with the 3D scene in a tab behind it; on the right the time series (forces,
     tip deflection, alpha_w, speeds) with the damage-risk plots in a tab behind them.
@@ -114,17 +135,21 @@ def blueprint(scene: SceneGeometry | None = None, paused: bool = False):
     viewer sizes a y axis to its widest tick label, so their plot areas start at one x and one
     instant is at one x position on every time series plot. No plot has a legend: each
     title says what its colours mean (a legend of per-parcel series covers the data).
-    ``paused``: a recording that is complete opens paused (a live one follows its data)."""
+    ``paused``: a recording that is complete opens paused (a live one follows its data);
+    ``t_end``: its last instant [s] (see :func:`time_plot`)."""
     import rerun.blueprint as rrb  # lazy: Rerun (0.5 s), only to log
 
     bounds = None
     if scene is not None:
-        x_range, y_range = top_view_bounds(scene)
+        x_range, y_range = top_view_bounds(scene, legend=True)
         bounds = rrb.VisualBounds2D(x_range=x_range, y_range=y_range)
-    plot = time_plot
+
+    def plot(name, origin, y_range):
+        return time_plot(name, origin, y_range, t_end)
+
     layout = rrb.Horizontal(
         rrb.Tabs(
-            rrb.Spatial2DView(name="top view", origin=TOP, visual_bounds=bounds),
+            rrb.Spatial2DView(name=TOP_VIEW_NAME, origin=TOP, visual_bounds=bounds),
             rrb.Spatial3DView(
                 name="sorter 3D",
                 origin="world",
@@ -146,7 +171,7 @@ def blueprint(scene: SceneGeometry | None = None, paused: bool = False):
                 ),
                 plot("drive angle alpha_w [rad]", "plots/fence/alpha_w", ALPHA_AXIS),
                 plot(
-                    "parcel speed [m/s]: to divert orange, to pass grey",
+                    "parcel speed [m/s]: to divert blue, to pass grey",
                     "plots/speed",
                     SPEED_AXIS,
                 ),
@@ -192,14 +217,18 @@ def open_recording(
     recording_id=None,
     scene: SceneGeometry | None = None,
     layout=None,
+    t_end: float | None = None,
 ):
     """A RecordingStream saving to ``path`` (.rrd), and/or streaming to a viewer: a spawned one
     (``spawn``) or one listening at ``url`` (gRPC, e.g. rerun+http://127.0.0.1:9876/proxy),
     with ``layout`` (a function of ``paused`` giving a blueprint; default :func:`blueprint`,
-    ``scene`` framing the top view) as the default layout; without ``url`` (no live viewer
-    follows it) the recording opens paused."""
+    ``scene`` framing the top view, ``t_end`` the last instant) as the default layout;
+    without ``url`` (no live viewer follows it) the recording opens paused."""
     rr = _rr()
     rec = rr.RecordingStream(APP_ID, recording_id=recording_id)
+    # one timeline, sim time: no log_time / log_tick beside it in the plots and time panel
+    rec.set_log_time_enabled(False)
+    rec.set_log_tick_enabled(False)
     if spawn:
         rec.spawn(connect=False)
     sinks = []
@@ -209,6 +238,8 @@ def open_recording(
         sinks.append(rr.GrpcSink(url) if url else rr.GrpcSink())
     if sinks:
         paused = url is None
-        default = layout(paused) if layout is not None else blueprint(scene, paused=paused)
+        default = (
+            layout(paused) if layout is not None else blueprint(scene, paused=paused, t_end=t_end)
+        )
         rec.set_sinks(*sinks, default_blueprint=default)
     return rec

@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from fence_sorter.visualisation.frames import FenceFrame, ParcelFrame, SceneGeometry
+from fence_sorter.visualisation.rerun_keys import outcome_of_line
 from fence_sorter.visualisation.rerun_layout import TIMELINE, open_recording
 from fence_sorter.visualisation.rerun_log import RerunLogger
 
@@ -249,6 +250,9 @@ def child_main(argv: list[str] | None = None) -> int:
             rec.set_time(TIMELINE, duration=t)
             text = payload[9:].decode("utf-8", "replace")
             rec.log("events/outcomes", rr.TextLog(text, level="INFO" if ok else "WARN"))
+            outcome = outcome_of_line(text)
+            if outcome is not None:  # its mark where the parcel was last seen
+                logger.log_outcome(t, *outcome)
         elif kind == KIND_SORT_EVENT:
             logger.log_event(*pickle.loads(payload))
     logger.close()

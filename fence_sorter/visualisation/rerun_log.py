@@ -4,8 +4,8 @@ time series (N, N_stiff, tip deflection, alpha_w, parcel speeds) on the ``sim_ti
 
 The logger is driven by plain frames (:class:`FenceFrame`, :class:`ParcelFrame`, in
 ``visualisation/frames.py``), made from the line's snapshots (:func:`frames_from_snapshot`, used
-live by the simulator) or from a recorded bag (:func:`log_bag`, ``fence-sorter rrd``); the
-recording stream and its layout are ``visualisation/rerun_layout.py``'s. Entity paths:
+live by the simulator) or from a recorded bag (``visualisation/rerun_bag.py``, ``fence-sorter
+rrd``); the recording stream and its layout are ``visualisation/rerun_layout.py``'s. Entity paths:
 
 - ``world/conveyor/belt``, ``world/conveyor/borders``, ``world/chute``, ``world/scan_line``
   (static), ``world/fence``, ``world/parcels``, ``world/contact_forces``;
@@ -22,8 +22,11 @@ recording stream and its layout are ``visualisation/rerun_layout.py``'s. Entity 
 
 Frame "sorter" (REP-103, z up): x0 along the belt, y0 across it towards the chute. The default
 blueprint opens on the top view with the time series beside it (the 3D view in a tab behind,
-the damage-risk plots in a tab behind the time series). Parcels are coloured by their damage
-margin once their outcome is known (from the start in a bag's recording).
+the damage-risk plots in a tab behind the time series). A parcel's outline is coloured by what
+the scan decided (to divert, to pass); where it was last seen, its outcome mark
+(``top/outcomes``: sorted, passed, missed, failed); its damage margin colours its damage mark
+under the belt. The two colour schemes, their legend, a scale bar and the belt's direction are
+``visualisation/rerun_keys.py``'s.
 """
 
 from __future__ import annotations
@@ -33,8 +36,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fence_sorter.recording import topics
-from fence_sorter.stamps import time_to_sec
 from fence_sorter.visualisation.frames import (
     FenceFrame,
     ParcelFrame,
@@ -42,6 +43,17 @@ from fence_sorter.visualisation.frames import (
     bag_frames,
     frames_from_snapshot,
     scene_from_bag,
+)
+from fence_sorter.visualisation.rerun_keys import (
+    LABEL_COLOR,
+    LABEL_DROP,
+    MARGIN_COLORS,
+    MARGIN_RANGE,
+    OUTCOME_COLORS,
+    PARCEL_COLORS,
+    log_keys,
+    log_outcome_marks,
+    margin_color,
 )
 from fence_sorter.visualisation.rerun_layout import (
     ACCEL_PLOT_UNIT,
@@ -70,21 +82,16 @@ from fence_sorter.visualisation.rerun_layout import (
 
 FENCE_Z = 0.05  # height the fence polyline is drawn at [m]
 FORCE_SCALE = 1.0 / 1000.0  # contact arrow length per newton [m/N]
-DIVERT_COLOR = (230, 150, 50)
-PASS_COLOR = (150, 150, 150)
-SORTED_COLOR = (60, 180, 75)
-#: damage-risk colours of the top view: the margin (1 - value / limit, the smaller of w_n's
-#: and a_N's) from MARGIN_COLORS[0] at MARGIN_RANGE[0] (over the limit) to [2] at [1]
-MARGIN_COLORS = ((220, 40, 40), (240, 200, 40), (60, 180, 75))
-MARGIN_RANGE = (-0.25, 0.5)
+#: a parcel's outline (and its speed's line) by what the scan decided; its outcome mark's
+#: colour once it has left (``rerun_keys.py``: one scheme, none of the damage margins' colours)
+DIVERT_COLOR = PARCEL_COLORS["to divert"]
+PASS_COLOR = PARCEL_COLORS["to pass"]
 #: colours the plots' titles name (no legends): N and N_stiff, solver steps and samples
 N_COLOR = (40, 110, 220)
 N_STIFF_COLOR = (235, 120, 20)
 STEPS_COLOR = (40, 110, 220)
 SAMPLED_COLOR = (120, 120, 120)
 ALPHA_COLOR = (200, 50, 50)
-#: labels of parcels and damage marks: dark, so the text reads on any background
-LABEL_COLOR = (25, 25, 25)
 RISK_TICKS = (0.0, 0.5, 1.0)  # the chart's y scale: value / limit
 
 
@@ -115,6 +122,8 @@ class RerunLogger:
         self._damage_styled: set[str] = set()
         # parcel id -> (colour, label, w_n / w_dop, a_N / a_Ndop)
         self._risk_marks: dict[int, tuple] = {}
+        self.last_seen: dict[int, tuple[float, float, float]] = {}  # id -> centre [m]
+        self.outcomes: dict[int, tuple] = {}  # id -> (outcome, x, y, z), once known
         self._frames = _SceneColumns()
         self._log_static()
 
@@ -180,7 +189,7 @@ class RerunLogger:
                 f"{TOP}/parcel_labels",
                 index,
                 rr.Points2D.columns(
-                    positions=centers[:, :2] * (1.0, -1.0), labels=b.labels
+                    positions=centers[:, :2] * (1.0, -1.0) - (0.0, LABEL_DROP), labels=b.labels
                 ).partition(n),
             )
             origins = np.array(b.origins).reshape(-1, 3)
@@ -233,7 +242,7 @@ class RerunLogger:
             # reads pale), at the chute's far edge, off the belt and the parcels
             rec.log(
                 "world/chute_label",
-                rr.Points3D([(cx, cy + 0.5 * sy, 0.0)], colors=[LABEL_COLOR], radii=0.005,
+                rr.Points3D([(cx, cy + 0.5 * sy, 0.0)], colors=[LABEL_COLOR], radii=0.0,
                             labels=["chute"]),
                 static=True,
             )  # fmt: skip
@@ -280,7 +289,13 @@ class RerunLogger:
             rec.log(
                 f"{TOP}/chute",
                 rr.Boxes2D(centers=[(cx, -cy)], sizes=[(sx, sy)], colors=[(50, 100, 200)],
-                           labels=["chute"], draw_order=0.5),
+                           draw_order=0.5),
+                static=True,
+            )  # fmt: skip
+            rec.log(
+                f"{TOP}/chute/label",
+                rr.Points2D([(cx, -cy - LABEL_DROP)], labels=["chute"], colors=[LABEL_COLOR],
+                            radii=0.0, draw_order=2.0),
                 static=True,
             )  # fmt: skip
         if sc.scan_line_x is not None:
@@ -288,9 +303,17 @@ class RerunLogger:
             rec.log(
                 f"{TOP}/scan_line",
                 rr.LineStrips2D([[(x, 0.0), (x, -s)]], colors=[(255, 60, 60)], radii=0.01,
-                                labels=["scan line"], draw_order=2.0),
+                                draw_order=2.0),
                 static=True,
             )  # fmt: skip
+            # its name above the belt, clear of the parcels' ids where they enter
+            rec.log(
+                f"{TOP}/scan_line/label",
+                rr.Points2D([(x, -s - 0.12 - LABEL_DROP)], labels=["scan line"],
+                            colors=[LABEL_COLOR], radii=0.0, draw_order=2.0),
+                static=True,
+            )  # fmt: skip
+        log_keys(rr, rec, sc, TOP)
 
     def _log_static_styles(self) -> None:
         """What does not change from frame to frame of the moving entities (static: it holds
@@ -302,10 +325,10 @@ class RerunLogger:
             "world/fence": rr.LineStrips3D.from_fields(colors=fence_color, radii=0.01),
             "world/parcels": rr.Boxes3D.from_fields(fill_mode="solid", show_labels=False),
             "world/parcel_labels": rr.Points3D.from_fields(
-                colors=[LABEL_COLOR], radii=0.005, show_labels=True
+                colors=[LABEL_COLOR], radii=0.0, show_labels=True
             ),
             f"{TOP}/parcel_labels": rr.Points2D.from_fields(
-                colors=[LABEL_COLOR], radii=0.004, show_labels=True, draw_order=7.0
+                colors=[LABEL_COLOR], radii=0.0, show_labels=True, draw_order=7.0
             ),
             "world/contact_forces": rr.Arrows3D.from_fields(colors=force_color, radii=0.008),
             f"{TOP}/fence": rr.LineStrips2D.from_fields(
@@ -343,6 +366,7 @@ class RerunLogger:
             b.quats.append((0.0, 0.0, math.sin(0.5 * p.yaw), math.cos(0.5 * p.yaw)))
             b.labels.append(str(p.parcel_id))
             b.colors.append(self._color(p))
+            self.last_seen[p.parcel_id] = (p.center_x, p.center_y, p.height)
             if p.n > 0.0 and math.isfinite(p.contact_x) and fence is not None:
                 normal = _fence_normal(fence, p.contact_x, p.contact_y, p.center_x, p.center_y)
                 b.origins.append((p.contact_x, p.contact_y, FENCE_Z))
@@ -384,12 +408,20 @@ class RerunLogger:
             self._flush_scene()
 
     def _color(self, p: ParcelFrame) -> tuple[int, int, int]:
-        """The parcel's damage margin once known (green safe, yellow near, red over a limit),
-        else sorted / divert / pass."""
-        margin = self.margins.get(p.parcel_id)
-        if margin is not None and math.isfinite(margin):
-            return margin_color(margin)
-        return SORTED_COLOR if p.stage == 5 else (DIVERT_COLOR if p.divert else PASS_COLOR)
+        """What the scan decided: to divert or to pass (the outcome scheme; a damage margin
+        shows on the parcel's damage mark)."""
+        return DIVERT_COLOR if p.divert else PASS_COLOR
+
+    def log_outcome(self, t: float, parcel_id: int, outcome: str) -> None:
+        """A parcel's outcome (sorted, passed, missed, failed) at sim time ``t`` [s]: its mark
+        where it was last seen (the outcome marks of every parcel so far are logged anew)."""
+        at = self.last_seen.get(parcel_id)
+        if at is None:
+            return
+        self._flush_scene()  # the parcel's last frames before its mark
+        self.outcomes[parcel_id] = (outcome, *at)
+        self.rec.set_time(TIMELINE, duration=float(t))
+        log_outcome_marks(self.rr, self.rec, TOP, self.outcomes)
 
     def log_event(self, ev, risk: dict | None = None) -> None:
         """One sorting event at the solver's resolution
@@ -517,16 +549,6 @@ class RerunLogger:
         self.rec.disconnect()
 
 
-def margin_color(margin: float) -> tuple[int, int, int]:
-    """Colour of a damage margin: MARGIN_COLORS interpolated over MARGIN_RANGE (clamped)."""
-    lo, hi = MARGIN_RANGE
-    u = min(max((margin - lo) / (hi - lo), 0.0), 1.0) * (len(MARGIN_COLORS) - 1)
-    k = min(int(u), len(MARGIN_COLORS) - 2)
-    f = u - k
-    a, b = MARGIN_COLORS[k], MARGIN_COLORS[k + 1]
-    return tuple(int(round(a[j] + f * (b[j] - a[j]))) for j in range(3))
-
-
 @dataclass
 class _SceneColumns:
     """Frames buffered for :meth:`RerunLogger._flush_scene` (per frame: counts; per parcel
@@ -580,35 +602,6 @@ def _fence_normal(fence: FenceFrame, x: float, y: float, cx: float, cy: float):
     return n
 
 
-def log_bag(contents, rec) -> RerunLogger:
-    """Log a recorded run (read with :func:`fence_sorter.recording.bagread.read_bag`)."""
-    from fence_sorter.analysis.events import SortEventData, risk_of  # lazy: loads rosbags
-    from fence_sorter.analysis.run import OUTCOME_FIELDS
-
-    logger = RerunLogger(rec, scene_from_bag(contents), series_every=1000, scene_every=1000)
-    rr = logger.rr
-    outcomes = {}
-    for m in contents.by_topic(topics.SORT_OUTCOMES):
-        outcomes[int(m.msg.parcel_id)] = {n: getattr(m.msg, n, math.nan) for n in OUTCOME_FIELDS}
-    for m in contents.by_topic(topics.SORT_EVENTS):
-        ev = SortEventData.from_msg(m.msg)
-        o = outcomes.get(ev.parcel_id)
-        logger.log_event(ev, risk_of(o) if o is not None else None)
-    for pid, o in outcomes.items():  # a bag without /sort_events: the margins alone
-        risk = risk_of(o)
-        margin = min(risk["impact_speed_margin"], risk["accel_margin"])
-        if pid not in logger.margins and math.isfinite(margin):
-            logger.margins[pid] = margin
-    for m in contents.by_topic(topics.SORT_OUTCOMES):
-        o = m.msg
-        rec.set_time(TIMELINE, duration=time_to_sec(o.header.stamp))
-        rec.log("events/outcomes", rr.TextLog(f"parcel {o.parcel_id}: {o.reason}",
-                                              level="INFO" if o.sorted else "WARN"))  # fmt: skip
-    for t, fence, parcels in bag_frames(contents):
-        logger.log_frame(t, fence, parcels)
-    return logger
-
-
 #: the logger and, for its callers, the frames and layout it draws with
 __all__ = [
     "ALPHA_AXIS",
@@ -636,7 +629,8 @@ __all__ = [
     "RISK_TICKS",
     "RerunLogger",
     "SAMPLED_COLOR",
-    "SORTED_COLOR",
+    "OUTCOME_COLORS",
+    "PARCEL_COLORS",
     "SPEED_AXIS",
     "SPEED_AXIS_MAX",
     "STEPS_COLOR",
@@ -648,7 +642,6 @@ __all__ = [
     "camera_position",
     "camera_target",
     "frames_from_snapshot",
-    "log_bag",
     "margin_color",
     "open_recording",
     "risk_mark_position",

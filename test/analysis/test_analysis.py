@@ -28,6 +28,7 @@ from fence_sorter.analysis.run import (
     sampled_exit_speed,
 )
 from fence_sorter.recording.bagread import read_bag
+from fence_sorter.stamps import time_to_sec
 from fence_sorter.visualisation import rerun_layout as layout
 from fence_sorter.visualisation import rerun_log as rl
 
@@ -309,8 +310,9 @@ def blueprint_axes(path: Path) -> dict[str, dict[str, object]]:
 
 @pytest.mark.slow
 def test_damage_colours_and_the_logged_event(tmp_path):
-    """A parcel's colour follows its damage margin once its event is logged (green with room
-    to spare, red over a limit); the event's curves go in at full rate."""
+    """A parcel's outline keeps the outcome scheme's colour (to divert) once its event is
+    logged; its damage margin (green with room to spare, red over a limit) colours its damage
+    mark; the event's curves go in at full rate."""
     from fence_sorter.analysis.events import SortEventData
     from fence_sorter.visualisation.rerun_log import (
         MARGIN_COLORS,
@@ -339,7 +341,8 @@ def test_damage_colours_and_the_logged_event(tmp_path):
     risk = {"w_dop": 2.4, "a_ndop": 300.0, "impact_speed_margin": -0.2, "accel_margin": 0.5,
             "drop_height": 0.2}  # fmt: skip
     logger.log_event(ev, risk)
-    assert before != logger._color(frame) == margin_color(-0.2)
+    assert before == logger._color(frame) == rl.PARCEL_COLORS["to divert"]
+    assert logger._risk_marks[3][0] == margin_color(-0.2)
     logger.close()
     rows, static = rrd_rows(out)
     assert rows["/plots/contact/3/N_steps"] == 101 == rows["/plots/fence/tip_deflection/steps/3"]
@@ -402,7 +405,14 @@ def test_rrd_from_the_example_bag(example, tmp_path):
     contents = read_bag(example)
     counts = contents.counts()
     rows, static = rrd_rows(out)
-    frames = counts["/fence_state"]
+    # the scene up to the last outcome (the fence at rest right after it), and a last frame
+    # at that instant: the recorder's later fence states are left out
+    t_end = max(time_to_sec(m.msg.header.stamp) for m in contents.by_topic("/sort_outcomes"))
+    states = sorted((time_to_sec(m.msg.header.stamp), m.msg.drive_angle)
+                    for m in contents.by_topic("/fence_state"))  # fmt: skip
+    assert abs(next(a for t, a in states if t > t_end)) < 1e-3
+    frames = sum(t <= t_end for t, _ in states) + 1
+    assert frames < counts["/fence_state"]
     for entity in ("/world/fence", "/world/parcels", "/world/contact_forces",
                    "/plots/fence/tip_deflection", "/plots/fence/alpha_w"):  # fmt: skip
         assert rows[entity] == frames, entity
@@ -424,7 +434,9 @@ def test_rrd_from_the_example_bag(example, tmp_path):
     plots = sorted(n for n, v in views.items() if v[0] == "TimeSeries")
     assert sorted(axes["time_link"]) == plots == sorted(axes["x_range"])
     assert set(axes["time_link"].values()) == {1}  # LinkAxis.Independent: its own view_range
-    assert all(r == {"start": None, "end": None} for r in axes["x_range"].values())  # infinite
+    # from the first instant to 3 % past the last (the cursor at the end drawn whole)
+    end = round((1.0 + layout.TIME_END_MARGIN) * t_end * 1e9)
+    assert all(r["start"] is None and abs(r["end"] - end) <= 1 for r in axes["x_range"].values())
     assert axes["legend"] == dict.fromkeys(plots, False)
     # fixed y ranges with single-digit tick labels on every time series plot (one plot area)
     assert axes["y_range"] == {
@@ -438,7 +450,7 @@ def test_rrd_from_the_example_bag(example, tmp_path):
     }
     for lo, hi in axes["y_range"].values():  # whole-number ticks from 0 to at most 9
         assert -1.0 < lo < 0.0 and 2.0 <= hi < 10.0, (lo, hi)
-    kind, origin, bounds = views["top view"]
+    kind, origin, bounds = views[layout.TOP_VIEW_NAME]
     assert (kind, origin) == ("2D", "top")
     # framed on the bag's scene: belt x -3 .. 3 m, chute up to y0 = 1.3 m (view y = -1.3)
     (x0, x1), (y0, y1) = bounds["x_range"], bounds["y_range"]
@@ -516,7 +528,7 @@ def test_rerun_child_process_logs_what_the_loop_offers(tmp_path):
     rows, static = rrd_rows(out)
     assert rows["/world/parcels"] == rows["/plots/speed/5"] == 1039
     assert all(rows[e] == 1039 for e in TOP_MOVING)
-    assert blueprint_views(out)["top view"][:2] == ("2D", "top")
+    assert blueprint_views(out)[layout.TOP_VIEW_NAME][:2] == ("2D", "top")
     assert rows["/events/outcomes"] == 1
     assert "/world/chute" in static
 

@@ -7,6 +7,7 @@ Line: config/lines/four_units.yaml (units 1 and 3 on the right, 2 and 4 mirrored
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -86,6 +87,56 @@ def test_sorted_parcels_end_in_a_chute_serving_their_destination(recorded):
                 inside += 1
     assert s["sorted"] > 0
     assert inside == s["sorted"]
+
+
+def test_parcels_on_the_loop_move_back_to_the_induction(recorded):
+    """Every parcel that went round the loop is drawn on its lane while it is there, moving
+    from the belt's end (X = length) back to the induction (X = 0) at length / transit_time."""
+    s, rows = recorded
+    line = load_line("four_units")
+    seen: dict[str, list[tuple[float, float]]] = {}
+    for t, r in rows["/top/loop/parcels"]:
+        for label, (x, _) in zip(r["labels"] or [], r["positions"] or [], strict=True):
+            seen.setdefault(label, []).append((t, x))
+    assert s["recirculated"] > 0
+    assert len(seen) == s["recirculated"]
+    speed = line.length / line.transit_time
+    for track in seen.values():
+        t, x = np.array(track).T
+        assert 0.0 <= x.min() and x.max() <= line.length + 1e-6
+        if len(t) > 2:
+            assert np.allclose(np.diff(x) / np.diff(t), -speed, rtol=1e-3)
+
+
+def test_running_counters_end_at_the_summary(recorded):
+    """The counters (sorted, on the line, rejected, failed) never count a sorted parcel
+    back, and at the end say what the run's summary says."""
+    s, rows = recorded
+    texts = [r["labels"][0] for _, r in rows["/top/counters"]]
+    sorted_counts = [int(text.split()[1]) for text in texts]
+    assert sorted_counts == sorted(sorted_counts)
+    words = texts[-1].split()
+    assert int(words[1]) == s["sorted"]
+    assert int(words[words.index("rejected") + 1]) == s["rejected"]
+    assert int(words[words.index("failed") + 1]) == s["solver_failures"]
+
+
+def test_every_parcel_drawn_carries_its_id(recorded):
+    _, rows = recorded
+    ids = {t: r["labels"] or [] for t, r in rows["/top/parcel_ids"]}
+    for t, r in rows["/top/parcels"]:
+        assert ids[t] == [label.split()[0] for label in r["labels"] or []]
+
+
+def test_unit_colours_are_none_of_the_destinations_or_damage_margins():
+    """The plots' unit colours stay clear (RGB distance > 60) of every destination colour,
+    the fence's and the damage-margin ramp."""
+    from fence_sorter.visualisation import line_view as lv
+    from fence_sorter.visualisation.rerun_keys import margin_color
+
+    others = [*lv.DESTINATION_COLORS, lv.FENCE_COLOR]
+    others += [margin_color(m) for m in np.linspace(-0.5, 1.0, 1501)]
+    assert min(math.dist(u, o) for u in lv.UNIT_COLORS for o in others) > 60.0
 
 
 @pytest.mark.parametrize(

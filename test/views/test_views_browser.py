@@ -22,6 +22,7 @@ import pytest
 from PIL import Image
 
 from fence_sorter.visualisation import browser
+from fence_sorter.visualisation import rerun_keys as rk
 from fence_sorter.visualisation import rerun_log as rl
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -36,6 +37,8 @@ pytestmark = [
 
 #: panels of the default layout at WIDTH x HEIGHT: left (top view / 3D), right (plots)
 LEFT = (0, 64, 760, 770)
+#: the top view's band of belt, chute and damage marks, below the legend
+BELT_BAND = (0, 385, 760, 620)
 RIGHT = (775, 64, 1280, 770)
 #: the four plots of the time-series tab, top to bottom (x0, y0, x1, y1)
 PLOTS = [(775, 64 + k * 177, 1280, 64 + (k + 1) * 177) for k in range(4)]
@@ -148,6 +151,13 @@ def test_example_recording_renders_in_the_web_viewer(tmp_path):
     # the end: the damage marks under the belt, each in its parcel's margin colour
     for colour in colours.values():
         seen("end", colour, LEFT, 8)
+    # and every parcel's outcome mark (three sorted, one passed) where it left the belt: at
+    # least 20 pixels of its colour more than as the recording opens (the legend's swatches
+    # sit above this band; the belt's edges hold a few greys)
+    for outcome in ("sorted", "passed"):
+        colour = rk.OUTCOME_COLORS[outcome]
+        before = colour_pixels(png["default"], colour, BELT_BAND)
+        seen("end", colour, BELT_BAND, before + 20)
     # the 3D tab: the belt (lit grey), the chute and the scan line at the belt's start
     seen("3d", (70, 70, 70), LEFT, 5000)
     seen("3d", (121, 140, 203), LEFT, 1000)
@@ -158,8 +168,9 @@ def test_example_recording_renders_in_the_web_viewer(tmp_path):
 
 
 #: the line's layout at WIDTH x HEIGHT: the belt's band in the top view, the alpha_w plot
-LINE_BELT = (85, 150, 1255, 193)
-LINE_ALPHA = (0, 310, 1280, 510)
+LINE_BELT = (85, 247, 1255, 292)
+LINE_TOP = (0, 64, 1280, 400)  # the top view
+LINE_ALPHA = (0, 430, 1280, 575)
 
 
 def test_line_recording_renders_in_the_web_viewer(tmp_path):
@@ -211,6 +222,6 @@ def test_line_recording_renders_in_the_web_viewer(tmp_path):
         n = colour_pixels(mid, lv.UNIT_COLORS[k], LINE_ALPHA)
         assert n >= 20, f"unit {k + 1}'s colour: {n} pixels on the alpha_w plot"
     # the static scene: belt borders, chutes, fences at rest
-    assert colour_pixels(mid, lv.BORDER_COLOR, (0, 64, 1280, 280)) >= 1000
-    assert colour_pixels(mid, lv.CHUTE_COLOR, (0, 64, 1280, 280)) >= 200
-    assert colour_pixels(mid, lv.FENCE_COLOR, (0, 64, 1280, 280)) >= 100
+    assert colour_pixels(mid, lv.BORDER_COLOR, LINE_TOP) >= 1000
+    assert colour_pixels(mid, lv.CHUTE_COLOR, LINE_TOP) >= 200
+    assert colour_pixels(mid, lv.FENCE_COLOR, LINE_TOP) >= 100
